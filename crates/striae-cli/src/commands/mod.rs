@@ -1,0 +1,4 @@
+pub mod layers;
+pub mod plot;
+pub mod precompute;
+pub mod render;

@@ -1,0 +1,38 @@
+//! `striae`: the command line. Each subcommand lives in `commands/`; this file only parses.
+
+mod commands;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(name = "striae", version, about = "Scratched glass and metal: scratch BRDF precompute, scratch layers and a path tracer")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Precompute the BRDF table of one scratch profile by 2D ray tracing (METHOD.md 2-4).
+    Precompute(commands::precompute::Args),
+    /// Plot a scratch BRDF table: a polar lobe for one incident angle, or a heat map.
+    Plot(commands::plot::Args),
+    /// Generate scratch layers from Worley cell noise and write them as images (METHOD.md 5).
+    Layers(commands::layers::Args),
+    /// Render a scene file (or the built-in default scene) to EXR and PNG.
+    Render(commands::render::Args),
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Precompute(a) => commands::precompute::run(a),
+        Command::Plot(a) => commands::plot::run(a),
+        Command::Layers(a) => commands::layers::run(a),
+        Command::Render(a) => commands::render::run(a),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
