@@ -49,6 +49,13 @@ impl PixelSampler {
         self.dimension = CAMERA_DIMS + depth * BOUNCE_DIMS;
     }
 
+    /// Jump to dimension `offset` within the block of bounce `depth` (the layout of a block:
+    /// 0 layer choice, 1 light choice, 2-3 light position, 4 BSDF lobe, 5-6 BSDF direction,
+    /// 7 Russian roulette), so a decision keeps its dimension whether or not earlier ones ran.
+    pub fn seek(&mut self, depth: u32, offset: u32) {
+        self.dimension = CAMERA_DIMS + depth * BOUNCE_DIMS + offset;
+    }
+
     /// The next number in `[0, 1)`.
     #[inline]
     pub fn next_1d(&mut self) -> f32 {
