@@ -10,7 +10,7 @@
 //!
 //! The integrator picks one light uniformly per shading point (probability `1 / n_lights`).
 
-use crate::envmap::EnvMap;
+use crate::scene::interim::EnvMap;
 use crate::geometry::Shape;
 use crate::math::{Rgb, Vec2, Vec3};
 use crate::sampling::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};

@@ -8,11 +8,12 @@
 //! a degenerate camera) name the key path such as `shapes[2].path`.
 
 pub mod file;
+pub mod interim;
 
 use crate::camera::PerspectiveCamera;
 use crate::geometry::{Geometry, Shape, ShapeGeometry, TriangleMesh};
 use crate::lights::{Environment, Light};
-use crate::material::Material;
+use interim::Material;
 use crate::bsdf::Bsdf;
 use crate::math::Vec3;
 use crate::shading::ShadingContext;
@@ -200,7 +201,7 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
                 if !(scale.is_finite() && *scale >= 0.0) {
                     return Err(invalid(file, "environment.scale", scale, "must be finite and >= 0"));
                 }
-                let map = crate::envmap::EnvMap::load(&full, *scale, transform)
+                let map = interim::EnvMap::load(&full, *scale, transform)
                     .map_err(|e| invalid(file, "environment.path", path, e))?;
                 Environment::Map(Box::new(map))
             }
@@ -238,7 +239,7 @@ fn shape_geometry(s: &ShapeSection, i: usize, file: &Path, base: &Path) -> Resul
             if !(1..=256).contains(subdivisions) {
                 return Err(invalid(file, format!("shapes[{i}].subdivisions"), subdivisions, "must lie in 1..=256"));
             }
-            ShapeGeometry::Mesh(TriangleMesh::teapot(*subdivisions))
+            return Err(invalid(file, format!("shapes[{i}].type"), "teapot", "the teapot is not available yet"))
         }
         ShapeSection::Rectangle { .. } => ShapeGeometry::Mesh(TriangleMesh::rectangle()),
         ShapeSection::Cuboid { .. } => ShapeGeometry::Mesh(TriangleMesh::cuboid()),
