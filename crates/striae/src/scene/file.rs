@@ -110,112 +110,108 @@ fn default_up() -> [f32; 3] {
     [0.0, 1.0, 0.0]
 }
 
-/// `[[shapes]]`: one shape; `type` picks the kind. Every kind takes `material` (a name from
-/// `[materials]`; may be left out for a pure emitter, which then reflects nothing),
-/// `emission` (makes it an area light) and `transform`.
-#[derive(Debug, Deserialize)]
-#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
-pub enum ShapeSection {
-    /// A triangle mesh from an OBJ file, `path` relative to the scene file.
-    Mesh {
-        path: String,
-        material: Option<String>,
-        emission: Option<Colour>,
-        #[serde(default)]
-        transform: Transform,
-    },
-    /// The Utah teapot (Newell's Bezier patches), about 3.2 wide and 1.6 tall (Newell's units,
-    /// lid up along `+y`... see `docs/scenes.md` for its extent after tessellation).
-    Teapot {
-        material: Option<String>,
-        emission: Option<Colour>,
-        #[serde(default)]
-        transform: Transform,
-        /// Segments per patch side in u and v.
-        #[serde(default = "default_teapot_subdivisions")]
-        subdivisions: u32,
-    },
+/// The kinds of shape.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum ShapeType {
+    /// A triangle mesh from an OBJ file (`path`, relative to the scene file).
+    Mesh,
+    /// The Utah teapot, tessellated from Newell's Bezier patches (`subdivisions`).
+    Teapot,
     /// The square `[-1, 1]^2` in the `xy` plane, normal `+z` (Mitsuba's `rectangle`).
-    Rectangle {
-        material: Option<String>,
-        emission: Option<Colour>,
-        #[serde(default)]
-        transform: Transform,
-    },
+    Rectangle,
     /// The box `[-1, 1]^3` (Mitsuba's `cube`); a glass plate is a thin box.
-    #[serde(rename = "box")]
-    Cuboid {
-        material: Option<String>,
-        emission: Option<Colour>,
-        #[serde(default)]
-        transform: Transform,
-    },
-    /// An analytic sphere.
-    Sphere {
-        #[serde(default)]
-        center: [f32; 3],
-        #[serde(default = "one")]
-        radius: f32,
-        material: Option<String>,
-        emission: Option<Colour>,
-        #[serde(default)]
-        transform: Transform,
-    },
+    Box,
+    /// An analytic sphere (`center`, `radius`).
+    Sphere,
 }
 
-fn default_teapot_subdivisions() -> u32 {
-    16
-}
-fn one() -> f32 {
-    1.0
+/// `[[shapes]]`: one shape. `type` picks the kind; every kind takes `material` (a name from
+/// `[materials]`; may be left out for a pure emitter, which then reflects nothing), `emission`
+/// (makes it an area light) and `transform`. The other keys belong to one kind each.
+///
+/// A flat struct rather than a tagged enum, so that a bad value keeps its position in the file
+/// (serde buffers the fields of internally tagged enums and `toml` loses their spans).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShapeSection {
+    #[serde(rename = "type")]
+    pub kind: ShapeType,
+    pub material: Option<String>,
+    pub emission: Option<Colour>,
+    #[serde(default)]
+    pub transform: Transform,
+    /// `mesh`: the OBJ file.
+    pub path: Option<String>,
+    /// `teapot`: segments per patch side (default 8).
+    pub subdivisions: Option<u32>,
+    /// `sphere`: centre (default the origin) and radius (default 1).
+    pub center: Option<[f32; 3]>,
+    pub radius: Option<f32>,
 }
 
 impl ShapeSection {
-    pub fn kind(&self) -> &'static str {
-        match self {
-            ShapeSection::Mesh { .. } => "mesh",
-            ShapeSection::Teapot { .. } => "teapot",
-            ShapeSection::Rectangle { .. } => "rectangle",
-            ShapeSection::Cuboid { .. } => "box",
-            ShapeSection::Sphere { .. } => "sphere",
+    /// The keys given that do not belong to this kind of shape.
+    pub fn foreign_keys(&self) -> Vec<&'static str> {
+        let mut out = Vec::new();
+        if self.path.is_some() && self.kind != ShapeType::Mesh {
+            out.push("path");
         }
-    }
-
-    /// `(material, emission, transform)`, common to every kind.
-    pub fn common(&self) -> (Option<&str>, Option<Colour>, &Transform) {
-        match self {
-            ShapeSection::Mesh { material, emission, transform, .. }
-            | ShapeSection::Teapot { material, emission, transform, .. }
-            | ShapeSection::Rectangle { material, emission, transform }
-            | ShapeSection::Cuboid { material, emission, transform }
-            | ShapeSection::Sphere { material, emission, transform, .. } => (material.as_deref(), *emission, transform),
+        if self.subdivisions.is_some() && self.kind != ShapeType::Teapot {
+            out.push("subdivisions");
         }
+        if self.center.is_some() && self.kind != ShapeType::Sphere {
+            out.push("center");
+        }
+        if self.radius.is_some() && self.kind != ShapeType::Sphere {
+            out.push("radius");
+        }
+        out
     }
 }
 
-/// `[[lights]]`: lights that are not shapes.
+/// The kinds of `[[lights]]` entry.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum LightType {
+    /// A directional light.
+    Sun,
+}
+
+/// `[[lights]]`: lights that are not shapes. For `sun`: `direction` points from the scene
+/// **toward** the sun; `irradiance` is measured on a surface facing the sun.
 #[derive(Debug, Deserialize)]
-#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
-pub enum LightSection {
-    /// A directional light. `direction` points from the scene **toward** the sun;
-    /// `irradiance` is measured on a surface facing the sun.
-    Sun { direction: [f32; 3], irradiance: Colour },
+#[serde(deny_unknown_fields)]
+pub struct LightSection {
+    #[serde(rename = "type")]
+    pub kind: LightType,
+    pub direction: [f32; 3],
+    pub irradiance: Colour,
+}
+
+/// The kinds of environment.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum EnvironmentType {
+    /// The same radiance from every direction (`radiance`).
+    Constant,
+    /// An equirectangular OpenEXR map (`path` relative to the scene file, `scale`, `transform`).
+    Map,
 }
 
 /// `[environment]`: light from infinitely far away.
 #[derive(Debug, Deserialize)]
-#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
-pub enum EnvironmentSection {
-    /// The same radiance from every direction.
-    Constant { radiance: Colour },
-    /// An equirectangular OpenEXR map (`path` relative to the scene file), times `scale`.
-    Map {
-        path: String,
-        #[serde(default = "one")]
-        scale: f32,
-        #[serde(default)]
-        transform: Transform,
-    },
+#[serde(deny_unknown_fields)]
+pub struct EnvironmentSection {
+    #[serde(rename = "type")]
+    pub kind: EnvironmentType,
+    /// `constant`: the radiance.
+    pub radiance: Option<Colour>,
+    /// `map`: the EXR file, a multiplier and an orientation.
+    pub path: Option<String>,
+    pub scale: Option<f32>,
+    #[serde(default)]
+    pub transform: Transform,
 }
 
 pub fn vec3(a: [f32; 3]) -> Vec3 {

@@ -17,7 +17,7 @@ use interim::Material;
 use crate::bsdf::Bsdf;
 use crate::math::Vec3;
 use crate::shading::ShadingContext;
-use file::{EnvironmentSection, LightSection, SceneFile, ShapeSection};
+use file::{EnvironmentType, LightType, SceneFile, ShapeSection, ShapeType};
 use std::path::{Path, PathBuf};
 
 /// The built-in default scene (`striae render` with no argument): a smooth glass teapot on a
@@ -153,22 +153,24 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
     let mut shapes = Vec::with_capacity(f.shapes.len());
     let mut lights = Vec::new();
     for (i, s) in f.shapes.iter().enumerate() {
-        let (material, emission, transform) = s.common();
-        let material = match material {
+        if let Some(key) = s.foreign_keys().first() {
+            return Err(invalid(file, format!("shapes[{i}].{key}"), s.kind, format!("`{key}` does not apply to this type of shape")));
+        }
+        let material = match &s.material {
             Some(name) => names
                 .iter()
-                .position(|n| n.as_str() == name)
+                .position(|n| *n == name)
                 .ok_or_else(|| invalid(file, format!("shapes[{i}].material"), name, format!("no such material (defined: {names:?})")))? as u32,
-            None if emission.is_some() => NO_MATERIAL,
+            None if s.emission.is_some() => NO_MATERIAL,
             None => return Err(invalid(file, format!("shapes[{i}].material"), "(missing)", "a shape needs a material unless it has an emission")),
         };
         let geometry = shape_geometry(s, i, file, base)?;
-        let geometry = if transform.is_identity() {
+        let geometry = if s.transform.is_identity() {
             geometry
         } else {
-            geometry.transformed(transform).map_err(|e| invalid(file, format!("shapes[{i}].transform"), transform, e))?
+            geometry.transformed(&s.transform).map_err(|e| invalid(file, format!("shapes[{i}].transform"), s.transform, e))?
         };
-        let area_light = match emission {
+        let area_light = match s.emission {
             Some(e) => {
                 let radiance = e.rgb();
                 if !(radiance.is_finite() && radiance.min_element() >= 0.0) {
@@ -181,28 +183,35 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
         };
         let shape = Shape { geometry, material, area_light };
         if shape.area_light.is_some() && !(shape.area() > 0.0) {
-            return Err(invalid(file, format!("shapes[{i}]"), s.kind(), "an emitting shape must have a positive area"));
+            return Err(invalid(file, format!("shapes[{i}]"), s.kind, "an emitting shape must have a positive area"));
         }
         shapes.push(shape);
     }
 
     let mut environment = None;
     if let Some(env) = &f.environment {
-        let e = match env {
-            EnvironmentSection::Constant { radiance } => {
+        let e = match env.kind {
+            EnvironmentType::Constant => {
+                if env.path.is_some() || env.scale.is_some() || !env.transform.is_identity() {
+                    return Err(invalid(file, "environment", env.kind, "a constant environment takes only `radiance`"));
+                }
+                let radiance = env.radiance.ok_or_else(|| invalid(file, "environment.radiance", "(missing)", "a constant environment needs `radiance`"))?;
                 let rgb = radiance.rgb();
                 if !(rgb.is_finite() && rgb.min_element() >= 0.0) {
                     return Err(invalid(file, "environment.radiance", radiance, "radiance must be finite and >= 0"));
                 }
                 Environment::Constant { radiance: rgb }
             }
-            EnvironmentSection::Map { path, scale, transform } => {
-                let full = base.join(path);
-                if !(scale.is_finite() && *scale >= 0.0) {
+            EnvironmentType::Map => {
+                if env.radiance.is_some() {
+                    return Err(invalid(file, "environment.radiance", env.radiance, "a map environment takes `path`, `scale` and `transform`"));
+                }
+                let path = env.path.as_ref().ok_or_else(|| invalid(file, "environment.path", "(missing)", "a map environment needs `path`"))?;
+                let scale = env.scale.unwrap_or(1.0);
+                if !(scale.is_finite() && scale >= 0.0) {
                     return Err(invalid(file, "environment.scale", scale, "must be finite and >= 0"));
                 }
-                let map = interim::EnvMap::load(&full, *scale, transform)
-                    .map_err(|e| invalid(file, "environment.path", path, e))?;
+                let map = load_envmap(&base.join(path), scale, &env.transform).map_err(|e| invalid(file, "environment.path", path, e))?;
                 Environment::Map(Box::new(map))
             }
         };
@@ -210,15 +219,15 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
         environment = Some(lights.len() - 1);
     }
     for (i, l) in f.lights.iter().enumerate() {
-        match l {
-            LightSection::Sun { direction, irradiance } => {
-                let d = Vec3::from_array(*direction);
+        match l.kind {
+            LightType::Sun => {
+                let d = Vec3::from_array(l.direction);
                 if !(d.length_squared() > 0.0 && d.is_finite()) {
-                    return Err(invalid(file, format!("lights[{i}].direction"), direction, "must be a non-zero vector"));
+                    return Err(invalid(file, format!("lights[{i}].direction"), l.direction, "must be a non-zero vector"));
                 }
-                let e = irradiance.rgb();
+                let e = l.irradiance.rgb();
                 if !(e.is_finite() && e.min_element() >= 0.0) {
-                    return Err(invalid(file, format!("lights[{i}].irradiance"), irradiance, "must be finite and >= 0"));
+                    return Err(invalid(file, format!("lights[{i}].irradiance"), l.irradiance, "must be finite and >= 0"));
                 }
                 lights.push(Light::Sun { direction: d.normalize(), irradiance: e });
             }
@@ -228,22 +237,29 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
     Ok(Scene { camera, geometry: Geometry::new(shapes), materials, lights, environment, settings })
 }
 
+fn load_envmap(path: &Path, scale: f32, transform: &crate::geometry::Transform) -> Result<interim::EnvMap, String> {
+    interim::EnvMap::load(path, scale, transform)
+}
+
 fn shape_geometry(s: &ShapeSection, i: usize, file: &Path, base: &Path) -> Result<ShapeGeometry, SceneError> {
-    Ok(match s {
-        ShapeSection::Mesh { path, .. } => {
-            let full = base.join(path);
-            let mesh = TriangleMesh::from_obj(&full).map_err(|e| invalid(file, format!("shapes[{i}].path"), path, e))?;
+    Ok(match s.kind {
+        ShapeType::Mesh => {
+            let path = s.path.as_ref().ok_or_else(|| invalid(file, format!("shapes[{i}].path"), "(missing)", "a mesh needs the path of an OBJ file"))?;
+            let mesh = TriangleMesh::from_obj(base.join(path)).map_err(|e| invalid(file, format!("shapes[{i}].path"), path, e))?;
             ShapeGeometry::Mesh(mesh)
         }
-        ShapeSection::Teapot { subdivisions, .. } => {
-            if !(1..=256).contains(subdivisions) {
-                return Err(invalid(file, format!("shapes[{i}].subdivisions"), subdivisions, "must lie in 1..=256"));
+        ShapeType::Teapot => {
+            let n = s.subdivisions.unwrap_or(8);
+            if !(1..=64).contains(&n) {
+                return Err(invalid(file, format!("shapes[{i}].subdivisions"), n, "must lie in 1..=64"));
             }
-            return Err(invalid(file, format!("shapes[{i}].type"), "teapot", "the teapot is not available yet"))
+            return Err(invalid(file, format!("shapes[{i}].type"), "teapot", "the teapot is not available yet"));
         }
-        ShapeSection::Rectangle { .. } => ShapeGeometry::Mesh(TriangleMesh::rectangle()),
-        ShapeSection::Cuboid { .. } => ShapeGeometry::Mesh(TriangleMesh::cuboid()),
-        ShapeSection::Sphere { center, radius, .. } => ShapeGeometry::sphere(Vec3::from_array(*center), *radius)
-            .map_err(|e| invalid(file, format!("shapes[{i}].radius"), radius, e))?,
+        ShapeType::Rectangle => ShapeGeometry::Mesh(TriangleMesh::rectangle()),
+        ShapeType::Box => ShapeGeometry::Mesh(TriangleMesh::cuboid()),
+        ShapeType::Sphere => {
+            let radius = s.radius.unwrap_or(1.0);
+            ShapeGeometry::sphere(Vec3::from_array(s.center.unwrap_or([0.0; 3])), radius).map_err(|e| invalid(file, format!("shapes[{i}].radius"), radius, e))?
+        }
     })
 }

@@ -1,0 +1,248 @@
+//! Scene tests of the path tracer: white furnaces, analytic scenes with known pixel values,
+//! determinism across thread counts, and clear errors for bad scene files. Small images and
+//! few samples: the whole file runs in a few seconds.
+
+use std::path::Path;
+use striae::film::Image;
+use striae::integrator::{render, RenderStats};
+use striae::scene::{Overrides, Scene, SceneError};
+use striae::testing::MeanEstimate;
+
+fn scene(text: &str) -> Scene {
+    Scene::parse(text, Path::new("test.toml"), Path::new("."), &Overrides::default()).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn render_with_threads(scene: &Scene, threads: usize) -> (Image, RenderStats) {
+    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| render(scene, &|_| {}))
+}
+
+/// Mean over the pixels inside a centred square of side `frac` of the image (each pixel is an
+/// independent estimate), per channel.
+fn centre_mean(img: &Image, frac: f32, channel: usize) -> MeanEstimate {
+    let mut m = MeanEstimate::default();
+    let (w, h) = (img.width as f32, img.height as f32);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            let (dx, dy) = ((x as f32 + 0.5) / w - 0.5, (y as f32 + 0.5) / h - 0.5);
+            if dx.abs() < frac / 2.0 && dy.abs() < frac / 2.0 {
+                m.push(img.get(x, y)[channel] as f64);
+            }
+        }
+    }
+    m
+}
+
+/// A camera filling its view with a unit sphere of the given material in a uniform white
+/// environment: every pixel's expectation is exactly 1 for a lossless material.
+fn furnace(material: &str) -> Scene {
+    scene(&format!(
+        r#"
+[render]
+width = 24
+height = 24
+spp = 64
+max_depth = 0
+[camera]
+position = [0, 0, 4]
+look_at = [0, 0, 0]
+fov = 28
+[materials.m]
+{material}
+[[shapes]]
+type = "sphere"
+material = "m"
+[environment]
+type = "constant"
+radiance = 1
+"#
+    ))
+}
+
+fn assert_furnace(s: &Scene, what: &str) {
+    let (img, _) = render_with_threads(s, 2);
+    for c in 0..3 {
+        let m = centre_mean(&img, 0.5, c);
+        assert!(m.count() > 100);
+        assert!(m.agrees_with(1.0, 4.0, 1e-3), "{what}: channel {c} mean {} +- {}", m.mean(), m.std_error());
+    }
+}
+
+#[test]
+fn white_furnace_glass_sphere() {
+    assert_furnace(&furnace("type = \"dielectric\"\nior = 1.5"), "glass sphere");
+}
+
+#[test]
+fn white_furnace_perfect_conductor_sphere() {
+    // A purely imaginary index (eta = 0, k > 0) reflects everything: F = 1 at every angle.
+    assert_furnace(&furnace("type = \"conductor\"\neta = [0, 0, 0]\nk = [1, 1, 1]"), "F = 1 conductor");
+}
+
+#[test]
+fn white_furnace_fails_for_a_lossy_material() {
+    // The furnace test can fail: an absorbing material is caught.
+    let s = furnace("type = \"conductor\"\neta = [0.2, 0.2, 0.2]\nk = [3, 3, 3]");
+    let (img, _) = render_with_threads(&s, 2);
+    let m = centre_mean(&img, 0.5, 0);
+    assert!(!m.agrees_with(1.0, 4.0, 1e-3), "mean {}", m.mean());
+}
+
+#[test]
+fn diffuse_plane_under_constant_sky_is_albedo_times_radiance() {
+    // pixel = a L for a Lambertian plane of albedo a seeing only a sky of radiance L
+    // (NEE of the environment + BSDF sampling, combined by MIS).
+    let s = scene(
+        r#"
+[render]
+width = 32
+height = 32
+spp = 16
+max_depth = 2
+[camera]
+position = [0, 3, 1]
+look_at = [0, 0, 0]
+fov = 30
+[materials.plane]
+type = "diffuse"
+reflectance = [0.5, 0.25, 0.8]
+[[shapes]]
+type = "rectangle"
+material = "plane"
+transform = [{ scale = 50 }, { rotate = { axis = [1, 0, 0], angle = -90 } }]
+[environment]
+type = "constant"
+radiance = [2, 2, 1]
+"#,
+    );
+    let (img, stats) = render_with_threads(&s, 2);
+    assert_eq!(stats.samples, 32 * 32 * 16);
+    for (c, expected) in [(0, 1.0), (1, 0.5), (2, 0.8)] {
+        let m = centre_mean(&img, 1.0, c);
+        assert!(m.agrees_with(expected, 4.0, 1e-3), "channel {c}: {} +- {} vs {expected}", m.mean(), m.std_error());
+        assert!(m.std_error() < 0.01);
+    }
+}
+
+#[test]
+fn diffuse_plane_under_a_sphere_light_matches_the_analytic_irradiance() {
+    // A sphere light of radius R and radiance Le centred at height d above a Lambertian plane
+    // gives irradiance E = pi Le (R/d)^2 at the foot point, so the pixel there is a Le (R/d)^2.
+    // The camera sees a tiny patch around the foot point (1 degree field of view).
+    let (r, d, le, a) = (0.5f64, 2.0f64, 10.0f64, 0.6f64);
+    let s = scene(&format!(
+        r#"
+[render]
+width = 8
+height = 8
+spp = 256
+max_depth = 2
+[camera]
+position = [3, 2, 0]
+look_at = [0, 0, 0]
+fov = 1
+[materials.plane]
+type = "diffuse"
+reflectance = [{a}, {a}, {a}]
+[[shapes]]
+type = "rectangle"
+material = "plane"
+transform = [{{ scale = 10 }}, {{ rotate = {{ axis = [1, 0, 0], angle = -90 }} }}]
+[[shapes]]
+type = "sphere"
+center = [0, {d}, 0]
+radius = {r}
+emission = {le}
+"#
+    ));
+    let (img, _) = render_with_threads(&s, 2);
+    let expected = a * le * (r / d).powi(2);
+    let m = centre_mean(&img, 1.0, 1);
+    // The patch is ~0.06 wide: the irradiance varies by well under 0.5% across it.
+    assert!(m.agrees_with(expected, 4.0, 0.005 * expected), "{} +- {} vs {expected}", m.mean(), m.std_error());
+}
+
+#[test]
+fn emitter_seen_directly_has_its_radiance() {
+    let s = scene(
+        r#"
+[render]
+width = 8
+height = 8
+spp = 4
+[camera]
+position = [0, 0, 3]
+look_at = [0, 0, 0]
+fov = 10
+[[shapes]]
+type = "rectangle"
+emission = [1, 2, 3]
+"#,
+    );
+    let (img, _) = render_with_threads(&s, 1);
+    for p in &img.pixels {
+        assert_eq!(*p, striae::math::Rgb::new(1.0, 2.0, 3.0));
+    }
+}
+
+#[test]
+fn image_is_bit_identical_across_thread_counts() {
+    let text = striae::scene::DEFAULT_SCENE;
+    let o = Overrides { spp: Some(4), resolution: Some((40, 30)), seed: Some(7), max_depth: None };
+    let s = Scene::parse(text, Path::new("default.toml"), Path::new("."), &o).unwrap();
+    let (a, sa) = render_with_threads(&s, 1);
+    let (b, sb) = render_with_threads(&s, 3);
+    assert!(a.pixels.iter().zip(&b.pixels).all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits)));
+    assert_eq!(sa.rays, sb.rays);
+    // And the seed matters.
+    let o2 = Overrides { seed: Some(8), ..o };
+    let s2 = Scene::parse(text, Path::new("default.toml"), Path::new("."), &o2).unwrap();
+    let (c, _) = render_with_threads(&s2, 2);
+    assert_ne!(a.pixels, c.pixels);
+}
+
+fn parse_err(text: &str) -> String {
+    match Scene::parse(text, Path::new("scenes/broken.toml"), Path::new("."), &Overrides::default()) {
+        Ok(_) => panic!("scene accepted:\n{text}"),
+        Err(e) => {
+            let msg = e.to_string();
+            assert!(msg.contains("scenes/broken.toml"), "message does not name the file: {msg}");
+            msg
+        }
+    }
+}
+
+const CAMERA: &str = "[camera]\nposition = [0, 0, 3]\nlook_at = [0, 0, 0]\nfov = 40\n";
+
+#[test]
+fn bad_scene_files_give_clear_errors() {
+    // Unknown key, named with its line.
+    let msg = parse_err(&format!("{CAMERA}[render]\nsspp = 4\n"));
+    assert!(msg.contains("sspp") && msg.contains("line"), "{msg}");
+    // Bad value type.
+    let msg = parse_err(&format!("{CAMERA}[render]\nspp = \"many\"\n"));
+    assert!(msg.contains("spp") && msg.contains("many"), "{msg}");
+    // Out-of-range value.
+    let msg = parse_err(&format!("{CAMERA}[render]\nspp = 0\n"));
+    assert!(msg.contains("render.spp") && msg.contains('0'), "{msg}");
+    // Unknown shape type.
+    let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"torus\"\nemission = 1\n"));
+    assert!(msg.contains("torus") && msg.contains("type"), "{msg}");
+    // Missing mesh file, with the key path.
+    let msg = parse_err(&format!("{CAMERA}[materials.m]\ntype = \"dielectric\"\nior = 1.5\n[[shapes]]\ntype = \"mesh\"\npath = \"nowhere.obj\"\nmaterial = \"m\"\n"));
+    assert!(msg.contains("shapes[0].path") && msg.contains("nowhere.obj"), "{msg}");
+    // Unknown material name.
+    let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"sphere\"\nmaterial = \"glas\"\n"));
+    assert!(msg.contains("shapes[0].material") && msg.contains("glas"), "{msg}");
+    // Degenerate camera.
+    let msg = parse_err("[camera]\nposition = [0, 0, 0]\nlook_at = [0, 0, 0]\nfov = 40\n");
+    assert!(msg.contains("camera"), "{msg}");
+    // Negative emission.
+    let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"rectangle\"\nemission = -1\n"));
+    assert!(msg.contains("shapes[0].emission") && msg.contains("-1"), "{msg}");
+    // Bad value inside a shape: the message names the key.
+    let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"sphere\"\nradius = \"big\"\nemission = 1\n"));
+    assert!(msg.contains("radius") && msg.contains("big"), "{msg}");
+    // Missing file.
+    let err = Scene::load(Path::new("no/such/scene.toml"), &Overrides::default()).unwrap_err();
+    assert!(matches!(err, SceneError::Read { .. }) && err.to_string().contains("no/such/scene.toml"), "{err}");
+}
