@@ -43,7 +43,6 @@ pub(crate) struct WatertightRay {
     sx: f32,
     sy: f32,
     sz: f32,
-    d: Vec3,
 }
 
 impl WatertightRay {
