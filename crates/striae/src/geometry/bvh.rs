@@ -13,6 +13,8 @@ use std::time::Duration;
 
 use glam::Vec3A;
 use obvhs::aabb::Aabb;
+use obvhs::bvh2::builder::build_bvh2;
+use obvhs::bvh2::Bvh2;
 use obvhs::cwbvh::builder::build_cwbvh;
 use obvhs::cwbvh::CwBvh;
 use obvhs::BvhBuildParams;
@@ -43,7 +45,6 @@ pub(crate) struct WatertightRay {
     sx: f32,
     sy: f32,
     sz: f32,
-    d: Vec3,
 }
 
 impl WatertightRay {
@@ -65,7 +66,6 @@ impl WatertightRay {
             sx: -d[kx] / d[kz],
             sy: -d[ky] / d[kz],
             sz: 1.0 / d[kz],
-            d,
         }
     }
 
@@ -125,11 +125,34 @@ impl WatertightRay {
     }
 }
 
+/// Which obvhs hierarchy [`Geometry`] traverses (see `BENCHMARKS.md`, "BVH", for the
+/// measurement behind the default).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum BvhKind {
+    /// Compressed 8-wide BVH (Ylitie et al. 2017), SIMD node tests.
+    #[default]
+    Cwbvh,
+    /// Binary BVH with collapsed leaves.
+    Bvh2,
+}
+
+enum Accel {
+    None,
+    Cwbvh(CwBvh),
+    Bvh2(Bvh2),
+}
+
+/// obvhs' CWBVH node test clamps a box's entry distance to at least `1e-4`
+/// (`cwbvh::node::EPSILON`), so a box lying entirely closer than that to the ray origin would be
+/// skipped. Traversal therefore starts the ray `CWBVH_SHIFT` (in units of `t`) behind its origin
+/// and reports `t + CWBVH_SHIFT` to obvhs; the primitive tests use the true origin.
+const CWBVH_SHIFT: f32 = 2e-4;
+
 /// Shapes with the BVH over their primitives.
 pub struct Geometry {
     shapes: Vec<Shape>,
     prims: Vec<Prim>,
-    bvh: Option<CwBvh>,
+    accel: Accel,
 }
 
 impl std::fmt::Debug for Geometry {
@@ -157,8 +180,13 @@ fn prim_aabb(p: &Prim) -> Aabb {
 }
 
 impl Geometry {
-    /// Builds the BVH over all triangles and spheres of `shapes`.
+    /// Builds the BVH (the default [`BvhKind`]) over all triangles and spheres of `shapes`.
     pub fn new(shapes: Vec<Shape>) -> Geometry {
+        Geometry::with_bvh(shapes, BvhKind::default())
+    }
+
+    /// Builds the chosen kind of BVH (for benchmarks and tests).
+    pub fn with_bvh(shapes: Vec<Shape>, kind: BvhKind) -> Geometry {
         let mut prims = Vec::new();
         for (s, shape) in shapes.iter().enumerate() {
             match &shape.geometry {
@@ -184,24 +212,29 @@ impl Geometry {
             return Geometry {
                 shapes,
                 prims,
-                bvh: None,
+                accel: Accel::None,
             };
         }
         let aabbs: Vec<Aabb> = prims.iter().map(prim_aabb).collect();
-        let bvh = build_cwbvh(
-            &aabbs,
-            BvhBuildParams::medium_build(),
-            &mut Duration::default(),
-        );
-        let prims = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| prims[i as usize])
-            .collect();
+        let params = BvhBuildParams::medium_build();
+        let (accel, order) = match kind {
+            BvhKind::Cwbvh => {
+                let bvh = build_cwbvh(&aabbs, params, &mut Duration::default());
+                let order = bvh.primitive_indices.clone();
+                (Accel::Cwbvh(bvh), order)
+            }
+            BvhKind::Bvh2 => {
+                let bvh = build_bvh2(&aabbs, params, &mut Duration::default());
+                let order = bvh.primitive_indices.clone();
+                (Accel::Bvh2(bvh), order)
+            }
+        };
+        // Primitives in BVH order: traversal indexes them directly.
+        let prims = order.iter().map(|&i| prims[i as usize]).collect();
         Geometry {
             shapes,
             prims,
-            bvh: Some(bvh),
+            accel,
         }
     }
 
@@ -215,62 +248,85 @@ impl Geometry {
     }
 
     #[inline]
-    fn obvhs_ray(ray: &Ray) -> obvhs::ray::Ray {
-        // `+ 0.0` turns -0.0 into +0.0: obvhs picks the slab order from `d < 0` but inverts
-        // -0.0 to -inf, so a -0.0 component would swap the slabs and miss every box.
-        obvhs::ray::Ray::new(
-            Vec3A::from(ray.o),
-            Vec3A::from(ray.d) + Vec3A::ZERO,
-            0.0,
-            ray.t_max,
-        )
+    fn obvhs_ray(ray: &Ray, shift: f32) -> obvhs::ray::Ray {
+        // `+ 0.0` turns -0.0 into +0.0: obvhs' CWBVH picks the slab order from `d < 0` but
+        // inverts -0.0 to -huge, so a -0.0 component would swap the slabs and miss every box.
+        let d = Vec3A::from(ray.d) + Vec3A::ZERO;
+        obvhs::ray::Ray::new(Vec3A::from(ray.o) - shift * d, d, 0.0, ray.t_max + shift)
+    }
+
+    #[inline]
+    fn hit_prim(
+        &self,
+        wray: &WatertightRay,
+        ray: &Ray,
+        id: usize,
+        t_max: f32,
+    ) -> Option<(f32, f32, f32)> {
+        let p = &self.prims[id];
+        if p.prim == SPHERE {
+            intersect_sphere(p.v[0], p.v[1].x, ray, t_max).map(|t| (t, 0.0, 0.0))
+        } else {
+            wray.intersect(p.v[0], p.v[1], p.v[2], t_max)
+        }
     }
 
     /// Closest hit with `t` in `(0, ray.t_max)`.
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceHit> {
-        let bvh = self.bvh.as_ref()?;
         let wray = WatertightRay::new(ray);
         let mut best: Option<(usize, f32, f32, f32)> = None;
+        let mut t_max = ray.t_max;
         let mut hit = obvhs::ray::RayHit::none();
-        bvh.ray_traverse(Self::obvhs_ray(ray), &mut hit, |r, id| {
-            let p = &self.prims[id];
-            let found = if p.prim == SPHERE {
-                intersect_sphere(p.v[0], p.v[1].x, ray, r.tmax).map(|t| (t, 0.0, 0.0))
-            } else {
-                wray.intersect(p.v[0], p.v[1], p.v[2], r.tmax)
-            };
-            match found {
-                Some((t, b1, b2)) => {
-                    best = Some((id, t, b1, b2));
-                    t
-                }
-                None => f32::INFINITY,
+        match &self.accel {
+            Accel::None => return None,
+            Accel::Cwbvh(bvh) => {
+                bvh.ray_traverse(
+                    Self::obvhs_ray(ray, CWBVH_SHIFT),
+                    &mut hit,
+                    |_, id| match self.hit_prim(&wray, ray, id, t_max) {
+                        Some((t, b1, b2)) => {
+                            best = Some((id, t, b1, b2));
+                            t_max = t;
+                            t + CWBVH_SHIFT
+                        }
+                        None => f32::INFINITY,
+                    },
+                );
             }
-        });
+            Accel::Bvh2(bvh) => {
+                bvh.ray_traverse(Self::obvhs_ray(ray, 0.0), &mut hit, |_, id| {
+                    match self.hit_prim(&wray, ray, id, t_max) {
+                        Some((t, b1, b2)) => {
+                            best = Some((id, t, b1, b2));
+                            t_max = t;
+                            t
+                        }
+                        None => f32::INFINITY,
+                    }
+                });
+            }
+        }
         let (id, t, b1, b2) = best?;
         Some(self.surface_hit(ray, id, t, b1, b2))
     }
 
     /// Whether anything lies along the ray in `(0, ray.t_max)` (any hit, early exit).
     pub fn occluded(&self, ray: &Ray) -> bool {
-        let Some(bvh) = self.bvh.as_ref() else {
-            return false;
-        };
         let wray = WatertightRay::new(ray);
-        let t_max = ray.t_max;
-        !bvh.ray_traverse_miss(Self::obvhs_ray(ray), |_, id| {
-            let p = &self.prims[id];
-            let hit = if p.prim == SPHERE {
-                intersect_sphere(p.v[0], p.v[1].x, ray, t_max).is_some()
-            } else {
-                wray.intersect(p.v[0], p.v[1], p.v[2], t_max).is_some()
-            };
-            if hit {
+        let test = |id: usize| {
+            if self.hit_prim(&wray, ray, id, ray.t_max).is_some() {
                 0.0
             } else {
                 f32::INFINITY
             }
-        })
+        };
+        match &self.accel {
+            Accel::None => false,
+            Accel::Cwbvh(bvh) => {
+                !bvh.ray_traverse_miss(Self::obvhs_ray(ray, CWBVH_SHIFT), |_, id| test(id))
+            }
+            Accel::Bvh2(bvh) => !bvh.ray_traverse_miss(Self::obvhs_ray(ray, 0.0), |_, id| test(id)),
+        }
     }
 
     fn surface_hit(&self, ray: &Ray, id: usize, t: f32, b1: f32, b2: f32) -> SurfaceHit {

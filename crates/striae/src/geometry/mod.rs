@@ -18,7 +18,7 @@ pub mod transform;
 
 use std::path::PathBuf;
 
-pub use bvh::Geometry;
+pub use bvh::{BvhKind, Geometry};
 pub use mesh::TriangleMesh;
 pub use transform::Transform;
 

@@ -179,45 +179,141 @@ fn test_scene() -> Vec<Shape> {
     ]
 }
 
+/// Compares `intersect` and `occluded` of both BVH kinds with brute force over `rays`.
+fn check_against_brute_force(shapes: &[Shape], rays: &[Ray]) -> usize {
+    let mut hits = 0;
+    for kind in [BvhKind::Cwbvh, BvhKind::Bvh2] {
+        let geometry = Geometry::with_bvh(shapes.to_vec(), kind);
+        hits = 0;
+        for ray in rays {
+            let bvh = geometry.intersect(ray);
+            let brute = intersect_brute_force(shapes, ray);
+            match (bvh, brute) {
+                (None, None) => {}
+                (Some(h), Some((t, s, p))) => {
+                    hits += 1;
+                    assert_eq!(h.t, t, "{kind:?} ray {ray:?}");
+                    assert_eq!((h.shape, h.prim), (s, p), "{kind:?} ray {ray:?}");
+                    assert!(h.t > 0.0 && h.t < ray.t_max);
+                    assert!((h.p - ray.at(h.t)).length() < 1e-4 * (1.0 + h.t * ray.d.length()));
+                    for v in [h.p, h.ng, h.ns, h.dpdu, h.dpdv] {
+                        assert!(v.is_finite());
+                    }
+                    assert!(h.uv.is_finite());
+                    assert!(
+                        (h.ng.length() - 1.0).abs() < 1e-4
+                            && (h.ns.length() - 1.0).abs() < 1e-4
+                            && h.ng.dot(h.ns) >= 0.0
+                    );
+                }
+                (a, b) => panic!("{kind:?}: bvh {a:?} vs brute force {b:?} for {ray:?}"),
+            }
+            assert_eq!(
+                geometry.occluded(ray),
+                brute.is_some(),
+                "{kind:?} ray {ray:?}"
+            );
+        }
+    }
+    hits
+}
+
+fn random_rays(rng: &mut Pcg64, n: usize, centre: Vec3, radius: f32) -> Vec<Ray> {
+    (0..n)
+        .map(|k| {
+            let o = centre + radius * random_unit(rng) * rng.random::<f32>().sqrt();
+            let mut d = random_unit(rng);
+            if k % 7 == 0 {
+                // Axis-aligned directions with signed zeros (obvhs picks slabs by the sign bit).
+                d = [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z][k % 6];
+            }
+            let mut ray = Ray::new(o, d);
+            if k % 3 == 0 {
+                ray.t_max = radius * rng.random::<f32>();
+            }
+            ray
+        })
+        .collect()
+}
+
 #[test]
 fn bvh_closest_hit_equals_brute_force_and_occlusion_agrees() {
     let shapes = test_scene();
-    let geometry = Geometry::new(shapes.clone());
     let mut rng = Pcg64::seed_from_u64(11);
-    let mut hits = 0;
-    for k in 0..20_000 {
-        let o = 4.0 * random_unit(&mut rng) * rng.random::<f32>().sqrt();
-        let mut ray = Ray::new(o, random_unit(&mut rng));
-        if k % 3 == 0 {
-            ray.t_max = 3.0 * rng.random::<f32>();
-        }
-        let bvh = geometry.intersect(&ray);
-        let brute = intersect_brute_force(&shapes, &ray);
-        match (bvh, brute) {
-            (None, None) => {}
-            (Some(h), Some((t, s, p))) => {
-                hits += 1;
-                assert_eq!(h.t, t, "ray {ray:?}");
-                assert_eq!((h.shape, h.prim), (s, p), "ray {ray:?}");
-                assert!(h.t > 0.0 && h.t < ray.t_max);
-                assert!((h.p - ray.at(h.t)).length() < 1e-4 * (1.0 + h.t));
-                for v in [h.p, h.ng, h.ns, h.dpdu, h.dpdv] {
-                    assert!(v.is_finite());
-                }
-                assert!(
-                    (h.ng.length() - 1.0).abs() < 1e-4
-                        && (h.ns.length() - 1.0).abs() < 1e-4
-                        && h.ng.dot(h.ns) >= 0.0
-                );
-            }
-            (a, b) => panic!("bvh {a:?} vs brute force {b:?} for {ray:?}"),
-        }
-        assert_eq!(geometry.occluded(&ray), brute.is_some(), "ray {ray:?}");
-    }
+    let rays = random_rays(&mut rng, 10_000, Vec3::ZERO, 4.0);
+    let hits = check_against_brute_force(&shapes, &rays);
     assert!(
-        hits > 5000,
+        hits > 2500,
         "only {hits} hits: the test scene is not exercised"
     );
+}
+
+#[test]
+fn bvh_closest_hit_equals_brute_force_on_the_teapot() {
+    let shapes = vec![shape(ShapeGeometry::Mesh(TriangleMesh::teapot(6)))];
+    let mut rng = Pcg64::seed_from_u64(12);
+    let mut rays = random_rays(&mut rng, 3_000, Vec3::new(0.0, 0.0, 1.5), 4.0);
+    // Camera-like rays from outside.
+    for i in 0..40 {
+        for j in 0..30 {
+            let target = Vec3::new(-3.5 + 7.0 * i as f32 / 39.0, 0.0, 3.3 * j as f32 / 29.0);
+            let o = Vec3::new(1.0, -8.0, 2.5);
+            rays.push(Ray::new(o, (target - o).normalize()));
+        }
+    }
+    let hits = check_against_brute_force(&shapes, &rays);
+    assert!(hits > 1000, "only {hits} hits");
+}
+
+#[test]
+fn hits_very_close_to_the_origin_are_found() {
+    // obvhs' CWBVH node test ignores boxes closer than 1e-4: a small triangle 3e-5 ahead must still
+    // be hit (and occlude).
+    // A cluster of 64 tiny triangles (so the BVH's nested boxes are tiny too, not just rounded up to
+    // a coarse parent grid) at z in [3e-5, 6e-5], the nearest (z = 3e-5) centred on the z axis.
+    let mut positions = Vec::new();
+    let mut indices = Vec::new();
+    for k in 0..64 {
+        let c = Vec3::new(
+            if k == 0 {
+                0.0
+            } else {
+                2e-5 * ((k % 8) as f32 - 3.5)
+            },
+            if k == 0 {
+                0.0
+            } else {
+                2e-5 * ((k / 8) as f32 - 3.5)
+            },
+            3e-5 + if k == 0 { 0.0 } else { 3e-5 * k as f32 / 64.0 },
+        );
+        let base = positions.len() as u32;
+        positions.extend([
+            c + Vec3::new(-1e-5, -1e-5, 0.0),
+            c + Vec3::new(1e-5, -1e-5, 0.0),
+            c + Vec3::new(0.0, 1e-5, 0.0),
+        ]);
+        indices.push([base, base + 1, base + 2]);
+    }
+    let tri = TriangleMesh::new(positions, indices, None, None, None).unwrap();
+    let far =
+        TriangleMesh::rectangle().transformed(&Transform::translate(Vec3::new(0.0, 0.0, 5.0)));
+    for kind in [BvhKind::Cwbvh, BvhKind::Bvh2] {
+        let g = Geometry::with_bvh(
+            vec![
+                shape(ShapeGeometry::Mesh(tri.clone())),
+                shape(ShapeGeometry::Mesh(far.clone())),
+            ],
+            kind,
+        );
+        let ray = Ray::new(Vec3::ZERO, Vec3::Z);
+        let h = g.intersect(&ray).unwrap();
+        assert_eq!(h.shape, 0, "{kind:?}");
+        assert!((h.t - 3e-5).abs() < 1e-9);
+        let mut short = ray;
+        short.t_max = 1e-4;
+        assert!(g.occluded(&short), "{kind:?}");
+    }
 }
 
 #[test]
