@@ -9,17 +9,29 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
 fn dir(theta: f32, phi: f32) -> Vec3 {
-    Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos())
+    Vec3::new(
+        theta.sin() * phi.cos(),
+        theta.sin() * phi.sin(),
+        theta.cos(),
+    )
 }
 
 /// Outgoing directions: normal, oblique, grazing (89.5 degrees).
 fn wos_outside() -> Vec<Vec3> {
-    vec![dir(0.0, 0.0), dir(0.7, 1.0), dir(1.3, 2.0), dir(89.5f32.to_radians(), -1.2)]
+    vec![
+        dir(0.0, 0.0),
+        dir(0.7, 1.0),
+        dir(1.3, 2.0),
+        dir(89.5f32.to_radians(), -1.2),
+    ]
 }
 
 /// The same directions from inside (`z < 0`).
 fn wos_inside() -> Vec<Vec3> {
-    wos_outside().into_iter().map(|w| Vec3::new(w.x, w.y, -w.z)).collect()
+    wos_outside()
+        .into_iter()
+        .map(|w| Vec3::new(w.x, w.y, -w.z))
+        .collect()
 }
 
 /// The chi-square grid's cells are smallest at its equator and largest at its poles, so
@@ -33,8 +45,17 @@ fn from_grid(g: Vec3) -> Vec3 {
     Vec3::new(g.z, g.x, g.y)
 }
 
-fn chi2_tilted(n: usize, mut sample: impl FnMut() -> Option<Vec3>, pdf: impl Fn(Vec3) -> f64) -> crate::testing::Chi2Result {
-    chi2_sphere(&SphereGrid::new(40, 80), n, || sample().map(to_grid), |g| pdf(from_grid(g)))
+fn chi2_tilted(
+    n: usize,
+    mut sample: impl FnMut() -> Option<Vec3>,
+    pdf: impl Fn(Vec3) -> f64,
+) -> crate::testing::Chi2Result {
+    chi2_sphere(
+        &SphereGrid::new(40, 80),
+        n,
+        || sample().map(to_grid),
+        |g| pdf(from_grid(g)),
+    )
 }
 
 fn rel_close(a: f32, b: f32, tol: f32) -> bool {
@@ -65,9 +86,18 @@ fn check_non_delta(name: &str, bsdf: &Bsdf, wo: Vec3, n: usize, seed: u64) {
         |wi| bsdf.pdf(wo, wi) as f64,
     );
     // A few samples near singular configurations may disagree in the last digits.
-    assert!(bad_pdf <= n / 10_000, "{name} wo {wo:?}: {bad_pdf} sampled pdfs differ from pdf()");
-    assert!(bad_weight <= n / 10_000, "{name} wo {wo:?}: {bad_weight} weights differ from eval cos / pdf");
-    assert!(r.p_value > 1e-3, "{name} wo {wo:?}: chi-square rejects the sampler: {r:?}");
+    assert!(
+        bad_pdf <= n / 10_000,
+        "{name} wo {wo:?}: {bad_pdf} sampled pdfs differ from pdf()"
+    );
+    assert!(
+        bad_weight <= n / 10_000,
+        "{name} wo {wo:?}: {bad_weight} weights differ from eval cos / pdf"
+    );
+    assert!(
+        r.p_value > 1e-3,
+        "{name} wo {wo:?}: chi-square rejects the sampler: {r:?}"
+    );
 }
 
 /// Monte Carlo directional albedo `integral f |cos| dwi` from the sampler, per channel,
@@ -93,13 +123,19 @@ fn diffuse_sampler_pdf_weight_and_energy() {
     for (i, wo) in wos_outside().into_iter().enumerate() {
         check_non_delta("diffuse", &b, wo, 100_000, i as u64);
         let a = albedo(&b, wo, 10_000, 100 + i as u64, false);
-        assert!((a[0].mean() - 1.0).abs() < 1e-5 && (a[1].mean() - 0.5).abs() < 1e-5, "albedo {a:?}");
+        assert!(
+            (a[0].mean() - 1.0).abs() < 1e-5 && (a[1].mean() - 0.5).abs() < 1e-5,
+            "albedo {a:?}"
+        );
         assert_eq!(a[2].mean(), 0.0);
     }
     // Independent of the sampler: quadrature of f cos over the hemisphere gives the albedo.
     let white = Bsdf::Diffuse(Diffuse::new(Rgb::ONE));
     let wo = dir(0.5, 0.1);
-    let q: f64 = SphereGrid::new(200, 8).integrate(|wi| (white.eval(wo, wi).x * wi.z.abs()) as f64).iter().sum();
+    let q: f64 = SphereGrid::new(200, 8)
+        .integrate(|wi| (white.eval(wo, wi).x * wi.z.abs()) as f64)
+        .iter()
+        .sum();
     assert!((q - 1.0).abs() < 1e-3, "diffuse albedo by quadrature {q}");
     // One-sided: nothing from below, nothing towards below.
     assert!(white.sample(-wo, 0.5, Vec2::splat(0.3)).is_none());
@@ -116,12 +152,18 @@ fn smooth_dielectric_lobes_and_energy() {
     let b = Bsdf::Dielectric(Dielectric::new(eta));
     assert!(b.is_delta() && b.has_transmission());
     let mut rng = Pcg64::seed_from_u64(5);
-    for wo in wos_outside().into_iter().chain(wos_inside()).chain([dir(2.5, 0.3)]) {
+    for wo in wos_outside()
+        .into_iter()
+        .chain(wos_inside())
+        .chain([dir(2.5, 0.3)])
+    {
         let f = fresnel::dielectric(wo.z as f64, eta as f64);
         let n = 20_000;
         let mut counts = [0u64; 2];
         for _ in 0..n {
-            let s = b.sample(wo, rng.random(), Vec2::new(rng.random(), rng.random())).expect("always samples");
+            let s = b
+                .sample(wo, rng.random(), Vec2::new(rng.random(), rng.random()))
+                .expect("always samples");
             assert!(s.delta);
             assert_eq!(b.pdf(wo, s.wi), 0.0);
             assert_eq!(b.eval(wo, s.wi), Rgb::ZERO);
@@ -138,9 +180,16 @@ fn smooth_dielectric_lobes_and_energy() {
                 let (n_o, n_i) = if wo.z > 0.0 { (1.0, eta) } else { (eta, 1.0) };
                 let sin_o = (1.0 - wo.z * wo.z).sqrt();
                 let sin_i = (1.0 - s.wi.z * s.wi.z).max(0.0).sqrt();
-                assert!((n_o * sin_o - n_i * sin_i).abs() < 1e-4, "Snell {wo:?} {:?}", s.wi);
+                assert!(
+                    (n_o * sin_o - n_i * sin_i).abs() < 1e-4,
+                    "Snell {wo:?} {:?}",
+                    s.wi
+                );
                 if sin_o > 1e-4 {
-                    assert!(wo.x * s.wi.x + wo.y * s.wi.y < 0.0, "refracted to the other side of the normal");
+                    assert!(
+                        wo.x * s.wi.x + wo.y * s.wi.y < 0.0,
+                        "refracted to the other side of the normal"
+                    );
                 }
                 assert!(rel_close(s.eta, n_i / n_o, 1e-6));
                 assert!(rel_close(s.pdf, 1.0 - f.r as f32, 1e-5));
@@ -151,7 +200,11 @@ fn smooth_dielectric_lobes_and_energy() {
         }
         let expected = [f.r * n as f64, (1.0 - f.r) * n as f64];
         let r = chi2_discrete(&counts, &expected);
-        assert!(r.p_value > 1e-3, "wo {wo:?}: lobe choice {counts:?} vs F = {}: {r:?}", f.r);
+        assert!(
+            r.p_value > 1e-3,
+            "wo {wo:?}: lobe choice {counts:?} vs F = {}: {r:?}",
+            f.r
+        );
     }
     // Beyond the critical angle from inside: total internal reflection only.
     let wo = dir(std::f32::consts::PI - 0.9, 0.0);
@@ -185,10 +238,20 @@ fn ggx_is_normalised() {
 fn visible_normal_sampler_chi2() {
     let mut rng = Pcg64::seed_from_u64(11);
     for (alpha, theta) in [(0.15f32, 0.3f32), (0.6, 1.2), (0.9, 1.55)] {
-        let g = microfacet::Ggx { alpha_x: alpha, alpha_y: alpha * 0.7 };
+        let g = microfacet::Ggx {
+            alpha_x: alpha,
+            alpha_y: alpha * 0.7,
+        };
         let v = dir(theta, 1.0);
-        let r = chi2_tilted(200_000, || Some(g.sample_visible(v, Vec2::new(rng.random(), rng.random()))), |m| g.pdf_visible(v, m) as f64);
+        let r = chi2_tilted(
+            200_000,
+            || Some(g.sample_visible(v, Vec2::new(rng.random(), rng.random()))),
+            |m| g.pdf_visible(v, m) as f64,
+        );
         assert!(r.p_value > 1e-3, "alpha {alpha} theta {theta}: {r:?}");
-        assert!((r.pdf_mass - 1.0).abs() < 0.01, "alpha {alpha} theta {theta}: {r:?}");
+        assert!(
+            (r.pdf_mass - 1.0).abs() < 0.01,
+            "alpha {alpha} theta {theta}: {r:?}"
+        );
     }
 }
