@@ -38,7 +38,9 @@ pub struct Conductor {
 
 impl Conductor {
     pub fn new(eta: Rgb, k: Rgb) -> Self {
-        Conductor { ior: ConductorIor { eta, k } }
+        Conductor {
+            ior: ConductorIor { eta, k },
+        }
     }
 
     #[inline]
@@ -46,7 +48,13 @@ impl Conductor {
         if wo.z <= 0.0 {
             return None;
         }
-        Some(BsdfSample { wi: reflect_z(wo), weight: self.ior.fresnel(wo.z), pdf: 1.0, delta: true, eta: 1.0 })
+        Some(BsdfSample {
+            wi: reflect_z(wo),
+            weight: self.ior.fresnel(wo.z),
+            pdf: 1.0,
+            delta: true,
+            eta: 1.0,
+        })
     }
 }
 
@@ -59,7 +67,10 @@ pub struct RoughConductor {
 
 impl RoughConductor {
     pub fn new(eta: Rgb, k: Rgb, alpha: f32) -> Self {
-        RoughConductor { ior: ConductorIor { eta, k }, distribution: Ggx::isotropic(alpha) }
+        RoughConductor {
+            ior: ConductorIor { eta, k },
+            distribution: Ggx::isotropic(alpha),
+        }
     }
 
     /// `F(wo.m) D(m) G(wo, wi, m) / (4 cos_o cos_i)`, `m` the half vector (Walter eq. 20).
@@ -107,6 +118,12 @@ impl RoughConductor {
         if !(pdf > 0.0) || g1 <= 0.0 {
             return None;
         }
-        Some(BsdfSample { wi, weight: self.ior.fresnel(wo_m) * g1, pdf, delta: false, eta: 1.0 })
+        Some(BsdfSample {
+            wi,
+            weight: self.ior.fresnel(wo_m) * g1,
+            pdf,
+            delta: false,
+            eta: 1.0,
+        })
     }
 }

@@ -38,12 +38,24 @@ impl Dielectric {
         let fr = fresnel::dielectric(wo.z as f64, self.eta as f64);
         let r = fr.r as f32;
         if u_lobe < r || r >= 1.0 {
-            return Some(BsdfSample { wi: reflect_z(wo), weight: Rgb::ONE, pdf: r, delta: true, eta: 1.0 });
+            return Some(BsdfSample {
+                wi: reflect_z(wo),
+                weight: Rgb::ONE,
+                pdf: r,
+                delta: true,
+                eta: 1.0,
+            });
         }
         let eta_it = fr.eta_it as f32;
         let eta_ti = 1.0 / eta_it;
         let wi = Vec3::new(-eta_ti * wo.x, -eta_ti * wo.y, fr.cos_theta_t as f32);
-        Some(BsdfSample { wi, weight: Rgb::splat(eta_ti * eta_ti), pdf: 1.0 - r, delta: true, eta: eta_it })
+        Some(BsdfSample {
+            wi,
+            weight: Rgb::splat(eta_ti * eta_ti),
+            pdf: 1.0 - r,
+            delta: true,
+            eta: eta_it,
+        })
     }
 }
 
@@ -88,7 +100,10 @@ fn half_vector(eta: f32, wo: Vec3, wi: Vec3) -> Option<(Vec3, f32, bool)> {
 
 impl RoughDielectric {
     pub fn new(eta: f32, alpha: f32) -> Self {
-        RoughDielectric { eta, distribution: Ggx::isotropic(alpha) }
+        RoughDielectric {
+            eta,
+            distribution: Ggx::isotropic(alpha),
+        }
     }
 
     /// Walter eq. 20 (reflection) and eq. 21 (transmission, divided by `eta_p^2` for radiance).
@@ -154,7 +169,13 @@ impl RoughDielectric {
             if !(pdf > 0.0) || g1 <= 0.0 {
                 return None;
             }
-            Some(BsdfSample { wi, weight: Rgb::splat(g1), pdf, delta: false, eta: 1.0 })
+            Some(BsdfSample {
+                wi,
+                weight: Rgb::splat(g1),
+                pdf,
+                delta: false,
+                eta: 1.0,
+            })
         } else {
             let eta_p = fr.eta_it as f32;
             let wi = refract(wo, m, fr.cos_theta_t as f32, 1.0 / eta_p).normalize();
@@ -168,7 +189,13 @@ impl RoughDielectric {
             if !(pdf > 0.0) || g1 <= 0.0 {
                 return None;
             }
-            Some(BsdfSample { wi, weight: Rgb::splat(g1 / (eta_p * eta_p)), pdf, delta: false, eta: eta_p })
+            Some(BsdfSample {
+                wi,
+                weight: Rgb::splat(g1 / (eta_p * eta_p)),
+                pdf,
+                delta: false,
+                eta: eta_p,
+            })
         }
     }
 }

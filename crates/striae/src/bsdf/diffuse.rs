@@ -42,6 +42,12 @@ impl Diffuse {
             return None;
         }
         // f cos / pdf = (R / pi) cos / (cos / pi) = R.
-        Some(BsdfSample { wi, weight: self.reflectance, pdf, delta: false, eta: 1.0 })
+        Some(BsdfSample {
+            wi,
+            weight: self.reflectance,
+            pdf,
+            delta: false,
+            eta: 1.0,
+        })
     }
 }

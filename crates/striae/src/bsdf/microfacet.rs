@@ -24,7 +24,10 @@ impl Ggx {
 
     pub fn isotropic(alpha: f32) -> Self {
         let a = alpha.max(Self::MIN_ALPHA);
-        Ggx { alpha_x: a, alpha_y: a }
+        Ggx {
+            alpha_x: a,
+            alpha_y: a,
+        }
     }
 
     /// The normal distribution `D(m)` (Walter eq. 33), a density per unit solid
@@ -37,7 +40,11 @@ impl Ggx {
         let (ax, ay) = (self.alpha_x, self.alpha_y);
         let t = (m.x / ax).powi(2) + (m.y / ay).powi(2) + m.z * m.z;
         let d = 1.0 / (PI * ax * ay * t * t);
-        if d.is_finite() { d } else { 0.0 }
+        if d.is_finite() {
+            d
+        } else {
+            0.0
+        }
     }
 
     /// Smith's masking `G1(v, m)` for GGX (Walter eq. 34), 0 when `m` is back-facing to `v`
@@ -82,7 +89,11 @@ impl Ggx {
         // Stretch the view direction to the hemisphere configuration.
         let vh = Vec3::new(self.alpha_x * v.x, self.alpha_y * v.y, v.z).normalize();
         let lensq = vh.x * vh.x + vh.y * vh.y;
-        let t1 = if lensq > 0.0 { Vec3::new(-vh.y, vh.x, 0.0) / lensq.sqrt() } else { Vec3::X };
+        let t1 = if lensq > 0.0 {
+            Vec3::new(-vh.y, vh.x, 0.0) / lensq.sqrt()
+        } else {
+            Vec3::X
+        };
         let t2 = vh.cross(t1);
         // A point on the projected area of the hemisphere.
         let r = u.x.sqrt();
