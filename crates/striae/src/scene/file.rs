@@ -3,7 +3,7 @@
 //! documented with an example in `docs/scenes.md`.
 
 use crate::geometry::Transform;
-use super::interim::Material;
+use crate::material::Material;
 use crate::math::{Rgb, Vec3};
 use serde::Deserialize;
 use std::collections::BTreeMap;

@@ -13,7 +13,7 @@ pub mod interim;
 use crate::camera::PerspectiveCamera;
 use crate::geometry::{Geometry, Shape, ShapeGeometry, TriangleMesh};
 use crate::lights::{Environment, Light};
-use interim::Material;
+use crate::material::Material;
 use crate::bsdf::Bsdf;
 use crate::math::Vec3;
 use crate::shading::ShadingContext;
@@ -148,7 +148,12 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
 
     // Materials by name, in file order of the table (sorted keys: BTreeMap).
     let names: Vec<&String> = f.materials.keys().collect();
-    let materials: Vec<Material> = f.materials.values().cloned().collect();
+    let mut materials: Vec<Material> = Vec::with_capacity(names.len());
+    for (name, m) in &f.materials {
+        let mut m = m.clone();
+        m.prepare(base).map_err(|e| invalid(file, format!("materials.{name}"), m.clone(), e))?;
+        materials.push(m);
+    }
 
     let mut shapes = Vec::with_capacity(f.shapes.len());
     let mut lights = Vec::new();
@@ -253,7 +258,9 @@ fn shape_geometry(s: &ShapeSection, i: usize, file: &Path, base: &Path) -> Resul
             if !(1..=64).contains(&n) {
                 return Err(invalid(file, format!("shapes[{i}].subdivisions"), n, "must lie in 1..=64"));
             }
-            return Err(invalid(file, format!("shapes[{i}].type"), "teapot", "the teapot is not available yet"));
+            // Newell's teapot is z-up with its base at z = 0; scenes are y-up.
+            let z_up_to_y_up = crate::geometry::Transform::rotate(Vec3::X, -90.0).expect("valid rotation");
+            ShapeGeometry::Mesh(TriangleMesh::teapot(n).transformed(&z_up_to_y_up))
         }
         ShapeType::Rectangle => ShapeGeometry::Mesh(TriangleMesh::rectangle()),
         ShapeType::Box => ShapeGeometry::Mesh(TriangleMesh::cuboid()),
