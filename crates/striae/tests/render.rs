@@ -242,6 +242,12 @@ fn bad_scene_files_give_clear_errors() {
     // Bad value inside a shape: the message names the key.
     let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"sphere\"\nradius = \"big\"\nemission = 1\n"));
     assert!(msg.contains("radius") && msg.contains("big"), "{msg}");
+    // An index of refraction below 1, named with its material.
+    let msg = parse_err(&format!("{CAMERA}[materials.glass]\ntype = \"dielectric\"\nior = 0.9\n"));
+    assert!(msg.contains("materials.glass") && msg.contains("ior") && msg.contains("0.9"), "{msg}");
+    // A key that does not belong to the shape's type.
+    let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"rectangle\"\nradius = 2\nemission = 1\n"));
+    assert!(msg.contains("shapes[0].radius"), "{msg}");
     // Missing file.
     let err = Scene::load(Path::new("no/such/scene.toml"), &Overrides::default()).unwrap_err();
     assert!(matches!(err, SceneError::Read { .. }) && err.to_string().contains("no/such/scene.toml"), "{err}");

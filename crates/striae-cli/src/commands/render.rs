@@ -70,7 +70,7 @@ fn output_paths(output: Option<&Path>, scene: Option<&Path>) -> (PathBuf, PathBu
 pub fn run(args: Args) -> anyhow::Result<()> {
     let overrides = Overrides { spp: args.spp, resolution: args.res, seed: args.seed, max_depth: args.max_depth };
     let mut scene = match &args.scene {
-        Some(path) => Scene::load(path, &overrides).with_context(|| format!("loading scene {}", path.display()))?,
+        Some(path) => Scene::load(path, &overrides).context("cannot load the scene")?,
         None => Scene::default_scene(&overrides).context("building the built-in default scene")?,
     };
     if let Some(e) = args.exposure {
