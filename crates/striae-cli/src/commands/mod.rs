@@ -1,4 +1,5 @@
 pub mod layers;
+pub mod mesh;
 pub mod plot;
 pub mod precompute;
 pub mod render;
