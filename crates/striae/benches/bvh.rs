@@ -16,7 +16,11 @@ use striae::sampling::square_to_uniform_sphere;
 const SUBDIVISIONS: u32 = 64;
 
 fn teapot_shapes() -> Vec<Shape> {
-    vec![Shape { geometry: ShapeGeometry::Mesh(TriangleMesh::teapot(SUBDIVISIONS)), material: 0, area_light: None }]
+    vec![Shape {
+        geometry: ShapeGeometry::Mesh(TriangleMesh::teapot(SUBDIVISIONS)),
+        material: 0,
+        area_light: None,
+    }]
 }
 
 /// A 256 x 256 pinhole camera looking at the teapot, filling most of the frame.
@@ -45,8 +49,14 @@ fn incoherent_rays() -> Vec<Ray> {
     let mut rng = Pcg64::seed_from_u64(1);
     (0..65536)
         .map(|_| {
-            let o = Vec3::new(0.0, 0.0, 1.5) + 4.0 * rng.random::<f32>().cbrt() * square_to_uniform_sphere(Vec2::new(rng.random(), rng.random()));
-            Ray::new(o, square_to_uniform_sphere(Vec2::new(rng.random(), rng.random())))
+            let o = Vec3::new(0.0, 0.0, 1.5)
+                + 4.0
+                    * rng.random::<f32>().cbrt()
+                    * square_to_uniform_sphere(Vec2::new(rng.random(), rng.random()));
+            Ray::new(
+                o,
+                square_to_uniform_sphere(Vec2::new(rng.random(), rng.random())),
+            )
         })
         .collect()
 }
@@ -61,22 +71,37 @@ fn bench(c: &mut Criterion) {
     for kind in [BvhKind::Cwbvh, BvhKind::Bvh2] {
         let start = Instant::now();
         let g = Geometry::with_bvh(shapes.clone(), kind);
-        eprintln!("{kind:?}: built over {triangles} triangles in {:.1} ms", start.elapsed().as_secs_f64() * 1e3);
+        eprintln!(
+            "{kind:?}: built over {triangles} triangles in {:.1} ms",
+            start.elapsed().as_secs_f64() * 1e3
+        );
         geometries.push((kind, g));
     }
-    for (name, rays) in [("coherent", coherent_rays()), ("incoherent", incoherent_rays())] {
-        let hit_fraction = rays.iter().filter(|r| geometries[0].1.occluded(r)).count() as f64 / rays.len() as f64;
-        eprintln!("{name}: {:.1}% of {} rays hit", 100.0 * hit_fraction, rays.len());
+    for (name, rays) in [
+        ("coherent", coherent_rays()),
+        ("incoherent", incoherent_rays()),
+    ] {
+        let hit_fraction =
+            rays.iter().filter(|r| geometries[0].1.occluded(r)).count() as f64 / rays.len() as f64;
+        eprintln!(
+            "{name}: {:.1}% of {} rays hit",
+            100.0 * hit_fraction,
+            rays.len()
+        );
         let mut group = c.benchmark_group(format!("bvh/{name}"));
         group.throughput(Throughput::Elements(rays.len() as u64));
         group.sample_size(10);
         for (kind, g) in &geometries {
-            group.bench_with_input(BenchmarkId::new("intersect", format!("{kind:?}")), &rays, |b, rays| {
-                b.iter(|| rays.iter().filter(|r| g.intersect(r).is_some()).count())
-            });
-            group.bench_with_input(BenchmarkId::new("occluded", format!("{kind:?}")), &rays, |b, rays| {
-                b.iter(|| rays.iter().filter(|r| g.occluded(r)).count())
-            });
+            group.bench_with_input(
+                BenchmarkId::new("intersect", format!("{kind:?}")),
+                &rays,
+                |b, rays| b.iter(|| rays.iter().filter(|r| g.intersect(r).is_some()).count()),
+            );
+            group.bench_with_input(
+                BenchmarkId::new("occluded", format!("{kind:?}")),
+                &rays,
+                |b, rays| b.iter(|| rays.iter().filter(|r| g.occluded(r)).count()),
+            );
         }
         group.finish();
     }

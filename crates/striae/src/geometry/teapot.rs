@@ -402,15 +402,15 @@ mod tests {
         }
         // Knob top (lid patches 21-24 at t = 0) faces up, the bottom centre faces down.
         let ps = patches();
-        for pi in 20..24 {
+        for (pi, patch) in ps.iter().enumerate().take(24).skip(20) {
             for s in [0.0, 0.3, 1.0] {
-                assert!(patch_normal(&ps[pi], s, 0.0).z > 0.999, "lid patch {pi}");
+                assert!(patch_normal(patch, s, 0.0).z > 0.999, "lid patch {pi}");
             }
         }
-        for pi in 28..32 {
+        for (pi, patch) in ps.iter().enumerate().skip(28) {
             for s in [0.0, 0.3, 1.0] {
                 assert!(
-                    patch_normal(&ps[pi], s, 0.0).z < -0.999,
+                    patch_normal(patch, s, 0.0).z < -0.999,
                     "bottom patch {pi}"
                 );
             }
