@@ -1,0 +1,398 @@
+//! The scene's acceleration structure: every triangle and sphere of every shape in one
+//! compressed wide BVH (obvhs' CWBVH, Ylitie et al. 2017, built by PLOC with reinsertion),
+//! traversed for the closest hit and for any hit (shadow rays, early exit).
+//!
+//! Triangles are intersected with the watertight test of Woop, Benthin and Wald (2013, "Watertight
+//! Ray/Triangle Intersection", JCGT 2(1)), in the form of pbrt-v4's `Triangle::Intersect`: the
+//! vertices are translated to the ray origin, permuted so the ray's dominant axis is `z` and
+//! sheared so the ray is `+z`; the 2D edge functions are then evaluated identically (up to sign)
+//! for both triangles sharing an edge, and recomputed in `f64` when one is exactly zero, so a
+//! ray never slips between them.
+
+use std::time::Duration;
+
+use glam::Vec3A;
+use obvhs::aabb::Aabb;
+use obvhs::bvh2::builder::build_bvh2;
+use obvhs::bvh2::Bvh2;
+use obvhs::cwbvh::builder::build_cwbvh;
+use obvhs::cwbvh::CwBvh;
+use obvhs::BvhBuildParams;
+
+use super::sphere::{intersect_sphere, sphere_surface};
+use super::{Shape, ShapeGeometry, SurfaceHit};
+use crate::math::{Ray, Vec3};
+
+/// One BVH primitive, stored in BVH order (no index indirection at traversal).
+#[derive(Clone, Copy, Debug)]
+struct Prim {
+    /// Triangle vertices; for a sphere `v[0]` is the centre and `v[1].x` the radius.
+    v: [Vec3; 3],
+    shape: u32,
+    /// Triangle index within the shape, or [`SPHERE`].
+    prim: u32,
+}
+
+const SPHERE: u32 = u32::MAX;
+
+/// Per-ray constants of the watertight test: axis permutation and shear.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct WatertightRay {
+    o: Vec3,
+    kx: usize,
+    ky: usize,
+    kz: usize,
+    sx: f32,
+    sy: f32,
+    sz: f32,
+}
+
+impl WatertightRay {
+    #[inline]
+    pub(crate) fn new(ray: &Ray) -> Self {
+        let d = ray.d;
+        let kz = d.abs().max_position();
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        if d[kz] < 0.0 {
+            // Keep the winding (and hence the sign of the determinant) consistent.
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        WatertightRay {
+            o: ray.o,
+            kx,
+            ky,
+            kz,
+            sx: -d[kx] / d[kz],
+            sy: -d[ky] / d[kz],
+            sz: 1.0 / d[kz],
+        }
+    }
+
+    /// `(t, b1, b2)` of the hit with triangle `(p0, p1, p2)` for `t` in `(0, t_max)`;
+    /// `b1`, `b2` weight `p1`, `p2`.
+    #[inline]
+    pub(crate) fn intersect(
+        &self,
+        p0: Vec3,
+        p1: Vec3,
+        p2: Vec3,
+        t_max: f32,
+    ) -> Option<(f32, f32, f32)> {
+        // Arrays indexed by the permutation (a `Vec3` index is a `match`).
+        let (a, b, c) = (
+            (p0 - self.o).to_array(),
+            (p1 - self.o).to_array(),
+            (p2 - self.o).to_array(),
+        );
+        let (kx, ky, kz) = (self.kx, self.ky, self.kz);
+        let ax = a[kx] + self.sx * a[kz];
+        let ay = a[ky] + self.sy * a[kz];
+        let bx = b[kx] + self.sx * b[kz];
+        let by = b[ky] + self.sy * b[kz];
+        let cx = c[kx] + self.sx * c[kz];
+        let cy = c[ky] + self.sy * c[kz];
+        let mut e0 = bx * cy - by * cx;
+        let mut e1 = cx * ay - cy * ax;
+        let mut e2 = ax * by - ay * bx;
+        if e0 == 0.0 || e1 == 0.0 || e2 == 0.0 {
+            // Exactly on an edge in f32: decide in f64 (pbrt-v4, Woop et al. section 3.3).
+            let (bxd, byd, cxd, cyd, axd, ayd) = (
+                bx as f64, by as f64, cx as f64, cy as f64, ax as f64, ay as f64,
+            );
+            e0 = (bxd * cyd - byd * cxd) as f32;
+            e1 = (cxd * ayd - cyd * axd) as f32;
+            e2 = (axd * byd - ayd * bxd) as f32;
+        }
+        if (e0 < 0.0 || e1 < 0.0 || e2 < 0.0) && (e0 > 0.0 || e1 > 0.0 || e2 > 0.0) {
+            return None;
+        }
+        let det = e0 + e1 + e2;
+        if det == 0.0 {
+            return None;
+        }
+        let az = self.sz * a[kz];
+        let bz = self.sz * b[kz];
+        let cz = self.sz * c[kz];
+        let t_scaled = e0 * az + e1 * bz + e2 * cz;
+        if det < 0.0 && (t_scaled >= 0.0 || t_scaled < t_max * det) {
+            return None;
+        }
+        if det > 0.0 && (t_scaled <= 0.0 || t_scaled > t_max * det) {
+            return None;
+        }
+        let inv_det = 1.0 / det;
+        let t = t_scaled * inv_det;
+        if !(t > 0.0 && t < t_max) {
+            return None;
+        }
+        Some((t, e1 * inv_det, e2 * inv_det))
+    }
+}
+
+/// Which obvhs hierarchy [`Geometry`] traverses (see `BENCHMARKS.md`, "BVH", for the
+/// measurement behind the default).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum BvhKind {
+    /// Compressed 8-wide BVH (Ylitie et al. 2017), SIMD node tests.
+    #[default]
+    Cwbvh,
+    /// Binary BVH with collapsed leaves.
+    Bvh2,
+}
+
+enum Accel {
+    None,
+    Cwbvh(CwBvh),
+    Bvh2(Bvh2),
+}
+
+/// obvhs' CWBVH node test clamps a box's entry distance to at least `1e-4`
+/// (`cwbvh::node::EPSILON`), so a box lying entirely closer than that to the ray origin would be
+/// skipped. Traversal therefore starts the ray `CWBVH_SHIFT` (in units of `t`) behind its origin
+/// and reports `t + CWBVH_SHIFT` to obvhs; the primitive tests use the true origin.
+const CWBVH_SHIFT: f32 = 2e-4;
+
+/// Shapes with the BVH over their primitives.
+pub struct Geometry {
+    shapes: Vec<Shape>,
+    prims: Vec<Prim>,
+    accel: Accel,
+}
+
+impl std::fmt::Debug for Geometry {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Geometry")
+            .field("shapes", &self.shapes.len())
+            .field("primitives", &self.prims.len())
+            .finish()
+    }
+}
+
+fn prim_aabb(p: &Prim) -> Aabb {
+    let (lo, hi) = if p.prim == SPHERE {
+        let r = Vec3::splat(p.v[1].x);
+        (p.v[0] - r, p.v[0] + r)
+    } else {
+        (
+            p.v[0].min(p.v[1]).min(p.v[2]),
+            p.v[0].max(p.v[1]).max(p.v[2]),
+        )
+    };
+    // A little padding keeps flat (axis-aligned) boxes robust in the slab test.
+    let pad = Vec3::splat(1e-6 * lo.abs().max(hi.abs()).max_element() + 1e-20);
+    Aabb::new(Vec3A::from(lo - pad), Vec3A::from(hi + pad))
+}
+
+impl Geometry {
+    /// Builds the BVH (the default [`BvhKind`]) over all triangles and spheres of `shapes`.
+    pub fn new(shapes: Vec<Shape>) -> Geometry {
+        Geometry::with_bvh(shapes, BvhKind::default())
+    }
+
+    /// Builds the chosen kind of BVH (for benchmarks and tests).
+    pub fn with_bvh(shapes: Vec<Shape>, kind: BvhKind) -> Geometry {
+        let mut prims = Vec::new();
+        for (s, shape) in shapes.iter().enumerate() {
+            match &shape.geometry {
+                ShapeGeometry::Mesh(mesh) => {
+                    for i in 0..mesh.triangle_count() {
+                        prims.push(Prim {
+                            v: mesh.triangle(i),
+                            shape: s as u32,
+                            prim: i as u32,
+                        });
+                    }
+                }
+                ShapeGeometry::Sphere { centre, radius } => {
+                    prims.push(Prim {
+                        v: [*centre, Vec3::new(*radius, 0.0, 0.0), Vec3::ZERO],
+                        shape: s as u32,
+                        prim: SPHERE,
+                    });
+                }
+            }
+        }
+        if prims.is_empty() {
+            return Geometry {
+                shapes,
+                prims,
+                accel: Accel::None,
+            };
+        }
+        let aabbs: Vec<Aabb> = prims.iter().map(prim_aabb).collect();
+        let params = BvhBuildParams::medium_build();
+        let (accel, order) = match kind {
+            BvhKind::Cwbvh => {
+                let bvh = build_cwbvh(&aabbs, params, &mut Duration::default());
+                let order = bvh.primitive_indices.clone();
+                (Accel::Cwbvh(bvh), order)
+            }
+            BvhKind::Bvh2 => {
+                let bvh = build_bvh2(&aabbs, params, &mut Duration::default());
+                let order = bvh.primitive_indices.clone();
+                (Accel::Bvh2(bvh), order)
+            }
+        };
+        // Primitives in BVH order: traversal indexes them directly.
+        let prims = order.iter().map(|&i| prims[i as usize]).collect();
+        Geometry {
+            shapes,
+            prims,
+            accel,
+        }
+    }
+
+    pub fn shapes(&self) -> &[Shape] {
+        &self.shapes
+    }
+
+    /// Number of BVH primitives (triangles plus spheres).
+    pub fn primitive_count(&self) -> usize {
+        self.prims.len()
+    }
+
+    #[inline]
+    fn obvhs_ray(ray: &Ray, shift: f32) -> obvhs::ray::Ray {
+        // `+ 0.0` turns -0.0 into +0.0: obvhs' CWBVH picks the slab order from `d < 0` but
+        // inverts -0.0 to -huge, so a -0.0 component would swap the slabs and miss every box.
+        let d = Vec3A::from(ray.d) + Vec3A::ZERO;
+        obvhs::ray::Ray::new(Vec3A::from(ray.o) - shift * d, d, 0.0, ray.t_max + shift)
+    }
+
+    #[inline]
+    fn hit_prim(
+        &self,
+        wray: &WatertightRay,
+        ray: &Ray,
+        id: usize,
+        t_max: f32,
+    ) -> Option<(f32, f32, f32)> {
+        let p = &self.prims[id];
+        if p.prim == SPHERE {
+            intersect_sphere(p.v[0], p.v[1].x, ray, t_max).map(|t| (t, 0.0, 0.0))
+        } else {
+            wray.intersect(p.v[0], p.v[1], p.v[2], t_max)
+        }
+    }
+
+    /// Closest hit with `t` in `(0, ray.t_max)`.
+    pub fn intersect(&self, ray: &Ray) -> Option<SurfaceHit> {
+        let wray = WatertightRay::new(ray);
+        let mut best: Option<(usize, f32, f32, f32)> = None;
+        let mut t_max = ray.t_max;
+        let mut hit = obvhs::ray::RayHit::none();
+        match &self.accel {
+            Accel::None => return None,
+            Accel::Cwbvh(bvh) => {
+                bvh.ray_traverse(
+                    Self::obvhs_ray(ray, CWBVH_SHIFT),
+                    &mut hit,
+                    |_, id| match self.hit_prim(&wray, ray, id, t_max) {
+                        Some((t, b1, b2)) => {
+                            best = Some((id, t, b1, b2));
+                            t_max = t;
+                            t + CWBVH_SHIFT
+                        }
+                        None => f32::INFINITY,
+                    },
+                );
+            }
+            Accel::Bvh2(bvh) => {
+                bvh.ray_traverse(Self::obvhs_ray(ray, 0.0), &mut hit, |_, id| {
+                    match self.hit_prim(&wray, ray, id, t_max) {
+                        Some((t, b1, b2)) => {
+                            best = Some((id, t, b1, b2));
+                            t_max = t;
+                            t
+                        }
+                        None => f32::INFINITY,
+                    }
+                });
+            }
+        }
+        let (id, t, b1, b2) = best?;
+        Some(self.surface_hit(ray, id, t, b1, b2))
+    }
+
+    /// Whether anything lies along the ray in `(0, ray.t_max)` (any hit, early exit).
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        let wray = WatertightRay::new(ray);
+        let test = |id: usize| {
+            if self.hit_prim(&wray, ray, id, ray.t_max).is_some() {
+                0.0
+            } else {
+                f32::INFINITY
+            }
+        };
+        match &self.accel {
+            Accel::None => false,
+            Accel::Cwbvh(bvh) => {
+                !bvh.ray_traverse_miss(Self::obvhs_ray(ray, CWBVH_SHIFT), |_, id| test(id))
+            }
+            Accel::Bvh2(bvh) => !bvh.ray_traverse_miss(Self::obvhs_ray(ray, 0.0), |_, id| test(id)),
+        }
+    }
+
+    fn surface_hit(&self, ray: &Ray, id: usize, t: f32, b1: f32, b2: f32) -> SurfaceHit {
+        let prim = &self.prims[id];
+        let shape = &self.shapes[prim.shape as usize];
+        match &shape.geometry {
+            ShapeGeometry::Mesh(mesh) => {
+                let (p, ng, ns, uv, dpdu, dpdv) = mesh.surface(prim.prim as usize, b1, b2);
+                SurfaceHit {
+                    t,
+                    p,
+                    ng,
+                    ns,
+                    uv,
+                    dpdu,
+                    dpdv,
+                    shape: prim.shape,
+                    prim: prim.prim,
+                }
+            }
+            ShapeGeometry::Sphere { centre, radius } => {
+                let (p, n, uv, dpdu, dpdv) = sphere_surface(*centre, *radius, ray.at(t));
+                SurfaceHit {
+                    t,
+                    p,
+                    ng: n,
+                    ns: n,
+                    uv,
+                    dpdu,
+                    dpdv,
+                    shape: prim.shape,
+                    prim: 0,
+                }
+            }
+        }
+    }
+}
+
+/// Brute-force closest hit over every primitive (the test oracle for the BVH).
+pub fn intersect_brute_force(shapes: &[Shape], ray: &Ray) -> Option<(f32, u32, u32)> {
+    let wray = WatertightRay::new(ray);
+    let mut best: Option<(f32, u32, u32)> = None;
+    let mut t_max = ray.t_max;
+    for (s, shape) in shapes.iter().enumerate() {
+        match &shape.geometry {
+            ShapeGeometry::Mesh(mesh) => {
+                for i in 0..mesh.triangle_count() {
+                    let [a, b, c] = mesh.triangle(i);
+                    if let Some((t, ..)) = wray.intersect(a, b, c, t_max) {
+                        t_max = t;
+                        best = Some((t, s as u32, i as u32));
+                    }
+                }
+            }
+            ShapeGeometry::Sphere { centre, radius } => {
+                if let Some(t) = intersect_sphere(*centre, *radius, ray, t_max) {
+                    t_max = t;
+                    best = Some((t, s as u32, 0));
+                }
+            }
+        }
+    }
+    best
+}
