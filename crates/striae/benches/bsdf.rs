@@ -19,8 +19,14 @@ fn bsdfs() -> Vec<(&'static str, Bsdf)> {
         ("diffuse", Bsdf::Diffuse(Diffuse::new(Rgb::splat(0.8)))),
         ("dielectric", Bsdf::Dielectric(Dielectric::new(1.5))),
         ("conductor", Bsdf::Conductor(Conductor::new(eta, k))),
-        ("rough_dielectric", Bsdf::RoughDielectric(RoughDielectric::new(1.5, 0.2))),
-        ("rough_conductor", Bsdf::RoughConductor(RoughConductor::new(eta, k, 0.2))),
+        (
+            "rough_dielectric",
+            Bsdf::RoughDielectric(RoughDielectric::new(1.5, 0.2)),
+        ),
+        (
+            "rough_conductor",
+            Bsdf::RoughConductor(RoughConductor::new(eta, k, 0.2)),
+        ),
     ]
 }
 
@@ -36,7 +42,9 @@ fn bench(c: &mut Criterion) {
     let wo: Vec<Vec3> = (0..BATCH).map(|_| dir(true)).collect();
     let wi: Vec<Vec3> = (0..BATCH).map(|_| dir(false)).collect();
     let wo_any: Vec<Vec3> = (0..BATCH).map(|_| dir(false)).collect();
-    let us: Vec<(f32, Vec2)> = (0..BATCH).map(|_| (rng.random(), Vec2::new(rng.random(), rng.random()))).collect();
+    let us: Vec<(f32, Vec2)> = (0..BATCH)
+        .map(|_| (rng.random(), Vec2::new(rng.random(), rng.random())))
+        .collect();
 
     let mut g = c.benchmark_group("bsdf");
     g.throughput(Throughput::Elements(BATCH as u64));
@@ -69,7 +77,15 @@ fn bench(c: &mut Criterion) {
 
     // A 1024 x 512 environment map with structure.
     let (w, h) = (1024, 512);
-    let px = (0..w * h).map(|i| Rgb::new((i % w) as f32 / w as f32, 0.5, ((i / w) as f32 * 0.1).sin().abs() * 3.0)).collect();
+    let px = (0..w * h)
+        .map(|i| {
+            Rgb::new(
+                (i % w) as f32 / w as f32,
+                0.5,
+                ((i / w) as f32 * 0.1).sin().abs() * 3.0,
+            )
+        })
+        .collect();
     let env = EnvMap::from_rgb(w, h, px).unwrap();
     g.bench_function("envmap_1024x512/sample", |bench| {
         bench.iter(|| {
