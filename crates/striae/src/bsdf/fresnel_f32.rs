@@ -21,6 +21,11 @@ pub fn dielectric(cos_theta_i: f32, eta: f32) -> (f32, f32, f32) {
     (r, if outside { -cos_t } else { cos_t }, eta_it)
 }
 
+#[inline]
+fn sqrt3(v: Vec3) -> Vec3 {
+    Vec3::new(v.x.sqrt(), v.y.sqrt(), v.z.sqrt())
+}
+
 /// Conductor Fresnel for a complex index `eta + i k` per RGB channel at `cos_theta_i` in
 /// `[0, 1]`, in the real-arithmetic form Mitsuba 3 uses (`fresnel_conductor`, after Moeller,
 /// "Optics", 1988); equal to `fresnel::conductor`.
