@@ -94,6 +94,19 @@ impl Bsdf {
         }
     }
 
+    /// `(eval(wo, wi), pdf(wo, wi))` in one call, sharing the work the two have in common
+    /// (the microfacet models compute the half vector, `D` and Fresnel once). Use it for light
+    /// sampling with MIS.
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        match self {
+            Bsdf::Diffuse(b) => (b.eval(wo, wi), b.pdf(wo, wi)),
+            Bsdf::Dielectric(_) | Bsdf::Conductor(_) => (Rgb::ZERO, 0.0),
+            Bsdf::RoughDielectric(b) => b.eval_pdf(wo, wi),
+            Bsdf::RoughConductor(b) => b.eval_pdf(wo, wi),
+        }
+    }
+
     /// Sample `wi` given `wo`: `u_lobe` chooses between lobes (reflection / transmission),
     /// `u` drives the direction. `None` when no direction is produced (wrong side, a
     /// microfacet sample below the surface): the path ends.
