@@ -1,0 +1,145 @@
+//! Conductors: a smooth mirror and a rough GGX reflector (Walter et al. 2007 eq. 20; visible
+//! normal sampling, Heitz 2018), with the exact Fresnel reflectance of a complex index of
+//! refraction `eta + i k` per RGB channel (`fresnel::conductor`).
+//!
+//! Presets live in `material` (Mitsuba 3's `conductor` list); `eta = 0, k = 1` is Mitsuba's
+//! `none`, a perfect mirror with `F = 1` at every angle.
+
+use super::fresnel_f32;
+use super::microfacet::Ggx;
+use super::BsdfSample;
+use crate::math::{reflect, reflect_z, Rgb, Vec2, Vec3};
+
+/// The complex index of refraction of a conductor, per RGB channel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ConductorIor {
+    pub eta: Rgb,
+    pub k: Rgb,
+}
+
+impl ConductorIor {
+    /// Unpolarised reflectance per channel at `cos_theta` in `[0, 1]`.
+    #[inline]
+    pub fn fresnel(&self, cos_theta: f32) -> Rgb {
+        fresnel_f32::conductor(cos_theta, self.eta, self.k)
+    }
+}
+
+/// A smooth conductor: a single delta reflection lobe with weight `F(cos theta_o)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Conductor {
+    pub ior: ConductorIor,
+}
+
+impl Conductor {
+    pub fn new(eta: Rgb, k: Rgb) -> Self {
+        Conductor {
+            ior: ConductorIor { eta, k },
+        }
+    }
+
+    #[inline]
+    pub fn sample(&self, wo: Vec3) -> Option<BsdfSample> {
+        if wo.z <= 0.0 {
+            return None;
+        }
+        Some(BsdfSample {
+            wi: reflect_z(wo),
+            weight: self.ior.fresnel(wo.z),
+            pdf: 1.0,
+            delta: true,
+            eta: 1.0,
+        })
+    }
+}
+
+/// A rough GGX conductor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RoughConductor {
+    pub ior: ConductorIor,
+    pub distribution: Ggx,
+}
+
+impl RoughConductor {
+    pub fn new(eta: Rgb, k: Rgb, alpha: f32) -> Self {
+        RoughConductor {
+            ior: ConductorIor { eta, k },
+            distribution: Ggx::isotropic(alpha),
+        }
+    }
+
+    /// `F(wo.m) D(m) G(wo, wi, m) / (4 cos_o cos_i)`, `m` the half vector (Walter eq. 20).
+    #[inline]
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return Rgb::ZERO;
+        }
+        let m = (wo + wi).normalize();
+        let dg = self.distribution.d(m) * self.distribution.g(wo, wi, m);
+        if dg <= 0.0 {
+            return Rgb::ZERO;
+        }
+        self.ior.fresnel(wo.dot(m)) * (dg / (4.0 * wo.z * wi.z))
+    }
+
+    /// `D_wo(m) / (4 wo.m)` (visible-normal density times the reflection Jacobian, eq. 14).
+    #[inline]
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return 0.0;
+        }
+        let m = (wo + wi).normalize();
+        let wo_m = wo.dot(m);
+        if wo_m <= 0.0 {
+            return 0.0;
+        }
+        self.distribution.pdf_visible(wo, m) / (4.0 * wo_m)
+    }
+
+    /// `(eval, pdf)` sharing the half vector, `D` and `G1(wo)`.
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return (Rgb::ZERO, 0.0);
+        }
+        let m = (wo + wi).normalize();
+        let wo_m = wo.dot(m);
+        if wo_m <= 0.0 {
+            return (Rgb::ZERO, 0.0);
+        }
+        let d = self.distribution.d(m);
+        let g1_o = self.distribution.g1(wo, m);
+        let g = g1_o * self.distribution.g1(wi, m);
+        let pdf = g1_o * wo_m * d / wo.z / (4.0 * wo_m);
+        if d * g <= 0.0 {
+            return (Rgb::ZERO, pdf);
+        }
+        (self.ior.fresnel(wo_m) * (d * g / (4.0 * wo.z * wi.z)), pdf)
+    }
+
+    /// Reflect `wo` about a visible normal; weight `F(wo.m) G1(wi, m)`.
+    #[inline]
+    pub fn sample(&self, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
+        if wo.z <= 0.0 {
+            return None;
+        }
+        let m = self.distribution.sample_visible(wo, u);
+        let wi = reflect(wo, m);
+        if wi.z <= 0.0 {
+            return None;
+        }
+        let wo_m = wo.dot(m);
+        let pdf = self.distribution.pdf_visible(wo, m) / (4.0 * wo_m);
+        let g1 = self.distribution.g1(wi, m);
+        if !(pdf > 0.0) || g1 <= 0.0 {
+            return None;
+        }
+        Some(BsdfSample {
+            wi,
+            weight: self.ior.fresnel(wo_m) * g1,
+            pdf,
+            delta: false,
+            eta: 1.0,
+        })
+    }
+}

@@ -1,0 +1,139 @@
+//! BSDFs in a local shading frame (`z` = shading normal; `wo`, `wi` point away), the
+//! surface-scattering part of the path tracer (issue 4; `docs/METHOD.md` section 7 uses them
+//! as the base layer under the scratches).
+//!
+//! Five models, each in its own file, gathered in the closed enum [`Bsdf`] so the integrator
+//! dispatches without virtual calls:
+//!
+//! * [`Diffuse`], Lambertian.
+//! * [`Dielectric`], a smooth interface with the exact Fresnel equations (Mitsuba 3's
+//!   `dielectric`, pbrt-v4's `DielectricBxDF` with zero roughness).
+//! * [`Conductor`], a smooth mirror with a complex index of refraction per RGB channel.
+//! * [`RoughConductor`] and [`RoughDielectric`], GGX microfacet models after Walter et al. 2007,
+//!   sampled by visible normals (Heitz 2018), with the separable Smith shadowing
+//!   `G = G1(wo) G1(wi)` that Mitsuba 3 uses (so that renders agree with it).
+//!
+//! ## Conventions
+//!
+//! * `eval(wo, wi)` is `f` without the cosine; `pdf(wo, wi)` is per unit solid angle and 0 for
+//!   delta lobes; `sample` returns [`BsdfSample`] with `weight = f |cos theta_i| / pdf`.
+//! * Opaque BSDFs (diffuse, conductors) are one-sided in the local frame: they return 0 unless
+//!   both `wo.z > 0` and `wi.z > 0`; the integrator flips the frame to `wo`'s side first
+//!   (`docs/ARCHITECTURE.md`).
+//! * Transmissive BSDFs see `wo.z < 0` when `wo` is inside the medium the normal points away
+//!   from. The relative index `eta = n_inside / n_outside`.
+//! * **Radiance transport**: refraction into a medium of relative index `eta_t` (seen from
+//!   `wo`'s side) scales radiance by `1 / eta_t^2` (pbrt-v4's `TransportMode::Radiance`,
+//!   Mitsuba 3's `dielectric` in radiance mode). [`BsdfSample::eta`] reports that relative
+//!   index so Russian roulette can undo the scaling.
+//!
+//! Issue 5 adds a `Scratched` variant: add it to [`Bsdf`] and to the `match`es of the five
+//! methods in this file; nothing else depends on the list of variants.
+
+// `!(x > 0.0)` is used on purpose: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+mod conductor;
+mod dielectric;
+mod diffuse;
+mod fresnel_f32;
+pub mod microfacet;
+
+pub use conductor::{Conductor, ConductorIor, RoughConductor};
+pub use dielectric::{Dielectric, RoughDielectric};
+pub use diffuse::Diffuse;
+
+use crate::math::{Rgb, Vec2, Vec3};
+
+/// One sampled incident direction.
+#[derive(Clone, Copy, Debug)]
+pub struct BsdfSample {
+    /// Sampled direction, local frame, unit length, pointing away from the surface.
+    pub wi: Vec3,
+    /// `f(wo, wi) |cos theta_i| / pdf` (for a delta lobe: the lobe's weight).
+    pub weight: Rgb,
+    /// Solid-angle density of `wi` (for a delta lobe: the discrete probability of choosing it).
+    pub pdf: f32,
+    /// Whether `wi` came from a delta (specular) lobe, which light sampling cannot reach.
+    pub delta: bool,
+    /// Relative index of refraction `n_i / n_o` crossed by the sample (1 for reflection),
+    /// used to keep Russian roulette independent of the radiance scaling at refraction.
+    pub eta: f32,
+}
+
+/// A BSDF evaluated at one surface point (textures already looked up).
+#[derive(Clone, Copy, Debug)]
+pub enum Bsdf {
+    Diffuse(Diffuse),
+    Dielectric(Dielectric),
+    Conductor(Conductor),
+    RoughDielectric(RoughDielectric),
+    RoughConductor(RoughConductor),
+}
+
+impl Bsdf {
+    /// `f(wo, wi)` without the cosine (0 for delta lobes).
+    #[inline]
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
+        match self {
+            Bsdf::Diffuse(b) => b.eval(wo, wi),
+            Bsdf::Dielectric(_) | Bsdf::Conductor(_) => Rgb::ZERO,
+            Bsdf::RoughDielectric(b) => b.eval(wo, wi),
+            Bsdf::RoughConductor(b) => b.eval(wo, wi),
+        }
+    }
+
+    /// Solid-angle density with which [`Bsdf::sample`] returns `wi` (0 for delta lobes).
+    #[inline]
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        match self {
+            Bsdf::Diffuse(b) => b.pdf(wo, wi),
+            Bsdf::Dielectric(_) | Bsdf::Conductor(_) => 0.0,
+            Bsdf::RoughDielectric(b) => b.pdf(wo, wi),
+            Bsdf::RoughConductor(b) => b.pdf(wo, wi),
+        }
+    }
+
+    /// `(eval(wo, wi), pdf(wo, wi))` in one call, sharing the work the two have in common
+    /// (the microfacet models compute the half vector, `D` and Fresnel once). Use it for light
+    /// sampling with MIS.
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        match self {
+            Bsdf::Diffuse(b) => (b.eval(wo, wi), b.pdf(wo, wi)),
+            Bsdf::Dielectric(_) | Bsdf::Conductor(_) => (Rgb::ZERO, 0.0),
+            Bsdf::RoughDielectric(b) => b.eval_pdf(wo, wi),
+            Bsdf::RoughConductor(b) => b.eval_pdf(wo, wi),
+        }
+    }
+
+    /// Sample `wi` given `wo`: `u_lobe` chooses between lobes (reflection / transmission),
+    /// `u` drives the direction. `None` when no direction is produced (wrong side, a
+    /// microfacet sample below the surface): the path ends.
+    #[inline]
+    pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+        match self {
+            Bsdf::Diffuse(b) => b.sample(wo, u),
+            Bsdf::Dielectric(b) => b.sample(wo, u_lobe),
+            Bsdf::Conductor(b) => b.sample(wo),
+            Bsdf::RoughDielectric(b) => b.sample(wo, u_lobe, u),
+            Bsdf::RoughConductor(b) => b.sample(wo, u),
+        }
+    }
+
+    /// Whether light can pass through (the integrator then keeps `wo.z < 0` as "inside"
+    /// instead of flipping the frame).
+    #[inline]
+    pub fn has_transmission(&self) -> bool {
+        matches!(self, Bsdf::Dielectric(_) | Bsdf::RoughDielectric(_))
+    }
+
+    /// Whether every lobe is a delta: light sampling cannot contribute and is skipped.
+    #[inline]
+    pub fn is_delta(&self) -> bool {
+        matches!(self, Bsdf::Dielectric(_) | Bsdf::Conductor(_))
+    }
+}
+
+#[cfg(test)]
+mod tests;

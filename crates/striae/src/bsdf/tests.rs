@@ -1,0 +1,441 @@
+//! Tests of every BSDF: chi-square of the sampler against `pdf` (at several `wo`, grazing and
+//! from inside for the dielectrics), sampled pdf == `pdf(wo, wi)`, weight == `f |cos| / pdf`,
+//! directional albedo (energy), reciprocity, and the discrete lobe choice of delta BSDFs.
+
+use super::*;
+use crate::fresnel;
+use crate::testing::{chi2_discrete, chi2_sphere, MeanEstimate, SphereGrid};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+fn dir(theta: f32, phi: f32) -> Vec3 {
+    Vec3::new(
+        theta.sin() * phi.cos(),
+        theta.sin() * phi.sin(),
+        theta.cos(),
+    )
+}
+
+/// Outgoing directions: normal, oblique, grazing (89.5 degrees).
+fn wos_outside() -> Vec<Vec3> {
+    vec![
+        dir(0.0, 0.0),
+        dir(0.7, 1.0),
+        dir(1.3, 2.0),
+        dir(89.5f32.to_radians(), -1.2),
+    ]
+}
+
+/// The same directions from inside (`z < 0`).
+fn wos_inside() -> Vec<Vec3> {
+    wos_outside()
+        .into_iter()
+        .map(|w| Vec3::new(w.x, w.y, -w.z))
+        .collect()
+}
+
+/// The chi-square grid's cells are smallest at its equator and largest at its poles, so
+/// directions are tested in a frame whose poles are the local `+-x` axes: lobes around the
+/// normal or mirror direction (for `wo` away from the `x` axis) land on fine cells.
+fn to_grid(w: Vec3) -> Vec3 {
+    Vec3::new(w.y, w.z, w.x)
+}
+
+fn from_grid(g: Vec3) -> Vec3 {
+    Vec3::new(g.z, g.x, g.y)
+}
+
+fn chi2_tilted(
+    n: usize,
+    sub: usize,
+    mut sample: impl FnMut() -> Option<Vec3>,
+    pdf: impl Fn(Vec3) -> f64,
+) -> crate::testing::Chi2Result {
+    let grid = SphereGrid {
+        sub,
+        ..SphereGrid::new(40, 80)
+    };
+    chi2_sphere(&grid, n, || sample().map(to_grid), |g| pdf(from_grid(g)))
+}
+
+fn rel_close(a: f32, b: f32, tol: f32) -> bool {
+    (a - b).abs() <= tol * a.abs().max(b.abs()).max(1e-6)
+}
+
+/// Draw samples; check each sample's `pdf` against `bsdf.pdf` and its weight against
+/// `eval |cos| / pdf`; then chi-square of the directions against `pdf`.
+fn check_non_delta(name: &str, bsdf: &Bsdf, wo: Vec3, n: usize, seed: u64) {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let mut bad_pdf = 0;
+    let mut bad_weight = 0;
+    // Lobes cut by the horizon at grazing angles, and the thin crescent of directions that
+    // leave through tilted microfacets beyond the critical angle, need a finer quadrature.
+    let sub = if wo.z.abs() < 0.05 {
+        48
+    } else if wo.z < 0.0 {
+        24
+    } else {
+        8
+    };
+    let r = chi2_tilted(
+        n,
+        sub,
+        || {
+            let s = bsdf.sample(wo, rng.random(), Vec2::new(rng.random(), rng.random()))?;
+            assert!(!s.delta);
+            let pdf = bsdf.pdf(wo, s.wi);
+            if !rel_close(s.pdf, pdf, 2e-3) {
+                bad_pdf += 1;
+            }
+            let expect = bsdf.eval(wo, s.wi) * s.wi.z.abs() / s.pdf;
+            if !(0..3).all(|c| (expect[c] - s.weight[c]).abs() <= 2e-3 * expect[c].max(1.0)) {
+                bad_weight += 1;
+            }
+            Some(s.wi)
+        },
+        |wi| bsdf.pdf(wo, wi) as f64,
+    );
+    // A few samples near singular configurations may disagree in the last digits.
+    assert!(
+        bad_pdf <= n / 10_000,
+        "{name} wo {wo:?}: {bad_pdf} sampled pdfs differ from pdf()"
+    );
+    assert!(
+        bad_weight <= n / 10_000,
+        "{name} wo {wo:?}: {bad_weight} weights differ from eval cos / pdf"
+    );
+    assert!(
+        r.p_value > 1e-3,
+        "{name} wo {wo:?}: chi-square rejects the sampler: {r:?}"
+    );
+}
+
+/// Monte Carlo directional albedo `integral f |cos| dwi` from the sampler, per channel,
+/// with the refraction radiance factor undone (`weight * eta^2`) when `undo_eta` is set.
+fn albedo(bsdf: &Bsdf, wo: Vec3, n: usize, seed: u64, undo_eta: bool) -> [MeanEstimate; 3] {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let mut m = [MeanEstimate::default(); 3];
+    for _ in 0..n {
+        let w = match bsdf.sample(wo, rng.random(), Vec2::new(rng.random(), rng.random())) {
+            Some(s) => s.weight * if undo_eta { s.eta * s.eta } else { 1.0 },
+            None => Rgb::ZERO,
+        };
+        for c in 0..3 {
+            m[c].push(w[c] as f64);
+        }
+    }
+    m
+}
+
+#[test]
+fn diffuse_sampler_pdf_weight_and_energy() {
+    let b = Bsdf::Diffuse(Diffuse::new(Rgb::new(1.0, 0.5, 0.0)));
+    for (i, wo) in wos_outside().into_iter().enumerate() {
+        check_non_delta("diffuse", &b, wo, 100_000, i as u64);
+        let a = albedo(&b, wo, 10_000, 100 + i as u64, false);
+        assert!(
+            (a[0].mean() - 1.0).abs() < 1e-5 && (a[1].mean() - 0.5).abs() < 1e-5,
+            "albedo {a:?}"
+        );
+        assert_eq!(a[2].mean(), 0.0);
+    }
+    // Independent of the sampler: quadrature of f cos over the hemisphere gives the albedo.
+    let white = Bsdf::Diffuse(Diffuse::new(Rgb::ONE));
+    let wo = dir(0.5, 0.1);
+    let q: f64 = SphereGrid::new(200, 8)
+        .integrate(|wi| (white.eval(wo, wi).x * wi.z.abs()) as f64)
+        .iter()
+        .sum();
+    assert!((q - 1.0).abs() < 1e-3, "diffuse albedo by quadrature {q}");
+    // One-sided: nothing from below, nothing towards below.
+    assert!(white.sample(-wo, 0.5, Vec2::splat(0.3)).is_none());
+    assert_eq!(white.eval(wo, -wo), Rgb::ZERO);
+    assert_eq!(white.eval(wo, dir(0.3, 2.0)), white.eval(dir(0.3, 2.0), wo));
+}
+
+/// The smooth dielectric picks reflection with probability F (discrete chi-square), reflects
+/// and refracts by the laws of reflection and Snell, and is lossless: R + T = 1 once the
+/// `1 / eta^2` radiance factor is undone.
+#[test]
+fn smooth_dielectric_lobes_and_energy() {
+    let eta = 1.5f32;
+    let b = Bsdf::Dielectric(Dielectric::new(eta));
+    assert!(b.is_delta() && b.has_transmission());
+    let mut rng = Pcg64::seed_from_u64(5);
+    for wo in wos_outside()
+        .into_iter()
+        .chain(wos_inside())
+        .chain([dir(2.5, 0.3)])
+    {
+        let f = fresnel::dielectric(wo.z as f64, eta as f64);
+        let n = 20_000;
+        let mut counts = [0u64; 2];
+        for _ in 0..n {
+            let s = b
+                .sample(wo, rng.random(), Vec2::new(rng.random(), rng.random()))
+                .expect("always samples");
+            assert!(s.delta);
+            assert_eq!(b.pdf(wo, s.wi), 0.0);
+            assert_eq!(b.eval(wo, s.wi), Rgb::ZERO);
+            assert!((s.wi.length() - 1.0).abs() < 1e-5);
+            if s.wi.z * wo.z > 0.0 {
+                counts[0] += 1;
+                assert!((s.wi - Vec3::new(-wo.x, -wo.y, wo.z)).length() < 1e-6);
+                assert!(rel_close(s.pdf, f.r as f32, 1e-5));
+                assert_eq!(s.eta, 1.0);
+                assert_eq!(s.weight, Rgb::ONE);
+            } else {
+                counts[1] += 1;
+                // Snell: n_o sin_o = n_i sin_i, same plane, opposite side.
+                let (n_o, n_i) = if wo.z > 0.0 { (1.0, eta) } else { (eta, 1.0) };
+                let sin_o = (1.0 - wo.z * wo.z).sqrt();
+                let sin_i = (1.0 - s.wi.z * s.wi.z).max(0.0).sqrt();
+                assert!(
+                    (n_o * sin_o - n_i * sin_i).abs() < 1e-4,
+                    "Snell {wo:?} {:?}",
+                    s.wi
+                );
+                if sin_o > 1e-4 {
+                    assert!(
+                        wo.x * s.wi.x + wo.y * s.wi.y < 0.0,
+                        "refracted to the other side of the normal"
+                    );
+                }
+                assert!(rel_close(s.eta, n_i / n_o, 1e-6));
+                assert!(rel_close(s.pdf, 1.0 - f.r as f32, 1e-5));
+                // Radiance transport: scaled by (n_o / n_i)^2; undone it is exactly 1.
+                assert!(rel_close(s.weight.x, (n_o / n_i).powi(2), 1e-5));
+                assert!(rel_close(s.weight.x * s.eta * s.eta, 1.0, 1e-5));
+            }
+        }
+        let expected = [f.r * n as f64, (1.0 - f.r) * n as f64];
+        let r = chi2_discrete(&counts, &expected);
+        assert!(
+            r.p_value > 1e-3,
+            "wo {wo:?}: lobe choice {counts:?} vs F = {}: {r:?}",
+            f.r
+        );
+    }
+    // Beyond the critical angle from inside: total internal reflection only.
+    let wo = dir(std::f32::consts::PI - 0.9, 0.0);
+    for u in [0.0, 0.5, 0.999] {
+        let s = b.sample(wo, u, Vec2::ZERO).unwrap();
+        assert!(s.wi.z < 0.0 && s.pdf == 1.0);
+    }
+}
+
+/// `integral D(m) cos theta_m dm = 1` (the projected microfacet area is the macro area), by
+/// a fine 1D quadrature in theta (isotropic).
+#[test]
+fn ggx_is_normalised() {
+    for alpha in [0.02f32, 0.1, 0.3, 1.0] {
+        let g = microfacet::Ggx::isotropic(alpha);
+        let n = 200_000;
+        let h = std::f64::consts::FRAC_PI_2 / n as f64;
+        let total: f64 = (0..n)
+            .map(|i| {
+                let t = (i as f64 + 0.5) * h;
+                g.d(dir(t as f32, 0.3)) as f64 * t.cos() * t.sin() * 2.0 * std::f64::consts::PI * h
+            })
+            .sum();
+        assert!((total - 1.0).abs() < 1e-3, "alpha {alpha}: {total}");
+    }
+}
+
+/// The visible-normal sampler matches `pdf_visible` (chi-square), and the visible normals'
+/// density integrates to 1 (which checks `G1` against `D`: Heitz 2014 eq. 2).
+#[test]
+fn visible_normal_sampler_chi2() {
+    let mut rng = Pcg64::seed_from_u64(11);
+    for (alpha, theta) in [(0.15f32, 0.3f32), (0.6, 1.2), (0.9, 1.55)] {
+        let g = microfacet::Ggx {
+            alpha_x: alpha,
+            alpha_y: alpha * 0.7,
+        };
+        let v = dir(theta, 1.0);
+        let r = chi2_tilted(
+            200_000,
+            8,
+            || Some(g.sample_visible(v, Vec2::new(rng.random(), rng.random()))),
+            |m| g.pdf_visible(v, m) as f64,
+        );
+        assert!(r.p_value > 1e-3, "alpha {alpha} theta {theta}: {r:?}");
+        assert!(
+            (r.pdf_mass - 1.0).abs() < 0.01,
+            "alpha {alpha} theta {theta}: {r:?}"
+        );
+    }
+}
+
+fn gold() -> (Rgb, Rgb) {
+    crate::material::conductor_preset("gold").unwrap()
+}
+
+/// Smooth conductor: one delta lobe at the mirror direction, weight F per channel; the
+/// `none` preset (eta = 0, k = 1) reflects everything at every angle.
+#[test]
+fn smooth_conductor_mirror_and_fresnel() {
+    let (eta, k) = gold();
+    let b = Bsdf::Conductor(Conductor::new(eta, k));
+    let mirror = Bsdf::Conductor(Conductor::new(Rgb::ZERO, Rgb::ONE));
+    assert!(b.is_delta() && !b.has_transmission());
+    for wo in wos_outside() {
+        let s = b.sample(wo, 0.3, Vec2::new(0.2, 0.7)).unwrap();
+        assert!(s.delta && s.pdf == 1.0 && s.eta == 1.0);
+        assert!((s.wi - Vec3::new(-wo.x, -wo.y, wo.z)).length() < 1e-6);
+        for c in 0..3 {
+            let f = fresnel::conductor(wo.z as f64, eta[c] as f64, k[c] as f64) as f32;
+            assert!((s.weight[c] - f).abs() < 1e-6);
+        }
+        assert_eq!(b.eval(wo, s.wi), Rgb::ZERO);
+        assert_eq!(b.pdf(wo, s.wi), 0.0);
+        let m = mirror.sample(wo, 0.3, Vec2::new(0.2, 0.7)).unwrap();
+        assert!(
+            (m.weight - Rgb::ONE).abs().max_element() < 1e-6,
+            "perfect mirror {:?}",
+            m.weight
+        );
+    }
+    assert!(
+        b.sample(-dir(0.4, 0.0), 0.5, Vec2::splat(0.5)).is_none(),
+        "opaque: nothing from below"
+    );
+}
+
+/// Rough conductor: chi-square, pdf and weight consistency at several roughnesses and
+/// angles (grazing included); albedo <= 1, and close to 1 for the `F = 1` mirror at low
+/// roughness (the separable single-scattering model loses energy as alpha grows: Heitz 2016).
+#[test]
+fn rough_conductor_sampler_and_energy() {
+    let (eta, k) = gold();
+    let mut seed = 1000;
+    for alpha in [0.1f32, 0.3, 0.8] {
+        let b = Bsdf::RoughConductor(RoughConductor::new(eta, k, alpha));
+        assert!(!b.is_delta() && !b.has_transmission());
+        let mirror = Bsdf::RoughConductor(RoughConductor::new(Rgb::ZERO, Rgb::ONE, alpha));
+        for wo in wos_outside() {
+            seed += 1;
+            check_non_delta(
+                &format!("rough conductor alpha {alpha}"),
+                &b,
+                wo,
+                200_000,
+                seed,
+            );
+            let a = albedo(&mirror, wo, 20_000, seed + 500, false);
+            let m = a[0].mean();
+            assert!(
+                m <= 1.0 + 3.0 * a[0].std_error(),
+                "alpha {alpha} wo {wo:?}: albedo {m}"
+            );
+            if alpha <= 0.1 && wo.z > 0.5 {
+                assert!(m > 0.97, "alpha {alpha} wo {wo:?}: albedo {m}");
+            }
+        }
+    }
+}
+
+/// Rough dielectric from outside and from inside: chi-square over both hemispheres (the pdf
+/// integrates to the probability the sampler succeeds), pdf and weight consistency; energy
+/// with the radiance factor undone <= 1, and near 1 at low roughness away from grazing.
+#[test]
+fn rough_dielectric_sampler_and_energy() {
+    let mut seed = 2000;
+    for alpha in [0.1f32, 0.4] {
+        for eta in [1.5f32, 1.0 / 1.33] {
+            let b = Bsdf::RoughDielectric(RoughDielectric::new(eta, alpha));
+            assert!(!b.is_delta() && b.has_transmission());
+            for wo in wos_outside().into_iter().chain(wos_inside()) {
+                seed += 1;
+                check_non_delta(
+                    &format!("rough dielectric alpha {alpha} eta {eta}"),
+                    &b,
+                    wo,
+                    200_000,
+                    seed,
+                );
+                let a = albedo(&b, wo, 20_000, seed + 500, true);
+                let m = a[0].mean();
+                assert!(
+                    m <= 1.0 + 3.0 * a[0].std_error(),
+                    "alpha {alpha} eta {eta} wo {wo:?}: albedo {m}"
+                );
+                if alpha <= 0.1 && wo.z.abs() > 0.5 {
+                    assert!(m > 0.95, "alpha {alpha} eta {eta} wo {wo:?}: albedo {m}");
+                }
+            }
+        }
+    }
+}
+
+/// Reciprocity: `f(wo, wi) = f(wi, wo)` for reflection; for transmission the radiance
+/// scaling makes `f(wo, wi) / n(wo)^2 = f(wi, wo) / n(wi)^2` (Veach 1997, eq. 5.14).
+#[test]
+fn reciprocity() {
+    let mut rng = Pcg64::seed_from_u64(77);
+    let (eta_au, k_au) = gold();
+    let eta = 1.5f32;
+    let bsdfs = [
+        Bsdf::Diffuse(Diffuse::new(Rgb::new(0.3, 0.6, 0.9))),
+        Bsdf::RoughConductor(RoughConductor::new(eta_au, k_au, 0.3)),
+        Bsdf::RoughDielectric(RoughDielectric::new(eta, 0.3)),
+    ];
+    let mut checked = [0; 3];
+    for _ in 0..2000 {
+        let a = crate::sampling::square_to_uniform_sphere(Vec2::new(rng.random(), rng.random()));
+        let b = crate::sampling::square_to_uniform_sphere(Vec2::new(rng.random(), rng.random()));
+        for (i, bsdf) in bsdfs.iter().enumerate() {
+            let (fab, fba) = (bsdf.eval(a, b), bsdf.eval(b, a));
+            let n = |w: Vec3| {
+                if w.z < 0.0 && bsdf.has_transmission() {
+                    eta
+                } else {
+                    1.0
+                }
+            };
+            let (lhs, rhs) = (fab / (n(a) * n(a)), fba / (n(b) * n(b)));
+            assert!(
+                (lhs - rhs).abs().max_element() <= 1e-3 * lhs.max_element().max(1e-3),
+                "{bsdf:?} {a:?} {b:?}: {fab:?} vs {fba:?}"
+            );
+            if fab.max_element() > 0.0 {
+                checked[i] += 1;
+            }
+        }
+    }
+    assert!(checked.iter().all(|&c| c > 100), "{checked:?}");
+}
+
+/// `eval_pdf` agrees with `eval` and `pdf` for every BSDF, both sides, random directions.
+#[test]
+fn eval_pdf_matches_eval_and_pdf() {
+    let mut rng = Pcg64::seed_from_u64(78);
+    let (eta_au, k_au) = gold();
+    let bsdfs = [
+        Bsdf::Diffuse(Diffuse::new(Rgb::new(0.3, 0.6, 0.9))),
+        Bsdf::Dielectric(Dielectric::new(1.5)),
+        Bsdf::Conductor(Conductor::new(eta_au, k_au)),
+        Bsdf::RoughConductor(RoughConductor::new(eta_au, k_au, 0.3)),
+        Bsdf::RoughDielectric(RoughDielectric::new(1.5, 0.3)),
+        Bsdf::RoughDielectric(RoughDielectric::new(1.0 / 1.33, 0.05)),
+    ];
+    let mut nonzero = 0;
+    for _ in 0..5000 {
+        let a = crate::sampling::square_to_uniform_sphere(Vec2::new(rng.random(), rng.random()));
+        let b = crate::sampling::square_to_uniform_sphere(Vec2::new(rng.random(), rng.random()));
+        for bsdf in &bsdfs {
+            let (f, p) = bsdf.eval_pdf(a, b);
+            let (f2, p2) = (bsdf.eval(a, b), bsdf.pdf(a, b));
+            assert!(
+                (f - f2).abs().max_element() <= 1e-4 * f2.max_element().max(1e-3),
+                "{bsdf:?}: {f:?} vs {f2:?}"
+            );
+            assert!(
+                (p - p2).abs() <= 1e-4 * p2.max(1e-3),
+                "{bsdf:?}: {p} vs {p2}"
+            );
+            nonzero += (p > 0.0) as usize;
+        }
+    }
+    assert!(nonzero > 5000, "{nonzero}");
+}
