@@ -135,7 +135,11 @@ impl LayerSet {
         params.validate()?;
         let layers = (0..params.layers)
             .map(|k| {
-                let h = worley::mix64(worley::mix64(seed) ^ worley::mix64(k as u64 + 1));
+                // Bijective in k for a given seed, so no two layers of a set share their stream.
+                let h = worley::mix64(
+                    worley::mix64(seed ^ 0xa076_1d64_78bd_642f)
+                        .wrapping_add((k as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15)),
+                );
                 let alpha = (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64) * std::f64::consts::TAU;
                 let noise_seed = worley::mix64(h ^ 0x9e37_79b9_7f4a_7c15);
                 ScratchLayer::new(k, alpha, noise_seed, &params)
@@ -225,3 +229,6 @@ impl LayerSet {
     }
 }
 
+
+#[cfg(test)]
+mod tests;
