@@ -73,7 +73,11 @@ pub fn union_discs_polygon_area(centres: &[DVec2], r: f64, poly: &[DVec2]) -> f6
     'circles: for (ci, &c) in centres.iter().enumerate() {
         let mut n = 0usize;
         let push = |iv: &mut [(f64, f64)], n: &mut usize, mid: f64, half: f64| {
-            let a = (mid - half).rem_euclid(TAU);
+            // mid in [-pi, pi], half in [0, pi]: one or two turns bring it into [0, 2 pi).
+            let mut a = mid - half;
+            while a < 0.0 {
+                a += TAU;
+            }
             let b = a + 2.0 * half;
             if b > TAU {
                 iv[*n] = (a, TAU);
@@ -168,7 +172,7 @@ pub fn union_discs_polygon_area(centres: &[DVec2], r: f64, poly: &[DVec2]) -> f6
 /// within `tau`, so `E = mean_q [1 - prod_c (1 - area(disc(q, tau) ∩ cell c))]`. The mean over
 /// `q` in the unit cell is a midpoint rule on `n x n` points (smooth integrand; `n = 48` is
 /// accurate to about 1e-6). For small tau this is `pi tau^2` less the overlaps of neighbouring
-/// scratches (about 1.5 % at tau = 0.1).
+/// scratches (0.2 % at tau = 0.1: a jittered grid overlaps less than Poisson points).
 pub fn expected_coverage(tau: f64, n: usize) -> f64 {
     let mut sum = 0.0;
     for y in 0..n {

@@ -34,6 +34,13 @@ pub(crate) fn mix64(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// `floor(x)` as an integer without a libm call (baseline x86-64 has no `roundsd`); `|x| < 2^62`.
+#[inline(always)]
+pub(crate) fn floor_i64(x: f64) -> i64 {
+    let t = x as i64;
+    t - ((t as f64) > x) as i64
+}
+
 /// Tileable Worley noise with period `P` (a power of two) in both axes.
 #[derive(Clone, Copy, Debug)]
 pub struct Worley {
@@ -89,9 +96,8 @@ impl Worley {
     /// touches (one to four for `r <= 1/2`).
     #[inline]
     pub fn any_within(&self, q: DVec2, r: f64) -> bool {
-        let (cx, cy) = (q.x.floor(), q.y.floor());
-        let (i, j) = (cx as i64, cy as i64);
-        let f = q - DVec2::new(cx, cy);
+        let (i, j) = (floor_i64(q.x), floor_i64(q.y));
+        let f = q - DVec2::new(i as f64, j as f64);
         let r2 = r * r;
         let hit = |di: i64, dj: i64| {
             let p = DVec2::new(di as f64, dj as f64) + self.offset(i + di, j + dj);
@@ -106,8 +112,8 @@ impl Worley {
             let dy = if f.y < r { -1 } else if f.y > 1.0 - r { 1 } else { 0 };
             (dx != 0 && hit(dx, 0)) || (dy != 0 && hit(0, dy)) || (dx != 0 && dy != 0 && hit(dx, dy))
         } else {
-            let (i0, i1) = ((f.x - r).floor() as i64, (f.x + r).floor() as i64);
-            let (j0, j1) = ((f.y - r).floor() as i64, (f.y + r).floor() as i64);
+            let (i0, i1) = (floor_i64(f.x - r), floor_i64(f.x + r));
+            let (j0, j1) = (floor_i64(f.y - r), floor_i64(f.y + r));
             (j0..=j1).any(|dj| (i0..=i1).any(|di| hit(di, dj)))
         }
     }
@@ -116,8 +122,8 @@ impl Worley {
 /// Exact F1/F2 search around `q` for any placement `offset(i, j)` in `[0, 1)^2` per cell.
 /// Generic so that a test can feed it another implementation's feature points.
 pub fn worley_search(q: DVec2, offset: impl Fn(i64, i64) -> DVec2) -> WorleySample {
-    let (cx, cy) = (q.x.floor(), q.y.floor());
-    let (i, j) = (cx as i64, cy as i64);
+    let (i, j) = (floor_i64(q.x), floor_i64(q.y));
+    let (cx, cy) = (i as f64, j as f64);
     let f = q - DVec2::new(cx, cy);
     // (F1^2, F2^2, nearest cell offset and point relative to the query's cell)
     let mut st = (f64::INFINITY, f64::INFINITY, (0i64, 0i64, DVec2::ZERO));
