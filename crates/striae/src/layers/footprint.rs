@@ -43,6 +43,66 @@ fn merge(iv: &mut [(f64, f64)]) -> usize {
     n + 1
 }
 
+/// A monotone stand-in for the angle of a unit vector, in `[0, 4)` counter-clockwise from +x.
+#[inline]
+fn pseudo_angle(v: DVec2) -> f64 {
+    let p = v.x / (v.x.abs() + v.y.abs());
+    if v.y >= 0.0 {
+        1.0 - p
+    } else {
+        3.0 + p
+    }
+}
+
+/// An angular interval on a circle: pseudo-angles `k0 <= k1` and the unit vectors at its ends.
+#[derive(Clone, Copy)]
+struct Arc {
+    k0: f64,
+    k1: f64,
+    e0: DVec2,
+    e1: DVec2,
+}
+
+impl Arc {
+    const EMPTY: Arc = Arc { k0: 0.0, k1: 0.0, e0: DVec2::X, e1: DVec2::X };
+
+    /// Push the arc of directions within `beta = acos(cos_beta)` of unit vector `m`, split at +x.
+    #[inline]
+    fn push_excluded(iv: &mut [Arc], n: &mut usize, m: DVec2, cos_beta: f64) {
+        let sin_beta = (1.0 - cos_beta * cos_beta).max(0.0).sqrt();
+        let e0 = DVec2::new(m.x * cos_beta + m.y * sin_beta, m.y * cos_beta - m.x * sin_beta);
+        let e1 = DVec2::new(m.x * cos_beta - m.y * sin_beta, m.y * cos_beta + m.x * sin_beta);
+        let (k0, k1) = (pseudo_angle(e0), pseudo_angle(e1));
+        if k0 <= k1 {
+            iv[*n] = Arc { k0, k1, e0, e1 };
+            *n += 1;
+        } else {
+            // Wraps through +x.
+            iv[*n] = Arc { k0, k1: 4.0, e0, e1: DVec2::X };
+            iv[*n + 1] = Arc { k0: 0.0, k1, e0: DVec2::X, e1 };
+            *n += 2;
+        }
+    }
+
+    /// Sort by start and merge overlapping arcs in place; returns the count.
+    fn merge(iv: &mut [Arc]) -> usize {
+        iv.sort_unstable_by(|a, b| a.k0.total_cmp(&b.k0));
+        let mut n = 0;
+        for k in 1..iv.len() {
+            if iv[k].k0 <= iv[n].k1 {
+                if iv[k].k1 > iv[n].k1 {
+                    iv[n].k1 = iv[k].k1;
+                    iv[n].e1 = iv[k].e1;
+                }
+            } else {
+                n += 1;
+                iv[n] = iv[k];
+            }
+        }
+        n + 1
+    }
+}
+
 /// Area of `(∪_k disc(centres[k], r)) ∩ polygon` for a convex polygon given counter-clockwise.
 /// Exact (Green's theorem over arcs and edge pieces). Coordinates should be small (put the
 /// origin near the polygon) for best rounding. At most [`MAX_DISCS`] discs and [`MAX_EDGES`]
@@ -68,26 +128,12 @@ pub fn union_discs_polygon_area(centres: &[DVec2], r: f64, poly: &[DVec2]) -> f6
     }
     let mut twice_area = 0.0;
     let r2 = r * r;
-    // Arcs: for each circle, the angles excluded (outside the polygon or inside another disc).
-    let mut iv = [(0.0f64, 0.0f64); 2 * (MAX_EDGES + MAX_DISCS)];
+    // Arcs: for each circle, the angular intervals excluded (outside the polygon or inside
+    // another disc), kept as unit vectors ordered by a pseudo-angle: no trigonometry but one
+    // atan2 per kept arc.
+    let mut iv = [Arc::EMPTY; 2 * (MAX_EDGES + MAX_DISCS)];
     'circles: for (ci, &c) in centres.iter().enumerate() {
         let mut n = 0usize;
-        let push = |iv: &mut [(f64, f64)], n: &mut usize, mid: f64, half: f64| {
-            // mid in [-pi, pi], half in [0, pi]: one or two turns bring it into [0, 2 pi).
-            let mut a = mid - half;
-            while a < 0.0 {
-                a += TAU;
-            }
-            let b = a + 2.0 * half;
-            if b > TAU {
-                iv[*n] = (a, TAU);
-                iv[*n + 1] = (0.0, b - TAU);
-                *n += 2;
-            } else {
-                iv[*n] = (a, b);
-                *n += 1;
-            }
-        };
         for &(nrm, d) in &normals[..ne] {
             if nrm == DVec2::ZERO {
                 continue;
@@ -99,7 +145,7 @@ pub fn union_discs_polygon_area(centres: &[DVec2], r: f64, poly: &[DVec2]) -> f6
             if s <= -r {
                 continue 'circles; // the whole circle is outside the polygon
             }
-            push(&mut iv, &mut n, nrm.y.atan2(nrm.x), (s / r).acos());
+            Arc::push_excluded(&mut iv, &mut n, nrm, s / r);
         }
         for (cj, &o) in centres.iter().enumerate() {
             if cj == ci {
@@ -117,23 +163,31 @@ pub fn union_discs_polygon_area(centres: &[DVec2], r: f64, poly: &[DVec2]) -> f6
                 }
                 continue;
             }
-            push(&mut iv, &mut n, v.y.atan2(v.x), (dist / (2.0 * r)).acos());
+            Arc::push_excluded(&mut iv, &mut n, v / dist, dist / (2.0 * r));
         }
-        let m = merge(&mut iv[..n]);
-        // Integrate (x dy - y dx) = r^2 + r (cx cos t + cy sin t) over the kept arcs.
-        let mut arc = |t0: f64, t1: f64| {
-            if t1 > t0 {
-                let (s0, c0) = t0.sin_cos();
-                let (s1, c1) = t1.sin_cos();
-                twice_area += r2 * (t1 - t0) + r * (c.x * (s1 - s0) - c.y * (c1 - c0));
+        if n == 0 {
+            twice_area += r2 * TAU; // the whole circle bounds the region
+            continue;
+        }
+        let m = Arc::merge(&mut iv[..n]);
+        // Integrate (x dy - y dx) = r^2 + r (cx cos t + cy sin t) dt over the kept arcs, from
+        // unit vector e0 to e1 counter-clockwise.
+        let mut arc = |e0: DVec2, e1: DVec2| {
+            let mut dt = cross(e0, e1).atan2(e0.dot(e1));
+            if dt < 0.0 {
+                dt += TAU;
             }
+            twice_area += r2 * dt + r * (c.x * (e1.y - e0.y) - c.y * (e1.x - e0.x));
         };
-        let mut start = 0.0;
-        for &(a, b) in &iv[..m] {
-            arc(start, a);
-            start = start.max(b);
+        if iv[0].k0 > 0.0 {
+            arc(DVec2::X, iv[0].e0);
         }
-        arc(start, TAU);
+        for w in 0..m {
+            let next = if w + 1 < m { iv[w + 1] } else { Arc { k0: 4.0, e0: DVec2::X, ..Arc::EMPTY } };
+            if next.k0 > iv[w].k1 {
+                arc(iv[w].e1, next.e0);
+            }
+        }
     }
     // Edge pieces inside some disc: (x dy - y dx) along a -> b is cross(a, b) dt.
     let mut tv = [(0.0f64, 0.0f64); MAX_DISCS];
