@@ -10,21 +10,50 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 fn striae(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_striae")).arg("layers").args(args).output().unwrap()
+    Command::new(env!("CARGO_BIN_EXE_striae"))
+        .arg("layers")
+        .args(args)
+        .output()
+        .unwrap()
 }
 
 #[test]
 fn writes_layers_combined_json_and_stages() {
     let out = tmp("ok");
-    let o = striae(&["--setting", "2", "--layers", "3", "--res", "96", "--seed", "5", "--stages", "-o", out.to_str().unwrap()]);
+    let o = striae(&[
+        "--setting",
+        "2",
+        "--layers",
+        "3",
+        "--res",
+        "96",
+        "--seed",
+        "5",
+        "--stages",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let mut names: Vec<String> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
     names.sort();
     assert_eq!(
         names,
-        ["layer-0.png", "layer-1.png", "layer-2.png", "layers.json", "layers.png", "stage-a-noise.png", "stage-b-stretched.png", "stage-c-threshold.png"]
+        [
+            "layer-0.png",
+            "layer-1.png",
+            "layer-2.png",
+            "layers.json",
+            "layers.png",
+            "stage-a-noise.png",
+            "stage-b-stretched.png",
+            "stage-c-threshold.png"
+        ]
     );
-    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("layers.json")).unwrap()).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("layers.json")).unwrap()).unwrap();
     assert_eq!(json["params"]["length"], 0.6);
     assert_eq!(json["params"]["width"], 0.01);
     assert_eq!(json["params"]["layers"], 3);
@@ -33,14 +62,33 @@ fn writes_layers_combined_json_and_stages() {
     for l in layers {
         let a = l["angle_rad"].as_f64().unwrap();
         let d = l["direction"].as_array().unwrap();
-        assert!((d[0].as_f64().unwrap() - a.cos()).abs() < 1e-12 && (d[1].as_f64().unwrap() - a.sin()).abs() < 1e-12);
+        assert!(
+            (d[0].as_f64().unwrap() - a.cos()).abs() < 1e-12
+                && (d[1].as_f64().unwrap() - a.sin()).abs() < 1e-12
+        );
         let c = l["coverage"].as_f64().unwrap();
         assert!(c > 0.005 && c < 0.1, "coverage {c}");
     }
     // Same seed, same bytes.
     let again = tmp("again");
-    assert!(striae(&["--setting", "2", "--layers", "3", "--res", "96", "--seed", "5", "-o", again.to_str().unwrap()]).status.success());
-    assert_eq!(std::fs::read(out.join("layer-1.png")).unwrap(), std::fs::read(again.join("layer-1.png")).unwrap());
+    assert!(striae(&[
+        "--setting",
+        "2",
+        "--layers",
+        "3",
+        "--res",
+        "96",
+        "--seed",
+        "5",
+        "-o",
+        again.to_str().unwrap()
+    ])
+    .status
+    .success());
+    assert_eq!(
+        std::fs::read(out.join("layer-1.png")).unwrap(),
+        std::fs::read(again.join("layer-1.png")).unwrap()
+    );
     std::fs::remove_dir_all(&out).unwrap();
     std::fs::remove_dir_all(&again).unwrap();
 }
@@ -48,11 +96,26 @@ fn writes_layers_combined_json_and_stages() {
 #[test]
 fn bad_input_is_a_clear_error_and_leaves_nothing() {
     for (args, want) in [
-        (vec!["--length", "0", "--width", "0.01", "--threshold", "0.1"], "length"),
-        (vec!["--length", "-0.3", "--width", "0.01", "--threshold", "0.1"], "length"),
-        (vec!["--length", "0.3", "--width", "0", "--threshold", "0.1"], "width"),
-        (vec!["--length", "0.3", "--width", "0.01", "--threshold", "1.5"], "threshold"),
-        (vec!["--length", "0.3", "--width", "0.01", "--threshold", "0"], "threshold"),
+        (
+            vec!["--length", "0", "--width", "0.01", "--threshold", "0.1"],
+            "length",
+        ),
+        (
+            vec!["--length", "-0.3", "--width", "0.01", "--threshold", "0.1"],
+            "length",
+        ),
+        (
+            vec!["--length", "0.3", "--width", "0", "--threshold", "0.1"],
+            "width",
+        ),
+        (
+            vec!["--length", "0.3", "--width", "0.01", "--threshold", "1.5"],
+            "threshold",
+        ),
+        (
+            vec!["--length", "0.3", "--width", "0.01", "--threshold", "0"],
+            "threshold",
+        ),
         (vec!["--layers", "0"], "layers"),
         (vec!["--setting", "3"], "setting"),
         (vec!["--res", "0"], "res"),
@@ -69,7 +132,18 @@ fn bad_input_is_a_clear_error_and_leaves_nothing() {
     }
     // Only part of the custom triple, or a setting with a custom value: usage errors.
     let out = tmp("partial");
-    assert!(!striae(&["--length", "0.3", "-o", out.to_str().unwrap()]).status.success());
-    assert!(!striae(&["--setting", "1", "--width", "0.1", "-o", out.to_str().unwrap()]).status.success());
+    assert!(!striae(&["--length", "0.3", "-o", out.to_str().unwrap()])
+        .status
+        .success());
+    assert!(!striae(&[
+        "--setting",
+        "1",
+        "--width",
+        "0.1",
+        "-o",
+        out.to_str().unwrap()
+    ])
+    .status
+    .success());
     assert!(!out.exists());
 }

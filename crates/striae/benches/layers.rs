@@ -8,7 +8,14 @@ use striae::math::Vec2;
 /// Query points spread over the texture (a fixed low-discrepancy sequence, R2).
 fn points(n: usize) -> Vec<Vec2> {
     let (a1, a2) = (0.754_877_7f64, 0.569_840_3f64);
-    (0..n).map(|i| Vec2::new(((0.5 + a1 * i as f64) % 1.0) as f32, ((0.5 + a2 * i as f64) % 1.0) as f32)).collect()
+    (0..n)
+        .map(|i| {
+            Vec2::new(
+                ((0.5 + a1 * i as f64) % 1.0) as f32,
+                ((0.5 + a2 * i as f64) % 1.0) as f32,
+            )
+        })
+        .collect()
 }
 
 fn queries(c: &mut Criterion) {
@@ -43,7 +50,11 @@ fn rasterise(c: &mut Criterion) {
     for setting in [1, 2] {
         let set = LayerSet::new(LayerParams::setting(setting).unwrap(), 1).unwrap();
         g.bench_function(format!("setting{setting}_8_layers_2048"), |b| {
-            b.iter(|| (0..set.len()).map(|k| set.rasterize(k, 2048).unwrap().mean()).sum::<f64>())
+            b.iter(|| {
+                (0..set.len())
+                    .map(|k| set.rasterize(k, 2048).unwrap().mean())
+                    .sum::<f64>()
+            })
         });
     }
     g.finish();

@@ -64,22 +64,43 @@ struct Arc {
 }
 
 impl Arc {
-    const EMPTY: Arc = Arc { k0: 0.0, k1: 0.0, e0: DVec2::X, e1: DVec2::X };
+    const EMPTY: Arc = Arc {
+        k0: 0.0,
+        k1: 0.0,
+        e0: DVec2::X,
+        e1: DVec2::X,
+    };
 
     /// Push the arc of directions within `beta = acos(cos_beta)` of unit vector `m`, split at +x.
     #[inline]
     fn push_excluded(iv: &mut [Arc], n: &mut usize, m: DVec2, cos_beta: f64) {
         let sin_beta = (1.0 - cos_beta * cos_beta).max(0.0).sqrt();
-        let e0 = DVec2::new(m.x * cos_beta + m.y * sin_beta, m.y * cos_beta - m.x * sin_beta);
-        let e1 = DVec2::new(m.x * cos_beta - m.y * sin_beta, m.y * cos_beta + m.x * sin_beta);
+        let e0 = DVec2::new(
+            m.x * cos_beta + m.y * sin_beta,
+            m.y * cos_beta - m.x * sin_beta,
+        );
+        let e1 = DVec2::new(
+            m.x * cos_beta - m.y * sin_beta,
+            m.y * cos_beta + m.x * sin_beta,
+        );
         let (k0, k1) = (pseudo_angle(e0), pseudo_angle(e1));
         if k0 <= k1 {
             iv[*n] = Arc { k0, k1, e0, e1 };
             *n += 1;
         } else {
             // Wraps through +x.
-            iv[*n] = Arc { k0, k1: 4.0, e0, e1: DVec2::X };
-            iv[*n + 1] = Arc { k0: 0.0, k1, e0: DVec2::X, e1 };
+            iv[*n] = Arc {
+                k0,
+                k1: 4.0,
+                e0,
+                e1: DVec2::X,
+            };
+            iv[*n + 1] = Arc {
+                k0: 0.0,
+                k1,
+                e0: DVec2::X,
+                e1,
+            };
             *n += 2;
         }
     }
@@ -113,6 +134,22 @@ pub fn union_discs_polygon_area(centres: &[DVec2], r: f64, poly: &[DVec2]) -> f6
     if nd == 0 || r <= 0.0 {
         return 0.0;
     }
+    // Scratch arrays sized for the case at hand (zeroing the largest ones would dominate the
+    // single-disc case of the rasteriser).
+    match nd {
+        1 => union_area::<{ 2 * MAX_EDGES }, 1>(centres, r, poly),
+        2..=8 => union_area::<{ 2 * (MAX_EDGES + 8) }, 8>(centres, r, poly),
+        _ => union_area::<{ 2 * (MAX_EDGES + MAX_DISCS) }, MAX_DISCS>(centres, r, poly),
+    }
+}
+
+/// [`union_discs_polygon_area`] with room for `ARCS` excluded arcs per circle and `DISCS` discs.
+fn union_area<const ARCS: usize, const DISCS: usize>(
+    centres: &[DVec2],
+    r: f64,
+    poly: &[DVec2],
+) -> f64 {
+    let ne = poly.len();
     // Outward unit normals and offsets of the edges: inside is n.x <= d.
     let mut normals = [(DVec2::ZERO, 0.0f64); MAX_EDGES];
     for e in 0..ne {
@@ -131,7 +168,7 @@ pub fn union_discs_polygon_area(centres: &[DVec2], r: f64, poly: &[DVec2]) -> f6
     // Arcs: for each circle, the angular intervals excluded (outside the polygon or inside
     // another disc), kept as unit vectors ordered by a pseudo-angle: no trigonometry but one
     // atan2 per kept arc.
-    let mut iv = [Arc::EMPTY; 2 * (MAX_EDGES + MAX_DISCS)];
+    let mut iv = [Arc::EMPTY; ARCS];
     'circles: for (ci, &c) in centres.iter().enumerate() {
         let mut n = 0usize;
         for &(nrm, d) in &normals[..ne] {
@@ -183,14 +220,22 @@ pub fn union_discs_polygon_area(centres: &[DVec2], r: f64, poly: &[DVec2]) -> f6
             arc(DVec2::X, iv[0].e0);
         }
         for w in 0..m {
-            let next = if w + 1 < m { iv[w + 1] } else { Arc { k0: 4.0, e0: DVec2::X, ..Arc::EMPTY } };
+            let next = if w + 1 < m {
+                iv[w + 1]
+            } else {
+                Arc {
+                    k0: 4.0,
+                    e0: DVec2::X,
+                    ..Arc::EMPTY
+                }
+            };
             if next.k0 > iv[w].k1 {
                 arc(iv[w].e1, next.e0);
             }
         }
     }
     // Edge pieces inside some disc: (x dy - y dx) along a -> b is cross(a, b) dt.
-    let mut tv = [(0.0f64, 0.0f64); MAX_DISCS];
+    let mut tv = [(0.0f64, 0.0f64); DISCS];
     for e in 0..ne {
         let (a, b) = (poly[e], poly[(e + 1) % ne]);
         let d = b - a;
@@ -256,14 +301,19 @@ mod tests {
 
     /// Reference area by a fine midpoint grid over the polygon's bounding box.
     fn grid_area(centres: &[DVec2], r: f64, poly: &[DVec2], n: usize) -> f64 {
-        let lo = poly.iter().fold(DVec2::splat(f64::INFINITY), |m, p| m.min(*p));
-        let hi = poly.iter().fold(DVec2::splat(f64::NEG_INFINITY), |m, p| m.max(*p));
+        let lo = poly
+            .iter()
+            .fold(DVec2::splat(f64::INFINITY), |m, p| m.min(*p));
+        let hi = poly
+            .iter()
+            .fold(DVec2::splat(f64::NEG_INFINITY), |m, p| m.max(*p));
         let cell = (hi - lo) / n as f64;
         let mut count = 0usize;
         for y in 0..n {
             for x in 0..n {
                 let p = lo + cell * DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
-                let inside_poly = (0..poly.len()).all(|e| cross(poly[(e + 1) % poly.len()] - poly[e], p - poly[e]) >= 0.0);
+                let inside_poly = (0..poly.len())
+                    .all(|e| cross(poly[(e + 1) % poly.len()] - poly[e], p - poly[e]) >= 0.0);
                 if inside_poly && centres.iter().any(|c| (p - *c).length_squared() < r * r) {
                     count += 1;
                 }
@@ -274,7 +324,12 @@ mod tests {
 
     #[test]
     fn closed_forms() {
-        let sq = [DVec2::new(-1.0, -1.0), DVec2::new(1.0, -1.0), DVec2::new(1.0, 1.0), DVec2::new(-1.0, 1.0)];
+        let sq = [
+            DVec2::new(-1.0, -1.0),
+            DVec2::new(1.0, -1.0),
+            DVec2::new(1.0, 1.0),
+            DVec2::new(-1.0, 1.0),
+        ];
         // A disc inside the square.
         let a = union_discs_polygon_area(&[DVec2::new(0.1, -0.2)], 0.5, &sq);
         assert!((a - PI * 0.25).abs() < 1e-12);
@@ -295,7 +350,10 @@ mod tests {
         let a = union_discs_polygon_area(&[DVec2::new(-0.1, 0.0), DVec2::new(0.1, 0.0)], r, &sq);
         assert!((a - (2.0 * PI * r * r - lens)).abs() < 1e-12);
         // A disc far outside, and a duplicate disc counted once.
-        assert_eq!(union_discs_polygon_area(&[DVec2::new(5.0, 0.0)], 0.5, &sq), 0.0);
+        assert_eq!(
+            union_discs_polygon_area(&[DVec2::new(5.0, 0.0)], 0.5, &sq),
+            0.0
+        );
         let a = union_discs_polygon_area(&[DVec2::ZERO, DVec2::ZERO], 0.5, &sq);
         assert!((a - PI * 0.25).abs() < 1e-12);
     }
@@ -311,11 +369,16 @@ mod tests {
             let poly = [c - a - b, c + a - b, c + a + b, c - a + b];
             let r = rng.random_range(0.05..0.6);
             let nd = 1 + case % 6;
-            let centres: Vec<DVec2> = (0..nd).map(|_| DVec2::new(rng.random_range(-1.2..1.2), rng.random_range(-1.2..1.2))).collect();
+            let centres: Vec<DVec2> = (0..nd)
+                .map(|_| DVec2::new(rng.random_range(-1.2..1.2), rng.random_range(-1.2..1.2)))
+                .collect();
             let exact = union_discs_polygon_area(&centres, r, &poly);
             let grid = grid_area(&centres, r, &poly, 1200);
             let total = 4.0 * cross(a, b);
-            assert!((exact - grid).abs() < 2e-3 * total.max(0.1), "case {case}: {exact} vs grid {grid}");
+            assert!(
+                (exact - grid).abs() < 2e-3 * total.max(0.1),
+                "case {case}: {exact} vs grid {grid}"
+            );
             assert!(exact <= total + 1e-12);
         }
     }
