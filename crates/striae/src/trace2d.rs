@@ -197,27 +197,31 @@ impl Walls2D {
     }
 
     /// Nearest wall hit of the ray `o + t d` with `t > t_min`, skipping segment `skip`.
+    ///
+    /// The polyline closed by the opening is a counter-clockwise simple polygon (validated by
+    /// `profile`), so a ray inside can only hit a wall from its left (inner) side, where
+    /// `d x e > 0`: other segments are culled, and the comparisons are division-free.
     #[inline]
     fn nearest(&self, o: [f64; 2], d: [f64; 2], skip: usize, t_min: f64) -> Option<(usize, f64)> {
-        let mut best: Option<(usize, f64)> = None;
-        let mut best_t = f64::INFINITY;
+        let mut best = usize::MAX;
+        // Best hit as the fraction num/den (den > 0), initially +infinity.
+        let (mut best_num, mut best_den) = (1.0f64, 0.0f64);
         for (k, s) in self.segs.iter().enumerate() {
-            if k == skip {
-                continue;
-            }
             let denom = d[0] * s.e[1] - d[1] * s.e[0];
-            if denom == 0.0 {
+            if denom <= 0.0 || k == skip {
                 continue;
             }
             let w = [s.p[0] - o[0], s.p[1] - o[1]];
-            let t = (w[0] * s.e[1] - w[1] * s.e[0]) / denom;
-            let u = (w[0] * d[1] - w[1] * d[0]) / denom;
-            if t > t_min && t < best_t && (-1e-12..=1.0 + 1e-12).contains(&u) {
-                best_t = t;
-                best = Some((k, t));
+            let t_num = w[0] * s.e[1] - w[1] * s.e[0];
+            let u_num = w[0] * d[1] - w[1] * d[0];
+            let tol = 1e-12 * denom;
+            if t_num > t_min * denom && t_num * best_den < best_num * denom && u_num >= -tol && u_num <= denom + tol {
+                best = k;
+                best_num = t_num;
+                best_den = denom;
             }
         }
-        best
+        (best != usize::MAX).then(|| (best, best_num / best_den))
     }
 }
 
@@ -234,6 +238,43 @@ fn entry_rng(seed: u64, row: usize, entry: usize) -> rand_pcg::Pcg64Mcg {
     let a = mix(entry as u64);
     let b = mix(0x5851_F42D_4C95_7F2D);
     rand_pcg::Pcg64Mcg::new(((a as u128) << 64) | b as u128)
+}
+
+/// Bins an upward unit exit direction by `sin(phi_o) = d.x` (no `atan2`): a lookup table on
+/// a uniform grid in `d.x` gives a starting bin, corrected against the exact edge sines.
+struct ExitBinner {
+    edge_sin: Vec<f64>,
+    lut: Vec<u32>,
+    scale: f64,
+}
+
+impl ExitBinner {
+    fn new(m: usize) -> Self {
+        let edge_sin: Vec<f64> = (0..=m).map(|k| (-FRAC_PI_2 + k as f64 * PI / m as f64).sin()).collect();
+        let cells = 4 * m;
+        let scale = cells as f64 / 2.0;
+        let lut = (0..=cells)
+            .map(|q| {
+                let x = -1.0 + q as f64 / scale;
+                (edge_sin.partition_point(|&e| e <= x).saturating_sub(1)).min(m - 1) as u32
+            })
+            .collect();
+        ExitBinner { edge_sin, lut, scale }
+    }
+
+    #[inline]
+    fn bin(&self, dx: f64) -> usize {
+        let m = self.edge_sin.len() - 1;
+        let dx = dx.clamp(-1.0, 1.0);
+        let mut j = self.lut[((dx + 1.0) * self.scale) as usize] as usize;
+        while j + 1 < m && dx >= self.edge_sin[j + 1] {
+            j += 1;
+        }
+        while j > 0 && dx < self.edge_sin[j] {
+            j -= 1;
+        }
+        j
+    }
 }
 
 /// Accumulators of one work item.
@@ -308,7 +349,7 @@ fn trace_block(geo: &Walls2D, s: &TraceSettings, channels: usize, row: usize, en
     let walks = s.walks_per_entry();
     let walls_mode = channels == 4;
     let law = s.fresnel_law;
-    let inv_bin = m as f64 / PI;
+    let binner = ExitBinner::new(m);
     for k in entries {
         let mut rng = entry_rng(s.seed, row, k);
         let x = -0.5 + (k as f64 + rng.random::<f64>()) / s.n as f64;
@@ -356,8 +397,7 @@ fn trace_block(geo: &Walls2D, s: &TraceSettings, channels: usize, row: usize, en
                     }
                     None => {
                         if dir[1] > 0.0 {
-                            let phi_o = dir[0].atan2(dir[1]);
-                            let j = (((phi_o + FRAC_PI_2) * inv_bin) as usize).min(m - 1);
+                            let j = binner.bin(dir[0]);
                             for c in 0..channels {
                                 part.hist[c * m + j] += w[c];
                             }
@@ -526,6 +566,24 @@ mod tests {
                 assert_eq!(w[2 * m * m + i * m + j], out.rho_m[i * m + j]);
                 let f = crate::fresnel::schlick(1.5, bin_centre(i, m).cos());
                 assert!((w[i * m + j] - f * out.rho_m[i * m + j]).abs() < 1e-9 * out.rho_m[i * m + j].max(1.0));
+            }
+        }
+    }
+
+    #[test]
+    fn exit_binner_matches_atan2() {
+        for m in [1, 7, 64, 256] {
+            let b = ExitBinner::new(m);
+            for k in 0..20_000 {
+                let phi = -FRAC_PI_2 + (k as f64 + 0.37) * PI / 20_000.0;
+                let (x, z) = (phi.sin(), phi.cos());
+                let want = bin_of(x.atan2(z), m);
+                let got = b.bin(x);
+                // Equal except within rounding of an edge.
+                if got != want {
+                    let edge = -FRAC_PI_2 + got.max(want) as f64 * PI / m as f64;
+                    assert!((phi - edge).abs() < 1e-12, "m {m} phi {phi}: {got} vs {want}");
+                }
             }
         }
     }
