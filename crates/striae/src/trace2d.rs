@@ -277,6 +277,20 @@ impl ExitBinner {
     }
 }
 
+/// Walks interleaved per entry point (see `trace_block`).
+const LANES: usize = 4;
+
+/// The state of one walk.
+#[derive(Clone, Copy)]
+struct Lane {
+    pos: [f64; 2],
+    dir: [f64; 2],
+    seg: usize,
+    w: [f64; 4],
+    bounces: usize,
+    active: bool,
+}
+
 /// Accumulators of one work item.
 struct Partial {
     /// `channels x M`: channel 0 is `rho_m`, channels 1..=3 the `walls` slices.
@@ -342,14 +356,31 @@ pub fn trace(profile: &Profile, s: &TraceSettings, progress: &(dyn Fn(u64) + Syn
 /// Trace the entries `entries` of incident bin `row`; weights are per walk (1 each, the
 /// `1 / N_r` is applied in the normalisation).
 fn trace_block(geo: &Walls2D, s: &TraceSettings, channels: usize, row: usize, entries: std::ops::Range<usize>) -> Partial {
+    // Monomorphise the hot loop for the wall model and the Fresnel mode.
+    match (s.walls, channels == 4) {
+        (Walls::Diffuse, false) => trace_block_impl::<true, false>(geo, s, row, entries),
+        (Walls::Diffuse, true) => trace_block_impl::<true, true>(geo, s, row, entries),
+        (Walls::Specular, false) => trace_block_impl::<false, false>(geo, s, row, entries),
+        (Walls::Specular, true) => trace_block_impl::<false, true>(geo, s, row, entries),
+    }
+}
+
+fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
+    geo: &Walls2D,
+    s: &TraceSettings,
+    row: usize,
+    entries: std::ops::Range<usize>,
+) -> Partial {
+    let channels = if WALLS_MODE { 4 } else { 1 };
     let m = s.m;
     let mut part = Partial { hist: vec![0.0; channels * m], dropped: 0.0, lost: 0.0 };
     let phi_i = bin_centre(row, m);
     let d0 = [-phi_i.sin(), -phi_i.cos()];
     let walks = s.walks_per_entry();
-    let walls_mode = channels == 4;
     let law = s.fresnel_law;
     let binner = ExitBinner::new(m);
+    let albedo = s.albedo;
+    let max_bounces = s.max_bounces;
     for k in entries {
         let mut rng = entry_rng(s.seed, row, k);
         let x = -0.5 + (k as f64 + rng.random::<f64>()) / s.n as f64;
@@ -360,57 +391,84 @@ fn trace_block(geo: &Walls2D, s: &TraceSettings, channels: usize, row: usize, en
             continue;
         };
         let hit0 = [o[0] + t0.max(0.0) * d0[0], o[1] + t0.max(0.0) * d0[1]];
-        for _ in 0..walks {
-            let (mut pos, mut dir, mut seg) = (hit0, d0, seg0);
-            let mut w = [1.0f64; 4];
-            let mut escaped = false;
-            for _bounce in 0..s.max_bounces {
-                let sg = &geo.segs[seg];
-                let mut n = sg.n;
-                let mut cos_in = -(n[0] * dir[0] + n[1] * dir[1]);
-                if cos_in < 0.0 {
-                    n = [-n[0], -n[1]];
-                    cos_in = -cos_in;
+        // The walks of this entry run LANES at a time, interleaved: each bounce is a chain of
+        // dependent sqrt/div latencies, and independent walks side by side let the CPU overlap
+        // them. A finished lane restarts with the entry's next walk. Every walk still draws
+        // its own fresh uniforms (from the entry's stream, in a fixed order), so the estimator
+        // is exactly the seed's N_r scheme and the output is deterministic.
+        let fresh = Lane { pos: hit0, dir: d0, seg: seg0, w: [1.0; 4], bounces: 0, active: true };
+        let mut lanes = [Lane { active: false, ..fresh }; LANES];
+        let mut started = 0;
+        let mut active = 0;
+        for lane in lanes.iter_mut() {
+            if started < walks {
+                *lane = fresh;
+                started += 1;
+                active += 1;
+            }
+        }
+        while active > 0 {
+            for lane in lanes.iter_mut() {
+                if !lane.active {
+                    continue;
                 }
-                w[0] *= s.albedo;
-                if walls_mode {
-                    for c in 0..3 {
-                        w[c + 1] *= s.albedo * law.reflectance(COS_THETA_SLICES[c] * cos_in);
+                let done = if lane.bounces == max_bounces {
+                    part.dropped += lane.w[0];
+                    true
+                } else {
+                    let sg = &geo.segs[lane.seg];
+                    let mut n = sg.n;
+                    let dir = lane.dir;
+                    let mut cos_in = -(n[0] * dir[0] + n[1] * dir[1]);
+                    if cos_in < 0.0 {
+                        n = [-n[0], -n[1]];
+                        cos_in = -cos_in;
                     }
-                }
-                dir = match s.walls {
-                    Walls::Specular => {
-                        let dn = 2.0 * cos_in;
-                        [dir[0] + dn * n[0], dir[1] + dn * n[1]]
+                    lane.bounces += 1;
+                    lane.w[0] *= albedo;
+                    if WALLS_MODE {
+                        for c in 0..3 {
+                            lane.w[c + 1] *= albedo * law.reflectance(COS_THETA_SLICES[c] * cos_in);
+                        }
                     }
-                    Walls::Diffuse => {
+                    let dir = if DIFFUSE {
                         // sin(a) uniform in [-1, 1] about the wall normal (2D Lambert).
                         let sa = 2.0 * rng.random::<f64>() - 1.0;
                         let ca = (1.0 - sa * sa).max(0.0).sqrt();
                         [ca * n[0] + sa * sg.t[0], ca * n[1] + sa * sg.t[1]]
+                    } else {
+                        let dn = 2.0 * cos_in;
+                        [dir[0] + dn * n[0], dir[1] + dn * n[1]]
+                    };
+                    lane.dir = dir;
+                    match geo.nearest(lane.pos, dir, lane.seg, T_EPS) {
+                        Some((k2, t)) => {
+                            lane.pos = [lane.pos[0] + t * dir[0], lane.pos[1] + t * dir[1]];
+                            lane.seg = k2;
+                            false
+                        }
+                        None => {
+                            if dir[1] > 0.0 {
+                                let j = binner.bin(dir[0]);
+                                for c in 0..channels {
+                                    part.hist[c * m + j] += lane.w[c];
+                                }
+                            } else {
+                                part.lost += lane.w[0];
+                            }
+                            true
+                        }
                     }
                 };
-                match geo.nearest(pos, dir, seg, T_EPS) {
-                    Some((k2, t)) => {
-                        pos = [pos[0] + t * dir[0], pos[1] + t * dir[1]];
-                        seg = k2;
-                    }
-                    None => {
-                        if dir[1] > 0.0 {
-                            let j = binner.bin(dir[0]);
-                            for c in 0..channels {
-                                part.hist[c * m + j] += w[c];
-                            }
-                        } else {
-                            part.lost += w[0];
-                        }
-                        escaped = true;
-                        break;
+                if done {
+                    if started < walks {
+                        *lane = fresh;
+                        started += 1;
+                    } else {
+                        lane.active = false;
+                        active -= 1;
                     }
                 }
-            }
-            if !escaped {
-                part.dropped += w[0];
             }
         }
     }
