@@ -97,7 +97,11 @@ pub fn plot_lobe(table: &ScratchTable, phi_i_deg: f64, path: &Path) -> Result<()
                 (0..=180).map(|k| (k as f64).to_radians()).map(|a| (r * a.cos(), r * a.sin())).collect();
             chart.draw_series(LineSeries::new(arc, RGBColor(210, 210, 210))).map_err(|e| e.to_string())?;
             chart
-                .draw_series(std::iter::once(Text::new(format!("{r:.3}"), (r, 0.0), ("sans-serif", 13).into_font())))
+                .draw_series(std::iter::once(Text::new(
+                    format!("{r:.3}"),
+                    (-0.259 * r, 0.966 * r),
+                    ("sans-serif", 13).into_font().color(&RGBColor(120, 120, 120)),
+                )))
                 .map_err(|e| e.to_string())?;
             r += step;
         }

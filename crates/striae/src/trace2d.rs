@@ -208,18 +208,21 @@ impl Walls2D {
         let (mut best_num, mut best_den) = (1.0f64, 0.0f64);
         for (k, s) in self.segs.iter().enumerate() {
             let denom = d[0] * s.e[1] - d[1] * s.e[0];
-            if denom <= 0.0 || k == skip {
-                continue;
-            }
             let w = [s.p[0] - o[0], s.p[1] - o[1]];
             let t_num = w[0] * s.e[1] - w[1] * s.e[0];
             let u_num = w[0] * d[1] - w[1] * d[0];
             let tol = 1e-12 * denom;
-            if t_num > t_min * denom && t_num * best_den < best_num * denom && u_num >= -tol && u_num <= denom + tol {
-                best = k;
-                best_num = t_num;
-                best_den = denom;
-            }
+            // Non-short-circuit `&` so that the choice compiles to selects, not branches
+            // (the outcome is unpredictable and mispredictions dominated the cost).
+            let ok = (denom > 0.0)
+                & (k != skip)
+                & (t_num > t_min * denom)
+                & (t_num * best_den < best_num * denom)
+                & (u_num >= -tol)
+                & (u_num <= denom + tol);
+            best = if ok { k } else { best };
+            best_num = if ok { t_num } else { best_num };
+            best_den = if ok { denom } else { best_den };
         }
         (best != usize::MAX).then(|| (best, best_num / best_den))
     }
@@ -251,7 +254,8 @@ struct ExitBinner {
 impl ExitBinner {
     fn new(m: usize) -> Self {
         let edge_sin: Vec<f64> = (0..=m).map(|k| (-FRAC_PI_2 + k as f64 * PI / m as f64).sin()).collect();
-        let cells = 4 * m;
+        // Fine enough that a bin spans at least ~one cell except in the last few bins.
+        let cells = (64 * m).max(1 << 15);
         let scale = cells as f64 / 2.0;
         let lut = (0..=cells)
             .map(|q| {
@@ -267,6 +271,8 @@ impl ExitBinner {
         let m = self.edge_sin.len() - 1;
         let dx = dx.clamp(-1.0, 1.0);
         let mut j = self.lut[((dx + 1.0) * self.scale) as usize] as usize;
+        // One branch-free correction step, then (rarely taken) loops near the ends.
+        j += ((j + 1 < m) & (dx >= self.edge_sin[(j + 1).min(m)])) as usize;
         while j + 1 < m && dx >= self.edge_sin[j + 1] {
             j += 1;
         }
