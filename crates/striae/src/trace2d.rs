@@ -254,8 +254,8 @@ struct ExitBinner {
 impl ExitBinner {
     fn new(m: usize) -> Self {
         let edge_sin: Vec<f64> = (0..=m).map(|k| (-FRAC_PI_2 + k as f64 * PI / m as f64).sin()).collect();
-        // Fine enough that a bin spans at least ~one cell except in the last few bins.
-        let cells = (64 * m).max(1 << 15);
+        // 4 cells per bin on average; near the ends several bins share a cell (loops below).
+        let cells = 4 * m;
         let scale = cells as f64 / 2.0;
         let lut = (0..=cells)
             .map(|q| {
