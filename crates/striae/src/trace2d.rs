@@ -314,6 +314,7 @@ pub fn trace(profile: &Profile, s: &TraceSettings, progress: &(dyn Fn(u64) + Syn
     s.validate()?;
     let geo = Walls2D::new(profile);
     let m = s.m;
+    let binner = ExitBinner::new(m);
     let channels = match s.fresnel_mode {
         FresnelMode::Seed => 1,
         FresnelMode::Walls => 4,
@@ -325,7 +326,7 @@ pub fn trace(profile: &Profile, s: &TraceSettings, progress: &(dyn Fn(u64) + Syn
         .map(|&(row, block)| {
             let lo = block * BLOCK;
             let hi = (lo + BLOCK).min(s.n);
-            let p = trace_block(&geo, s, channels, row, lo..hi);
+            let p = trace_block(&geo, &binner, s, channels, row, lo..hi);
             progress(((hi - lo) * s.walks_per_entry()) as u64);
             p
         })
@@ -361,18 +362,26 @@ pub fn trace(profile: &Profile, s: &TraceSettings, progress: &(dyn Fn(u64) + Syn
 
 /// Trace the entries `entries` of incident bin `row`; weights are per walk (1 each, the
 /// `1 / N_r` is applied in the normalisation).
-fn trace_block(geo: &Walls2D, s: &TraceSettings, channels: usize, row: usize, entries: std::ops::Range<usize>) -> Partial {
+fn trace_block(
+    geo: &Walls2D,
+    binner: &ExitBinner,
+    s: &TraceSettings,
+    channels: usize,
+    row: usize,
+    entries: std::ops::Range<usize>,
+) -> Partial {
     // Monomorphise the hot loop for the wall model and the Fresnel mode.
     match (s.walls, channels == 4) {
-        (Walls::Diffuse, false) => trace_block_impl::<true, false>(geo, s, row, entries),
-        (Walls::Diffuse, true) => trace_block_impl::<true, true>(geo, s, row, entries),
-        (Walls::Specular, false) => trace_block_impl::<false, false>(geo, s, row, entries),
-        (Walls::Specular, true) => trace_block_impl::<false, true>(geo, s, row, entries),
+        (Walls::Diffuse, false) => trace_block_impl::<true, false>(geo, binner, s, row, entries),
+        (Walls::Diffuse, true) => trace_block_impl::<true, true>(geo, binner, s, row, entries),
+        (Walls::Specular, false) => trace_block_impl::<false, false>(geo, binner, s, row, entries),
+        (Walls::Specular, true) => trace_block_impl::<false, true>(geo, binner, s, row, entries),
     }
 }
 
 fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
     geo: &Walls2D,
+    binner: &ExitBinner,
     s: &TraceSettings,
     row: usize,
     entries: std::ops::Range<usize>,
@@ -384,7 +393,6 @@ fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
     let d0 = [-phi_i.sin(), -phi_i.cos()];
     let walks = s.walks_per_entry();
     let law = s.fresnel_law;
-    let binner = ExitBinner::new(m);
     let albedo = s.albedo;
     let max_bounces = s.max_bounces;
     for k in entries {
