@@ -5,7 +5,11 @@ mod commands;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "striae", version, about = "Scratched glass and metal: scratch BRDF precompute, scratch layers and a path tracer")]
+#[command(
+    name = "striae",
+    version,
+    about = "Scratched glass and metal: scratch BRDF precompute, scratch layers and a path tracer"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -12,8 +12,25 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("trace2d");
     g.sample_size(10);
     for (name, s) in [
-        ("v90_diffuse_m64_n1000_nr100", TraceSettings { walls: Walls::Diffuse, m: 64, n: 1000, nr: 100, ..TraceSettings::default() }),
-        ("v90_specular_m256_n10000", TraceSettings { walls: Walls::Specular, m: 256, n: 10_000, ..TraceSettings::default() }),
+        (
+            "v90_diffuse_m64_n1000_nr100",
+            TraceSettings {
+                walls: Walls::Diffuse,
+                m: 64,
+                n: 1000,
+                nr: 100,
+                ..TraceSettings::default()
+            },
+        ),
+        (
+            "v90_specular_m256_n10000",
+            TraceSettings {
+                walls: Walls::Specular,
+                m: 256,
+                n: 10_000,
+                ..TraceSettings::default()
+            },
+        ),
     ] {
         g.throughput(Throughput::Elements(s.total_paths()));
         g.bench_function(name, |b| b.iter(|| trace(&profile, &s, &|_| {}).unwrap()));

@@ -34,13 +34,21 @@ pub fn dielectric(cos_theta_i: f64, eta: f64) -> DielectricFresnel {
     let cos_i = cos_theta_i.abs().min(1.0);
     let sin2_t = (1.0 - cos_i * cos_i) / (eta_it * eta_it);
     if sin2_t >= 1.0 {
-        return DielectricFresnel { r: 1.0, cos_theta_t: 0.0, eta_it };
+        return DielectricFresnel {
+            r: 1.0,
+            cos_theta_t: 0.0,
+            eta_it,
+        };
     }
     let cos_t = (1.0 - sin2_t).sqrt();
     let r_s = (cos_i - eta_it * cos_t) / (cos_i + eta_it * cos_t);
     let r_p = (eta_it * cos_i - cos_t) / (eta_it * cos_i + cos_t);
     let r = 0.5 * (r_s * r_s + r_p * r_p);
-    DielectricFresnel { r, cos_theta_t: if outside { -cos_t } else { cos_t }, eta_it }
+    DielectricFresnel {
+        r,
+        cos_theta_t: if outside { -cos_t } else { cos_t },
+        eta_it,
+    }
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -60,7 +68,10 @@ impl Complex {
         Complex::new(self.re - o.re, self.im - o.im)
     }
     fn mul(self, o: Complex) -> Complex {
-        Complex::new(self.re * o.re - self.im * o.im, self.re * o.im + self.im * o.re)
+        Complex::new(
+            self.re * o.re - self.im * o.im,
+            self.re * o.im + self.im * o.re,
+        )
     }
     fn scale(self, s: f64) -> Complex {
         Complex::new(self.re * s, self.im * s)
@@ -70,7 +81,10 @@ impl Complex {
     }
     fn div(self, o: Complex) -> Complex {
         let d = o.norm2();
-        Complex::new((self.re * o.re + self.im * o.im) / d, (self.im * o.re - self.re * o.im) / d)
+        Complex::new(
+            (self.re * o.re + self.im * o.im) / d,
+            (self.im * o.re - self.re * o.im) / d,
+        )
     }
     fn sqrt(self) -> Complex {
         let r = self.norm2().sqrt();
@@ -89,7 +103,10 @@ pub fn conductor(cos_theta_i: f64, eta: f64, k: f64) -> f64 {
     let sin2_t = Complex::new(sin2_i, 0.0).div(eta_c.mul(eta_c));
     let cos_t = Complex::new(1.0, 0.0).sub(sin2_t).sqrt();
     let ci = Complex::new(cos_i, 0.0);
-    let r_parl = eta_c.scale(cos_i).sub(cos_t).div(eta_c.scale(cos_i).add(cos_t));
+    let r_parl = eta_c
+        .scale(cos_i)
+        .sub(cos_t)
+        .div(eta_c.scale(cos_i).add(cos_t));
     let r_perp = ci.sub(eta_c.mul(cos_t)).div(ci.add(eta_c.mul(cos_t)));
     0.5 * (r_parl.norm2() + r_perp.norm2())
 }

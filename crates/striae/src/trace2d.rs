@@ -119,7 +119,11 @@ pub struct TraceOutput {
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum TraceError {
     #[error("invalid trace parameter `{key}` = {value}: {why}")]
-    BadParameter { key: &'static str, value: String, why: &'static str },
+    BadParameter {
+        key: &'static str,
+        value: String,
+        why: &'static str,
+    },
 }
 
 impl TraceSettings {
@@ -139,14 +143,24 @@ impl TraceSettings {
             return bad("albedo", self.albedo.to_string(), "must be in [0, 1]");
         }
         if !(1..=100_000).contains(&self.max_bounces) {
-            return bad("max_bounces", self.max_bounces.to_string(), "must be in 1..=100000");
+            return bad(
+                "max_bounces",
+                self.max_bounces.to_string(),
+                "must be in 1..=100000",
+            );
         }
         let law_ok = match self.fresnel_law {
             FresnelLaw::Schlick { n } | FresnelLaw::Dielectric { n } => n.is_finite() && n > 0.0,
-            FresnelLaw::Conductor { eta, k } => eta.is_finite() && k.is_finite() && eta > 0.0 && k >= 0.0,
+            FresnelLaw::Conductor { eta, k } => {
+                eta.is_finite() && k.is_finite() && eta > 0.0 && k >= 0.0
+            }
         };
         if !law_ok {
-            return bad("fresnel_law", format!("{:?}", self.fresnel_law), "indices must be finite, n > 0, k >= 0");
+            return bad(
+                "fresnel_law",
+                format!("{:?}", self.fresnel_law),
+                "indices must be finite, n > 0, k >= 0",
+            );
         }
         Ok(())
     }
@@ -190,7 +204,12 @@ impl Walls2D {
                 let e = [w[1][0] - w[0][0], w[1][1] - w[0][1]];
                 let l = e[0].hypot(e[1]);
                 let t = [e[0] / l, e[1] / l];
-                Segment { p: w[0], e, n: [-t[1], t[0]], t }
+                Segment {
+                    p: w[0],
+                    e,
+                    n: [-t[1], t[0]],
+                    t,
+                }
             })
             .collect();
         Walls2D { segs }
@@ -253,7 +272,9 @@ struct ExitBinner {
 
 impl ExitBinner {
     fn new(m: usize) -> Self {
-        let edge_sin: Vec<f64> = (0..=m).map(|k| (-FRAC_PI_2 + k as f64 * PI / m as f64).sin()).collect();
+        let edge_sin: Vec<f64> = (0..=m)
+            .map(|k| (-FRAC_PI_2 + k as f64 * PI / m as f64).sin())
+            .collect();
         // 4 cells per bin on average; near the ends several bins share a cell (loops below).
         let cells = 4 * m;
         let scale = cells as f64 / 2.0;
@@ -263,7 +284,11 @@ impl ExitBinner {
                 (edge_sin.partition_point(|&e| e <= x).saturating_sub(1)).min(m - 1) as u32
             })
             .collect();
-        ExitBinner { edge_sin, lut, scale }
+        ExitBinner {
+            edge_sin,
+            lut,
+            scale,
+        }
     }
 
     #[inline]
@@ -310,7 +335,11 @@ const BLOCK: usize = 256;
 
 /// Trace the profile (section 3). `progress` is called from worker threads with the number of
 /// walks just finished. Runs on the current rayon pool.
-pub fn trace(profile: &Profile, s: &TraceSettings, progress: &(dyn Fn(u64) + Sync)) -> Result<TraceOutput, TraceError> {
+pub fn trace(
+    profile: &Profile,
+    s: &TraceSettings,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<TraceOutput, TraceError> {
     s.validate()?;
     let geo = Walls2D::new(profile);
     let m = s.m;
@@ -320,7 +349,9 @@ pub fn trace(profile: &Profile, s: &TraceSettings, progress: &(dyn Fn(u64) + Syn
         FresnelMode::Walls => 4,
     };
     let blocks = s.n.div_ceil(BLOCK);
-    let items: Vec<(usize, usize)> = (0..m).flat_map(|i| (0..blocks).map(move |b| (i, b))).collect();
+    let items: Vec<(usize, usize)> = (0..m)
+        .flat_map(|i| (0..blocks).map(move |b| (i, b)))
+        .collect();
     let partials: Vec<Partial> = items
         .par_iter()
         .map(|&(row, block)| {
@@ -337,7 +368,9 @@ pub fn trace(profile: &Profile, s: &TraceSettings, progress: &(dyn Fn(u64) + Syn
     let mut out = vec![0.0; channels * m * m];
     let mut dropped = vec![0.0; m];
     let mut lost = vec![0.0; m];
-    let norm: Vec<f64> = (0..m).map(|j| m as f64 / (PI * s.n as f64 * walks * bin_centre(j, m).cos())).collect();
+    let norm: Vec<f64> = (0..m)
+        .map(|j| m as f64 / (PI * s.n as f64 * walks * bin_centre(j, m).cos()))
+        .collect();
     for (row, chunk) in partials.chunks(blocks).enumerate() {
         let mut acc = vec![0.0; channels * m];
         for p in chunk {
@@ -357,7 +390,13 @@ pub fn trace(profile: &Profile, s: &TraceSettings, progress: &(dyn Fn(u64) + Syn
     }
     let rho_m = out[..m * m].to_vec();
     let rho_walls = (channels == 4).then(|| out[m * m..].to_vec());
-    Ok(TraceOutput { m, rho_m, rho_walls, dropped, lost })
+    Ok(TraceOutput {
+        m,
+        rho_m,
+        rho_walls,
+        dropped,
+        lost,
+    })
 }
 
 /// Trace the entries `entries` of incident bin `row`; weights are per walk (1 each, the
@@ -388,7 +427,11 @@ fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
 ) -> Partial {
     let channels = if WALLS_MODE { 4 } else { 1 };
     let m = s.m;
-    let mut part = Partial { hist: vec![0.0; channels * m], dropped: 0.0, lost: 0.0 };
+    let mut part = Partial {
+        hist: vec![0.0; channels * m],
+        dropped: 0.0,
+        lost: 0.0,
+    };
     let phi_i = bin_centre(row, m);
     let d0 = [-phi_i.sin(), -phi_i.cos()];
     let walks = s.walks_per_entry();
@@ -410,8 +453,18 @@ fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
         // them. A finished lane restarts with the entry's next walk. Every walk still draws
         // its own fresh uniforms (from the entry's stream, in a fixed order), so the estimator
         // is exactly the seed's N_r scheme and the output is deterministic.
-        let fresh = Lane { pos: hit0, dir: d0, seg: seg0, w: [1.0; 4], bounces: 0, active: true };
-        let mut lanes = [Lane { active: false, ..fresh }; LANES];
+        let fresh = Lane {
+            pos: hit0,
+            dir: d0,
+            seg: seg0,
+            w: [1.0; 4],
+            bounces: 0,
+            active: true,
+        };
+        let mut lanes = [Lane {
+            active: false,
+            ..fresh
+        }; LANES];
         let mut started = 0;
         let mut active = 0;
         for lane in lanes.iter_mut() {
@@ -441,8 +494,8 @@ fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
                     lane.bounces += 1;
                     lane.w[0] *= albedo;
                     if WALLS_MODE {
-                        for c in 0..3 {
-                            lane.w[c + 1] *= albedo * law.reflectance(COS_THETA_SLICES[c] * cos_in);
+                        for (w, cos_theta) in lane.w[1..].iter_mut().zip(COS_THETA_SLICES) {
+                            *w *= albedo * law.reflectance(cos_theta * cos_in);
                         }
                     }
                     let dir = if DIFFUSE {
@@ -494,26 +547,49 @@ mod tests {
     use super::*;
 
     fn small(walls: Walls) -> TraceSettings {
-        TraceSettings { walls, m: 32, n: 2000, nr: 8, ..TraceSettings::default() }
+        TraceSettings {
+            walls,
+            m: 32,
+            n: 2000,
+            nr: 8,
+            ..TraceSettings::default()
+        }
     }
 
     /// Sum over `phi_o` of `rho_m cos(phi_o) pi/M`: the 2D albedo of row `i`.
     fn albedo_2d(rho: &[f64], m: usize, i: usize) -> f64 {
-        (0..m).map(|j| rho[i * m + j] * bin_centre(j, m).cos() * PI / m as f64).sum()
+        (0..m)
+            .map(|j| rho[i * m + j] * bin_centre(j, m).cos() * PI / m as f64)
+            .sum()
     }
 
     #[test]
     fn lossless_profiles_conserve_energy() {
-        for spec in ["v:angle=90", "round:depth=0.4", "trapezoid:depth=0.3,bottom=0.2", "v:depth=2"] {
+        for spec in [
+            "v:angle=90",
+            "round:depth=0.4",
+            "trapezoid:depth=0.3,bottom=0.2",
+            "v:depth=2",
+        ] {
             let p = Profile::parse(spec).unwrap();
             for walls in [Walls::Specular, Walls::Diffuse] {
                 let out = trace(&p, &small(walls), &|_| {}).unwrap();
                 for i in 0..out.m {
                     let a = albedo_2d(&out.rho_m, out.m, i);
                     let dropped = out.dropped[i];
-                    assert!(out.lost[i] == 0.0, "{spec} {walls:?} row {i} lost {}", out.lost[i]);
-                    assert!((a + dropped - 1.0).abs() < 1e-9, "{spec} {walls:?} row {i}: {a} + {dropped}");
-                    assert!(dropped < 1e-3, "{spec} {walls:?} row {i}: dropped {dropped}");
+                    assert!(
+                        out.lost[i] == 0.0,
+                        "{spec} {walls:?} row {i} lost {}",
+                        out.lost[i]
+                    );
+                    assert!(
+                        (a + dropped - 1.0).abs() < 1e-9,
+                        "{spec} {walls:?} row {i}: {a} + {dropped}"
+                    );
+                    assert!(
+                        dropped < 1e-3,
+                        "{spec} {walls:?} row {i}: dropped {dropped}"
+                    );
                 }
             }
         }
@@ -522,7 +598,10 @@ mod tests {
     #[test]
     fn albedo_scales_energy() {
         // A flat profile: one bounce each, so the 2D albedo is exactly the facet albedo.
-        let s = TraceSettings { albedo: 0.7, ..small(Walls::Diffuse) };
+        let s = TraceSettings {
+            albedo: 0.7,
+            ..small(Walls::Diffuse)
+        };
         let out = trace(&Profile::flat(), &s, &|_| {}).unwrap();
         for i in 0..out.m {
             assert!((albedo_2d(&out.rho_m, out.m, i) - 0.7).abs() < 1e-9);
@@ -534,7 +613,13 @@ mod tests {
         // sin(a) uniform: P(phi_o in bin j) = (sin b_{j+1} - sin b_j)/2 ~ cos(phi_j) (pi/M)/2,
         // so eq. (1') gives 1/2 per bin. Compare with the exact bin integral, within MC error.
         let m = 16;
-        let s = TraceSettings { walls: Walls::Diffuse, m, n: 4000, nr: 16, ..TraceSettings::default() };
+        let s = TraceSettings {
+            walls: Walls::Diffuse,
+            m,
+            n: 4000,
+            nr: 16,
+            ..TraceSettings::default()
+        };
         let out = trace(&Profile::flat(), &s, &|_| {}).unwrap();
         let walks = (s.n * s.nr) as f64;
         let mut max_z = 0.0f64;
@@ -592,14 +677,22 @@ mod tests {
     #[test]
     fn mirror_v_groove_retroreflects_the_two_wall_fraction() {
         let m = 64;
-        let s = TraceSettings { walls: Walls::Specular, m, n: 20_000, ..TraceSettings::default() };
+        let s = TraceSettings {
+            walls: Walls::Specular,
+            m,
+            n: 20_000,
+            ..TraceSettings::default()
+        };
         let out = trace(&Profile::parse("v:angle=90").unwrap(), &s, &|_| {}).unwrap();
         for i in 0..m {
             let phi = bin_centre(i, m);
             let retro = out.rho_m[i * m + i] * phi.cos() * PI / m as f64;
             let expect = (1.0 - phi.abs().tan()).max(0.0);
             // Stratified entries: error at most a couple of strata.
-            assert!((retro - expect).abs() < 3.0 / s.n as f64, "phi {phi}: {retro} vs {expect}");
+            assert!(
+                (retro - expect).abs() < 3.0 / s.n as f64,
+                "phi {phi}: {retro} vs {expect}"
+            );
         }
     }
 
@@ -615,13 +708,25 @@ mod tests {
             ..TraceSettings::default()
         };
         let run = |threads| {
-            rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| trace(&p, &s, &|_| {}).unwrap())
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| trace(&p, &s, &|_| {}).unwrap())
         };
         let a = run(1);
         let b = run(3);
         assert_eq!(a, b);
         // And a different seed changes the output.
-        let c = trace(&p, &TraceSettings { seed: 43, ..s.clone() }, &|_| {}).unwrap();
+        let c = trace(
+            &p,
+            &TraceSettings {
+                seed: 43,
+                ..s.clone()
+            },
+            &|_| {},
+        )
+        .unwrap();
         assert_ne!(a.rho_m, c.rho_m);
     }
 
@@ -629,7 +734,10 @@ mod tests {
     fn walls_fresnel_for_mirrors_at_grazing_slice_is_lossless() {
         // Slice theta = pi/2 has incidence cosine 0: Schlick gives F = 1, so the slice equals
         // rho_m; slice 0 of a flat mirror is exactly F(cos phi_i).
-        let s = TraceSettings { fresnel_mode: FresnelMode::Walls, ..small(Walls::Specular) };
+        let s = TraceSettings {
+            fresnel_mode: FresnelMode::Walls,
+            ..small(Walls::Specular)
+        };
         let out = trace(&Profile::flat(), &s, &|_| {}).unwrap();
         let m = s.m;
         let w = out.rho_walls.unwrap();
@@ -637,7 +745,10 @@ mod tests {
             for j in 0..m {
                 assert_eq!(w[2 * m * m + i * m + j], out.rho_m[i * m + j]);
                 let f = crate::fresnel::schlick(1.5, bin_centre(i, m).cos());
-                assert!((w[i * m + j] - f * out.rho_m[i * m + j]).abs() < 1e-9 * out.rho_m[i * m + j].max(1.0));
+                assert!(
+                    (w[i * m + j] - f * out.rho_m[i * m + j]).abs()
+                        < 1e-9 * out.rho_m[i * m + j].max(1.0)
+                );
             }
         }
     }
@@ -654,7 +765,10 @@ mod tests {
                 // Equal except within rounding of an edge.
                 if got != want {
                     let edge = -FRAC_PI_2 + got.max(want) as f64 * PI / m as f64;
-                    assert!((phi - edge).abs() < 1e-12, "m {m} phi {phi}: {got} vs {want}");
+                    assert!(
+                        (phi - edge).abs() < 1e-12,
+                        "m {m} phi {phi}: {got} vs {want}"
+                    );
                 }
             }
         }
@@ -665,14 +779,41 @@ mod tests {
         let p = Profile::flat();
         let base = small(Walls::Diffuse);
         for s in [
-            TraceSettings { m: 0, ..base.clone() },
-            TraceSettings { n: 0, ..base.clone() },
-            TraceSettings { nr: 0, ..base.clone() },
-            TraceSettings { albedo: 1.5, ..base.clone() },
-            TraceSettings { albedo: f64::NAN, ..base.clone() },
-            TraceSettings { max_bounces: 0, ..base.clone() },
-            TraceSettings { fresnel_law: FresnelLaw::Schlick { n: -1.0 }, ..base.clone() },
-            TraceSettings { fresnel_law: FresnelLaw::Conductor { eta: 0.2, k: f64::INFINITY }, ..base.clone() },
+            TraceSettings {
+                m: 0,
+                ..base.clone()
+            },
+            TraceSettings {
+                n: 0,
+                ..base.clone()
+            },
+            TraceSettings {
+                nr: 0,
+                ..base.clone()
+            },
+            TraceSettings {
+                albedo: 1.5,
+                ..base.clone()
+            },
+            TraceSettings {
+                albedo: f64::NAN,
+                ..base.clone()
+            },
+            TraceSettings {
+                max_bounces: 0,
+                ..base.clone()
+            },
+            TraceSettings {
+                fresnel_law: FresnelLaw::Schlick { n: -1.0 },
+                ..base.clone()
+            },
+            TraceSettings {
+                fresnel_law: FresnelLaw::Conductor {
+                    eta: 0.2,
+                    k: f64::INFINITY,
+                },
+                ..base.clone()
+            },
         ] {
             assert!(trace(&p, &s, &|_| {}).is_err(), "{s:?}");
         }

@@ -70,19 +70,30 @@ fn parse_law(s: &str, ior: f64) -> anyhow::Result<FresnelLaw> {
         "dielectric" => FresnelLaw::Dielectric { n: ior },
         _ => {
             let Some(rest) = s.strip_prefix("conductor:") else {
-                bail!("unknown --fresnel-law `{s}` (expected schlick, dielectric or conductor:ETA,K)")
+                bail!(
+                    "unknown --fresnel-law `{s}` (expected schlick, dielectric or conductor:ETA,K)"
+                )
             };
             let parts: Vec<&str> = rest.split(',').collect();
-            let [eta, k] = parts[..] else { bail!("--fresnel-law `{s}`: expected conductor:ETA,K") };
-            let eta: f64 = eta.trim().parse().with_context(|| format!("--fresnel-law `{s}`: ETA `{eta}`"))?;
-            let k: f64 = k.trim().parse().with_context(|| format!("--fresnel-law `{s}`: K `{k}`"))?;
+            let [eta, k] = parts[..] else {
+                bail!("--fresnel-law `{s}`: expected conductor:ETA,K")
+            };
+            let eta: f64 = eta
+                .trim()
+                .parse()
+                .with_context(|| format!("--fresnel-law `{s}`: ETA `{eta}`"))?;
+            let k: f64 = k
+                .trim()
+                .parse()
+                .with_context(|| format!("--fresnel-law `{s}`: K `{k}`"))?;
             FresnelLaw::Conductor { eta, k }
         }
     })
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let profile = Profile::parse(&a.profile).with_context(|| format!("--profile `{}`", a.profile))?;
+    let profile =
+        Profile::parse(&a.profile).with_context(|| format!("--profile `{}`", a.profile))?;
     let trace = TraceSettings {
         walls: match a.walls {
             WallsArg::Specular => Walls::Specular,
@@ -105,21 +116,44 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let total = params.trace.total_paths();
     let bar = indicatif::ProgressBar::new(total);
     bar.set_style(
-        indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {percent}% ({per_sec}, eta {eta})")
-            .expect("template"),
+        indicatif::ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {wide_bar} {percent}% ({per_sec}, eta {eta})",
+        )
+        .expect("template"),
     );
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(a.threads.unwrap_or(0)).build()?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()?;
     let start = Instant::now();
     let table = pool.install(|| ScratchTable::compute(&params, &|k| bar.inc(k)))?;
     let secs = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
-    table.save(&a.output).with_context(|| format!("writing {}", a.output.display()))?;
+    table
+        .save(&a.output)
+        .with_context(|| format!("writing {}", a.output.display()))?;
     let alb = table.albedo_2d();
-    let (lo, hi) = alb.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+    let (lo, hi) = alb
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
+            (l.min(x), h.max(x))
+        });
     let dropped = table.dropped.iter().cloned().fold(0.0, f64::max);
-    println!("profile {}  walls {:?}  M {}  N {}  N_r {}", params.profile.spec, params.trace.walls, table.m, params.trace.n, params.trace.nr);
-    println!("wall time {secs:.3} s, {total} paths, {:.3e} paths/s ({} threads)", total as f64 / secs, pool.current_num_threads());
-    println!("2D albedo range [{lo:.6}, {hi:.6}]; max energy dropped by the bounce cap {dropped:.3e}");
-    println!("wrote {} (params hash {})", a.output.display(), &params.hash()[..16]);
+    println!(
+        "profile {}  walls {:?}  M {}  N {}  N_r {}",
+        params.profile.spec, params.trace.walls, table.m, params.trace.n, params.trace.nr
+    );
+    println!(
+        "wall time {secs:.3} s, {total} paths, {:.3e} paths/s ({} threads)",
+        total as f64 / secs,
+        pool.current_num_threads()
+    );
+    println!(
+        "2D albedo range [{lo:.6}, {hi:.6}]; max energy dropped by the bounce cap {dropped:.3e}"
+    );
+    println!(
+        "wrote {} (params hash {})",
+        a.output.display(),
+        &params.hash()[..16]
+    );
     Ok(())
 }
