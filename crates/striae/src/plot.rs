@@ -128,8 +128,13 @@ pub fn plot_lobe(table: &ScratchTable, phi_i_deg: f64, path: &Path) -> Result<()
             (row[j] * s, row[j] * c)
         }));
         pts.push((0.0, 0.0));
+        // Separate 2-point segments: a thick polyline's miter joins overshoot at the sharp
+        // turns of mirror spikes.
         chart
-            .draw_series(LineSeries::new(pts, BLUE.stroke_width(2)))
+            .draw_series(
+                pts.windows(2)
+                    .map(|w| PathElement::new(vec![w[0], w[1]], BLUE.stroke_width(2))),
+            )
             .map_err(|e| e.to_string())?
             .label("rho_m(phi_o, phi_i)")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(2)));

@@ -37,7 +37,7 @@ pub enum ProfileError {
     },
     #[error("profile `{spec}`: `{item}` is not of the form key=value")]
     Malformed { spec: String, item: String },
-    #[error("profile file {path}: {source}")]
+    #[error("cannot read profile file {path}")]
     Io {
         path: PathBuf,
         source: std::io::Error,

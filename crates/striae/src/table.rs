@@ -92,7 +92,7 @@ impl TableParams {
 pub enum TableError {
     #[error(transparent)]
     Trace(#[from] TraceError),
-    #[error("table {path}: {source}")]
+    #[error("cannot read or write table {path}")]
     Io {
         path: PathBuf,
         source: std::io::Error,
