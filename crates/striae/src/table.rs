@@ -728,6 +728,30 @@ mod tests {
     }
 
     #[test]
+    fn schlick_limits_used_by_the_slices() {
+        // Eq. (2) at the three slices for glass: theta = 0 is normal incidence, F0 = 0.04 =
+        // the exact dielectric value; theta = pi/2 grazes, F = 1; and the eq. (2) form equals
+        // F0 + (1 - F0)(1 - c)^5 for any n and c.
+        let law = FresnelLaw::Schlick { n: 1.5 };
+        assert!(
+            (law.reflectance(COS_THETA_SLICES[0]) - crate::fresnel::dielectric(1.0, 1.5).r).abs()
+                < 1e-12
+        );
+        assert_eq!(law.reflectance(COS_THETA_SLICES[2]), 1.0);
+        for n in [1.2, 1.5, 2.4] {
+            let f0 = ((n - 1.0) / (n + 1.0)) * ((n - 1.0) / (n + 1.0));
+            for c in [0.0, 0.1, 0.5, 0.9, 1.0] {
+                let f = crate::fresnel::schlick(n, c);
+                assert!((f - (f0 + (1.0 - f0) * (1.0 - c).powi(5))).abs() < 1e-12);
+                assert!((0.0..=1.0).contains(&f));
+            }
+        }
+        // Out-of-range cosines are clamped, never extrapolated.
+        assert_eq!(crate::fresnel::schlick(1.5, -0.5), 1.0);
+        assert!((crate::fresnel::schlick(1.5, 1.5) - 0.04).abs() < 1e-12);
+    }
+
+    #[test]
     fn gamma_fallback() {
         assert_eq!(fit_gamma(1.0, 1.0, 1.0), GAMMA_FALLBACK);
         assert_eq!(fit_gamma(0.0, 0.0, 0.0), GAMMA_FALLBACK);
