@@ -10,7 +10,7 @@
 //!
 //! The integrator picks one light uniformly per shading point (probability `1 / n_lights`).
 
-use crate::scene::interim::EnvMap;
+use crate::envmap::EnvMap;
 use crate::geometry::Shape;
 use crate::math::{Rgb, Vec2, Vec3};
 use crate::sampling::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
@@ -48,7 +48,7 @@ impl Environment {
     pub fn sample(&self, u: Vec2) -> Option<(Vec3, Rgb, f32)> {
         match self {
             Environment::Constant { radiance } => Some((square_to_uniform_sphere(u), *radiance, UNIFORM_SPHERE_PDF)),
-            Environment::Map(m) => m.sample(u),
+            Environment::Map(m) => Some(m.sample(u)),
         }
     }
 }

@@ -307,3 +307,86 @@ fn footprint_behind_a_glass_slab_uses_the_reduced_distance() {
     assert_eq!(ctx.len(), 3, "front face, back face, plane");
     assert_footprint(&ctx[2], pixel_width(3.5 + 1.0 / 1.5 + 1.5, 30.0, 64.0) / 4.0, "plane behind glass");
 }
+
+#[test]
+fn diffuse_plane_under_a_half_sky_map() {
+    // An equirectangular EXR bright (2) over the upper hemisphere and black below (65 rows:
+    // row 32 is the horizon). A Lambertian plane facing up sees only the bright half:
+    // pixel = a * 2. Exercises the map's importance sampling under MIS with the BSDF.
+    let dir = std::env::temp_dir().join(format!("striae-envtest-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (w, h) = (32u32, 65u32);
+    let mut sky = Image::new(w, h);
+    for y in 0..=32 {
+        for x in 0..w {
+            sky.pixels[(y * w + x) as usize] = striae::math::Rgb::new(2.0, 2.0, 2.0);
+        }
+    }
+    sky.write_exr(&dir.join("sky.exr")).unwrap();
+    let text = r#"
+[render]
+width = 16
+height = 16
+spp = 64
+max_depth = 2
+[camera]
+position = [0, 3, 1]
+look_at = [0, 0, 0]
+fov = 20
+[materials.plane]
+type = "diffuse"
+reflectance = 0.5
+[[shapes]]
+type = "rectangle"
+material = "plane"
+transform = [{ scale = 50 }, { rotate = { axis = [1, 0, 0], angle = -90 } }]
+[environment]
+type = "map"
+path = "sky.exr"
+transform = { rotate = { axis = [0, 1, 0], angle = 30 } }
+"#;
+    let s = Scene::parse(text, Path::new("env.toml"), &dir, &Overrides::default()).unwrap();
+    let (img, _) = render_with_threads(&s, 2);
+    let m = centre_mean(&img, 1.0, 0);
+    assert!(m.agrees_with(1.0, 4.0, 2e-3), "{} +- {}", m.mean(), m.std_error());
+    // A non-rotation transform and a missing file are rejected with the key named.
+    let bad = text.replace("transform = { rotate = { axis = [0, 1, 0], angle = 30 } }", "transform = { scale = 2 }");
+    let err = Scene::parse(&bad, Path::new("env.toml"), &dir, &Overrides::default()).unwrap_err().to_string();
+    assert!(err.contains("environment") && err.contains("rotation"), "{err}");
+    let err = Scene::parse(&text.replace("sky.exr", "nosky.exr"), Path::new("env.toml"), &dir, &Overrides::default()).unwrap_err().to_string();
+    assert!(err.contains("environment.path") && err.contains("nosky.exr"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn diffuse_plane_under_a_sun_is_albedo_times_irradiance_cosine_over_pi() {
+    // A sun at 60 degrees from the zenith with irradiance E: pixel = a E cos(60) / pi.
+    let s = scene(
+        r#"
+[render]
+width = 8
+height = 8
+spp = 4
+[camera]
+position = [0, 3, 1]
+look_at = [0, 0, 0]
+fov = 20
+[materials.plane]
+type = "diffuse"
+reflectance = 0.5
+[[shapes]]
+type = "rectangle"
+material = "plane"
+transform = [{ scale = 50 }, { rotate = { axis = [1, 0, 0], angle = -90 } }]
+[[lights]]
+type = "sun"
+direction = [0.8660254, 0.5, 0]
+irradiance = 4
+"#,
+    );
+    let (img, _) = render_with_threads(&s, 1);
+    let expected = 0.5 * 4.0 * 0.5 / std::f32::consts::PI;
+    for p in &img.pixels {
+        assert!((p.x - expected).abs() < 1e-4 * expected, "{p} vs {expected}");
+    }
+}

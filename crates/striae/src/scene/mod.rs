@@ -8,10 +8,10 @@
 //! a degenerate camera) name the key path such as `shapes[2].path`.
 
 pub mod file;
-pub mod interim;
 
 use crate::camera::PerspectiveCamera;
 use crate::geometry::{Geometry, Shape, ShapeGeometry, TriangleMesh};
+use crate::envmap::EnvMap;
 use crate::lights::{Environment, Light};
 use crate::material::Material;
 use crate::bsdf::Bsdf;
@@ -242,8 +242,16 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
     Ok(Scene { camera, geometry: Geometry::new(shapes), materials, lights, environment, settings })
 }
 
-fn load_envmap(path: &Path, scale: f32, transform: &crate::geometry::Transform) -> Result<interim::EnvMap, String> {
-    interim::EnvMap::load(path, scale, transform)
+/// Load an environment map and orient it: `transform` must be a rotation (directions only).
+fn load_envmap(path: &Path, scale: f32, transform: &crate::geometry::Transform) -> Result<EnvMap, String> {
+    let m = glam::Mat3::from_mat4(transform.matrix());
+    let orthonormal = (m.transpose() * m).abs_diff_eq(glam::Mat3::IDENTITY, 1e-4) && m.determinant() > 0.0;
+    if !orthonormal {
+        return Err("the environment's transform must be a rotation".into());
+    }
+    let map = EnvMap::load(path).map_err(|e| e.to_string())?;
+    let map = map.with_scale(scale).map_err(|e| e.to_string())?;
+    Ok(map.with_rotation(m))
 }
 
 fn shape_geometry(s: &ShapeSection, i: usize, file: &Path, base: &Path) -> Result<ShapeGeometry, SceneError> {
