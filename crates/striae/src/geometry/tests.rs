@@ -517,3 +517,35 @@ fn obj_files_load_and_bad_ones_are_named() {
     assert!(err.contains("bad_index.obj"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn obj_export_round_trips_the_teapot() {
+    let dir = std::env::temp_dir().join(format!("striae-obj-export-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("teapot.obj");
+    let teapot = TriangleMesh::teapot(3);
+    teapot.write_obj(&path).unwrap();
+    let back = TriangleMesh::from_obj(&path).unwrap();
+    assert_eq!(back.triangle_count(), teapot.triangle_count());
+    for i in 0..teapot.triangle_count() {
+        assert_eq!(back.triangle(i), teapot.triangle(i), "triangle {i}");
+    }
+    assert!(back.uvs().is_some() && back.normals().is_some());
+    // Same hits through both (uv and shading normal included).
+    let (a, b) = (
+        Geometry::new(vec![shape(ShapeGeometry::Mesh(teapot))]),
+        Geometry::new(vec![shape(ShapeGeometry::Mesh(back))]),
+    );
+    for k in 0..50 {
+        let ray = Ray::new(Vec3::new(-3.0 + 0.12 * k as f32, -6.0, 1.4), Vec3::Y);
+        match (a.intersect(&ray), b.intersect(&ray)) {
+            (None, None) => {}
+            (Some(x), Some(y)) => {
+                assert_eq!(x.t, y.t);
+                assert!((x.uv - y.uv).length() < 1e-6 && (x.ns - y.ns).length() < 1e-5);
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
