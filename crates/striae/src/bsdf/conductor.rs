@@ -5,9 +5,9 @@
 //! Presets live in `material` (Mitsuba 3's `conductor` list); `eta = 0, k = 1` is Mitsuba's
 //! `none`, a perfect mirror with `F = 1` at every angle.
 
+use super::fresnel_f32;
 use super::microfacet::Ggx;
 use super::BsdfSample;
-use crate::fresnel;
 use crate::math::{reflect, reflect_z, Rgb, Vec2, Vec3};
 
 /// The complex index of refraction of a conductor, per RGB channel.
@@ -21,12 +21,7 @@ impl ConductorIor {
     /// Unpolarised reflectance per channel at `cos_theta` in `[0, 1]`.
     #[inline]
     pub fn fresnel(&self, cos_theta: f32) -> Rgb {
-        let c = cos_theta as f64;
-        Rgb::new(
-            fresnel::conductor(c, self.eta.x as f64, self.k.x as f64) as f32,
-            fresnel::conductor(c, self.eta.y as f64, self.k.y as f64) as f32,
-            fresnel::conductor(c, self.eta.z as f64, self.k.z as f64) as f32,
-        )
+        fresnel_f32::conductor(cos_theta, self.eta, self.k)
     }
 }
 

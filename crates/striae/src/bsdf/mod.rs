@@ -33,6 +33,7 @@
 mod conductor;
 mod dielectric;
 mod diffuse;
+mod fresnel_f32;
 pub mod microfacet;
 
 pub use conductor::{Conductor, ConductorIor, RoughConductor};
