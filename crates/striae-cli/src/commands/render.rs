@@ -33,6 +33,11 @@ pub struct Args {
     /// Default: `striae` for the built-in scene, the scene file's name otherwise.
     #[arg(short = 'o', long)]
     pub output: Option<PathBuf>,
+    /// Instead of rendering, write every mesh shape of the scene (teapot, rectangle, box, OBJ;
+    /// in world space, transforms applied) to DIR/shape-<index>.obj, e.g. to describe the
+    /// same geometry to Mitsuba 3. Spheres are analytic and are skipped.
+    #[arg(long, value_name = "DIR")]
+    pub export_meshes: Option<PathBuf>,
     /// No progress bar.
     #[arg(long, short = 'q')]
     pub quiet: bool,
@@ -79,6 +84,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         scene.settings.exposure = e;
     }
+    if let Some(dir) = &args.export_meshes {
+        return export_meshes(&scene, dir);
+    }
     let (exr_path, png_path) = output_paths(args.output.as_deref(), args.scene.as_deref());
     let s = &scene.settings;
     let total = s.width as u64 * s.height as u64 * s.spp as u64;
@@ -117,6 +125,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if stats.nonfinite > 0 { format!(", {} non-finite samples dropped", stats.nonfinite) } else { String::new() }
     );
     eprintln!("wrote {} and {}", exr_path.display(), png_path.display());
+    Ok(())
+}
+
+fn export_meshes(scene: &Scene, dir: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    for (i, shape) in scene.geometry.shapes().iter().enumerate() {
+        match &shape.geometry {
+            striae::geometry::ShapeGeometry::Mesh(mesh) => {
+                let path = dir.join(format!("shape-{i}.obj"));
+                mesh.write_obj(&path).with_context(|| format!("writing {}", path.display()))?;
+                eprintln!("wrote {} ({} triangles)", path.display(), mesh.triangle_count());
+            }
+            striae::geometry::ShapeGeometry::Sphere { centre, radius } => {
+                eprintln!("shape {i}: analytic sphere, centre {centre}, radius {radius} (not exported)");
+            }
+        }
+    }
     Ok(())
 }
 
