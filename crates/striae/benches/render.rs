@@ -12,10 +12,23 @@ fn bench_render(c: &mut Criterion) {
     let mut g = c.benchmark_group("render");
     g.sample_size(10);
     for (w, h, spp) in [(128u32, 96u32, 4u32), (512, 384, 1)] {
-        let o = Overrides { spp: Some(spp), resolution: Some((w, h)), seed: Some(0), max_depth: None };
-        let scene = Scene::parse(striae::scene::DEFAULT_SCENE, Path::new("glass-teapot.toml"), Path::new("."), &o).unwrap();
+        let o = Overrides {
+            spp: Some(spp),
+            resolution: Some((w, h)),
+            seed: Some(0),
+            max_depth: None,
+        };
+        let scene = Scene::parse(
+            striae::scene::DEFAULT_SCENE,
+            Path::new("glass-teapot.toml"),
+            Path::new("."),
+            &o,
+        )
+        .unwrap();
         g.throughput(Throughput::Elements(w as u64 * h as u64 * spp as u64));
-        g.bench_function(format!("glass_teapot_{w}x{h}_{spp}spp"), |b| b.iter(|| render(&scene, &|_| {})));
+        g.bench_function(format!("glass_teapot_{w}x{h}_{spp}spp"), |b| {
+            b.iter(|| render(&scene, &|_| {}))
+        });
     }
     g.finish();
 

@@ -47,7 +47,9 @@ impl Environment {
     #[inline]
     pub fn sample(&self, u: Vec2) -> Option<(Vec3, Rgb, f32)> {
         match self {
-            Environment::Constant { radiance } => Some((square_to_uniform_sphere(u), *radiance, UNIFORM_SPHERE_PDF)),
+            Environment::Constant { radiance } => {
+                Some((square_to_uniform_sphere(u), *radiance, UNIFORM_SPHERE_PDF))
+            }
             Environment::Map(m) => Some(m.sample(u)),
         }
     }
@@ -57,11 +59,17 @@ impl Environment {
 #[derive(Debug)]
 pub enum Light {
     /// Shape `shape` emits `radiance` from its front side.
-    Area { shape: u32, radiance: Rgb },
+    Area {
+        shape: u32,
+        radiance: Rgb,
+    },
     Environment(Environment),
     /// A directional light: `direction` points **toward** the sun (unit), `irradiance` is the
     /// irradiance on a surface facing it.
-    Sun { direction: Vec3, irradiance: Rgb },
+    Sun {
+        direction: Vec3,
+        irradiance: Rgb,
+    },
 }
 
 /// A light sample seen from a shading point.
@@ -100,18 +108,37 @@ impl Light {
                 if !(pdf > 0.0 && pdf.is_finite()) {
                     return None;
                 }
-                Some(LightSample { wi, dist, radiance: *radiance, pdf, delta: false })
+                Some(LightSample {
+                    wi,
+                    dist,
+                    radiance: *radiance,
+                    pdf,
+                    delta: false,
+                })
             }
             Light::Environment(env) => {
                 let (wi, radiance, pdf) = env.sample(u)?;
                 if !(pdf > 0.0) {
                     return None;
                 }
-                Some(LightSample { wi, dist: f32::INFINITY, radiance, pdf, delta: false })
+                Some(LightSample {
+                    wi,
+                    dist: f32::INFINITY,
+                    radiance,
+                    pdf,
+                    delta: false,
+                })
             }
-            Light::Sun { direction, irradiance } => {
-                Some(LightSample { wi: *direction, dist: f32::INFINITY, radiance: *irradiance, pdf: 1.0, delta: true })
-            }
+            Light::Sun {
+                direction,
+                irradiance,
+            } => Some(LightSample {
+                wi: *direction,
+                dist: f32::INFINITY,
+                radiance: *irradiance,
+                pdf: 1.0,
+                delta: true,
+            }),
         }
     }
 

@@ -9,11 +9,21 @@ use striae::scene::{Overrides, Scene, SceneError};
 use striae::testing::MeanEstimate;
 
 fn scene(text: &str) -> Scene {
-    Scene::parse(text, Path::new("test.toml"), Path::new("."), &Overrides::default()).unwrap_or_else(|e| panic!("{e}"))
+    Scene::parse(
+        text,
+        Path::new("test.toml"),
+        Path::new("."),
+        &Overrides::default(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn render_with_threads(scene: &Scene, threads: usize) -> (Image, RenderStats) {
-    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| render(scene, &|_| {}))
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(|| render(scene, &|_| {}))
 }
 
 /// Mean over the pixels inside a centred square of side `frac` of the image (each pixel is an
@@ -63,7 +73,12 @@ fn assert_furnace(s: &Scene, what: &str) {
     for c in 0..3 {
         let m = centre_mean(&img, 0.5, c);
         assert!(m.count() > 100);
-        assert!(m.agrees_with(1.0, 4.0, 1e-3), "{what}: channel {c} mean {} +- {}", m.mean(), m.std_error());
+        assert!(
+            m.agrees_with(1.0, 4.0, 1e-3),
+            "{what}: channel {c} mean {} +- {}",
+            m.mean(),
+            m.std_error()
+        );
     }
 }
 
@@ -75,7 +90,10 @@ fn white_furnace_glass_sphere() {
 #[test]
 fn white_furnace_perfect_conductor_sphere() {
     // A purely imaginary index (eta = 0, k > 0) reflects everything: F = 1 at every angle.
-    assert_furnace(&furnace("type = \"conductor\"\neta = [0, 0, 0]\nk = [1, 1, 1]"), "F = 1 conductor");
+    assert_furnace(
+        &furnace("type = \"conductor\"\neta = [0, 0, 0]\nk = [1, 1, 1]"),
+        "F = 1 conductor",
+    );
 }
 
 #[test]
@@ -118,7 +136,12 @@ radiance = [2, 2, 1]
     assert_eq!(stats.samples, 32 * 32 * 16);
     for (c, expected) in [(0, 1.0), (1, 0.5), (2, 0.8)] {
         let m = centre_mean(&img, 1.0, c);
-        assert!(m.agrees_with(expected, 4.0, 1e-3), "channel {c}: {} +- {} vs {expected}", m.mean(), m.std_error());
+        assert!(
+            m.agrees_with(expected, 4.0, 1e-3),
+            "channel {c}: {} +- {} vs {expected}",
+            m.mean(),
+            m.std_error()
+        );
         assert!(m.std_error() < 0.01);
     }
 }
@@ -158,7 +181,12 @@ emission = {le}
     let expected = a * le * (r / d).powi(2);
     let m = centre_mean(&img, 1.0, 1);
     // The patch is ~0.06 wide: the irradiance varies by well under 0.5% across it.
-    assert!(m.agrees_with(expected, 4.0, 0.005 * expected), "{} +- {} vs {expected}", m.mean(), m.std_error());
+    assert!(
+        m.agrees_with(expected, 4.0, 0.005 * expected),
+        "{} +- {} vs {expected}",
+        m.mean(),
+        m.std_error()
+    );
 }
 
 #[test]
@@ -187,11 +215,20 @@ emission = [1, 2, 3]
 #[test]
 fn image_is_bit_identical_across_thread_counts() {
     let text = striae::scene::DEFAULT_SCENE;
-    let o = Overrides { spp: Some(4), resolution: Some((40, 30)), seed: Some(7), max_depth: None };
+    let o = Overrides {
+        spp: Some(4),
+        resolution: Some((40, 30)),
+        seed: Some(7),
+        max_depth: None,
+    };
     let s = Scene::parse(text, Path::new("default.toml"), Path::new("."), &o).unwrap();
     let (a, sa) = render_with_threads(&s, 1);
     let (b, sb) = render_with_threads(&s, 3);
-    assert!(a.pixels.iter().zip(&b.pixels).all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits)));
+    assert!(a
+        .pixels
+        .iter()
+        .zip(&b.pixels)
+        .all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits)));
     assert_eq!(sa.rays, sb.rays);
     // And the seed matters.
     let o2 = Overrides { seed: Some(8), ..o };
@@ -201,11 +238,19 @@ fn image_is_bit_identical_across_thread_counts() {
 }
 
 fn parse_err(text: &str) -> String {
-    match Scene::parse(text, Path::new("scenes/broken.toml"), Path::new("."), &Overrides::default()) {
+    match Scene::parse(
+        text,
+        Path::new("scenes/broken.toml"),
+        Path::new("."),
+        &Overrides::default(),
+    ) {
         Ok(_) => panic!("scene accepted:\n{text}"),
         Err(e) => {
             let msg = e.to_string();
-            assert!(msg.contains("scenes/broken.toml"), "message does not name the file: {msg}");
+            assert!(
+                msg.contains("scenes/broken.toml"),
+                "message does not name the file: {msg}"
+            );
             msg
         }
     }
@@ -225,32 +270,59 @@ fn bad_scene_files_give_clear_errors() {
     let msg = parse_err(&format!("{CAMERA}[render]\nspp = 0\n"));
     assert!(msg.contains("render.spp") && msg.contains('0'), "{msg}");
     // Unknown shape type.
-    let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"torus\"\nemission = 1\n"));
+    let msg = parse_err(&format!(
+        "{CAMERA}[[shapes]]\ntype = \"torus\"\nemission = 1\n"
+    ));
     assert!(msg.contains("torus") && msg.contains("type"), "{msg}");
     // Missing mesh file, with the key path.
     let msg = parse_err(&format!("{CAMERA}[materials.m]\ntype = \"dielectric\"\nior = 1.5\n[[shapes]]\ntype = \"mesh\"\npath = \"nowhere.obj\"\nmaterial = \"m\"\n"));
-    assert!(msg.contains("shapes[0].path") && msg.contains("nowhere.obj"), "{msg}");
+    assert!(
+        msg.contains("shapes[0].path") && msg.contains("nowhere.obj"),
+        "{msg}"
+    );
     // Unknown material name.
-    let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"sphere\"\nmaterial = \"glas\"\n"));
-    assert!(msg.contains("shapes[0].material") && msg.contains("glas"), "{msg}");
+    let msg = parse_err(&format!(
+        "{CAMERA}[[shapes]]\ntype = \"sphere\"\nmaterial = \"glas\"\n"
+    ));
+    assert!(
+        msg.contains("shapes[0].material") && msg.contains("glas"),
+        "{msg}"
+    );
     // Degenerate camera.
     let msg = parse_err("[camera]\nposition = [0, 0, 0]\nlook_at = [0, 0, 0]\nfov = 40\n");
     assert!(msg.contains("camera"), "{msg}");
     // Negative emission.
-    let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"rectangle\"\nemission = -1\n"));
-    assert!(msg.contains("shapes[0].emission") && msg.contains("-1"), "{msg}");
+    let msg = parse_err(&format!(
+        "{CAMERA}[[shapes]]\ntype = \"rectangle\"\nemission = -1\n"
+    ));
+    assert!(
+        msg.contains("shapes[0].emission") && msg.contains("-1"),
+        "{msg}"
+    );
     // Bad value inside a shape: the message names the key.
-    let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"sphere\"\nradius = \"big\"\nemission = 1\n"));
+    let msg = parse_err(&format!(
+        "{CAMERA}[[shapes]]\ntype = \"sphere\"\nradius = \"big\"\nemission = 1\n"
+    ));
     assert!(msg.contains("radius") && msg.contains("big"), "{msg}");
     // An index of refraction below 1, named with its material.
-    let msg = parse_err(&format!("{CAMERA}[materials.glass]\ntype = \"dielectric\"\nior = 0.9\n"));
-    assert!(msg.contains("materials.glass") && msg.contains("ior") && msg.contains("0.9"), "{msg}");
+    let msg = parse_err(&format!(
+        "{CAMERA}[materials.glass]\ntype = \"dielectric\"\nior = 0.9\n"
+    ));
+    assert!(
+        msg.contains("materials.glass") && msg.contains("ior") && msg.contains("0.9"),
+        "{msg}"
+    );
     // A key that does not belong to the shape's type.
-    let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"rectangle\"\nradius = 2\nemission = 1\n"));
+    let msg = parse_err(&format!(
+        "{CAMERA}[[shapes]]\ntype = \"rectangle\"\nradius = 2\nemission = 1\n"
+    ));
     assert!(msg.contains("shapes[0].radius"), "{msg}");
     // Missing file.
     let err = Scene::load(Path::new("no/such/scene.toml"), &Overrides::default()).unwrap_err();
-    assert!(matches!(err, SceneError::Read { .. }) && err.to_string().contains("no/such/scene.toml"), "{err}");
+    assert!(
+        matches!(err, SceneError::Read { .. }) && err.to_string().contains("no/such/scene.toml"),
+        "{err}"
+    );
 }
 
 /// The footprint a pixel of a `height`-pixel image with vertical fov `fov_deg` has on a plane
@@ -264,10 +336,18 @@ const FOOTPRINT_CAMERA: &str = "[render]\nwidth = 64\nheight = 64\n[camera]\npos
 fn assert_footprint(ctx: &striae::shading::ShadingContext, expected_du: f64, what: &str) {
     for (name, d) in [("duvdx", ctx.duvdx), ("duvdy", ctx.duvdy)] {
         let got = d.length() as f64;
-        assert!((got / expected_du - 1.0).abs() < 0.01, "{what}: |{name}| = {got}, expected {expected_du}");
+        assert!(
+            (got / expected_du - 1.0).abs() < 0.01,
+            "{what}: |{name}| = {got}, expected {expected_du}"
+        );
     }
     let cos = ctx.duvdx.dot(ctx.duvdy) / (ctx.duvdx.length() * ctx.duvdy.length());
-    assert!(cos.abs() < 0.01, "{what}: square pixels stay square ({:?}, {:?})", ctx.duvdx, ctx.duvdy);
+    assert!(
+        cos.abs() < 0.01,
+        "{what}: square pixels stay square ({:?}, {:?})",
+        ctx.duvdx,
+        ctx.duvdy
+    );
 }
 
 #[test]
@@ -291,7 +371,11 @@ fn footprint_after_a_mirror_grows_with_the_unfolded_distance() {
     ));
     let ctx = striae::integrator::trace_contexts(&s, striae::math::Vec2::new(32.0, 32.0), 4);
     assert_eq!(ctx.len(), 2, "mirror, then the plane");
-    assert_footprint(&ctx[1], pixel_width(7.0, 30.0, 64.0) / 4.0, "plane seen in a mirror");
+    assert_footprint(
+        &ctx[1],
+        pixel_width(7.0, 30.0, 64.0) / 4.0,
+        "plane seen in a mirror",
+    );
 }
 
 #[test]
@@ -305,7 +389,11 @@ fn footprint_behind_a_glass_slab_uses_the_reduced_distance() {
     ));
     let ctx = striae::integrator::trace_contexts(&s, striae::math::Vec2::new(32.0, 32.0), 4);
     assert_eq!(ctx.len(), 3, "front face, back face, plane");
-    assert_footprint(&ctx[2], pixel_width(3.5 + 1.0 / 1.5 + 1.5, 30.0, 64.0) / 4.0, "plane behind glass");
+    assert_footprint(
+        &ctx[2],
+        pixel_width(3.5 + 1.0 / 1.5 + 1.5, 30.0, 64.0) / 4.0,
+        "plane behind glass",
+    );
 }
 
 #[test]
@@ -348,13 +436,36 @@ transform = { rotate = { axis = [0, 1, 0], angle = 30 } }
     let s = Scene::parse(text, Path::new("env.toml"), &dir, &Overrides::default()).unwrap();
     let (img, _) = render_with_threads(&s, 2);
     let m = centre_mean(&img, 1.0, 0);
-    assert!(m.agrees_with(1.0, 4.0, 2e-3), "{} +- {}", m.mean(), m.std_error());
+    assert!(
+        m.agrees_with(1.0, 4.0, 2e-3),
+        "{} +- {}",
+        m.mean(),
+        m.std_error()
+    );
     // A non-rotation transform and a missing file are rejected with the key named.
-    let bad = text.replace("transform = { rotate = { axis = [0, 1, 0], angle = 30 } }", "transform = { scale = 2 }");
-    let err = Scene::parse(&bad, Path::new("env.toml"), &dir, &Overrides::default()).unwrap_err().to_string();
-    assert!(err.contains("environment") && err.contains("rotation"), "{err}");
-    let err = Scene::parse(&text.replace("sky.exr", "nosky.exr"), Path::new("env.toml"), &dir, &Overrides::default()).unwrap_err().to_string();
-    assert!(err.contains("environment.path") && err.contains("nosky.exr"), "{err}");
+    let bad = text.replace(
+        "transform = { rotate = { axis = [0, 1, 0], angle = 30 } }",
+        "transform = { scale = 2 }",
+    );
+    let err = Scene::parse(&bad, Path::new("env.toml"), &dir, &Overrides::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("environment") && err.contains("rotation"),
+        "{err}"
+    );
+    let err = Scene::parse(
+        &text.replace("sky.exr", "nosky.exr"),
+        Path::new("env.toml"),
+        &dir,
+        &Overrides::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("environment.path") && err.contains("nosky.exr"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -387,6 +498,9 @@ irradiance = 4
     let (img, _) = render_with_threads(&s, 1);
     let expected = 0.5 * 4.0 * 0.5 / std::f32::consts::PI;
     for p in &img.pixels {
-        assert!((p.x - expected).abs() < 1e-4 * expected, "{p} vs {expected}");
+        assert!(
+            (p.x - expected).abs() < 1e-4 * expected,
+            "{p} vs {expected}"
+        );
     }
 }

@@ -44,9 +44,17 @@ pub struct Args {
 }
 
 fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("`{s}` is not WIDTHxHEIGHT (e.g. 512x384)"))?;
-    let w: u32 = w.trim().parse().map_err(|_| format!("bad width in `{s}`"))?;
-    let h: u32 = h.trim().parse().map_err(|_| format!("bad height in `{s}`"))?;
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{s}` is not WIDTHxHEIGHT (e.g. 512x384)"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad width in `{s}`"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad height in `{s}`"))?;
     if w == 0 || h == 0 {
         return Err(format!("`{s}`: width and height must be at least 1"));
     }
@@ -57,7 +65,9 @@ fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
 fn output_paths(output: Option<&Path>, scene: Option<&Path>) -> (PathBuf, PathBuf) {
     let stem = match output {
         Some(o) => match o.extension().and_then(|e| e.to_str()) {
-            Some(e) if e.eq_ignore_ascii_case("exr") || e.eq_ignore_ascii_case("png") => o.with_extension(""),
+            Some(e) if e.eq_ignore_ascii_case("exr") || e.eq_ignore_ascii_case("png") => {
+                o.with_extension("")
+            }
             _ => o.to_path_buf(),
         },
         None => match scene.and_then(|s| s.file_stem()) {
@@ -73,7 +83,12 @@ fn output_paths(output: Option<&Path>, scene: Option<&Path>) -> (PathBuf, PathBu
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let overrides = Overrides { spp: args.spp, resolution: args.res, seed: args.seed, max_depth: args.max_depth };
+    let overrides = Overrides {
+        spp: args.spp,
+        resolution: args.res,
+        seed: args.seed,
+        max_depth: args.max_depth,
+    };
     let mut scene = match &args.scene {
         Some(path) => Scene::load(path, &overrides).context("cannot load the scene")?,
         None => Scene::default_scene(&overrides).context("building the built-in default scene")?,
@@ -96,7 +111,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     eprintln!(
         "rendering {} at {}x{}, {} spp, max depth {}, seed {}, {} thread(s)",
-        args.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "the built-in glass teapot".into()),
+        args.scene
+            .as_ref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_else(|| "the built-in glass teapot".into()),
         s.width,
         s.height,
         s.spp,
@@ -104,25 +122,40 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         s.seed,
         threads
     );
-    let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new(total) };
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(total)
+    };
     bar.set_style(
         ProgressStyle::with_template("{bar:40.cyan/blue} {percent:>3}%  {human_pos}/{human_len} samples  {per_sec}  elapsed {elapsed}  left {eta}")
             .expect("valid template")
             .progress_chars("=> "),
     );
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("starting the thread pool")?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("starting the thread pool")?;
     let (image, stats) = pool.install(|| striae::integrator::render(&scene, &|n| bar.inc(n)));
     bar.finish_and_clear();
 
-    image.write_exr(&exr_path).with_context(|| format!("writing {}", exr_path.display()))?;
-    image.write_png(&png_path, scene.settings.exposure).with_context(|| format!("writing {}", png_path.display()))?;
+    image
+        .write_exr(&exr_path)
+        .with_context(|| format!("writing {}", exr_path.display()))?;
+    image
+        .write_png(&png_path, scene.settings.exposure)
+        .with_context(|| format!("writing {}", png_path.display()))?;
     eprintln!(
         "done in {:.2} s: {:.3} M samples/s, {:.2} M rays/s ({} rays){}",
         stats.seconds,
         stats.samples_per_second() / 1e6,
         stats.rays_per_second() / 1e6,
         stats.rays,
-        if stats.nonfinite > 0 { format!(", {} non-finite samples dropped", stats.nonfinite) } else { String::new() }
+        if stats.nonfinite > 0 {
+            format!(", {} non-finite samples dropped", stats.nonfinite)
+        } else {
+            String::new()
+        }
     );
     eprintln!("wrote {} and {}", exr_path.display(), png_path.display());
     Ok(())
@@ -134,11 +167,18 @@ fn export_meshes(scene: &Scene, dir: &Path) -> anyhow::Result<()> {
         match &shape.geometry {
             striae::geometry::ShapeGeometry::Mesh(mesh) => {
                 let path = dir.join(format!("shape-{i}.obj"));
-                mesh.write_obj(&path).with_context(|| format!("writing {}", path.display()))?;
-                eprintln!("wrote {} ({} triangles)", path.display(), mesh.triangle_count());
+                mesh.write_obj(&path)
+                    .with_context(|| format!("writing {}", path.display()))?;
+                eprintln!(
+                    "wrote {} ({} triangles)",
+                    path.display(),
+                    mesh.triangle_count()
+                );
             }
             striae::geometry::ShapeGeometry::Sphere { centre, radius } => {
-                eprintln!("shape {i}: analytic sphere, centre {centre}, radius {radius} (not exported)");
+                eprintln!(
+                    "shape {i}: analytic sphere, centre {centre}, radius {radius} (not exported)"
+                );
             }
         }
     }
@@ -154,8 +194,17 @@ mod tests {
         assert_eq!(parse_resolution("512x384"), Ok((512, 384)));
         assert!(parse_resolution("512").is_err());
         assert!(parse_resolution("0x4").is_err());
-        assert_eq!(output_paths(None, None), (PathBuf::from("striae.exr"), PathBuf::from("striae.png")));
-        assert_eq!(output_paths(Some(Path::new("out/a.png")), None).0, PathBuf::from("out/a.exr"));
-        assert_eq!(output_paths(None, Some(Path::new("scenes/glass-plate.toml"))).1, PathBuf::from("glass-plate.png"));
+        assert_eq!(
+            output_paths(None, None),
+            (PathBuf::from("striae.exr"), PathBuf::from("striae.png"))
+        );
+        assert_eq!(
+            output_paths(Some(Path::new("out/a.png")), None).0,
+            PathBuf::from("out/a.exr")
+        );
+        assert_eq!(
+            output_paths(None, Some(Path::new("scenes/glass-plate.toml"))).1,
+            PathBuf::from("glass-plate.png")
+        );
     }
 }
