@@ -8,6 +8,9 @@
 //!   the right of the view direction (`forward x up`), image row 0 is the top.
 //! * Film positions are continuous pixel coordinates: pixel `(i, j)` covers `[i, i+1) x [j, j+1)`.
 
+// `!(x > 0.0)` is meant: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::math::{Frame, Ray, RayDifferential, Vec2, Vec3};
 use crate::sampling::square_to_concentric_disk;
 
@@ -44,6 +47,7 @@ pub enum CameraError {
 impl PerspectiveCamera {
     /// A camera at `position` looking at `look_at`, `fov_y_deg` the vertical field of view,
     /// rendering a `width x height` image. `lens_radius = 0` is a pinhole.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         position: Vec3,
         look_at: Vec3,

@@ -21,6 +21,9 @@
 //!   places, so the image does not depend on the thread count.
 //! * A sample whose radiance is not finite (NaN or infinite) is counted as black, and counted.
 
+// `!(x > 0.0)` is meant: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::bsdf::Bsdf;
 use crate::film::Image;
 use crate::geometry::SurfaceHit;

@@ -10,6 +10,9 @@
 //!
 //! The integrator picks one light uniformly per shading point (probability `1 / n_lights`).
 
+// `!(x > 0.0)` is meant: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::envmap::EnvMap;
 use crate::geometry::Shape;
 use crate::math::{Rgb, Vec2, Vec3};

@@ -16,6 +16,9 @@
 //!   (a footprint-preserving approximation; pbrt-v3 drops differentials there, pbrt-v4
 //!   re-derives them from the camera).
 
+// `!(x > 0.0)` is meant: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::geometry::SurfaceHit;
 use crate::math::{Frame, RayDifferential, Vec2, Vec3};
 
@@ -105,6 +108,7 @@ pub fn refract_dir(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
 /// a ray with direction `d_in` and differentials `rd` (see the module notes). `delta` selects
 /// the specular rule, `ns` is the shading normal of the bounce and, for refraction,
 /// `eta = n_incident / n_transmitted` along the path's direction of travel.
+#[allow(clippy::too_many_arguments)]
 pub fn spawn_differentials(
     p: Vec3,
     dpdx: Vec3,

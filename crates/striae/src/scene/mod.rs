@@ -7,6 +7,9 @@
 //! caret under the offending key; semantic errors (an unknown material name, a missing mesh,
 //! a degenerate camera) name the key path such as `shapes[2].path`.
 
+// `!(x > 0.0)` is meant: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod file;
 
 use crate::bsdf::Bsdf;
