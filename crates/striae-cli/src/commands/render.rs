@@ -128,9 +128,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ProgressBar::new(total)
     };
     bar.set_style(
-        ProgressStyle::with_template("{bar:40.cyan/blue} {percent:>3}%  {human_pos}/{human_len} samples  {per_sec}  elapsed {elapsed}  left {eta}")
-            .expect("valid template")
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "{bar:40.cyan/blue} {percent:>3}%  {human_pos}/{human_len} samples  {rate}  elapsed {elapsed}  left {eta}",
+        )
+        .expect("valid template")
+        .with_key("rate", |state: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+            let _ = write!(w, "{:.3} M samples/s", state.per_sec() / 1e6);
+        })
+        .progress_chars("=> "),
     );
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
