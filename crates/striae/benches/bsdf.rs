@@ -1,4 +1,4 @@
-//! Cost of `eval` + `pdf` and of `sample` for every BSDF, and of environment-map sampling.
+//! Cost of `eval` + `pdf` (two calls), of `eval_pdf` (one) and of `sample` for every BSDF, and of environment-map sampling.
 //! Each iteration processes a batch of 1024 precomputed random directions / sample points.
 //!
 //! `cargo bench -p striae --bench bsdf`
@@ -57,6 +57,18 @@ fn bench(c: &mut Criterion) {
                     let mut acc = Rgb::ZERO;
                     for (o, i) in wo.iter().zip(&wi) {
                         acc += b.eval(*o, *i) * b.pdf(*o, *i);
+                    }
+                    black_box(acc)
+                })
+            });
+        }
+        if !b.is_delta() {
+            g.bench_function(format!("{name}/eval_pdf"), |bench| {
+                bench.iter(|| {
+                    let mut acc = Rgb::ZERO;
+                    for (o, i) in wo.iter().zip(&wi) {
+                        let (f, p) = b.eval_pdf(*o, *i);
+                        acc += f * p;
                     }
                     black_box(acc)
                 })

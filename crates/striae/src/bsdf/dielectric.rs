@@ -141,6 +141,32 @@ impl RoughDielectric {
         }
     }
 
+    /// `(eval, pdf)` sharing the half vector, Fresnel term and `D` (what light sampling with
+    /// MIS needs).
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        let Some((m, eta_p, reflect)) = half_vector(self.eta, wo, wi) else {
+            return (Rgb::ZERO, 0.0);
+        };
+        let (wo_m, wi_m) = (wo.dot(m), wi.dot(m));
+        let f = fresnel_f32::dielectric(wo_m, self.eta).0;
+        let d = self.distribution.d(m);
+        let g1_o = self.distribution.g1(wo, m);
+        let g = g1_o * self.distribution.g1(wi, m);
+        // pdf_visible(v, m) with v = wo flipped to the upper side: G1(wo) |wo.m| D / |wo.z|.
+        let pdf_m = g1_o * wo_m.abs() * d / wo.z.abs();
+        if reflect {
+            let v = d * g * f / (4.0 * (wo.z * wi.z).abs());
+            (Rgb::splat(v), f * pdf_m / (4.0 * wo_m.abs()))
+        } else {
+            let denom = (wi_m + wo_m / eta_p).powi(2);
+            let v = d * g * (1.0 - f) * (wi_m * wo_m).abs()
+                / ((wi.z * wo.z).abs() * denom)
+                / (eta_p * eta_p);
+            (Rgb::splat(v), (1.0 - f) * pdf_m * wi_m.abs() / denom)
+        }
+    }
+
     /// Sample a visible microfacet normal from `wo`'s side, then reflect (probability `F`) or
     /// refract through it. Weight `G1(wi)` (separable Smith), `/ eta_p^2` for refraction.
     #[inline]

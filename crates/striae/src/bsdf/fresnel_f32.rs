@@ -35,10 +35,8 @@ pub fn conductor(cos_theta_i: f32, eta: Vec3, k: Vec3) -> Vec3 {
     let s2 = 1.0 - c2;
     let s4 = s2 * s2;
     let t1 = eta * eta - k * k - Vec3::splat(s2);
-    let a2pb2 = (t1 * t1 + 4.0 * k * k * eta * eta)
-        .max(Vec3::ZERO)
-        .powf(0.5);
-    let a = (0.5 * (a2pb2 + t1)).max(Vec3::ZERO).powf(0.5);
+    let a2pb2 = sqrt3((t1 * t1 + 4.0 * k * k * eta * eta).max(Vec3::ZERO));
+    let a = sqrt3((0.5 * (a2pb2 + t1)).max(Vec3::ZERO));
     let term1 = a2pb2 + Vec3::splat(c2);
     let term2 = 2.0 * cos_theta_i.max(0.0) * a;
     let r_s = (term1 - term2) / (term1 + term2);
