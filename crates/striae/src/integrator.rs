@@ -329,7 +329,7 @@ fn radiance(
                 } else {
                     power_heuristic(
                         prev_pdf,
-                        light_select_pdf * light.area_pdf(shapes, hit.t, ray.d, hit.ng),
+                        light_select_pdf * light.area_pdf(shapes, ray.o, hit.t, ray.d, hit.ng),
                     )
                 };
                 l += beta * le * w;
