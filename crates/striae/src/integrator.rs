@@ -1,1 +1,424 @@
-//! (to be written)
+//! Unidirectional path tracing with next-event estimation and multiple importance sampling
+//! (Veach 1997, power heuristic with beta = 2), Russian roulette and a maximum depth; the
+//! structure follows pbrt-v4's `PathIntegrator` and Mitsuba 3's `path` integrator.
+//!
+//! * **Depth** follows Mitsuba's `max_depth`: the longest path, counted in segments from the
+//!   camera. `max_depth = 1` shows only emitters seen directly, `2` adds direct lighting, and
+//!   so on; 0 means unlimited (Mitsuba's -1).
+//! * **Russian roulette** from depth `rr_depth` (Mitsuba's default 5) with survival
+//!   probability `min(max(beta * eta_scale), 0.95)`, where `eta_scale` undoes the radiance
+//!   scaling of refraction (pbrt-v4).
+//! * **Shading normals**: opaque BSDFs get their frame flipped to `wo`'s side of the geometric
+//!   normal; then, if `wo` lies on the other side of the shading normal than of the geometric
+//!   one, the shading normal is bent toward the geometric normal until `wo` is (just) on the
+//!   correct side, so interpolated normals never produce black pixels (the artefact pbrt and
+//!   Mitsuba handle by flipping or by geometric-side checks).
+//! * **Ray differentials** start at the camera and are carried to every hit
+//!   (`shading::spawn_differentials`); their texture-space footprint reaches the material in
+//!   the [`ShadingContext`].
+//! * **Determinism**: each pixel sample draws from its own Sobol stream
+//!   (`sampler::PixelSampler`), tiles are rendered in parallel by rayon and written to fixed
+//!   places, so the image does not depend on the thread count.
+//! * A sample whose radiance is not finite (NaN or infinite) is counted as black, and counted.
+
+// `!(x > 0.0)` is meant: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use crate::bsdf::Bsdf;
+use crate::film::Image;
+use crate::geometry::SurfaceHit;
+use crate::material::Material;
+use crate::math::{Frame, Ray, RayDifferential, Rgb, Vec2, Vec3};
+use crate::sampler::PixelSampler;
+use crate::sampling::power_heuristic;
+use crate::scene::{material_bsdf, Scene, NO_MATERIAL};
+use crate::shading::{footprint, spawn_differentials, ShadingContext};
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Side of a square tile of pixels, the unit of parallel work.
+pub const TILE: u32 = 16;
+
+/// Counters of one render.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RenderStats {
+    /// Camera samples traced (pixels x spp).
+    pub samples: u64,
+    /// Rays traced: closest-hit and shadow rays.
+    pub rays: u64,
+    /// Samples whose radiance was not finite and was dropped.
+    pub nonfinite: u64,
+    /// Wall time in seconds.
+    pub seconds: f64,
+}
+
+impl RenderStats {
+    pub fn samples_per_second(&self) -> f64 {
+        self.samples as f64 / self.seconds.max(1e-9)
+    }
+    pub fn rays_per_second(&self) -> f64 {
+        self.rays as f64 / self.seconds.max(1e-9)
+    }
+}
+
+/// Per-thread counters, summed at the end of a tile.
+#[derive(Default)]
+struct Counters {
+    rays: u64,
+    nonfinite: u64,
+}
+
+/// Offset a ray origin off the surface at `p` (geometric normal `ng`) toward the side `dir`
+/// leaves to, by a distance scaled with the magnitude of `p` to stay above float error.
+#[inline]
+pub fn offset_origin(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
+    let eps = 1e-4 * (1.0 + p.abs().max_element());
+    if dir.dot(ng) >= 0.0 {
+        p + eps * ng
+    } else {
+        p - eps * ng
+    }
+}
+
+/// Bend the shading normal `ns` toward the geometric normal `ng` (same hemisphere) so that
+/// `wo` lies on the same side of it as of `ng`, with a small margin. Returns `ns` unchanged in
+/// the usual case.
+#[inline]
+pub fn guard_shading_normal(ns: Vec3, ng: Vec3, wo: Vec3) -> Vec3 {
+    const MARGIN: f32 = 1e-3;
+    let g = wo.dot(ng);
+    let side = if g >= 0.0 { 1.0 } else { -1.0 };
+    let c = wo.dot(ns) * side;
+    if c >= MARGIN {
+        return ns;
+    }
+    let t = (MARGIN - c) / g.abs().max(1e-6);
+    (ns + t * ng).normalize_or(ng)
+}
+
+/// The material's view of a hit and the BSDF it presents there.
+pub struct Shaded {
+    pub ctx: ShadingContext,
+    pub bsdf: Bsdf,
+    /// Position derivatives per pixel step (for the spawned ray's differentials).
+    pub dpdx: Vec3,
+    pub dpdy: Vec3,
+}
+
+/// Build the shading context at `hit` seen from `wo_world` and ask the material for its BSDF.
+/// The frame handed to the material is the final one: flipped to `wo`'s side for opaque
+/// BSDFs and guarded against `wo` falling behind the shading normal (the material is asked
+/// again in those rare cases, so its BSDF always lives in `ctx.frame`).
+pub fn shade(
+    material: &Material,
+    hit: &SurfaceHit,
+    rd: &RayDifferential,
+    wo_world: Vec3,
+    u_layer: f32,
+) -> Shaded {
+    let (dpdx, dpdy, duvdx, duvdy) = footprint(hit, rd);
+    let mut ctx = ShadingContext {
+        p: hit.p,
+        uv: hit.uv,
+        duvdx,
+        duvdy,
+        dpdu: hit.dpdu,
+        dpdv: hit.dpdv,
+        frame: Frame::from_normal_tangent(hit.ns, hit.dpdu),
+        ng: hit.ng,
+        u_layer,
+    };
+    let mut bsdf = material_bsdf(material, &ctx);
+    let (mut ng, mut ns) = (hit.ng, hit.ns);
+    if !bsdf.has_transmission() && wo_world.dot(ng) < 0.0 {
+        // Opaque surfaces are two-sided: shade on wo's side.
+        ng = -ng;
+        ns = -ns;
+    }
+    let guarded = guard_shading_normal(ns, ng, wo_world);
+    if guarded != hit.ns {
+        ctx.frame = Frame::from_normal_tangent(guarded, hit.dpdu);
+        bsdf = material_bsdf(material, &ctx);
+    }
+    Shaded {
+        ctx,
+        bsdf,
+        dpdx,
+        dpdy,
+    }
+}
+
+/// The shading contexts along the camera ray through film position `film` (pinhole centre of
+/// the lens), following delta bounces (the first lobe a BSDF samples with `u = 0.5`) for up to
+/// `max_hits` hits; stops after the first non-delta BSDF. For tests and debugging views of the
+/// footprint (e.g. the scratch masks of issue 5).
+pub fn trace_contexts(scene: &Scene, film: Vec2, max_hits: usize) -> Vec<ShadingContext> {
+    let (mut ray, mut rd) = scene.camera.generate_ray(film, Vec2::splat(0.5));
+    let mut out = Vec::new();
+    while out.len() < max_hits {
+        let Some(hit) = scene.geometry.intersect(&ray) else {
+            break;
+        };
+        let shape = &scene.geometry.shapes()[hit.shape as usize];
+        if shape.material == NO_MATERIAL {
+            break;
+        }
+        let wo_world = -ray.d;
+        let sh = shade(
+            &scene.materials[shape.material as usize],
+            &hit,
+            &rd,
+            wo_world,
+            0.5,
+        );
+        out.push(sh.ctx);
+        let wo = sh.ctx.frame.to_local(wo_world);
+        let Some(bs) = sh.bsdf.sample(wo, 0.5, Vec2::splat(0.5)) else {
+            break;
+        };
+        if !bs.delta {
+            break;
+        }
+        let wi = sh.ctx.frame.to_world(bs.wi);
+        let eta_path = if bs.wi.z * wo.z < 0.0 {
+            1.0 / bs.eta
+        } else {
+            1.0
+        };
+        rd = spawn_differentials(
+            hit.p,
+            sh.dpdx,
+            sh.dpdy,
+            ray.d,
+            &rd,
+            sh.ctx.frame.n,
+            wi,
+            true,
+            eta_path,
+        );
+        ray = Ray::new(offset_origin(hit.p, hit.ng, wi), wi);
+    }
+    out
+}
+
+/// Render the whole image. `progress` is called (from worker threads) with the number of
+/// camera samples each finished tile traced.
+pub fn render(scene: &Scene, progress: &(dyn Fn(u64) + Sync)) -> (Image, RenderStats) {
+    let start = std::time::Instant::now();
+    let (w, h) = scene.camera.resolution();
+    let tiles_x = w.div_ceil(TILE);
+    let tiles_y = h.div_ceil(TILE);
+    let rays = AtomicU64::new(0);
+    let nonfinite = AtomicU64::new(0);
+    let spp = scene.settings.spp;
+    let tiles: Vec<(u32, Vec<Rgb>)> = (0..tiles_x * tiles_y)
+        .into_par_iter()
+        .map(|tile| {
+            let (tx, ty) = (tile % tiles_x, tile / tiles_x);
+            let (x0, y0) = (tx * TILE, ty * TILE);
+            let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
+            let mut counters = Counters::default();
+            let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    out.push(render_pixel(scene, x, y, &mut counters));
+                }
+            }
+            rays.fetch_add(counters.rays, Ordering::Relaxed);
+            nonfinite.fetch_add(counters.nonfinite, Ordering::Relaxed);
+            progress(out.len() as u64 * spp as u64);
+            (tile, out)
+        })
+        .collect();
+    let mut image = Image::new(w, h);
+    for (tile, px) in tiles {
+        let (tx, ty) = (tile % tiles_x, tile / tiles_x);
+        let (x0, y0) = (tx * TILE, ty * TILE);
+        let x1 = (x0 + TILE).min(w);
+        let tw = x1 - x0;
+        for (i, p) in px.into_iter().enumerate() {
+            let (x, y) = (x0 + i as u32 % tw, y0 + i as u32 / tw);
+            image.pixels[(y * w + x) as usize] = p;
+        }
+    }
+    let stats = RenderStats {
+        samples: w as u64 * h as u64 * spp as u64,
+        rays: rays.into_inner(),
+        nonfinite: nonfinite.into_inner(),
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    (image, stats)
+}
+
+/// The mean of `spp` samples of pixel `(x, y)` (box filter: uniform positions in the pixel).
+fn render_pixel(scene: &Scene, x: u32, y: u32, counters: &mut Counters) -> Rgb {
+    let (w, _) = scene.camera.resolution();
+    let pixel_index = y as u64 * w as u64 + x as u64;
+    let spp = scene.settings.spp;
+    let mut sum = Rgb::ZERO;
+    for s in 0..spp {
+        let mut sampler = PixelSampler::new(pixel_index, s, scene.settings.seed);
+        let film = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+        let u_lens = sampler.next_2d();
+        let (ray, rd) = scene.camera.generate_ray(film, u_lens);
+        let l = radiance(scene, ray, rd, &mut sampler, counters);
+        if l.is_finite() {
+            sum += l;
+        } else {
+            counters.nonfinite += 1;
+        }
+    }
+    sum / spp as f32
+}
+
+/// Radiance arriving at the camera along `ray` (one path sample).
+fn radiance(
+    scene: &Scene,
+    mut ray: Ray,
+    mut rd: RayDifferential,
+    sampler: &mut PixelSampler,
+    counters: &mut Counters,
+) -> Rgb {
+    let settings = &scene.settings;
+    let shapes = scene.geometry.shapes();
+    let n_lights = scene.lights.len();
+    let light_select_pdf = if n_lights > 0 {
+        1.0 / n_lights as f32
+    } else {
+        0.0
+    };
+    let max_depth = if settings.max_depth == 0 {
+        u32::MAX
+    } else {
+        settings.max_depth
+    };
+
+    let mut l = Rgb::ZERO;
+    let mut beta = Rgb::ONE;
+    let mut eta_scale = 1.0f32;
+    // The camera acts like a delta bounce: emitters seen directly count fully.
+    let mut specular = true;
+    let mut prev_pdf = 0.0f32;
+
+    let mut depth = 0u32;
+    loop {
+        sampler.start_bounce(depth);
+        counters.rays += 1;
+        let Some(hit) = scene.geometry.intersect(&ray) else {
+            if let Some(env) = scene.environment() {
+                let le = env.eval(ray.d);
+                let w = if specular {
+                    1.0
+                } else {
+                    power_heuristic(prev_pdf, light_select_pdf * env.pdf(ray.d))
+                };
+                l += beta * le * w;
+            }
+            break;
+        };
+        let shape = &shapes[hit.shape as usize];
+        let wo_world = -ray.d;
+
+        // Emission of an area light hit by the path (MIS against light sampling).
+        if let Some(li) = shape.area_light {
+            let light = &scene.lights[li as usize];
+            let le = light.emitted(hit.ng, wo_world);
+            if le != Rgb::ZERO {
+                let w = if specular {
+                    1.0
+                } else {
+                    power_heuristic(
+                        prev_pdf,
+                        light_select_pdf * light.area_pdf(shapes, ray.o, hit.t, ray.d, hit.ng),
+                    )
+                };
+                l += beta * le * w;
+            }
+        }
+        // Paths of at most `max_depth` segments: the next vertex would make depth + 2. A shape
+        // without a material (a pure emitter) absorbs everything.
+        if depth + 2 > max_depth || shape.material == NO_MATERIAL {
+            break;
+        }
+
+        // Shading frame and the material's BSDF.
+        let u_layer = sampler.next_1d();
+        let material = &scene.materials[shape.material as usize];
+        let Shaded {
+            ctx,
+            bsdf,
+            dpdx,
+            dpdy,
+        } = shade(material, &hit, &rd, wo_world, u_layer);
+        let frame = ctx.frame;
+        let wo = frame.to_local(wo_world);
+
+        // Next-event estimation: one light, chosen uniformly.
+        if !bsdf.is_delta() && n_lights > 0 {
+            let u_choice = sampler.next_1d();
+            let u_light = sampler.next_2d();
+            let index = ((u_choice * n_lights as f32) as usize).min(n_lights - 1);
+            let light = &scene.lights[index];
+            if let Some(ls) = light.sample_li(hit.p, u_light, shapes) {
+                let wi = frame.to_local(ls.wi);
+                let f = bsdf.eval(wo, wi) * wi.z.abs();
+                if f != Rgb::ZERO {
+                    let origin = offset_origin(hit.p, hit.ng, ls.wi);
+                    let t_max = if ls.dist.is_finite() {
+                        (ls.dist - (origin - hit.p).length()) * (1.0 - 1e-3)
+                    } else {
+                        f32::INFINITY
+                    };
+                    counters.rays += 1;
+                    let shadow = Ray {
+                        o: origin,
+                        d: ls.wi,
+                        t_max,
+                    };
+                    if !scene.geometry.occluded(&shadow) {
+                        let pdf_light = light_select_pdf * ls.pdf;
+                        let w = if ls.delta {
+                            1.0
+                        } else {
+                            power_heuristic(pdf_light, bsdf.pdf(wo, wi))
+                        };
+                        l += beta * f * ls.radiance * (w / pdf_light);
+                    }
+                }
+            }
+        }
+
+        // Continue the path by sampling the BSDF.
+        sampler.seek(depth, 4);
+        let u_lobe = sampler.next_1d();
+        let u_dir = sampler.next_2d();
+        let Some(bs) = bsdf.sample(wo, u_lobe, u_dir) else {
+            break;
+        };
+        if !(bs.pdf > 0.0) || bs.weight == Rgb::ZERO {
+            break;
+        }
+        let wi_world = frame.to_world(bs.wi);
+        beta *= bs.weight;
+        eta_scale *= bs.eta * bs.eta;
+        specular = bs.delta;
+        prev_pdf = bs.pdf;
+        let transmitted = bs.wi.z * wo.z < 0.0;
+        let eta_path = if transmitted { 1.0 / bs.eta } else { 1.0 };
+        rd = spawn_differentials(
+            hit.p, dpdx, dpdy, ray.d, &rd, frame.n, wi_world, bs.delta, eta_path,
+        );
+        ray = Ray::new(offset_origin(hit.p, hit.ng, wi_world), wi_world);
+
+        // Russian roulette.
+        depth += 1;
+        if depth >= settings.rr_depth {
+            let q = (beta * eta_scale).max_element().min(0.95);
+            if !(sampler.next_1d() < q) {
+                break;
+            }
+            beta /= q;
+        }
+    }
+    l
+}

@@ -48,7 +48,9 @@ pub mod geometry;
 pub mod integrator;
 pub mod lights;
 pub mod material;
+pub mod sampler;
 pub mod scene;
+pub mod shading;
 pub mod texture;
 
 /// The crate version, stored in every table and image the crate writes.

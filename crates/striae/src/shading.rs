@@ -1,0 +1,255 @@
+//! What a material sees at a hit: the [`ShadingContext`] (texture coordinates and their pixel
+//! footprint, surface derivatives, shading frame, a spare random number), and the ray
+//! differentials that produce the footprint (pbrt-v4 section 10.1, after Igehy 1999).
+//!
+//! Ray differentials. Camera rays carry exact differentials (one pixel step in x and y). At a
+//! hit, the offset rays are intersected with the tangent plane (`ng` through `p`) to give
+//! `dP/dx`, `dP/dy`, and `du/dx`, ... follow by least squares against `dP/du`, `dP/dv`
+//! (pbrt's `ComputeDifferentials`). Spawned rays carry differentials as follows:
+//! * delta reflection / refraction: the two offset rays start at `p + dP/dx`, `p + dP/dy` and
+//!   their directions are reflected / refracted with the **central hit's shading normal**
+//!   (Igehy's differentials with `dn/dx = 0`, i.e. a locally flat surface; curvature of the
+//!   surface does not widen the beam — a documented approximation, since `SurfaceHit` carries
+//!   no normal derivatives). Under total internal reflection of an offset ray it is mirrored.
+//! * any non-delta bounce: the offset rays start at `p + dP/dx`, `p + dP/dy` and run
+//!   **parallel** to the new direction, so the footprint keeps the width it had at this hit
+//!   (a footprint-preserving approximation; pbrt-v3 drops differentials there, pbrt-v4
+//!   re-derives them from the camera).
+
+// `!(x > 0.0)` is meant: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use crate::geometry::SurfaceHit;
+use crate::math::{Frame, RayDifferential, Vec2, Vec3};
+
+/// Everything a material may use to build its BSDF at one hit. New fields may be added (the
+/// scratched material of issue 5 filters its layers over `duvdx`, `duvdy`).
+#[derive(Clone, Copy, Debug)]
+pub struct ShadingContext {
+    /// World position.
+    pub p: Vec3,
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// Change of `uv` for one pixel step in x and in y (the pixel footprint in texture space);
+    /// zero when the ray carries no differentials.
+    pub duvdx: Vec2,
+    pub duvdy: Vec2,
+    /// Position derivatives, as in `SurfaceHit`.
+    pub dpdu: Vec3,
+    pub dpdv: Vec3,
+    /// The shading frame the BSDF works in (`n` = shading normal as the integrator uses it,
+    /// `s` along `dP/du` made orthogonal to it).
+    pub frame: Frame,
+    /// Unit geometric normal as the shape defines it.
+    pub ng: Vec3,
+    /// A uniform random number in `[0, 1)` from the pixel's sample stream, for stochastic
+    /// choices a material makes once per hit (e.g. which scratch layer where several cross).
+    pub u_layer: f32,
+}
+
+/// `dP/dx`, `dP/dy`, `du/dx`, `dv/dx`, `du/dy`, `dv/dy` at a hit from the ray's differentials
+/// (pbrt-v4 `SurfaceInteraction::ComputeDifferentials`). Degenerate cases give zeros.
+pub fn footprint(hit: &SurfaceHit, rd: &RayDifferential) -> (Vec3, Vec3, Vec2, Vec2) {
+    let n = hit.ng;
+    let plane = n.dot(hit.p);
+    let offset = |o: Vec3, d: Vec3| -> Vec3 {
+        let denom = n.dot(d);
+        if denom == 0.0 {
+            return Vec3::ZERO;
+        }
+        let t = (plane - n.dot(o)) / denom;
+        let dp = o + t * d - hit.p;
+        if dp.is_finite() {
+            dp
+        } else {
+            Vec3::ZERO
+        }
+    };
+    let dpdx = offset(rd.rx_o, rd.rx_d);
+    let dpdy = offset(rd.ry_o, rd.ry_d);
+    // Least squares for [dpdu dpdv] (du, dv)^T = dp.
+    let (a, b) = (hit.dpdu, hit.dpdv);
+    let (aa, ab, bb) = (a.dot(a), a.dot(b), b.dot(b));
+    let det = aa * bb - ab * ab;
+    let solve = |dp: Vec3| -> Vec2 {
+        if !(det.abs() > 1e-20) || !det.is_finite() {
+            return Vec2::ZERO;
+        }
+        let (ra, rb) = (a.dot(dp), b.dot(dp));
+        let du = (bb * ra - ab * rb) / det;
+        let dv = (aa * rb - ab * ra) / det;
+        let clamp = |x: f32| {
+            if x.is_finite() {
+                x.clamp(-1e8, 1e8)
+            } else {
+                0.0
+            }
+        };
+        Vec2::new(clamp(du), clamp(dv))
+    };
+    (dpdx, dpdy, solve(dpdx), solve(dpdy))
+}
+
+/// Refract unit direction `d` (travelling toward the surface) through the plane with unit
+/// normal `n` facing against `d`, with relative index `eta = n_incident / n_transmitted`.
+/// `None` under total internal reflection.
+#[inline]
+pub fn refract_dir(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
+    let cos_i = -d.dot(n);
+    let sin2_t = eta * eta * (1.0 - cos_i * cos_i).max(0.0);
+    if sin2_t >= 1.0 {
+        return None;
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    Some(eta * d + (eta * cos_i - cos_t) * n)
+}
+
+/// Differentials of a ray spawned at `p` in direction `wi` (world, unit) from a hit reached by
+/// a ray with direction `d_in` and differentials `rd` (see the module notes). `delta` selects
+/// the specular rule, `ns` is the shading normal of the bounce and, for refraction,
+/// `eta = n_incident / n_transmitted` along the path's direction of travel.
+#[allow(clippy::too_many_arguments)]
+pub fn spawn_differentials(
+    p: Vec3,
+    dpdx: Vec3,
+    dpdy: Vec3,
+    d_in: Vec3,
+    rd: &RayDifferential,
+    ns: Vec3,
+    wi: Vec3,
+    delta: bool,
+    eta: f32,
+) -> RayDifferential {
+    let rx_o = p + dpdx;
+    let ry_o = p + dpdy;
+    if !delta {
+        return RayDifferential {
+            rx_o,
+            rx_d: wi,
+            ry_o,
+            ry_d: wi,
+        };
+    }
+    let reflection = (wi.dot(ns) > 0.0) == ((-d_in).dot(ns) > 0.0);
+    let n = if d_in.dot(ns) < 0.0 { ns } else { -ns };
+    let bend = |d: Vec3| -> Vec3 {
+        let mirror = (d - 2.0 * d.dot(n) * n).normalize_or(wi);
+        if reflection {
+            mirror
+        } else {
+            refract_dir(d, n, eta)
+                .map(|t| t.normalize_or(wi))
+                .unwrap_or(mirror)
+        }
+    };
+    RayDifferential {
+        rx_o,
+        rx_d: bend(rd.rx_d),
+        ry_o,
+        ry_d: bend(rd.ry_d),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plane_hit() -> SurfaceHit {
+        // The plane z = 0 parametrised by u = x / 2, v = y / 2 (dP/du = 2 x, dP/dv = 2 y).
+        SurfaceHit {
+            t: 1.0,
+            p: Vec3::ZERO,
+            ng: Vec3::Z,
+            ns: Vec3::Z,
+            uv: Vec2::new(0.5, 0.5),
+            dpdu: Vec3::new(2.0, 0.0, 0.0),
+            dpdv: Vec3::new(0.0, 2.0, 0.0),
+            shape: 0,
+            prim: 0,
+        }
+    }
+
+    #[test]
+    fn footprint_of_a_head_on_plane() {
+        // Offset rays parallel to the central one, 0.1 apart in x and 0.2 in y.
+        let rd = RayDifferential {
+            rx_o: Vec3::new(0.1, 0.0, 1.0),
+            rx_d: -Vec3::Z,
+            ry_o: Vec3::new(0.0, 0.2, 1.0),
+            ry_d: -Vec3::Z,
+        };
+        let (dpdx, dpdy, duvdx, duvdy) = footprint(&plane_hit(), &rd);
+        assert!((dpdx - Vec3::new(0.1, 0.0, 0.0)).length() < 1e-6);
+        assert!((dpdy - Vec3::new(0.0, 0.2, 0.0)).length() < 1e-6);
+        assert!((duvdx - Vec2::new(0.05, 0.0)).length() < 1e-6);
+        assert!((duvdy - Vec2::new(0.0, 0.1)).length() < 1e-6);
+    }
+
+    #[test]
+    fn refraction_obeys_snell_and_differentials_bend() {
+        let d = Vec3::new(0.6, 0.0, -0.8);
+        let t = refract_dir(d, Vec3::Z, 1.0 / 1.5).unwrap();
+        assert!((t.length() - 1.0).abs() < 1e-5);
+        assert!(
+            (t.x - 0.6 / 1.5).abs() < 1e-5,
+            "sin theta_t = sin theta_i / 1.5"
+        );
+        // Total internal reflection from inside at a grazing angle.
+        assert!(refract_dir(Vec3::new(0.9, 0.0, -0.435_889_9), Vec3::Z, 1.5).is_none());
+        // Differentials of a refracted parallel beam stay parallel to the refracted ray.
+        let rd = RayDifferential {
+            rx_o: Vec3::X,
+            rx_d: d,
+            ry_o: Vec3::Y,
+            ry_d: d,
+        };
+        let out = spawn_differentials(
+            Vec3::ZERO,
+            Vec3::X * 0.1,
+            Vec3::Y * 0.1,
+            d,
+            &rd,
+            Vec3::Z,
+            t,
+            true,
+            1.0 / 1.5,
+        );
+        assert!((out.rx_d - t).length() < 1e-5);
+        // A diverging beam keeps diverging after refraction, less than before (entering glass).
+        let dx = (d + Vec3::new(0.01, 0.0, 0.0)).normalize();
+        let rd = RayDifferential {
+            rx_o: Vec3::ZERO,
+            rx_d: dx,
+            ry_o: Vec3::ZERO,
+            ry_d: d,
+        };
+        let out = spawn_differentials(
+            Vec3::ZERO,
+            Vec3::ZERO,
+            Vec3::ZERO,
+            d,
+            &rd,
+            Vec3::Z,
+            t,
+            true,
+            1.0 / 1.5,
+        );
+        let before = (dx - d).length();
+        let after = (out.rx_d - t).length();
+        assert!(after > 0.0 && after < before, "{before} {after}");
+        // Reflection mirrors the offset directions.
+        let r = Vec3::new(0.6, 0.0, 0.8);
+        let out = spawn_differentials(
+            Vec3::ZERO,
+            Vec3::ZERO,
+            Vec3::ZERO,
+            d,
+            &rd,
+            Vec3::Z,
+            r,
+            true,
+            1.0,
+        );
+        assert!((out.rx_d - Vec3::new(dx.x, dx.y, -dx.z)).length() < 1e-6);
+    }
+}
