@@ -172,7 +172,13 @@ def scene_dict(mi, path, striae_bin, res=None, spp=None, seed=None):
         m = transform(s.get("transform"))
         kind = s["type"]
         if kind in ("teapot", "mesh"):
-            sh = {"type": "obj", "filename": os.path.join(mesh_dir, f"shape-{i}.obj")}
+            obj = os.path.join(mesh_dir, f"shape-{i}.obj")
+            sh = {"type": "obj", "filename": obj}
+            # Mitsuba computes smooth vertex normals for an OBJ without any; striae shades such a
+            # mesh flat, so ask Mitsuba for face normals too.
+            with open(obj) as f:
+                if not any(line.startswith("vn ") for line in f):
+                    sh["face_normals"] = True
         elif kind == "rectangle":
             sh = {"type": "rectangle", "to_world": mi.ScalarTransform4f(m.tolist())}
         elif kind == "box":

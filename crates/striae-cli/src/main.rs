@@ -25,8 +25,6 @@ enum Command {
     Layers(commands::layers::Args),
     /// Render a scene file (or the built-in default scene) to EXR and PNG.
     Render(commands::render::Args),
-    /// Write a built-in mesh (the teapot) as OBJ, tessellated exactly as scenes use it.
-    Mesh(commands::mesh::Args),
 }
 
 fn main() {
@@ -36,7 +34,6 @@ fn main() {
         Command::Plot(a) => commands::plot::run(a),
         Command::Layers(a) => commands::layers::run(a),
         Command::Render(a) => commands::render::run(a),
-        Command::Mesh(a) => commands::mesh::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

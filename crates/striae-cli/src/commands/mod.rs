@@ -1,5 +1,4 @@
 pub mod layers;
-pub mod mesh;
 pub mod plot;
 pub mod precompute;
 pub mod render;
