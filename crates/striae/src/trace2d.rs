@@ -20,7 +20,6 @@
 
 use crate::fresnel::FresnelLaw;
 use crate::profile::Profile;
-use rand::Rng;
 use rayon::prelude::*;
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -191,6 +190,9 @@ struct Segment {
 /// The profile as segments, with ray queries.
 struct Walls2D {
     segs: Vec<Segment>,
+    /// The groove closed by its opening is a convex polygon (V, round, trapezoid, flat): a
+    /// ray leaving a wall escapes iff it points between the opening's corners.
+    convex: bool,
 }
 
 const T_EPS: f64 = 1e-10;
@@ -211,8 +213,13 @@ impl Walls2D {
                     t,
                 }
             })
-            .collect();
-        Walls2D { segs }
+            .collect::<Vec<Segment>>();
+        // Counter-clockwise polygon: convex iff it turns left (or goes straight) at every
+        // profile vertex (at the opening's corners it always does, the profile being below).
+        let convex = segs
+            .windows(2)
+            .all(|w| w[0].t[0] * w[1].t[1] - w[0].t[1] * w[1].t[0] >= -1e-12);
+        Walls2D { segs, convex }
     }
 
     /// Nearest wall hit of the ray `o + t d` with `t > t_min`, skipping segment `skip`.
@@ -247,19 +254,48 @@ impl Walls2D {
     }
 }
 
-/// Per-entry random stream from `(seed, phi_i index, entry index)` (SplitMix64 finaliser).
-fn entry_rng(seed: u64, row: usize, entry: usize) -> rand_pcg::Pcg64Mcg {
-    let mut z = seed ^ 0x9E37_79B9_7F4A_7C15u64.wrapping_mul(row as u64 + 1);
-    let mut mix = |x: u64| {
-        z = z.wrapping_add(x).wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut y = z;
-        y = (y ^ (y >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        y = (y ^ (y >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        y ^ (y >> 31)
-    };
-    let a = mix(entry as u64);
-    let b = mix(0x5851_F42D_4C95_7F2D);
-    rand_pcg::Pcg64Mcg::new(((a as u128) << 64) | b as u128)
+/// The SplitMix64 finaliser: a bijective 64-bit mixer.
+#[inline(always)]
+fn mix64(mut y: u64) -> u64 {
+    y = (y ^ (y >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    y = (y ^ (y >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    y ^ (y >> 31)
+}
+
+const GOLDEN: u64 = 0x9E37_79B9_7F4A_7C15;
+
+/// The key of an entry point's random streams, from `(seed, phi_i index, entry index)`
+/// (distinct for every `(row, entry)` as `row < 2^13`, `entry < 2^32`).
+#[inline]
+fn entry_key(seed: u64, row: usize, entry: usize) -> u64 {
+    mix64(mix64(seed.wrapping_add(GOLDEN)) ^ (((row as u64) << 32) | entry as u64))
+}
+
+/// Counter-based random numbers (SplitMix64 of `key + counter * golden`): draw `counter` of
+/// an entry's stream is computed directly, so walks are independent of the order (or the
+/// interleaving) in which they are traced. Counter 0 is the entry's jitter; walk `r` uses
+/// counters `1 + r * max_bounces + k` for its bounces `k = 0..max_bounces`.
+#[inline(always)]
+fn draw(key: u64, counter: u64) -> u64 {
+    mix64(key.wrapping_add(counter.wrapping_mul(GOLDEN)))
+}
+
+/// Uniform in `[0, 1)` from the top 53 bits.
+#[inline(always)]
+fn unit(x: u64) -> f64 {
+    (x >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+}
+
+/// `sin(a)` of the 2D Lambert law: uniform in `[-1, 1)` from the top 53 bits (`2 u - 1`).
+#[inline(always)]
+fn signed_unit(x: u64) -> f64 {
+    (x >> 11) as f64 * (1.0 / (1u64 << 52) as f64) - 1.0
+}
+
+/// The counter of bounce `k` of walk `r` (see [`draw`]).
+#[inline(always)]
+fn walk_counter(r: usize, k: usize, max_bounces: usize) -> u64 {
+    1 + r as u64 * max_bounces as u64 + k as u64
 }
 
 /// Bins an upward unit exit direction by `sin(phi_o) = d.x` (no `atan2`): a lookup table on
@@ -272,9 +308,31 @@ struct ExitBinner {
 
 impl ExitBinner {
     fn new(m: usize) -> Self {
-        let edge_sin: Vec<f64> = (0..=m)
-            .map(|k| (-FRAC_PI_2 + k as f64 * PI / m as f64).sin())
-            .collect();
+        Self::from_edges(
+            (0..=m)
+                .map(|k| (-FRAC_PI_2 + k as f64 * PI / m as f64).sin())
+                .collect(),
+        )
+    }
+
+    /// A binner for the variable `sin(a)` of a diffuse bounce off a wall whose inner normal
+    /// makes the angle `alpha` with the vertical: the exit angle is `phi_o = alpha + a`, so
+    /// the bin edges in `sin(a)` are `sin(edge - alpha)`, clamped to `[-1, 1]` for edges the
+    /// bounce cannot reach. Exit bins of escaping bounces are found without the `sqrt`.
+    fn for_wall(m: usize, alpha: f64) -> Self {
+        Self::from_edges(
+            (0..=m)
+                .map(|k| {
+                    let a = -FRAC_PI_2 + k as f64 * PI / m as f64 - alpha;
+                    a.clamp(-FRAC_PI_2, FRAC_PI_2).sin()
+                })
+                .collect(),
+        )
+    }
+
+    /// From `m + 1` non-decreasing edges in `[-1, 1]`.
+    fn from_edges(edge_sin: Vec<f64>) -> Self {
+        let m = edge_sin.len() - 1;
         // 4 cells per bin on average; near the ends several bins share a cell (loops below).
         let cells = 4 * m;
         let scale = cells as f64 / 2.0;
@@ -319,6 +377,8 @@ struct Lane {
     seg: usize,
     w: [f64; 4],
     bounces: usize,
+    /// Index `r` of the walk among the entry's `N_r` (selects its random numbers).
+    walk: usize,
     active: bool,
 }
 
@@ -340,6 +400,24 @@ pub fn trace(
     s: &TraceSettings,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<TraceOutput, TraceError> {
+    trace_with(profile, s, progress, TracePath::Auto)
+}
+
+/// Which implementation [`trace_with`] uses (the generic one exists to test the fast one).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum TracePath {
+    /// The convex fast path where it applies, else the generic tracer.
+    Auto,
+    /// Always the generic tracer.
+    Generic,
+}
+
+fn trace_with(
+    profile: &Profile,
+    s: &TraceSettings,
+    progress: &(dyn Fn(u64) + Sync),
+    path: TracePath,
+) -> Result<TraceOutput, TraceError> {
     s.validate()?;
     let geo = Walls2D::new(profile);
     let m = s.m;
@@ -348,6 +426,14 @@ pub fn trace(
         FresnelMode::Seed => 1,
         FresnelMode::Walls => 4,
     };
+    // The fast path for diffuse walls in convex grooves (same random numbers, same walks).
+    let wall_binners: Option<Vec<ExitBinner>> =
+        (geo.convex && s.walls == Walls::Diffuse && path == TracePath::Auto).then(|| {
+            geo.segs
+                .iter()
+                .map(|sg| ExitBinner::for_wall(m, sg.n[0].atan2(sg.n[1])))
+                .collect()
+        });
     let blocks = s.n.div_ceil(BLOCK);
     let items: Vec<(usize, usize)> = (0..m)
         .flat_map(|i| (0..blocks).map(move |b| (i, b)))
@@ -357,7 +443,13 @@ pub fn trace(
         .map(|&(row, block)| {
             let lo = block * BLOCK;
             let hi = (lo + BLOCK).min(s.n);
-            let p = trace_block(&geo, &binner, s, channels, row, lo..hi);
+            let p = match &wall_binners {
+                Some(wb) if channels == 4 => {
+                    trace_block_convex::<true>(&geo, &binner, wb, s, row, lo..hi)
+                }
+                Some(wb) => trace_block_convex::<false>(&geo, &binner, wb, s, row, lo..hi),
+                None => trace_block(&geo, &binner, s, channels, row, lo..hi),
+            };
             progress(((hi - lo) * s.walks_per_entry()) as u64);
             p
         })
@@ -439,8 +531,8 @@ fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
     let albedo = s.albedo;
     let max_bounces = s.max_bounces;
     for k in entries {
-        let mut rng = entry_rng(s.seed, row, k);
-        let x = -0.5 + (k as f64 + rng.random::<f64>()) / s.n as f64;
+        let key = entry_key(s.seed, row, k);
+        let x = -0.5 + (k as f64 + unit(draw(key, 0))) / s.n as f64;
         let o = [x, 0.0];
         // The first segment is shared by the N_r walks of this entry point.
         let Some((seg0, t0)) = geo.nearest(o, d0, usize::MAX, -1e-12) else {
@@ -459,6 +551,7 @@ fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
             seg: seg0,
             w: [1.0; 4],
             bounces: 0,
+            walk: 0,
             active: true,
         };
         let mut lanes = [Lane {
@@ -469,7 +562,10 @@ fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
         let mut active = 0;
         for lane in lanes.iter_mut() {
             if started < walks {
-                *lane = fresh;
+                *lane = Lane {
+                    walk: started,
+                    ..fresh
+                };
                 started += 1;
                 active += 1;
             }
@@ -500,7 +596,8 @@ fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
                     }
                     let dir = if DIFFUSE {
                         // sin(a) uniform in [-1, 1] about the wall normal (2D Lambert).
-                        let sa = 2.0 * rng.random::<f64>() - 1.0;
+                        let counter = walk_counter(lane.walk, lane.bounces - 1, max_bounces);
+                        let sa = signed_unit(draw(key, counter));
                         let ca = (1.0 - sa * sa).max(0.0).sqrt();
                         [ca * n[0] + sa * sg.t[0], ca * n[1] + sa * sg.t[1]]
                     } else {
@@ -529,12 +626,147 @@ fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
                 };
                 if done {
                     if started < walks {
-                        *lane = fresh;
+                        *lane = Lane {
+                            walk: started,
+                            ..fresh
+                        };
                         started += 1;
                     } else {
                         lane.active = false;
                         active -= 1;
                     }
+                }
+            }
+        }
+    }
+    part
+}
+
+/// The fast path of [`trace_block`] for diffuse walls in a convex groove: the same walks with
+/// the same random numbers (up to round-off at bin edges and corners), cheaper per walk.
+///
+/// * The entry's first wall hit is shared by its `N_r` walks, so the escape test of their
+///   first bounce is precomputed: a bounce from a point `p` of a convex groove escapes iff its
+///   direction lies between those of the opening's corners, i.e. iff `sin(a)` lies between the
+///   corners' `sin(a)` (`phi_o = alpha + a` is increasing in `sin a`).
+/// * An escaping bounce is binned by `sin(a)` directly (a per-wall [`ExitBinner::for_wall`]):
+///   no `sqrt`, no intersection. Only the walks that stay inside build their direction.
+/// * Later bounces test escape by two cross products with the corner directions.
+fn trace_block_convex<const WALLS_MODE: bool>(
+    geo: &Walls2D,
+    binner: &ExitBinner,
+    wall_binners: &[ExitBinner],
+    s: &TraceSettings,
+    row: usize,
+    entries: std::ops::Range<usize>,
+) -> Partial {
+    let channels = if WALLS_MODE { 4 } else { 1 };
+    let m = s.m;
+    let mut part = Partial {
+        hist: vec![0.0; channels * m],
+        dropped: 0.0,
+        lost: 0.0,
+    };
+    let phi_i = bin_centre(row, m);
+    let d0 = [-phi_i.sin(), -phi_i.cos()];
+    let walks = s.nr;
+    let law = s.fresnel_law;
+    let albedo = s.albedo;
+    let max_bounces = s.max_bounces;
+    // Weights after a wall hit with incidence cosine `cos_in` (2D), per channel.
+    let hit_weights = |w: [f64; 4], cos_in: f64| -> [f64; 4] {
+        let mut w = w;
+        w[0] *= albedo;
+        if WALLS_MODE {
+            for (w, cos_theta) in w[1..].iter_mut().zip(COS_THETA_SLICES) {
+                *w *= albedo * law.reflectance(cos_theta * cos_in);
+            }
+        }
+        w
+    };
+    // Walks whose first bounce stays inside: (walk index, sin a).
+    let mut pending: Vec<(usize, f64)> = vec![(0, 0.0); walks];
+    for k in entries {
+        let key = entry_key(s.seed, row, k);
+        let x = -0.5 + (k as f64 + unit(draw(key, 0))) / s.n as f64;
+        let o = [x, 0.0];
+        let Some((seg0, t0)) = geo.nearest(o, d0, usize::MAX, -1e-12) else {
+            part.lost += walks as f64;
+            continue;
+        };
+        let hit0 = [o[0] + t0.max(0.0) * d0[0], o[1] + t0.max(0.0) * d0[1]];
+        let sg = &geo.segs[seg0];
+        let cos_in0 = -(sg.n[0] * d0[0] + sg.n[1] * d0[1]);
+        let w0 = hit_weights([1.0; 4], cos_in0.abs());
+        // `sin a` of the directions to the opening's corners: the escape interval.
+        let corner_sin = |cx: f64, fallback: f64| {
+            let v = [cx - hit0[0], -hit0[1]];
+            let len = v[0].hypot(v[1]);
+            if len > 0.0 {
+                ((v[0] * sg.t[0] + v[1] * sg.t[1]) / len).clamp(-1.0, 1.0)
+            } else {
+                fallback
+            }
+        };
+        let lo = corner_sin(-0.5, -1.0);
+        let hi = corner_sin(0.5, 1.0);
+        let wb = &wall_binners[seg0];
+        // First bounces of all walks: branch-free classification; escapes are binned at
+        // once, the others queued (a zero weight is added for them, which changes nothing).
+        let mut n_pending = 0;
+        for r in 0..walks {
+            let sa = signed_unit(draw(key, walk_counter(r, 0, max_bounces)));
+            let escapes = (sa >= lo) & (sa <= hi);
+            let j = wb.bin(sa);
+            let e = if escapes { 1.0 } else { 0.0 };
+            for c in 0..channels {
+                part.hist[c * m + j] += e * w0[c];
+            }
+            pending[n_pending] = (r, sa);
+            n_pending += (!escapes) as usize;
+        }
+        for &(r, sa0) in &pending[..n_pending] {
+            // Continue walk `r` from its first hit; `sa` is its current bounce's `sin a`.
+            let (mut pos, mut seg, mut w) = (hit0, seg0, w0);
+            let ca0 = (1.0 - sa0 * sa0).max(0.0).sqrt();
+            let mut dir = [ca0 * sg.n[0] + sa0 * sg.t[0], ca0 * sg.n[1] + sa0 * sg.t[1]];
+            let mut bounces = 1;
+            loop {
+                let Some((next, t)) = geo.nearest(pos, dir, seg, T_EPS) else {
+                    // Only at round-off of a corner: treat as the generic tracer does.
+                    if dir[1] > 0.0 {
+                        let j = binner.bin(dir[0]);
+                        for c in 0..channels {
+                            part.hist[c * m + j] += w[c];
+                        }
+                    } else {
+                        part.lost += w[0];
+                    }
+                    break;
+                };
+                if bounces == max_bounces {
+                    part.dropped += w[0];
+                    break;
+                }
+                pos = [pos[0] + t * dir[0], pos[1] + t * dir[1]];
+                seg = next;
+                let sg = &geo.segs[seg];
+                let cos_in = -(sg.n[0] * dir[0] + sg.n[1] * dir[1]);
+                w = hit_weights(w, cos_in.abs());
+                let sa = signed_unit(draw(key, walk_counter(r, bounces, max_bounces)));
+                bounces += 1;
+                // Escape iff the new direction lies between the corner directions.
+                let ca = (1.0 - sa * sa).max(0.0).sqrt();
+                dir = [ca * sg.n[0] + sa * sg.t[0], ca * sg.n[1] + sa * sg.t[1]];
+                let (vl, vr) = ([-0.5 - pos[0], -pos[1]], [0.5 - pos[0], -pos[1]]);
+                let right_of_left = vl[0] * dir[1] - vl[1] * dir[0] <= 0.0;
+                let left_of_right = vr[0] * dir[1] - vr[1] * dir[0] >= 0.0;
+                if right_of_left && left_of_right {
+                    let j = wall_binners[seg].bin(sa);
+                    for c in 0..channels {
+                        part.hist[c * m + j] += w[c];
+                    }
+                    break;
                 }
             }
         }
@@ -694,6 +926,66 @@ mod tests {
                 "phi {phi}: {retro} vs {expect}"
             );
         }
+    }
+
+    /// The convex fast path traces the same walks with the same random numbers as the generic
+    /// tracer: the tables agree up to the rare walk that round-off at a bin edge or a corner
+    /// sends elsewhere.
+    #[test]
+    fn convex_fast_path_matches_generic_tracer() {
+        for (spec, mode, albedo) in [
+            ("v:angle=90", FresnelMode::Seed, 1.0),
+            ("v:depth=1.5", FresnelMode::Walls, 0.9),
+            ("round:depth=0.4", FresnelMode::Seed, 0.8),
+            ("trapezoid:depth=0.3,bottom=0.2", FresnelMode::Walls, 1.0),
+        ] {
+            let p = Profile::parse(spec).unwrap();
+            assert!(Walls2D::new(&p).convex, "{spec}");
+            let s = TraceSettings {
+                m: 24,
+                n: 500,
+                nr: 12,
+                albedo,
+                fresnel_mode: mode,
+                seed: 7,
+                ..TraceSettings::default()
+            };
+            let fast = trace_with(&p, &s, &|_| {}, TracePath::Auto).unwrap();
+            let slow = trace_with(&p, &s, &|_| {}, TracePath::Generic).unwrap();
+            // One walk's weight in rho units is at most M / (pi N N_r cos(phi_o)).
+            let one_walk = s.m as f64 / (PI * (s.n * s.nr) as f64 * bin_centre(0, s.m).cos());
+            let mut walks_moved = 0.0;
+            let pairs = [(&fast.rho_m, &slow.rho_m)].into_iter().chain(
+                fast.rho_walls
+                    .iter()
+                    .zip(slow.rho_walls.iter())
+                    .map(|(a, b)| (a, b)),
+            );
+            for (a, b) in pairs {
+                assert_eq!(a.len(), b.len());
+                for (x, y) in a.iter().zip(b) {
+                    walks_moved += (x - y).abs() / one_walk;
+                }
+            }
+            assert!(walks_moved < 4.0, "{spec}: ~{walks_moved} walks differ");
+            for i in 0..s.m {
+                assert!((fast.dropped[i] - slow.dropped[i]).abs() < 1e-12);
+                assert_eq!(fast.lost[i], 0.0);
+            }
+        }
+        // A non-convex profile takes the generic path.
+        let w = Profile::from_points(
+            "w",
+            vec![
+                [-0.5, 0.0],
+                [-0.25, -0.5],
+                [0.0, -0.1],
+                [0.25, -0.5],
+                [0.5, 0.0],
+            ],
+        )
+        .unwrap();
+        assert!(!Walls2D::new(&w).convex);
     }
 
     #[test]
