@@ -222,6 +222,18 @@ impl Walls2D {
         Walls2D { segs, convex }
     }
 
+    /// For a convex two-wall groove (a V): a ray leaving wall `seg` that does not escape hits
+    /// the other wall; its line parameter in closed form (no culling loop). `None` only when
+    /// round-off makes the ray parallel to or leave the other wall.
+    #[inline]
+    fn other_wall_hit(&self, o: [f64; 2], d: [f64; 2], seg: usize) -> Option<(usize, f64)> {
+        let k = 1 - seg;
+        let s = &self.segs[k];
+        let denom = d[0] * s.e[1] - d[1] * s.e[0];
+        let t = ((s.p[0] - o[0]) * s.e[1] - (s.p[1] - o[1]) * s.e[0]) / denom;
+        (denom > 0.0 && t > 0.0).then_some((k, t))
+    }
+
     /// Nearest wall hit of the ray `o + t d` with `t > t_min`, skipping segment `skip`.
     ///
     /// The polyline closed by the opening is a counter-clockwise simple polygon (validated by
@@ -301,8 +313,14 @@ fn walk_counter(r: usize, k: usize, max_bounces: usize) -> u64 {
 /// Bins an upward unit exit direction by `sin(phi_o) = d.x` (no `atan2`): a lookup table on
 /// a uniform grid in `d.x` gives a starting bin, corrected against the exact edge sines.
 struct ExitBinner {
+    m: usize,
+    /// The `m + 1` edges, padded with `+inf` to a power-of-two length (index masks instead of
+    /// bounds checks in the hot path).
     edge_sin: Vec<f64>,
-    lut: Vec<u32>,
+    edge_mask: usize,
+    /// Bin of each cell's lower end, padded to a power-of-two length.
+    lut: Vec<u16>,
+    lut_mask: usize,
     scale: f64,
 }
 
@@ -315,54 +333,164 @@ impl ExitBinner {
         )
     }
 
-    /// A binner for the variable `sin(a)` of a diffuse bounce off a wall whose inner normal
-    /// makes the angle `alpha` with the vertical: the exit angle is `phi_o = alpha + a`, so
-    /// the bin edges in `sin(a)` are `sin(edge - alpha)`, clamped to `[-1, 1]` for edges the
-    /// bounce cannot reach. Exit bins of escaping bounces are found without the `sqrt`.
-    fn for_wall(m: usize, alpha: f64) -> Self {
-        Self::from_edges(
-            (0..=m)
-                .map(|k| {
-                    let a = -FRAC_PI_2 + k as f64 * PI / m as f64 - alpha;
-                    a.clamp(-FRAC_PI_2, FRAC_PI_2).sin()
-                })
-                .collect(),
-        )
-    }
-
     /// From `m + 1` non-decreasing edges in `[-1, 1]`.
-    fn from_edges(edge_sin: Vec<f64>) -> Self {
+    fn from_edges(mut edge_sin: Vec<f64>) -> Self {
         let m = edge_sin.len() - 1;
-        // 4 cells per bin on average; near the ends several bins share a cell (loops below).
+        // 4 cells per bin on average; near the ends several bins share a cell (slow path).
         let cells = 4 * m;
         let scale = cells as f64 / 2.0;
-        let lut = (0..=cells)
+        let mut lut: Vec<u16> = (0..=cells)
             .map(|q| {
                 let x = -1.0 + q as f64 / scale;
-                (edge_sin.partition_point(|&e| e <= x).saturating_sub(1)).min(m - 1) as u32
+                (edge_sin.partition_point(|&e| e <= x).saturating_sub(1)).min(m - 1) as u16
             })
             .collect();
+        lut.resize((cells + 1).next_power_of_two(), (m - 1) as u16);
+        edge_sin.resize((m + 2).next_power_of_two(), f64::INFINITY);
         ExitBinner {
+            m,
+            edge_mask: edge_sin.len() - 1,
             edge_sin,
+            lut_mask: lut.len() - 1,
             lut,
             scale,
         }
     }
 
-    #[inline]
+    /// The bin `j` with `edge_j <= dx < edge_{j+1}` (`dx` clamped to `[-1, 1]`, `j < m`).
+    #[inline(always)]
     fn bin(&self, dx: f64) -> usize {
-        let m = self.edge_sin.len() - 1;
+        let (e, em) = (&self.edge_sin, self.edge_mask);
         let dx = dx.clamp(-1.0, 1.0);
-        let mut j = self.lut[((dx + 1.0) * self.scale) as usize] as usize;
-        // One branch-free correction step, then (rarely taken) loops near the ends.
-        j += ((j + 1 < m) & (dx >= self.edge_sin[(j + 1).min(m)])) as usize;
+        let mut j = self.lut[((dx + 1.0) * self.scale) as i64 as usize & self.lut_mask] as usize;
+        // One branch-free correction step; a (rare, predictable) slow path where a cell
+        // spans several edges.
+        j += (dx >= e[(j + 1) & em]) as usize;
+        if (dx >= e[(j + 1) & em]) | (dx < e[j & em]) {
+            j = self.bin_slow(dx, j);
+        }
+        j.min(self.m - 1)
+    }
+
+    #[cold]
+    fn bin_slow(&self, dx: f64, mut j: usize) -> usize {
+        let m = self.m;
         while j + 1 < m && dx >= self.edge_sin[j + 1] {
             j += 1;
         }
-        while j > 0 && dx < self.edge_sin[j] {
+        while j > 0 && dx < self.edge_sin[j.min(m)] {
             j -= 1;
         }
         j
+    }
+}
+
+/// `sin(a) = k 2^-52 - 1` of the 53-bit integer `k` (exact).
+#[inline(always)]
+fn sin_of_int(k: u64) -> f64 {
+    k as f64 * (1.0 / (1u64 << 52) as f64) - 1.0
+}
+
+/// The smallest 53-bit integer `k` with `sin_of_int(k) >= e` (`2^53` if none; `e` may be
+/// infinite).
+fn int_threshold(e: f64) -> u64 {
+    first_int_where(|x| x >= e, e)
+}
+
+/// The smallest 53-bit integer `k` with `sin_of_int(k) > e` (`2^53` if none).
+fn int_threshold_above(e: f64) -> u64 {
+    first_int_where(|x| x > e, e)
+}
+
+/// The smallest `k` in `0..=2^53` where the monotone predicate `holds(sin_of_int(k))` is true
+/// (`2^53` if none), starting near `e`.
+fn first_int_where(holds: impl Fn(f64) -> bool, e: f64) -> u64 {
+    const TOP: u64 = 1 << 53;
+    if e.is_nan() || e > 1.0 {
+        return TOP;
+    }
+    let mut k = (((e + 1.0) * (1u64 << 52) as f64).ceil().max(0.0) as u64).min(TOP);
+    while k > 0 && holds(sin_of_int(k - 1)) {
+        k -= 1;
+    }
+    while k < TOP && !holds(sin_of_int(k)) {
+        k += 1;
+    }
+    k
+}
+
+/// Exit bins of a diffuse bounce off one wall, on the random integer itself.
+///
+/// The bounce's direction has `sin(a) = k 2^-52 - 1` ([`signed_unit`]) about the inner normal,
+/// which makes the angle `alpha` with the vertical, so the exit angle is `phi_o = alpha + a`,
+/// increasing in `k`: bin `j` is a range of `k` between integer thresholds of the edges
+/// `sin(edge_j - alpha)` (clamped to `[-1, 1]` for edges the bounce cannot reach). An escaping
+/// bounce is binned with neither its direction (no `sqrt`) nor a float comparison: a table on
+/// the top bits of `k` and one threshold comparison.
+struct WallBinner {
+    m: usize,
+    /// Thresholds of the `m + 1` edges, padded with `u64::MAX` to a power-of-two length.
+    thresholds: Vec<u64>,
+    threshold_mask: usize,
+    /// Per cell of `k >> shift`: the bin of the cell's first `k`; `MULTI` flags a cell that
+    /// spans more than one threshold (slow path).
+    lut: Vec<u16>,
+    lut_mask: usize,
+    shift: u32,
+}
+
+impl WallBinner {
+    const MULTI: u16 = 0x8000;
+
+    fn new(m: usize, alpha: f64) -> Self {
+        let mut thresholds: Vec<u64> = (0..=m)
+            .map(|k| {
+                let a = -FRAC_PI_2 + k as f64 * PI / m as f64 - alpha;
+                int_threshold(a.clamp(-FRAC_PI_2, FRAC_PI_2).sin())
+            })
+            .collect();
+        let slow_bin = |th: &[u64], k: u64| -> usize {
+            th.partition_point(|&t| t <= k).saturating_sub(1).min(m - 1)
+        };
+        // ~16 cells per bin: cells spanning several thresholds are rare (|sin a| > 0.997).
+        let bits = (16 * m).next_power_of_two().trailing_zeros().max(1);
+        let shift = 53 - bits;
+        let lut: Vec<u16> = (0..1u64 << bits)
+            .map(|c| {
+                let (first, last) = (c << shift, ((c + 1) << shift) - 1);
+                let (j0, j1) = (slow_bin(&thresholds, first), slow_bin(&thresholds, last));
+                let multi = if j1 > j0 + 1 { Self::MULTI } else { 0 };
+                j0 as u16 | multi
+            })
+            .collect();
+        thresholds.resize((m + 2).next_power_of_two(), u64::MAX);
+        WallBinner {
+            m,
+            threshold_mask: thresholds.len() - 1,
+            thresholds,
+            lut_mask: lut.len() - 1,
+            lut,
+            shift,
+        }
+    }
+
+    /// The bin of the bounce with random integer `k < 2^53`.
+    #[inline(always)]
+    fn bin(&self, k: u64) -> usize {
+        let entry = self.lut[(k >> self.shift) as usize & self.lut_mask];
+        if entry & Self::MULTI != 0 {
+            return self.bin_slow(k);
+        }
+        let j = entry as usize;
+        j + (k >= self.thresholds[(j + 1) & self.threshold_mask]) as usize
+    }
+
+    #[cold]
+    fn bin_slow(&self, k: u64) -> usize {
+        self.thresholds[..=self.m]
+            .partition_point(|&t| t <= k)
+            .saturating_sub(1)
+            .min(self.m - 1)
     }
 }
 
@@ -427,11 +555,11 @@ fn trace_with(
         FresnelMode::Walls => 4,
     };
     // The fast path for diffuse walls in convex grooves (same random numbers, same walks).
-    let wall_binners: Option<Vec<ExitBinner>> =
+    let wall_binners: Option<Vec<WallBinner>> =
         (geo.convex && s.walls == Walls::Diffuse && path == TracePath::Auto).then(|| {
             geo.segs
                 .iter()
-                .map(|sg| ExitBinner::for_wall(m, sg.n[0].atan2(sg.n[1])))
+                .map(|sg| WallBinner::new(m, sg.n[0].atan2(sg.n[1])))
                 .collect()
         });
     let blocks = s.n.div_ceil(BLOCK);
@@ -649,13 +777,13 @@ fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
 ///   first bounce is precomputed: a bounce from a point `p` of a convex groove escapes iff its
 ///   direction lies between those of the opening's corners, i.e. iff `sin(a)` lies between the
 ///   corners' `sin(a)` (`phi_o = alpha + a` is increasing in `sin a`).
-/// * An escaping bounce is binned by `sin(a)` directly (a per-wall [`ExitBinner::for_wall`]):
+/// * An escaping bounce is binned by `sin(a)` directly (a per-wall [`WallBinner`]):
 ///   no `sqrt`, no intersection. Only the walks that stay inside build their direction.
 /// * Later bounces test escape by two cross products with the corner directions.
 fn trace_block_convex<const WALLS_MODE: bool>(
     geo: &Walls2D,
     binner: &ExitBinner,
-    wall_binners: &[ExitBinner],
+    wall_binners: &[WallBinner],
     s: &TraceSettings,
     row: usize,
     entries: std::ops::Range<usize>,
@@ -684,8 +812,11 @@ fn trace_block_convex<const WALLS_MODE: bool>(
         }
         w
     };
+    let two_walls = geo.segs.len() == 2;
     // Walks whose first bounce stays inside: (walk index, sin a).
-    let mut pending: Vec<(usize, f64)> = vec![(0, 0.0); walks];
+    let mut pending: Vec<u32> = vec![0; walks];
+    // Exit histogram, `channels x (M + 1)`: the last bin of each channel is scratch.
+    let mut hist = vec![0.0; channels * (m + 1)];
     for k in entries {
         let key = entry_key(s.seed, row, k);
         let x = -0.5 + (k as f64 + unit(draw(key, 0))) / s.n as f64;
@@ -711,28 +842,36 @@ fn trace_block_convex<const WALLS_MODE: bool>(
         let lo = corner_sin(-0.5, -1.0);
         let hi = corner_sin(0.5, 1.0);
         let wb = &wall_binners[seg0];
-        // First bounces of all walks: branch-free classification; escapes are binned at
-        // once, the others queued (a zero weight is added for them, which changes nothing).
+        // The escape interval on the random integer: `lo_k <= k < hi_k`.
+        let lo_k = int_threshold(lo);
+        let span = int_threshold_above(hi).saturating_sub(lo_k);
+        // First bounces of all walks, branch-free: an escape adds its weight to its exit
+        // bin, a walk that stays inside adds it to the scratch bin `m` and is queued.
         let mut n_pending = 0;
         for r in 0..walks {
-            let sa = signed_unit(draw(key, walk_counter(r, 0, max_bounces)));
-            let escapes = (sa >= lo) & (sa <= hi);
-            let j = wb.bin(sa);
-            let e = if escapes { 1.0 } else { 0.0 };
+            let k = draw(key, walk_counter(r, 0, max_bounces)) >> 11;
+            let escapes = k.wrapping_sub(lo_k) < span;
+            let j = if escapes { wb.bin(k) } else { m };
             for c in 0..channels {
-                part.hist[c * m + j] += e * w0[c];
+                hist[c * (m + 1) + j] += w0[c];
             }
-            pending[n_pending] = (r, sa);
+            pending[n_pending] = r as u32;
             n_pending += (!escapes) as usize;
         }
-        for &(r, sa0) in &pending[..n_pending] {
-            // Continue walk `r` from its first hit; `sa` is its current bounce's `sin a`.
+        for &r in &pending[..n_pending] {
+            let r = r as usize;
+            let sa0 = signed_unit(draw(key, walk_counter(r, 0, max_bounces)));
             let (mut pos, mut seg, mut w) = (hit0, seg0, w0);
             let ca0 = (1.0 - sa0 * sa0).max(0.0).sqrt();
             let mut dir = [ca0 * sg.n[0] + sa0 * sg.t[0], ca0 * sg.n[1] + sa0 * sg.t[1]];
             let mut bounces = 1;
             loop {
-                let Some((next, t)) = geo.nearest(pos, dir, seg, T_EPS) else {
+                let hit = if two_walls {
+                    geo.other_wall_hit(pos, dir, seg)
+                } else {
+                    geo.nearest(pos, dir, seg, T_EPS)
+                };
+                let Some((next, t)) = hit else {
                     // Only at round-off of a corner: treat as the generic tracer does.
                     if dir[1] > 0.0 {
                         let j = binner.bin(dir[0]);
@@ -753,7 +892,8 @@ fn trace_block_convex<const WALLS_MODE: bool>(
                 let sg = &geo.segs[seg];
                 let cos_in = -(sg.n[0] * dir[0] + sg.n[1] * dir[1]);
                 w = hit_weights(w, cos_in.abs());
-                let sa = signed_unit(draw(key, walk_counter(r, bounces, max_bounces)));
+                let k = draw(key, walk_counter(r, bounces, max_bounces)) >> 11;
+                let sa = sin_of_int(k);
                 bounces += 1;
                 // Escape iff the new direction lies between the corner directions.
                 let ca = (1.0 - sa * sa).max(0.0).sqrt();
@@ -762,14 +902,17 @@ fn trace_block_convex<const WALLS_MODE: bool>(
                 let right_of_left = vl[0] * dir[1] - vl[1] * dir[0] <= 0.0;
                 let left_of_right = vr[0] * dir[1] - vr[1] * dir[0] >= 0.0;
                 if right_of_left && left_of_right {
-                    let j = wall_binners[seg].bin(sa);
+                    let j = wall_binners[seg].bin(k);
                     for c in 0..channels {
-                        part.hist[c * m + j] += w[c];
+                        hist[c * (m + 1) + j] += w[c];
                     }
                     break;
                 }
             }
         }
+    }
+    for c in 0..channels {
+        part.hist[c * m..(c + 1) * m].copy_from_slice(&hist[c * (m + 1)..c * (m + 1) + m]);
     }
     part
 }
