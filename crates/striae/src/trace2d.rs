@@ -482,7 +482,9 @@ impl WallBinner {
             return self.bin_slow(k);
         }
         let j = entry as usize;
-        j + (k >= self.thresholds[(j + 1) & self.threshold_mask]) as usize
+        // `k` beyond the last edge (a direction past the horizon, never an escape) would
+        // give `m`: clamped.
+        (j + (k >= self.thresholds[(j + 1) & self.threshold_mask]) as usize).min(self.m - 1)
     }
 
     #[cold]
@@ -492,6 +494,18 @@ impl WallBinner {
             .saturating_sub(1)
             .min(self.m - 1)
     }
+}
+
+/// A walk of the convex fast path, queued after a bounce that stays inside.
+#[derive(Clone, Copy)]
+struct Walk {
+    /// Index among the entry's `N_r` walks (selects its random numbers).
+    r: u32,
+    seg: u32,
+    /// The last wall hit and the direction leaving it.
+    pos: [f64; 2],
+    dir: [f64; 2],
+    w: [f64; 4],
 }
 
 /// Walks interleaved per entry point (see `trace_block`).
@@ -815,6 +829,9 @@ fn trace_block_convex<const WALLS_MODE: bool>(
     let two_walls = geo.segs.len() == 2;
     // Walks whose first bounce stays inside: (walk index, sin a).
     let mut pending: Vec<u32> = vec![0; walks];
+    let mut queue: Vec<Walk> = Vec::with_capacity(walks);
+    // First-bounce escapes per (wall, exit bin).
+    let mut first_counts = vec![0u32; geo.segs.len() * m];
     // Exit histogram, `channels x (M + 1)`: the last bin of each channel is scratch.
     let mut hist = vec![0.0; channels * (m + 1)];
     for k in entries {
@@ -842,30 +859,51 @@ fn trace_block_convex<const WALLS_MODE: bool>(
         let lo = corner_sin(-0.5, -1.0);
         let hi = corner_sin(0.5, 1.0);
         let wb = &wall_binners[seg0];
+        let first_counts = &mut first_counts[seg0 * m..(seg0 + 1) * m];
         // The escape interval on the random integer: `lo_k <= k < hi_k`.
         let lo_k = int_threshold(lo);
         let span = int_threshold_above(hi).saturating_sub(lo_k);
-        // First bounces of all walks, branch-free: an escape adds its weight to its exit
-        // bin, a walk that stays inside adds it to the scratch bin `m` and is queued.
+        // First bounces of all walks: an escape adds its weight to its exit bin, a walk that
+        // stays inside is queued.
         let mut n_pending = 0;
         for r in 0..walks {
             let k = draw(key, walk_counter(r, 0, max_bounces)) >> 11;
             let escapes = k.wrapping_sub(lo_k) < span;
-            let j = if escapes { wb.bin(k) } else { m };
-            for c in 0..channels {
-                hist[c * (m + 1) + j] += w0[c];
-            }
+            // Always binned; a walk that stays inside adds 0 (no branch on the escape, whose
+            // outcome is unpredictable). First-bounce escapes from wall `seg0` all weigh
+            // `w0`, a function of (row, seg0) only: they are counted, and weighted per block.
+            first_counts[wb.bin(k)] += escapes as u32;
             pending[n_pending] = r as u32;
             n_pending += (!escapes) as usize;
         }
-        for &r in &pending[..n_pending] {
-            let r = r as usize;
-            let sa0 = signed_unit(draw(key, walk_counter(r, 0, max_bounces)));
-            let (mut pos, mut seg, mut w) = (hit0, seg0, w0);
-            let ca0 = (1.0 - sa0 * sa0).max(0.0).sqrt();
-            let mut dir = [ca0 * sg.n[0] + sa0 * sg.t[0], ca0 * sg.n[1] + sa0 * sg.t[1]];
-            let mut bounces = 1;
-            loop {
+        // The walks still inside advance breadth-first, one bounce per pass over the queue:
+        // the walks of a pass are independent, so their `sqrt`/division latencies overlap,
+        // and the queue is compacted without branching on the (unpredictable) escapes.
+        queue.clear();
+        queue.extend(pending[..n_pending].iter().map(|&r| {
+            let sa = signed_unit(draw(key, walk_counter(r as usize, 0, max_bounces)));
+            let ca = (1.0 - sa * sa).max(0.0).sqrt();
+            Walk {
+                r,
+                seg: seg0 as u32,
+                pos: hit0,
+                dir: [ca * sg.n[0] + sa * sg.t[0], ca * sg.n[1] + sa * sg.t[1]],
+                w: w0,
+            }
+        }));
+        // `bounces`: wall hits so far of every walk in the queue.
+        let mut bounces = 1;
+        while !queue.is_empty() {
+            let mut kept = 0;
+            for q in 0..queue.len() {
+                let Walk {
+                    r,
+                    seg,
+                    pos,
+                    dir,
+                    w,
+                } = queue[q];
+                let seg = seg as usize;
                 let hit = if two_walls {
                     geo.other_wall_hit(pos, dir, seg)
                 } else {
@@ -881,33 +919,49 @@ fn trace_block_convex<const WALLS_MODE: bool>(
                     } else {
                         part.lost += w[0];
                     }
-                    break;
+                    continue;
                 };
                 if bounces == max_bounces {
                     part.dropped += w[0];
-                    break;
+                    continue;
                 }
-                pos = [pos[0] + t * dir[0], pos[1] + t * dir[1]];
-                seg = next;
-                let sg = &geo.segs[seg];
+                let pos = [pos[0] + t * dir[0], pos[1] + t * dir[1]];
+                let sg = &geo.segs[next];
                 let cos_in = -(sg.n[0] * dir[0] + sg.n[1] * dir[1]);
-                w = hit_weights(w, cos_in.abs());
-                let k = draw(key, walk_counter(r, bounces, max_bounces)) >> 11;
+                let w = hit_weights(w, cos_in.abs());
+                let k = draw(key, walk_counter(r as usize, bounces, max_bounces)) >> 11;
                 let sa = sin_of_int(k);
-                bounces += 1;
-                // Escape iff the new direction lies between the corner directions.
                 let ca = (1.0 - sa * sa).max(0.0).sqrt();
-                dir = [ca * sg.n[0] + sa * sg.t[0], ca * sg.n[1] + sa * sg.t[1]];
+                let dir = [ca * sg.n[0] + sa * sg.t[0], ca * sg.n[1] + sa * sg.t[1]];
+                // Escape iff the new direction lies between the corner directions.
                 let (vl, vr) = ([-0.5 - pos[0], -pos[1]], [0.5 - pos[0], -pos[1]]);
                 let right_of_left = vl[0] * dir[1] - vl[1] * dir[0] <= 0.0;
                 let left_of_right = vr[0] * dir[1] - vr[1] * dir[0] >= 0.0;
-                if right_of_left && left_of_right {
-                    let j = wall_binners[seg].bin(k);
-                    for c in 0..channels {
-                        hist[c * (m + 1) + j] += w[c];
-                    }
-                    break;
+                let escapes = right_of_left & left_of_right;
+                let j = wall_binners[next].bin(k);
+                let e = (escapes as u8) as f64;
+                for c in 0..channels {
+                    hist[c * (m + 1) + j] += e * w[c];
                 }
+                queue[kept] = Walk {
+                    r,
+                    seg: next as u32,
+                    pos,
+                    dir,
+                    w,
+                };
+                kept += (!escapes) as usize;
+            }
+            queue.truncate(kept);
+            bounces += 1;
+        }
+    }
+    for (seg, counts) in first_counts.chunks(m).enumerate() {
+        let sg = &geo.segs[seg];
+        let w0 = hit_weights([1.0; 4], (sg.n[0] * d0[0] + sg.n[1] * d0[1]).abs());
+        for c in 0..channels {
+            for (h, &n) in hist[c * (m + 1)..].iter_mut().zip(counts) {
+                *h += n as f64 * w0[c];
             }
         }
     }
