@@ -6,7 +6,7 @@ use std::time::Instant;
 use striae::fresnel::FresnelLaw;
 use striae::profile::Profile;
 use striae::table::{ScratchTable, TableParams};
-use striae::trace2d::{FresnelMode, TraceSettings, Walls};
+use striae::trace2d::{Estimator, FresnelMode, TraceSettings, Walls};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -43,6 +43,13 @@ pub struct Args {
     max_bounces: usize,
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Diffuse-wall estimator. `walks`: the seed's N_r scheme (METHOD.md 3.1). `kernel`: a
+    /// departure from the seed, same expectation, lower variance and much faster: the exit
+    /// distribution from each wall position is tabulated once (256 nodes per wall, N*N_r/256
+    /// walks each) and every entry point adds the interpolated row of its first hit. Only for
+    /// diffuse walls, --fresnel seed and convex profiles (see docs/table-format.md).
+    #[arg(long, value_enum, default_value_t = EstimatorArg::Walks)]
+    estimator: EstimatorArg,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -55,6 +62,12 @@ pub struct Args {
 enum WallsArg {
     Specular,
     Diffuse,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum EstimatorArg {
+    Walks,
+    Kernel,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -110,6 +123,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             ModeArg::Walls => FresnelMode::Walls,
         },
         fresnel_law: parse_law(&a.fresnel_law, a.ior)?,
+        estimator: match a.estimator {
+            EstimatorArg::Walks => Estimator::Walks,
+            EstimatorArg::Kernel => Estimator::Kernel,
+        },
     };
     trace.validate().context("invalid precompute parameters")?;
     let params = TableParams::new(profile, trace);
