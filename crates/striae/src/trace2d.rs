@@ -545,9 +545,38 @@ impl WallBinner {
     }
 }
 
+/// The first bounces of an entry's `walks` walks (the hot loop of [`trace_block_convex`], kept
+/// apart so that its few live values stay in registers): a walk escapes iff its random
+/// integer `k` lies in `lo_k .. lo_k + span`; escapes are counted per exit bin, the others
+/// are written to `pending`, whose length is returned. Branch-free: every walk is binned and
+/// adds 0 or 1 (the escape outcome is unpredictable).
+#[inline(never)]
+fn first_bounces(
+    key: u64,
+    walks: usize,
+    max_bounces: usize,
+    (lo_k, span): (u64, u64),
+    wb: &WallBinner,
+    counts: &mut [u32],
+    pending: &mut [u32],
+) -> usize {
+    let mut n_pending = 0;
+    let pending = &mut pending[..walks];
+    for r in 0..walks {
+        let k = draw(key, walk_counter(r, 0, max_bounces)) >> 11;
+        let escapes = k.wrapping_sub(lo_k) < span;
+        counts[wb.bin(k)] += escapes as u32;
+        pending[n_pending.min(walks - 1)] = r as u32;
+        n_pending += (!escapes) as usize;
+    }
+    n_pending
+}
+
 /// A walk of the convex fast path, queued after a bounce that stays inside.
 #[derive(Clone, Copy)]
 struct Walk {
+    /// The key of its entry's random streams.
+    key: u64,
     /// Index among the entry's `N_r` walks (selects its random numbers).
     r: u32,
     seg: u32,
@@ -882,7 +911,7 @@ fn trace_block_convex<const WALLS_MODE: bool>(
     let two_walls = geo.segs.len() == 2;
     // Walks whose first bounce stays inside: (walk index, sin a).
     let mut pending: Vec<u32> = vec![0; walks];
-    let mut queue: Vec<Walk> = Vec::with_capacity(walks);
+    let mut queue: Vec<Walk> = Vec::new();
     // First-bounce escapes per (wall, exit bin).
     let mut first_counts = vec![0u32; geo.segs.len() * m];
     // Exit histogram, `channels x (M + 1)`: the last bin of each channel is scratch.
@@ -918,25 +947,21 @@ fn trace_block_convex<const WALLS_MODE: bool>(
         let span = int_threshold_above(hi).saturating_sub(lo_k);
         // First bounces of all walks: an escape adds its weight to its exit bin, a walk that
         // stays inside is queued.
-        let mut n_pending = 0;
-        for r in 0..walks {
-            let k = draw(key, walk_counter(r, 0, max_bounces)) >> 11;
-            let escapes = k.wrapping_sub(lo_k) < span;
-            // Always binned; a walk that stays inside adds 0 (no branch on the escape, whose
-            // outcome is unpredictable). First-bounce escapes from wall `seg0` all weigh
-            // `w0`, a function of (row, seg0) only: they are counted, and weighted per block.
-            first_counts[wb.bin(k)] += escapes as u32;
-            pending[n_pending] = r as u32;
-            n_pending += (!escapes) as usize;
-        }
-        // The walks still inside advance breadth-first, one bounce per pass over the queue:
-        // the walks of a pass are independent, so their `sqrt`/division latencies overlap,
-        // and the queue is compacted without branching on the (unpredictable) escapes.
-        queue.clear();
+        let n_pending = first_bounces(
+            key,
+            walks,
+            max_bounces,
+            (lo_k, span),
+            wb,
+            first_counts,
+            &mut pending,
+        );
+        // Queue the walks still inside (advanced after the block's first bounces).
         queue.extend(pending[..n_pending].iter().map(|&r| {
             let sa = signed_unit(draw(key, walk_counter(r as usize, 0, max_bounces)));
             let ca = (1.0 - sa * sa).max(0.0).sqrt();
             Walk {
+                key,
                 r,
                 seg: seg0 as u32,
                 pos: hit0,
@@ -944,70 +969,75 @@ fn trace_block_convex<const WALLS_MODE: bool>(
                 w: w0,
             }
         }));
-        // `bounces`: wall hits so far of every walk in the queue.
-        let mut bounces = 1;
-        while !queue.is_empty() {
-            let mut kept = 0;
-            for q in 0..queue.len() {
-                let Walk {
-                    r,
-                    seg,
-                    pos,
-                    dir,
-                    w,
-                } = queue[q];
-                let seg = seg as usize;
-                let hit = if two_walls {
-                    geo.other_wall_hit(pos, dir, seg)
-                } else {
-                    geo.nearest(pos, dir, seg, T_EPS)
-                };
-                let Some((next, t)) = hit else {
-                    // Only at round-off of a corner: treat as the generic tracer does.
-                    if dir[1] > 0.0 {
-                        let j = binner.bin(dir[0]);
-                        for c in 0..channels {
-                            part.hist[c * m + j] += w[c];
-                        }
-                    } else {
-                        part.lost += w[0];
+    }
+    // The walks of the whole block still inside advance breadth-first, one bounce per pass
+    // over the queue: its walks are independent, so their `sqrt`/division latencies overlap,
+    // and the queue is compacted without branching on the (unpredictable) escapes.
+    // `bounces`: wall hits so far of every walk in the queue.
+    let mut bounces = 1;
+    while !queue.is_empty() {
+        let mut kept = 0;
+        for q in 0..queue.len() {
+            let Walk {
+                key,
+                r,
+                seg,
+                pos,
+                dir,
+                w,
+            } = queue[q];
+            let seg = seg as usize;
+            let hit = if two_walls {
+                geo.other_wall_hit(pos, dir, seg)
+            } else {
+                geo.nearest(pos, dir, seg, T_EPS)
+            };
+            let Some((next, t)) = hit else {
+                // Only at round-off of a corner: treat as the generic tracer does.
+                if dir[1] > 0.0 {
+                    let j = binner.bin(dir[0]);
+                    for c in 0..channels {
+                        part.hist[c * m + j] += w[c];
                     }
-                    continue;
-                };
-                if bounces == max_bounces {
-                    part.dropped += w[0];
-                    continue;
+                } else {
+                    part.lost += w[0];
                 }
-                let pos = [pos[0] + t * dir[0], pos[1] + t * dir[1]];
-                let sg = &geo.segs[next];
-                let cos_in = -(sg.n[0] * dir[0] + sg.n[1] * dir[1]);
-                let w = hit_weights(w, cos_in.abs());
-                let k = draw(key, walk_counter(r as usize, bounces, max_bounces)) >> 11;
-                let sa = sin_of_int(k);
-                let ca = (1.0 - sa * sa).max(0.0).sqrt();
-                let dir = [ca * sg.n[0] + sa * sg.t[0], ca * sg.n[1] + sa * sg.t[1]];
-                // Escape iff the new direction lies between the corner directions.
-                let (vl, vr) = ([-0.5 - pos[0], -pos[1]], [0.5 - pos[0], -pos[1]]);
-                let right_of_left = vl[0] * dir[1] - vl[1] * dir[0] <= 0.0;
-                let left_of_right = vr[0] * dir[1] - vr[1] * dir[0] >= 0.0;
-                let escapes = right_of_left & left_of_right;
-                let j = wall_binners[next].bin(k);
-                let e = (escapes as u8) as f64;
-                for c in 0..channels {
-                    hist[c * (m + 1) + j] += e * w[c];
-                }
-                queue[kept] = Walk {
-                    r,
-                    seg: next as u32,
-                    pos,
-                    dir,
-                    w,
-                };
-                kept += (!escapes) as usize;
+                continue;
+            };
+            if bounces == max_bounces {
+                part.dropped += w[0];
+                continue;
             }
-            queue.truncate(kept);
-            bounces += 1;
+            let pos = [pos[0] + t * dir[0], pos[1] + t * dir[1]];
+            let sg = &geo.segs[next];
+            let cos_in = -(sg.n[0] * dir[0] + sg.n[1] * dir[1]);
+            let w = hit_weights(w, cos_in.abs());
+            let k = draw(key, walk_counter(r as usize, bounces, max_bounces)) >> 11;
+            let sa = sin_of_int(k);
+            let ca = (1.0 - sa * sa).max(0.0).sqrt();
+            let dir = [ca * sg.n[0] + sa * sg.t[0], ca * sg.n[1] + sa * sg.t[1]];
+            // Escape iff the new direction lies between the corner directions.
+            let (vl, vr) = ([-0.5 - pos[0], -pos[1]], [0.5 - pos[0], -pos[1]]);
+            let right_of_left = vl[0] * dir[1] - vl[1] * dir[0] <= 0.0;
+            let left_of_right = vr[0] * dir[1] - vr[1] * dir[0] >= 0.0;
+            let escapes = right_of_left & left_of_right;
+            let j = wall_binners[next].bin(k);
+            let e = (escapes as u8) as f64;
+            for c in 0..channels {
+                hist[c * (m + 1) + j] += e * w[c];
+            }
+            queue[kept] = Walk {
+                key,
+                r,
+                seg: next as u32,
+                pos,
+                dir,
+                w,
+            };
+            kept += (!escapes) as usize;
         }
+        queue.truncate(kept);
+        bounces += 1;
     }
     for (seg, counts) in first_counts.chunks(m).enumerate() {
         let sg = &geo.segs[seg];

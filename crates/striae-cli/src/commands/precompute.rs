@@ -159,8 +159,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         "profile {}  walls {:?}  M {}  N {}  N_r {}",
         params.profile.spec, params.trace.walls, table.m, params.trace.n, params.trace.nr
     );
+    let estimator = match params.trace.estimator {
+        Estimator::Walks => "",
+        Estimator::Kernel => " (kernel estimator: equivalent N_r-scheme paths)",
+    };
     println!(
-        "wall time {secs:.3} s, {total} paths, {:.3e} paths/s ({} threads)",
+        "wall time {secs:.3} s, {total} paths, {:.3e} paths/s ({} threads){estimator}",
         total as f64 / secs,
         pool.current_num_threads()
     );
