@@ -1378,6 +1378,7 @@ mod tests {
     ///   `x = xh + (xh + 1/2) cot phi`, which is `<= 1/2` (escape after one bounce, out at
     ///   `phi_o = pi/2 - phi`, another bin) iff `x0 + 1/2 <= tan phi`; otherwise it hits R and
     ///   leaves retroreflected (steep, moving away from both walls).
+    ///
     /// Retroreflected fraction: `(1/2 - tan(phi)/2) + (tan(phi)/2 - (tan(phi) - 1/2)) =
     /// 1 - tan(phi)`; for `phi >= pi/4` both ranges are empty: 0. By symmetry, for any phi:
     /// `max(0, 1 - tan |phi|)`.
