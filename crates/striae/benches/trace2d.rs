@@ -1,11 +1,12 @@
 //! Criterion bench of the 2D scratch tracer (METHOD.md section 3): a reduced version of the
-//! seed's table (90-degree V-groove, diffuse walls, N_r = 100) and mirror walls. Throughput is
+//! seed's table (90-degree V-groove, diffuse walls, N_r = 100), the full table with the
+//! optional kernel estimator, and mirror walls. Throughput is
 //! reported in walks ("paths"). The full seed table is timed with `striae precompute`
 //! (see BENCHMARKS.md).
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use striae::profile::Profile;
-use striae::trace2d::{trace, TraceSettings, Walls};
+use striae::trace2d::{trace, Estimator, TraceSettings, Walls};
 
 fn bench(c: &mut Criterion) {
     let profile = Profile::parse("v:angle=90").unwrap();
@@ -19,6 +20,16 @@ fn bench(c: &mut Criterion) {
                 m: 64,
                 n: 1000,
                 nr: 100,
+                ..TraceSettings::default()
+            },
+        ),
+        (
+            // The seed's full table with the optional kernel estimator ("paths" are the
+            // equivalent N M N_r walks of the seed's scheme).
+            "v90_diffuse_kernel_m256_n10000_nr100",
+            TraceSettings {
+                walls: Walls::Diffuse,
+                estimator: Estimator::Kernel,
                 ..TraceSettings::default()
             },
         ),

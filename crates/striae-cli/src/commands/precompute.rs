@@ -6,7 +6,7 @@ use std::time::Instant;
 use striae::fresnel::FresnelLaw;
 use striae::profile::Profile;
 use striae::table::{ScratchTable, TableParams};
-use striae::trace2d::{FresnelMode, TraceSettings, Walls};
+use striae::trace2d::{Estimator, FresnelMode, TraceSettings, Walls};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -43,6 +43,14 @@ pub struct Args {
     max_bounces: usize,
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Diffuse-wall estimator. `walks`: the seed's N_r scheme (METHOD.md 3.1). `kernel`: a
+    /// departure from the seed, same expectation, lower variance and much faster: the exit
+    /// distribution from each wall position is tabulated once (256 nodes per wall, walks per
+    /// node sized so that no row is noisier than with the N_r scheme) and every entry point
+    /// adds the interpolated row of its first hit. Only for diffuse walls, --fresnel seed and
+    /// convex profiles (see docs/table-format.md).
+    #[arg(long, value_enum, default_value_t = EstimatorArg::Walks)]
+    estimator: EstimatorArg,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -55,6 +63,12 @@ pub struct Args {
 enum WallsArg {
     Specular,
     Diffuse,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum EstimatorArg {
+    Walks,
+    Kernel,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -110,6 +124,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             ModeArg::Walls => FresnelMode::Walls,
         },
         fresnel_law: parse_law(&a.fresnel_law, a.ior)?,
+        estimator: match a.estimator {
+            EstimatorArg::Walks => Estimator::Walks,
+            EstimatorArg::Kernel => Estimator::Kernel,
+        },
     };
     trace.validate().context("invalid precompute parameters")?;
     let params = TableParams::new(profile, trace);
@@ -142,8 +160,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         "profile {}  walls {:?}  M {}  N {}  N_r {}",
         params.profile.spec, params.trace.walls, table.m, params.trace.n, params.trace.nr
     );
+    let estimator = match params.trace.estimator {
+        Estimator::Walks => "",
+        Estimator::Kernel => " (kernel estimator: equivalent N_r-scheme paths)",
+    };
     println!(
-        "wall time {secs:.3} s, {total} paths, {:.3e} paths/s ({} threads)",
+        "wall time {secs:.3} s, {total} paths, {:.3e} paths/s ({} threads){estimator}",
         total as f64 / secs,
         pool.current_num_threads()
     );
