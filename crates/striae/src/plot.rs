@@ -1,1 +1,261 @@
-//! (to be written)
+//! Plots of a scratch BRDF table: the polar lobe for one incident angle (the seed's Fig. 2:
+//! lobe radius = `rho_m(phi_o, phi_i)` over the upper half plane, incident direction marked)
+//! and a heat map of the whole `rho_m` table with labelled axes and a colour bar.
+//!
+//! Text uses DejaVu Sans, embedded with `include_bytes!` (licence in
+//! `crates/striae/assets/DejaVuSans-LICENSE.txt`) and registered with plotters' ab_glyph backend.
+
+use crate::table::ScratchTable;
+use plotters::prelude::*;
+use std::path::{Path, PathBuf};
+
+static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+
+/// A plot could not be drawn or written.
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    #[error("plot {path}: {why}")]
+    Draw { path: PathBuf, why: String },
+    #[error("plot: --phi-i {0} degrees is outside (-90, 90)")]
+    BadAngle(f64),
+}
+
+fn register_font() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // The font is embedded and known to parse; a failure would only lose the text.
+        let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
+    });
+}
+
+fn draw_err(path: &Path) -> impl Fn(String) -> PlotError + '_ {
+    move |why| PlotError::Draw { path: path.to_path_buf(), why }
+}
+
+/// Render to a temporary PNG and rename it into place (no half-written file).
+fn render(path: &Path, size: (u32, u32), draw: impl FnOnce(&Path) -> Result<(), String>) -> Result<(), PlotError> {
+    register_font();
+    let _ = size;
+    let err = draw_err(path);
+    let tmp = crate::io::temp_path(path);
+    // plotters picks the encoder from the extension: keep `.png` on the temporary name.
+    let tmp = tmp.with_file_name(format!("{}.png", tmp.file_name().unwrap_or_default().to_string_lossy()));
+    match draw(&tmp) {
+        Ok(()) => std::fs::rename(&tmp, path).map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            err(e.to_string())
+        }),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(err(e))
+        }
+    }
+}
+
+/// The seed's Fig. 2: polar plot of `rho_m(phi_o, phi_i)` over `phi_o` for the incident bin
+/// nearest `phi_i_deg`, with the incident direction drawn as an arrow from the origin.
+pub fn plot_lobe(table: &ScratchTable, phi_i_deg: f64, path: &Path) -> Result<(), PlotError> {
+    if !(phi_i_deg.is_finite() && phi_i_deg > -90.0 && phi_i_deg < 90.0) {
+        return Err(PlotError::BadAngle(phi_i_deg));
+    }
+    let m = table.m;
+    let i = crate::trace2d::bin_of(phi_i_deg.to_radians(), m);
+    let phi_i = table.phi[i];
+    let row: Vec<f64> = (0..m).map(|j| table.rho_m[i * m + j]).collect();
+    let rmax = row.iter().cloned().fold(0.0, f64::max).max(1e-9) * 1.1;
+    let albedo = table.albedo_2d()[i];
+    let (w, h) = (900u32, 520u32);
+    render(path, (w, h), |tmp| {
+        let root = BitMapBackend::new(tmp, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let caption = format!(
+            "rho_m lobe, phi_i = {:.1} deg  ({}, {:?} walls, 2D albedo {:.3})",
+            phi_i.to_degrees(),
+            table.params.profile.spec,
+            table.params.trace.walls,
+            albedo
+        );
+        let mut chart = ChartBuilder::on(&root)
+            .caption(caption, ("sans-serif", 20))
+            .margin(15)
+            .x_label_area_size(35)
+            .y_label_area_size(55)
+            .build_cartesian_2d(-rmax..rmax, 0.0..rmax)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc("rho sin(phi_o)")
+            .y_desc("rho cos(phi_o)")
+            .disable_mesh()
+            .draw()
+            .map_err(|e| e.to_string())?;
+        // Reference half circles.
+        let step = nice_step(rmax / 4.0);
+        let mut r = step;
+        while r < rmax {
+            let arc: Vec<(f64, f64)> =
+                (0..=180).map(|k| (k as f64).to_radians()).map(|a| (r * a.cos(), r * a.sin())).collect();
+            chart.draw_series(LineSeries::new(arc, RGBColor(210, 210, 210))).map_err(|e| e.to_string())?;
+            chart
+                .draw_series(std::iter::once(Text::new(format!("{r:.3}"), (r, 0.0), ("sans-serif", 13).into_font())))
+                .map_err(|e| e.to_string())?;
+            r += step;
+        }
+        // The lobe: one vertex per phi_o bin centre, closed through the origin.
+        let mut pts = vec![(0.0, 0.0)];
+        pts.extend((0..m).map(|j| {
+            let (s, c) = table.phi[j].sin_cos();
+            (row[j] * s, row[j] * c)
+        }));
+        pts.push((0.0, 0.0));
+        chart
+            .draw_series(LineSeries::new(pts, BLUE.stroke_width(2)))
+            .map_err(|e| e.to_string())?
+            .label("rho_m(phi_o, phi_i)")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(2)));
+        // Incident direction: w_i points away from the surface at phi_i; light travels inward.
+        let (s, c) = phi_i.sin_cos();
+        let tip = (0.95 * rmax * s, 0.95 * rmax * c);
+        chart
+            .draw_series(LineSeries::new(vec![tip, (0.0, 0.0)], RED.stroke_width(2)))
+            .map_err(|e| e.to_string())?
+            .label("incident direction")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
+        chart
+            .draw_series(std::iter::once(Circle::new(tip, 6, RED.filled())))
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .label_font(("sans-serif", 14))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        root.present().map_err(|e| e.to_string())
+    })
+}
+
+fn nice_step(x: f64) -> f64 {
+    let p = 10f64.powf(x.log10().floor());
+    let f = x / p;
+    p * if f < 1.5 {
+        1.0
+    } else if f < 3.5 {
+        2.0
+    } else if f < 7.5 {
+        5.0
+    } else {
+        10.0
+    }
+}
+
+/// A viridis-like colour map on `[0, 1]` (piecewise linear through 5 of viridis' colours).
+fn colour(t: f64) -> RGBColor {
+    const STOPS: [(f64, f64, f64); 5] =
+        [(68.0, 1.0, 84.0), (59.0, 82.0, 139.0), (33.0, 145.0, 140.0), (94.0, 201.0, 98.0), (253.0, 231.0, 37.0)];
+    let t = if t.is_finite() { t.clamp(0.0, 1.0) } else { 0.0 } * 4.0;
+    let k = (t as usize).min(3);
+    let f = t - k as f64;
+    let (a, b) = (STOPS[k], STOPS[k + 1]);
+    let l = |x: f64, y: f64| (x + (y - x) * f).round() as u8;
+    RGBColor(l(a.0, b.0), l(a.1, b.1), l(a.2, b.2))
+}
+
+/// Heat map of `rho_m[phi_i][phi_o]` (x: `phi_o`, y: `phi_i`, degrees) with a colour bar.
+/// The colour scale saturates at the 99th percentile (stated in the caption) so that mirror
+/// spikes do not hide the rest.
+pub fn plot_heatmap(table: &ScratchTable, path: &Path) -> Result<(), PlotError> {
+    let m = table.m;
+    let mut sorted = table.rho_m.clone();
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    let vmax = sorted[((sorted.len() - 1) as f64 * 0.99) as usize].max(sorted[sorted.len() - 1] * 1e-3).max(1e-12);
+    let (w, h) = (900u32, 760u32);
+    render(path, (w, h), |tmp| {
+        let root = BitMapBackend::new(tmp, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let (left, right) = root.split_horizontally(w - 150);
+        let caption = format!(
+            "rho_m: {}, {:?} walls, M = {} (colour saturates at {:.3})",
+            table.params.profile.spec, table.params.trace.walls, m, vmax
+        );
+        let mut chart = ChartBuilder::on(&left)
+            .caption(caption, ("sans-serif", 18))
+            .margin(15)
+            .x_label_area_size(45)
+            .y_label_area_size(60)
+            .build_cartesian_2d(-90.0..90.0f64, -90.0..90.0f64)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_desc("phi_o (degrees)")
+            .y_desc("phi_i (degrees)")
+            .label_style(("sans-serif", 14))
+            .axis_desc_style(("sans-serif", 16))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        let bw = 180.0 / m as f64;
+        chart
+            .draw_series((0..m * m).map(|k| {
+                let (i, j) = (k / m, k % m);
+                let x0 = -90.0 + j as f64 * bw;
+                let y0 = -90.0 + i as f64 * bw;
+                Rectangle::new([(x0, y0), (x0 + bw, y0 + bw)], colour(table.rho_m[k] / vmax).filled())
+            }))
+            .map_err(|e| e.to_string())?;
+        // Colour bar.
+        let mut bar = ChartBuilder::on(&right)
+            .margin_top(50)
+            .margin_bottom(60)
+            .margin_right(10)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..1.0f64, 0.0..vmax)
+            .map_err(|e| e.to_string())?;
+        bar.configure_mesh()
+            .disable_mesh()
+            .disable_x_axis()
+            .y_desc("rho_m")
+            .label_style(("sans-serif", 14))
+            .axis_desc_style(("sans-serif", 16))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        let steps = 200;
+        bar.draw_series((0..steps).map(|k| {
+            let a = vmax * k as f64 / steps as f64;
+            let b = vmax * (k + 1) as f64 / steps as f64;
+            Rectangle::new([(0.0, a), (1.0, b)], colour((k as f64 + 0.5) / steps as f64).filled())
+        }))
+        .map_err(|e| e.to_string())?;
+        root.present().map_err(|e| e.to_string())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::profile::Profile;
+    use crate::table::TableParams;
+    use crate::trace2d::{TraceSettings, Walls};
+
+    #[test]
+    fn plots_are_written_and_bad_angles_rejected() {
+        let s = TraceSettings { walls: Walls::Diffuse, m: 16, n: 200, nr: 4, ..TraceSettings::default() };
+        let t = ScratchTable::compute(&TableParams::new(Profile::parse("v:angle=90").unwrap(), s), &|_| {}).unwrap();
+        let dir = std::env::temp_dir().join(format!("striae-plot-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let lobe = dir.join("lobe.png");
+        plot_lobe(&t, 30.0, &lobe).unwrap();
+        let img = image::open(&lobe).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (900, 520));
+        // Blue lobe and red incident line are drawn.
+        assert!(img.pixels().any(|p| p.0 == [0, 0, 255]));
+        assert!(img.pixels().any(|p| p.0 == [255, 0, 0]));
+        let heat = dir.join("heat.png");
+        plot_heatmap(&t, &heat).unwrap();
+        assert!(image::open(&heat).is_ok());
+        assert!(matches!(plot_lobe(&t, 90.0, &dir.join("x.png")), Err(PlotError::BadAngle(_))));
+        assert!(!dir.join("x.png").exists());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

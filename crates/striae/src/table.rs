@@ -1,1 +1,766 @@
-//! (to be written)
+//! The scratch BRDF table: theta slices, gamma, the 3D BRDF and its sampler (METHOD.md
+//! sections 4 and 6), and the `.npz` file that stores it.
+//!
+//! [`ScratchTable::compute`] traces a profile ([`crate::trace2d`]), applies Fresnel per theta
+//! slice (`seed` mode: `rho_s(theta) = rho_m F(cos theta)`, the seed's assumption; `walls` mode:
+//! Fresnel at every wall hit, [Raymond16]) and fits `gamma` per bin by eq. (4).
+//! [`ScratchBrdf`] evaluates the 3D BRDF by eq. (3) with the `2/pi` unit factor of section 4
+//! and samples it as section 6 prescribes; for mirror walls it is the delta-in-theta lobe.
+//! The file layout is documented in `docs/table-format.md`.
+
+use crate::fresnel::FresnelLaw;
+use crate::math::Vec3;
+use crate::profile::Profile;
+use crate::sampling::Distribution1D;
+use crate::trace2d::{self, bin_centre, bin_of, FresnelMode, TraceError, TraceSettings, Walls, COS_THETA_SLICES, THETA_SLICES};
+use ndarray::{Array1, Array2, Array3, ArrayD, IxDyn};
+use ndarray_npy::{NpzReader, NpzWriter};
+use sha2::{Digest, Sha256};
+use std::f64::consts::{FRAC_PI_2, PI};
+use std::path::{Path, PathBuf};
+
+/// Version of the table file layout; files with another version are refused.
+pub const FORMAT_VERSION: i64 = 1;
+
+/// Everything that determines a table.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TableParams {
+    pub profile: Profile,
+    pub trace: TraceSettings,
+}
+
+impl TableParams {
+    pub fn new(profile: Profile, trace: TraceSettings) -> Self {
+        TableParams { profile, trace }
+    }
+
+    /// The JSON record stored in the file (`params_json`).
+    pub fn to_json(&self) -> serde_json::Value {
+        let mut v = serde_json::to_value(&self.trace).expect("settings serialise");
+        let o = v.as_object_mut().expect("object");
+        o.insert("profile".into(), self.profile.spec.clone().into());
+        o.insert("profile_points".into(), serde_json::to_value(&self.profile.points).expect("points"));
+        let ior = match self.trace.fresnel_law {
+            FresnelLaw::Schlick { n } | FresnelLaw::Dielectric { n } => n,
+            FresnelLaw::Conductor { eta, .. } => eta,
+        };
+        o.insert("ior".into(), ior.into());
+        o.insert("format_version".into(), FORMAT_VERSION.into());
+        o.insert("striae_version".into(), crate::VERSION.into());
+        v
+    }
+
+    fn from_json(v: &serde_json::Value) -> Result<Self, String> {
+        let trace: TraceSettings = serde_json::from_value(v.clone()).map_err(|e| e.to_string())?;
+        let spec = v.get("profile").and_then(|s| s.as_str()).ok_or("missing `profile`")?.to_string();
+        let points: Vec<[f64; 2]> = serde_json::from_value(v.get("profile_points").cloned().ok_or("missing `profile_points`")?)
+            .map_err(|e| format!("profile_points: {e}"))?;
+        let profile = Profile::from_points(spec, points).map_err(|e| e.to_string())?;
+        trace.validate().map_err(|e| e.to_string())?;
+        Ok(TableParams { profile, trace })
+    }
+
+    /// A stable SHA-256 (hex) of what determines the table's values: the format version, the
+    /// profile's vertices (not its spec or file name) and the trace settings. For on-disk caches.
+    pub fn hash(&self) -> String {
+        let key = serde_json::json!({
+            "format_version": FORMAT_VERSION,
+            "profile_points": self.profile.points,
+            "trace": self.trace,
+        });
+        let digest = Sha256::digest(key.to_string().as_bytes());
+        digest.iter().map(|b| format!("{b:02x}")).collect()
+    }
+}
+
+/// Errors computing, reading or writing a table.
+#[derive(Debug, thiserror::Error)]
+pub enum TableError {
+    #[error(transparent)]
+    Trace(#[from] TraceError),
+    #[error("table {path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("table {path}: not a readable .npz file ({why})")]
+    Npz { path: PathBuf, why: String },
+    #[error("table {path}: missing key `{key}`")]
+    MissingKey { path: PathBuf, key: &'static str },
+    #[error("table {path}: key `{key}` cannot be read as {dtype}: {why}")]
+    BadArray { path: PathBuf, key: &'static str, dtype: &'static str, why: String },
+    #[error("table {path}: key `{key}` has shape {got:?}, expected {expected:?}")]
+    Shape { path: PathBuf, key: &'static str, got: Vec<usize>, expected: Vec<usize> },
+    #[error("table {path}: key `{key}` holds a non-finite or negative value {value} at flat index {index}")]
+    BadValue { path: PathBuf, key: &'static str, index: usize, value: f64 },
+    #[error("table {path}: format version {found}, this striae reads version {expected}")]
+    Incompatible { path: PathBuf, found: i64, expected: i64 },
+    #[error("table {path}: bad parameters in `params_json`: {why}")]
+    Params { path: PathBuf, why: String },
+}
+
+/// A precomputed scratch BRDF. Arrays are row-major `[phi_i bin][phi_o bin]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ScratchTable {
+    pub params: TableParams,
+    /// `M`.
+    pub m: usize,
+    /// Bin centres `phi_k = -pi/2 + (k + 1/2) pi / M`.
+    pub phi: Vec<f64>,
+    /// `rho_m`, `M x M`, eq. (1'), no Fresnel.
+    pub rho_m: Vec<f64>,
+    /// `rho_s(theta)` for [`THETA_SLICES`], `3 x M x M`.
+    pub rho_s: Vec<f64>,
+    /// Eq. (4) exponent per bin, `M x M`.
+    pub gamma: Vec<f64>,
+    /// Per `phi_i`: energy fraction dropped by the bounce cap.
+    pub dropped: Vec<f64>,
+    /// The striae version that computed it.
+    pub version: String,
+}
+
+/// The `gamma` used where eq. (4) is degenerate: equal slices (`|rho(pi/2) - rho(0)|` below
+/// `1e-12` of their size, e.g. empty bins) or `R_3` outside `(0, 1)` (non-monotone in theta,
+/// possible in `walls` mode). `gamma = 1` is a linear blend in `|theta_o|`.
+pub const GAMMA_FALLBACK: f64 = 1.0;
+
+/// Eq. (4): `gamma = ln(R_3) / ln(2/3)`, `R_3 = (rho(pi/3) - rho(0)) / (rho(pi/2) - rho(0))`,
+/// with the fallback [`GAMMA_FALLBACK`].
+pub fn fit_gamma(rho0: f64, rho3: f64, rho2: f64) -> f64 {
+    let den = rho2 - rho0;
+    if den.abs() <= 1e-12 * (rho0.abs() + rho2.abs()) || den == 0.0 {
+        return GAMMA_FALLBACK;
+    }
+    let r3 = (rho3 - rho0) / den;
+    if r3 > 0.0 && r3 < 1.0 && r3.is_finite() {
+        r3.ln() / (2.0f64 / 3.0).ln()
+    } else {
+        GAMMA_FALLBACK
+    }
+}
+
+impl ScratchTable {
+    /// Trace and assemble a table (sections 3-4). `progress(done_walks)` is called from worker
+    /// threads; the total is `params.trace.total_paths()`.
+    pub fn compute(params: &TableParams, progress: &(dyn Fn(u64) + Sync)) -> Result<Self, TableError> {
+        let out = trace2d::trace(&params.profile, &params.trace, progress)?;
+        let m = out.m;
+        let mm = m * m;
+        let rho_s = match (params.trace.fresnel_mode, out.rho_walls) {
+            (FresnelMode::Walls, Some(w)) => w,
+            _ => {
+                // The seed's assumption: rho_s(theta) = rho_m F(n, cos theta).
+                let law = params.trace.fresnel_law;
+                let mut v = Vec::with_capacity(3 * mm);
+                for c in COS_THETA_SLICES {
+                    let f = law.reflectance(c);
+                    v.extend(out.rho_m.iter().map(|r| r * f));
+                }
+                v
+            }
+        };
+        let gamma = (0..mm).map(|k| fit_gamma(rho_s[k], rho_s[mm + k], rho_s[2 * mm + k])).collect();
+        Ok(ScratchTable {
+            params: params.clone(),
+            m,
+            phi: (0..m).map(|k| bin_centre(k, m)).collect(),
+            rho_m: out.rho_m,
+            rho_s,
+            gamma,
+            dropped: out.dropped,
+            version: crate::VERSION.to_string(),
+        })
+    }
+
+    /// Per `phi_i` row: the 2D albedo `sum_j rho_m cos(phi_j) pi/M` (eq. 1' makes it <= 1).
+    pub fn albedo_2d(&self) -> Vec<f64> {
+        let m = self.m;
+        (0..m).map(|i| (0..m).map(|j| self.rho_m[i * m + j] * self.phi[j].cos() * PI / m as f64).sum()).collect()
+    }
+
+    /// Write the `.npz` (atomically; layout in `docs/table-format.md`).
+    pub fn save(&self, path: &Path) -> Result<(), TableError> {
+        let m = self.m;
+        let npz_err = |e: ndarray_npy::WriteNpzError| std::io::Error::other(e.to_string());
+        let json = serde_json::to_string_pretty(&self.params.to_json()).expect("json");
+        crate::io::write_atomically(path, |tmp| {
+            let file = std::fs::File::create(tmp)?;
+            let mut w = NpzWriter::new(std::io::BufWriter::new(file));
+            let sh = |v: &[f64], s: &[usize]| ArrayD::from_shape_vec(IxDyn(s), v.to_vec()).expect("shape");
+            w.add_array("phi", &Array1::from(self.phi.clone())).map_err(npz_err)?;
+            w.add_array("theta", &Array1::from(THETA_SLICES.to_vec())).map_err(npz_err)?;
+            w.add_array("rho_m", &sh(&self.rho_m, &[m, m])).map_err(npz_err)?;
+            w.add_array("rho_s", &sh(&self.rho_s, &[3, m, m])).map_err(npz_err)?;
+            w.add_array("gamma", &sh(&self.gamma, &[m, m])).map_err(npz_err)?;
+            w.add_array("dropped", &Array1::from(self.dropped.clone())).map_err(npz_err)?;
+            w.add_array("albedo_2d", &Array1::from(self.albedo_2d())).map_err(npz_err)?;
+            w.add_array("params_json", &Array1::from(json.as_bytes().to_vec())).map_err(npz_err)?;
+            w.add_array("version", &Array1::from(self.version.as_bytes().to_vec())).map_err(npz_err)?;
+            w.add_array("format_version", &ndarray::arr0(FORMAT_VERSION)).map_err(npz_err)?;
+            w.finish().map_err(npz_err)?;
+            Ok(())
+        })
+        .map_err(|e| TableError::Io { path: path.into(), source: e })
+    }
+
+    /// Read and validate a table written by [`ScratchTable::save`].
+    pub fn load(path: &Path) -> Result<Self, TableError> {
+        let p = || path.to_path_buf();
+        let file = std::fs::File::open(path).map_err(|e| TableError::Io { path: p(), source: e })?;
+        let mut npz = NpzReader::new(std::io::BufReader::new(file)).map_err(|e| TableError::Npz { path: p(), why: e.to_string() })?;
+        let names = npz.names().map_err(|e| TableError::Npz { path: p(), why: e.to_string() })?;
+        let has = |k: &str| names.iter().any(|n| n == k);
+        for key in ["format_version", "params_json", "phi", "theta", "rho_m", "rho_s", "gamma"] {
+            if !has(key) {
+                return Err(TableError::MissingKey { path: p(), key });
+            }
+        }
+        let fv: ndarray::Array0<i64> = npz
+            .by_name("format_version")
+            .map_err(|e| TableError::BadArray { path: p(), key: "format_version", dtype: "int64 scalar", why: e.to_string() })?;
+        let fv = fv.into_scalar();
+        if fv != FORMAT_VERSION {
+            return Err(TableError::Incompatible { path: p(), found: fv, expected: FORMAT_VERSION });
+        }
+        let bytes = |npz: &mut NpzReader<_>, key: &'static str| -> Result<String, TableError> {
+            let a: Array1<u8> =
+                npz.by_name(key).map_err(|e| TableError::BadArray { path: p(), key, dtype: "uint8[]", why: e.to_string() })?;
+            String::from_utf8(a.to_vec()).map_err(|e| TableError::BadArray { path: p(), key, dtype: "UTF-8 text", why: e.to_string() })
+        };
+        let json = bytes(&mut npz, "params_json")?;
+        let version = if has("version") { bytes(&mut npz, "version")? } else { String::new() };
+        let value: serde_json::Value = serde_json::from_str(&json).map_err(|e| TableError::Params { path: p(), why: e.to_string() })?;
+        let params = TableParams::from_json(&value).map_err(|why| TableError::Params { path: p(), why })?;
+        let m = params.trace.m;
+        let mut get = |key: &'static str, shape: &[usize], nonneg: bool| -> Result<Vec<f64>, TableError> {
+            let a: ArrayD<f64> =
+                npz.by_name(key).map_err(|e| TableError::BadArray { path: p(), key, dtype: "float64", why: e.to_string() })?;
+            if a.shape() != shape {
+                return Err(TableError::Shape { path: p(), key, got: a.shape().to_vec(), expected: shape.to_vec() });
+            }
+            let v: Vec<f64> = a.iter().copied().collect();
+            if let Some((index, &value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite() || (nonneg && **x < 0.0)) {
+                return Err(TableError::BadValue { path: p(), key, index, value });
+            }
+            Ok(v)
+        };
+        let phi = get("phi", &[m], false)?;
+        let theta = get("theta", &[3], false)?;
+        let rho_m = get("rho_m", &[m, m], true)?;
+        let rho_s = get("rho_s", &[3, m, m], true)?;
+        let gamma = get("gamma", &[m, m], true)?;
+        let dropped = if has("dropped") { get("dropped", &[m], true)? } else { vec![0.0; m] };
+        for (k, (&a, &b)) in phi.iter().zip((0..m).map(|k| bin_centre(k, m)).collect::<Vec<_>>().iter()).enumerate() {
+            if (a - b).abs() > 1e-12 {
+                return Err(TableError::BadValue { path: p(), key: "phi", index: k, value: a });
+            }
+        }
+        for (k, (&a, &b)) in theta.iter().zip(THETA_SLICES.iter()).enumerate() {
+            if (a - b).abs() > 1e-12 {
+                return Err(TableError::BadValue { path: p(), key: "theta", index: k, value: a });
+            }
+        }
+        Ok(ScratchTable { params, m, phi, rho_m, rho_s, gamma, dropped, version })
+    }
+
+    /// `rho_s` slice `c` at `[phi_i bin i][phi_o bin o]`.
+    #[inline]
+    pub fn slice(&self, c: usize, i: usize, o: usize) -> f64 {
+        self.rho_s[(c * self.m + i) * self.m + o]
+    }
+
+    /// Eq. (3)-(4): `rho_s(theta_o, phi_o, phi_i) = R rho_s(pi/2) + (1 - R) rho_s(0)`,
+    /// `R = (2 |theta_o| / pi)^gamma`, for bins `i` (phi_i) and `o` (phi_o).
+    #[inline]
+    pub fn rho(&self, theta_o: f64, i: usize, o: usize) -> f64 {
+        let g = self.gamma[i * self.m + o];
+        let t = (2.0 * theta_o.abs() / PI).min(1.0);
+        let r = if t == 0.0 { 0.0 } else { t.powf(g) };
+        r * self.slice(2, i, o) + (1.0 - r) * self.slice(0, i, o)
+    }
+
+    /// Convenience: `Array2` views for callers that prefer ndarray.
+    pub fn rho_m_array(&self) -> Array2<f64> {
+        Array2::from_shape_vec((self.m, self.m), self.rho_m.clone()).expect("shape")
+    }
+
+    pub fn rho_s_array(&self) -> Array3<f64> {
+        Array3::from_shape_vec((3, self.m, self.m), self.rho_s.clone()).expect("shape")
+    }
+}
+
+/// A sampled incident direction (scratch frame).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScratchSample {
+    pub wi: Vec3,
+    /// `f cos(theta_i)/pdf` for the smooth lobe; for the delta lobe the row's sum term over
+    /// its probability: `rho_s cos(phi_i) (pi/M) / pmf`.
+    pub weight: f64,
+    /// Solid-angle pdf (smooth lobe) or the density in `phi_i` of the delta lobe.
+    pub pdf: f64,
+    /// Mirror walls: a delta in theta (`theta_i = -theta_o`).
+    pub delta: bool,
+}
+
+/// One term of the delta lobe's discrete sum (mirror walls, section 6).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DeltaTerm {
+    /// Direction at the bin centre `phi_k`, `theta_i = -theta_o`.
+    pub wi: Vec3,
+    /// `rho_s(theta_o, phi_o, phi_k) cos(phi_k) pi / M`.
+    pub value: f64,
+}
+
+/// The 3D scratch BRDF of a table in the scratch frame: `x` across the scratch, `y` along it,
+/// `z` the normal; `wo`, `wi` point away from the surface (METHOD.md section 1:
+/// `phi = atan2(x, z)`, `theta = asin(y)`). Angles are looked up in the nearest bin
+/// (piecewise-constant in `phi_o`, `phi_i`; no interpolation).
+#[derive(Clone, Debug)]
+pub struct ScratchBrdf {
+    table: ScratchTable,
+    delta: bool,
+    /// Per `phi_o` bin: distribution over `phi_i` bins of `rho_s(pi/2, phi_o, phi_i) cos(phi_i)`.
+    rows: Vec<Distribution1D>,
+}
+
+/// `(theta, phi)` of a unit direction (section 1).
+#[inline]
+fn angles(w: Vec3) -> (f64, f64) {
+    let (x, y, z) = (w.x as f64, w.y as f64, w.z as f64);
+    ((y.clamp(-1.0, 1.0)).asin(), x.atan2(z))
+}
+
+#[inline]
+fn direction(theta: f64, phi: f64) -> Vec3 {
+    let c = theta.cos();
+    Vec3::new((c * phi.sin()) as f32, theta.sin() as f32, (c * phi.cos()) as f32)
+}
+
+/// Inverse CDF of the density `(2/pi) cos^2(theta)` on `[-pi/2, pi/2]`:
+/// solves `(theta + pi/2 + sin(2 theta)/2) / pi = u` by safeguarded Newton.
+fn sample_cos2(u: f64) -> f64 {
+    let target = u.clamp(0.0, 1.0) * PI - FRAC_PI_2;
+    let (mut lo, mut hi) = (-FRAC_PI_2, FRAC_PI_2);
+    let mut t = 0.5 * target; // g(t) = t + sin(2t)/2 is within [t, 2t]-ish; any start works.
+    for _ in 0..60 {
+        let g = t + 0.5 * (2.0 * t).sin() - target;
+        if g > 0.0 {
+            hi = t;
+        } else {
+            lo = t;
+        }
+        let dg = 2.0 * t.cos() * t.cos();
+        let mut next = if dg > 1e-300 { t - g / dg } else { 0.5 * (lo + hi) };
+        if !(next > lo && next < hi) {
+            next = 0.5 * (lo + hi);
+        }
+        if (next - t).abs() < 1e-15 {
+            return next;
+        }
+        t = next;
+    }
+    t
+}
+
+impl ScratchBrdf {
+    pub fn new(table: ScratchTable) -> Self {
+        let m = table.m;
+        let delta = table.params.trace.walls == Walls::Specular;
+        let rows = (0..m)
+            .map(|o| {
+                let w: Vec<f64> = (0..m).map(|i| table.slice(2, i, o) * table.phi[i].cos()).collect();
+                Distribution1D::new(&w)
+            })
+            .collect();
+        ScratchBrdf { table, delta, rows }
+    }
+
+    pub fn table(&self) -> &ScratchTable {
+        &self.table
+    }
+
+    /// Mirror walls: the lobe is a delta in theta; use [`ScratchBrdf::sample`] and
+    /// [`ScratchBrdf::delta_terms`], `eval`/`pdf` return 0.
+    pub fn is_delta(&self) -> bool {
+        self.delta
+    }
+
+    /// `f(wo, wi)` of the smooth lobe, without the cosine: `(2/pi) rho_s(wo, wi)` by eq. (3)
+    /// (section 4's unit factor). 0 for the delta lobe or either direction below the surface.
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> f64 {
+        if self.delta || wo.z <= 0.0 || wi.z <= 0.0 {
+            return 0.0;
+        }
+        let m = self.table.m;
+        let (theta_o, phi_o) = angles(wo);
+        let (_, phi_i) = angles(wi);
+        2.0 / PI * self.table.rho(theta_o, bin_of(phi_i, m), bin_of(phi_o, m))
+    }
+
+    /// Solid-angle pdf of [`ScratchBrdf::sample`] (smooth lobe): `p(phi_i) (2/pi) cos(theta_i)`,
+    /// from `p(phi_i, theta_i) = p(phi_i) (2/pi) cos^2(theta_i)` and `dw = cos(theta) dtheta dphi`.
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f64 {
+        if self.delta || wo.z <= 0.0 || wi.z <= 0.0 {
+            return 0.0;
+        }
+        let (_, phi_o) = angles(wo);
+        let row = &self.rows[bin_of(phi_o, self.table.m)];
+        if row.integral() <= 0.0 {
+            return 0.0;
+        }
+        let (theta_i, phi_i) = angles(wi);
+        let p_phi = row.pdf(((phi_i + FRAC_PI_2) / PI).clamp(0.0, 1.0)) / PI;
+        p_phi * 2.0 / PI * theta_i.cos()
+    }
+
+    /// Section 6: `phi_i` from the row CDF of `rho_s(pi/2, phi_o, .) cos(phi_i)`, then
+    /// `theta_i` with density `(2/pi) cos^2` (smooth lobe) or `theta_i = -theta_o` (delta).
+    /// `None` where `wo` is below the surface or the row carries no energy.
+    pub fn sample(&self, wo: Vec3, u: [f64; 2]) -> Option<ScratchSample> {
+        if wo.z <= 0.0 {
+            return None;
+        }
+        let m = self.table.m;
+        let (theta_o, phi_o) = angles(wo);
+        let o = bin_of(phi_o, m);
+        let row = &self.rows[o];
+        if row.integral() <= 0.0 {
+            return None;
+        }
+        if self.delta {
+            let (k, du) = row.sample_discrete(u[0]);
+            let pmf = row.pmf(k);
+            let phi_i = -FRAC_PI_2 + (k as f64 + du) * PI / m as f64;
+            let wi = direction(-theta_o, phi_i);
+            let value = self.table.rho(theta_o, k, o) * phi_i.cos() * PI / m as f64;
+            return Some(ScratchSample { wi, weight: value / pmf, pdf: pmf * m as f64 / PI, delta: true });
+        }
+        let (x, pdf_x, _) = row.sample_continuous(u[0]);
+        let phi_i = -FRAC_PI_2 + x * PI;
+        let theta_i = sample_cos2(u[1]);
+        let wi = direction(theta_i, phi_i);
+        if wi.z <= 0.0 {
+            return None;
+        }
+        let pdf = self.pdf(wo, wi);
+        if pdf <= 0.0 {
+            return None;
+        }
+        let _ = pdf_x;
+        let f = self.eval(wo, wi);
+        Some(ScratchSample { wi, weight: f * wi.z as f64 / pdf, pdf, delta: false })
+    }
+
+    /// The delta lobe's probability of choosing `phi_i` bin `k` for `wo` (mirror walls).
+    pub fn delta_pmf(&self, wo: Vec3, k: usize) -> f64 {
+        let (_, phi_o) = angles(wo);
+        let row = &self.rows[bin_of(phi_o, self.table.m)];
+        if row.integral() <= 0.0 {
+            0.0
+        } else {
+            row.pmf(k)
+        }
+    }
+
+    /// The discrete-phi form of the delta lobe (section 6): `L_r(wo) = sum_k value_k L_i(wi_k)`
+    /// with `theta_i = -theta_o`. Empty if `wo` is below the surface.
+    pub fn delta_terms(&self, wo: Vec3) -> Vec<DeltaTerm> {
+        if wo.z <= 0.0 {
+            return Vec::new();
+        }
+        let m = self.table.m;
+        let (theta_o, phi_o) = angles(wo);
+        let o = bin_of(phi_o, m);
+        (0..m)
+            .map(|k| {
+                let phi = self.table.phi[k];
+                DeltaTerm { wi: direction(-theta_o, phi), value: self.table.rho(theta_o, k, o) * phi.cos() * PI / m as f64 }
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::{chi2_discrete, chi2_sphere, MeanEstimate, SphereGrid};
+    use rand::{Rng, SeedableRng};
+
+    fn params(spec: &str, walls: Walls, mode: FresnelMode) -> TableParams {
+        TableParams::new(
+            Profile::parse(spec).unwrap(),
+            TraceSettings { walls, m: 24, n: 1500, nr: 8, fresnel_mode: mode, seed: 3, ..TraceSettings::default() },
+        )
+    }
+
+    fn tmpdir() -> PathBuf {
+        let d = std::env::temp_dir().join(format!("striae-table-{}-{:?}", std::process::id(), std::thread::current().id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    #[test]
+    fn seed_mode_gamma_is_the_closed_form() {
+        let t = ScratchTable::compute(&params("v:angle=90", Walls::Diffuse, FresnelMode::Seed), &|_| {}).unwrap();
+        let law = t.params.trace.fresnel_law;
+        let (f0, f3, f2) = (law.reflectance(1.0), law.reflectance(0.5), law.reflectance(0.0));
+        let closed = ((f3 - f0) / (f2 - f0)).ln() / (2.0f64 / 3.0).ln();
+        // Schlick: R_3 = (1 - 1/2)^5 = 1/32, independent of n.
+        assert!((closed - (1.0f64 / 32.0).ln() / (2.0f64 / 3.0).ln()).abs() < 1e-9);
+        let mut checked = 0;
+        for k in 0..t.m * t.m {
+            if t.rho_m[k] > 0.0 {
+                assert!((t.gamma[k] - closed).abs() < 1e-9, "bin {k}: {}", t.gamma[k]);
+                checked += 1;
+            } else {
+                assert_eq!(t.gamma[k], GAMMA_FALLBACK);
+            }
+        }
+        assert!(checked > t.m * t.m / 2);
+        // Eq. (3) reproduces the slices at theta = 0, pi/3, pi/2.
+        for k in (0..t.m * t.m).step_by(7) {
+            let (i, o) = (k / t.m, k % t.m);
+            for (c, th) in THETA_SLICES.iter().enumerate() {
+                let r = t.rho(*th, i, o);
+                assert!((r - t.slice(c, i, o)).abs() <= 1e-9 * r.max(1e-300), "{c} {k}");
+            }
+        }
+    }
+
+    #[test]
+    fn gamma_fallback() {
+        assert_eq!(fit_gamma(1.0, 1.0, 1.0), GAMMA_FALLBACK);
+        assert_eq!(fit_gamma(0.0, 0.0, 0.0), GAMMA_FALLBACK);
+        assert_eq!(fit_gamma(0.1, 0.5, 0.3), GAMMA_FALLBACK); // R_3 > 1
+        assert!((fit_gamma(0.0, 2.0 / 3.0, 1.0) - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn diffuse_tables_are_reciprocal() {
+        // For lossless Lambertian walls rho_m(phi_o, phi_i) = rho_m(phi_i, phi_o) in expectation.
+        // Entries are (weighted) counts: sigma of entry [i][j] ~ sqrt(p (1 - p)/ (N N_r)) * norm.
+        let s = TraceSettings { walls: Walls::Diffuse, m: 12, n: 4000, nr: 16, seed: 9, ..TraceSettings::default() };
+        let t = ScratchTable::compute(&TableParams::new(Profile::parse("round:depth=0.45").unwrap(), s.clone()), &|_| {}).unwrap();
+        let m = t.m;
+        let walks = (s.n * s.nr) as f64;
+        let mut worst = 0.0f64;
+        for i in 0..m {
+            for j in i + 1..m {
+                let sigma = |a: usize, b: usize| {
+                    let norm = m as f64 / (PI * t.phi[b].cos());
+                    let p = (t.rho_m[a * m + b] / norm).clamp(1e-6, 1.0);
+                    // N_r walks from one entry are correlated: inflate by sqrt(N_r) (conservative).
+                    (p * (1.0 - p) / walks).sqrt() * norm * (s.nr as f64).sqrt()
+                };
+                let d = t.rho_m[i * m + j] - t.rho_m[j * m + i];
+                let z = d / (sigma(i, j).powi(2) + sigma(j, i).powi(2)).sqrt();
+                worst = worst.max(z.abs());
+            }
+        }
+        assert!(worst < 4.5, "worst |z| = {worst}");
+        // And a mirror V-groove is not reciprocal bin-wise in a way that would pass trivially:
+        // check the statistic can fail by comparing rows that differ.
+        let d = (t.rho_m[0] - t.rho_m[m / 2 * m + m / 2]).abs();
+        assert!(d > 0.0);
+    }
+
+    #[test]
+    fn flat_diffuse_is_lambertian_in_3d() {
+        // Section 4: a flat diffuse profile gives rho_m ~ 1/2, so f_r = (2/pi)(1/2) F = F/pi.
+        let s = TraceSettings { walls: Walls::Diffuse, m: 8, n: 4000, nr: 16, ..TraceSettings::default() };
+        let t = ScratchTable::compute(&TableParams::new(Profile::flat(), s), &|_| {}).unwrap();
+        let brdf = ScratchBrdf::new(t);
+        let wo = Vec3::new(0.3, 0.0, 1.0).normalize();
+        let wi = Vec3::new(-0.2, 0.0, 1.0).normalize();
+        let f = brdf.eval(wo, wi);
+        let expect = crate::fresnel::schlick(1.5, 1.0) / PI;
+        assert!((f - expect).abs() < 0.03 * expect, "{f} vs {expect}");
+    }
+
+    #[test]
+    fn save_load_round_trip_and_hash() {
+        let p = params("trapezoid:depth=0.3,bottom=0.3", Walls::Diffuse, FresnelMode::Walls);
+        let t = ScratchTable::compute(&p, &|_| {}).unwrap();
+        let dir = tmpdir();
+        let f = dir.join("t.npz");
+        t.save(&f).unwrap();
+        let u = ScratchTable::load(&f).unwrap();
+        assert_eq!(t, u);
+        // Hash: stable for equal parameters, different for different ones.
+        assert_eq!(p.hash(), u.params.hash());
+        assert_eq!(p.hash().len(), 64);
+        let mut q = p.clone();
+        q.trace.seed += 1;
+        assert_ne!(p.hash(), q.hash());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn bad_files_are_rejected() {
+        let p = params("v:depth=0.4", Walls::Specular, FresnelMode::Seed);
+        let t = ScratchTable::compute(&p, &|_| {}).unwrap();
+        let dir = tmpdir();
+        let good = dir.join("good.npz");
+        t.save(&good).unwrap();
+        let bytes = std::fs::read(&good).unwrap();
+        // Missing file, garbage, truncated.
+        assert!(matches!(ScratchTable::load(&dir.join("none.npz")), Err(TableError::Io { .. })));
+        let f = dir.join("garbage.npz");
+        std::fs::write(&f, b"not a zip at all").unwrap();
+        assert!(matches!(ScratchTable::load(&f), Err(TableError::Npz { .. })));
+        let f = dir.join("trunc.npz");
+        std::fs::write(&f, &bytes[..bytes.len() / 2]).unwrap();
+        assert!(ScratchTable::load(&f).is_err());
+        // Hand-made incompatible files.
+        let write = |name: &str, edit: &dyn Fn(&mut NpzWriter<std::fs::File>)| {
+            let f = dir.join(name);
+            let mut w = NpzWriter::new(std::fs::File::create(&f).unwrap());
+            edit(&mut w);
+            w.finish().unwrap();
+            f
+        };
+        let m = t.m;
+        let json = serde_json::to_string(&t.params.to_json()).unwrap();
+        let full = |w: &mut NpzWriter<std::fs::File>, fv: i64, json: &str, rho_shape: Vec<usize>, rho_val: f64| {
+            w.add_array("format_version", &ndarray::arr0(fv)).unwrap();
+            w.add_array("params_json", &Array1::from(json.as_bytes().to_vec())).unwrap();
+            w.add_array("phi", &Array1::from(t.phi.clone())).unwrap();
+            w.add_array("theta", &Array1::from(THETA_SLICES.to_vec())).unwrap();
+            w.add_array("rho_m", &ArrayD::from_elem(IxDyn(&rho_shape), rho_val)).unwrap();
+            w.add_array("rho_s", &ArrayD::from_elem(IxDyn(&[3, m, m]), 0.0)).unwrap();
+            w.add_array("gamma", &ArrayD::from_elem(IxDyn(&[m, m]), 1.0)).unwrap();
+        };
+        // Sanity: the hand-made good file loads.
+        let ok = write("ok.npz", &|w| full(w, FORMAT_VERSION, &json, vec![m, m], 0.5));
+        ScratchTable::load(&ok).unwrap();
+        let f = write("version.npz", &|w| full(w, 99, &json, vec![m, m], 0.5));
+        assert!(matches!(ScratchTable::load(&f), Err(TableError::Incompatible { found: 99, .. })));
+        let f = write("shape.npz", &|w| full(w, FORMAT_VERSION, &json, vec![m, m + 1], 0.5));
+        assert!(matches!(ScratchTable::load(&f), Err(TableError::Shape { key: "rho_m", .. })));
+        let f = write("nan.npz", &|w| full(w, FORMAT_VERSION, &json, vec![m, m], f64::NAN));
+        assert!(matches!(ScratchTable::load(&f), Err(TableError::BadValue { key: "rho_m", .. })));
+        let f = write("neg.npz", &|w| full(w, FORMAT_VERSION, &json, vec![m, m], -1.0));
+        assert!(matches!(ScratchTable::load(&f), Err(TableError::BadValue { key: "rho_m", .. })));
+        let f = write("json.npz", &|w| full(w, FORMAT_VERSION, "{not json", vec![m, m], 0.5));
+        assert!(matches!(ScratchTable::load(&f), Err(TableError::Params { .. })));
+        let bad_m = json.replace(&format!("\"m\":{m}"), "\"m\":0");
+        assert_ne!(bad_m, json);
+        let f = write("m0.npz", &|w| full(w, FORMAT_VERSION, &bad_m, vec![m, m], 0.5));
+        assert!(matches!(ScratchTable::load(&f), Err(TableError::Params { .. })));
+        let f = write("missing.npz", &|w| {
+            w.add_array("format_version", &ndarray::arr0(FORMAT_VERSION)).unwrap();
+        });
+        assert!(matches!(ScratchTable::load(&f), Err(TableError::MissingKey { .. })));
+        let f = write("dtype.npz", &|w| {
+            w.add_array("format_version", &ndarray::arr0(1.0f64)).unwrap();
+            w.add_array("params_json", &Array1::from(json.as_bytes().to_vec())).unwrap();
+            for k in ["phi", "theta", "rho_m", "rho_s", "gamma"] {
+                w.add_array(k, &Array1::from(vec![0.0f64])).unwrap();
+            }
+        });
+        assert!(matches!(ScratchTable::load(&f), Err(TableError::BadArray { key: "format_version", .. })));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    fn smooth_brdf() -> ScratchBrdf {
+        let s = TraceSettings { walls: Walls::Diffuse, m: 32, n: 1000, nr: 8, seed: 5, ..TraceSettings::default() };
+        ScratchBrdf::new(ScratchTable::compute(&TableParams::new(Profile::parse("v:angle=100").unwrap(), s), &|_| {}).unwrap())
+    }
+
+    fn dir_from(theta_deg: f64, phi_deg: f64) -> Vec3 {
+        direction(theta_deg.to_radians(), phi_deg.to_radians())
+    }
+
+    #[test]
+    fn smooth_sampler_chi2_and_pdf_consistency() {
+        let brdf = smooth_brdf();
+        let grid = SphereGrid::new(24, 48);
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+        for (t, p) in [(0.0, 0.0), (30.0, 40.0), (-50.0, -70.0), (80.0, 85.0), (10.0, -88.0)] {
+            let wo = dir_from(t, p);
+            let mut mismatch = 0;
+            let r = chi2_sphere(
+                &grid,
+                150_000,
+                || {
+                    let s = brdf.sample(wo, [rng.random(), rng.random()])?;
+                    let q = brdf.pdf(wo, s.wi);
+                    if (q - s.pdf).abs() > 1e-3 * s.pdf {
+                        mismatch += 1;
+                    }
+                    Some(s.wi)
+                },
+                |w| brdf.pdf(wo, w),
+            );
+            assert_eq!(mismatch, 0, "wo {t},{p}");
+            assert!(r.p_value > 1e-3, "wo ({t}, {p}): {r:?}");
+            assert!((r.pdf_mass - 1.0).abs() < 0.01, "{r:?}");
+        }
+    }
+
+    #[test]
+    fn smooth_sampler_weights_integrate_f_cos() {
+        // E[weight] = integral f cos dw, computed independently by quadrature over (theta, phi).
+        let brdf = smooth_brdf();
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(12);
+        for (t, p) in [(20.0, 10.0), (70.0, -60.0)] {
+            let wo = dir_from(t, p);
+            let mut est = MeanEstimate::default();
+            for _ in 0..40_000 {
+                est.push(brdf.sample(wo, [rng.random(), rng.random()]).map_or(0.0, |s| s.weight));
+            }
+            let n = 400;
+            let mut quad = 0.0;
+            for a in 0..n {
+                let th = -FRAC_PI_2 + (a as f64 + 0.5) * PI / n as f64;
+                for b in 0..n {
+                    let ph = -FRAC_PI_2 + (b as f64 + 0.5) * PI / n as f64;
+                    let wi = direction(th, ph);
+                    quad += brdf.eval(wo, wi) * wi.z as f64 * th.cos() * (PI / n as f64).powi(2);
+                }
+            }
+            assert!(est.agrees_with(quad, 4.0, 2e-3), "{} +- {} vs {quad}", est.mean(), est.std_error());
+            assert!(quad > 0.02 && quad < 1.0, "{quad}");
+        }
+    }
+
+    #[test]
+    fn delta_sampler_chi2_and_energy() {
+        let s = TraceSettings { walls: Walls::Specular, m: 32, n: 2000, seed: 5, ..TraceSettings::default() };
+        let brdf = ScratchBrdf::new(ScratchTable::compute(&TableParams::new(Profile::parse("round:depth=0.4").unwrap(), s), &|_| {}).unwrap());
+        assert!(brdf.is_delta());
+        let m = 32;
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(13);
+        for (t, p) in [(0.0, 10.0), (45.0, -30.0), (85.0, 80.0)] {
+            let wo = dir_from(t, p);
+            assert_eq!(brdf.eval(wo, wo), 0.0);
+            let n = 100_000;
+            let mut counts = vec![0u64; m];
+            let mut est = MeanEstimate::default();
+            for _ in 0..n {
+                let s = brdf.sample(wo, [rng.random(), rng.random()]).unwrap();
+                assert!(s.delta);
+                let (th, ph) = angles(s.wi);
+                assert!((th + t.to_radians()).abs() < 1e-5, "theta_i = -theta_o");
+                let k = bin_of(ph, m);
+                counts[k] += 1;
+                assert!((s.pdf - brdf.delta_pmf(wo, k) * m as f64 / PI).abs() < 1e-9);
+                est.push(s.weight);
+            }
+            let expected: Vec<f64> = (0..m).map(|k| brdf.delta_pmf(wo, k) * n as f64).collect();
+            let r = chi2_discrete(&counts, &expected);
+            assert!(r.p_value > 1e-3, "{r:?}");
+            // E[weight] = sum of the discrete terms (up to cos varying inside a bin).
+            let sum: f64 = brdf.delta_terms(wo).iter().map(|d| d.value).sum();
+            assert!(est.agrees_with(sum, 4.0, 2e-3 * sum), "{} vs {sum}", est.mean());
+            assert!(sum <= 1.0 + 1e-9);
+        }
+    }
+
+    #[test]
+    fn cos2_inverse_cdf() {
+        for k in 0..=100 {
+            let u = k as f64 / 100.0;
+            let t = sample_cos2(u);
+            let cdf = (t + FRAC_PI_2 + 0.5 * (2.0 * t).sin()) / PI;
+            assert!((cdf - u).abs() < 1e-9, "{u}: {t} {cdf}");
+        }
+    }
+}

@@ -1,8 +1,32 @@
-//! `striae plot` (to be written).
+//! `striae plot`: a polar lobe for one incident angle (the seed's Fig. 2) or a heat map of a
+//! scratch BRDF table.
+
+use anyhow::Context;
+use std::path::PathBuf;
+use striae::table::ScratchTable;
 
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// The table (.npz) written by `striae precompute`.
+    table: PathBuf,
+    /// Incident angle phi_i in degrees for the polar lobe plot.
+    #[arg(long, default_value_t = 30.0, allow_hyphen_values = true)]
+    phi_i: f64,
+    /// Plot the whole rho_m table as a heat map instead of one lobe.
+    #[arg(long)]
+    heatmap: bool,
+    /// Output PNG.
+    #[arg(short, long)]
+    output: PathBuf,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`striae plot` is not implemented yet")
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let table = ScratchTable::load(&a.table).with_context(|| format!("loading {}", a.table.display()))?;
+    if a.heatmap {
+        striae::plot::plot_heatmap(&table, &a.output)?;
+    } else {
+        striae::plot::plot_lobe(&table, a.phi_i, &a.output)?;
+    }
+    println!("wrote {}", a.output.display());
+    Ok(())
 }

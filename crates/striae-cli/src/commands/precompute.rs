@@ -1,8 +1,125 @@
-//! `striae precompute` (to be written).
+//! `striae precompute`: trace a scratch profile and write its BRDF table (METHOD.md 2-4).
+
+use anyhow::{bail, Context};
+use std::path::PathBuf;
+use std::time::Instant;
+use striae::fresnel::FresnelLaw;
+use striae::profile::Profile;
+use striae::table::{ScratchTable, TableParams};
+use striae::trace2d::{FresnelMode, TraceSettings, Walls};
 
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Profile: v:depth=D, v:angle=DEG, round:depth=D[,segments=K], trapezoid:depth=D,bottom=B,
+    /// flat, file:PATH (see docs/table-format.md).
+    #[arg(long, default_value = "v:angle=90")]
+    profile: String,
+    /// Wall micro-BRDF.
+    #[arg(long, value_enum, default_value_t = WallsArg::Diffuse)]
+    walls: WallsArg,
+    /// Angle bins M.
+    #[arg(long, default_value_t = 256)]
+    m: usize,
+    /// Entry points per incident angle N.
+    #[arg(long, default_value_t = 10_000)]
+    n: usize,
+    /// Walks per entry point N_r (diffuse walls).
+    #[arg(long, default_value_t = 100)]
+    nr: usize,
+    /// Index of refraction for schlick / dielectric.
+    #[arg(long, default_value_t = 1.5)]
+    ior: f64,
+    /// Where Fresnel is applied.
+    #[arg(long, value_enum, default_value_t = ModeArg::Seed)]
+    fresnel: ModeArg,
+    /// Fresnel law: schlick, dielectric or conductor:ETA,K.
+    #[arg(long, default_value = "schlick")]
+    fresnel_law: String,
+    /// Facet albedo per bounce.
+    #[arg(long, default_value_t = 1.0)]
+    albedo: f64,
+    /// Bounce cap.
+    #[arg(long, default_value_t = 64)]
+    max_bounces: usize,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Output table (.npz).
+    #[arg(short, long)]
+    output: PathBuf,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`striae precompute` is not implemented yet")
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum WallsArg {
+    Specular,
+    Diffuse,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum ModeArg {
+    Seed,
+    Walls,
+}
+
+/// Parse `--fresnel-law`.
+fn parse_law(s: &str, ior: f64) -> anyhow::Result<FresnelLaw> {
+    Ok(match s {
+        "schlick" => FresnelLaw::Schlick { n: ior },
+        "dielectric" => FresnelLaw::Dielectric { n: ior },
+        _ => {
+            let Some(rest) = s.strip_prefix("conductor:") else {
+                bail!("unknown --fresnel-law `{s}` (expected schlick, dielectric or conductor:ETA,K)")
+            };
+            let parts: Vec<&str> = rest.split(',').collect();
+            let [eta, k] = parts[..] else { bail!("--fresnel-law `{s}`: expected conductor:ETA,K") };
+            let eta: f64 = eta.trim().parse().with_context(|| format!("--fresnel-law `{s}`: ETA `{eta}`"))?;
+            let k: f64 = k.trim().parse().with_context(|| format!("--fresnel-law `{s}`: K `{k}`"))?;
+            FresnelLaw::Conductor { eta, k }
+        }
+    })
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let profile = Profile::parse(&a.profile).with_context(|| format!("--profile `{}`", a.profile))?;
+    let trace = TraceSettings {
+        walls: match a.walls {
+            WallsArg::Specular => Walls::Specular,
+            WallsArg::Diffuse => Walls::Diffuse,
+        },
+        m: a.m,
+        n: a.n,
+        nr: a.nr,
+        albedo: a.albedo,
+        max_bounces: a.max_bounces,
+        seed: a.seed,
+        fresnel_mode: match a.fresnel {
+            ModeArg::Seed => FresnelMode::Seed,
+            ModeArg::Walls => FresnelMode::Walls,
+        },
+        fresnel_law: parse_law(&a.fresnel_law, a.ior)?,
+    };
+    trace.validate().context("invalid precompute parameters")?;
+    let params = TableParams::new(profile, trace);
+    let total = params.trace.total_paths();
+    let bar = indicatif::ProgressBar::new(total);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {percent}% ({per_sec}, eta {eta})")
+            .expect("template"),
+    );
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(a.threads.unwrap_or(0)).build()?;
+    let start = Instant::now();
+    let table = pool.install(|| ScratchTable::compute(&params, &|k| bar.inc(k)))?;
+    let secs = start.elapsed().as_secs_f64();
+    bar.finish_and_clear();
+    table.save(&a.output).with_context(|| format!("writing {}", a.output.display()))?;
+    let alb = table.albedo_2d();
+    let (lo, hi) = alb.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+    let dropped = table.dropped.iter().cloned().fold(0.0, f64::max);
+    println!("profile {}  walls {:?}  M {}  N {}  N_r {}", params.profile.spec, params.trace.walls, table.m, params.trace.n, params.trace.nr);
+    println!("wall time {secs:.3} s, {total} paths, {:.3e} paths/s ({} threads)", total as f64 / secs, pool.current_num_threads());
+    println!("2D albedo range [{lo:.6}, {hi:.6}]; max energy dropped by the bounce cap {dropped:.3e}");
+    println!("wrote {} (params hash {})", a.output.display(), &params.hash()[..16]);
+    Ok(())
 }
