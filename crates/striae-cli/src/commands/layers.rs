@@ -1,8 +1,164 @@
-//! `striae layers` (to be written).
+//! `striae layers`: scratch layers from Worley cell noise (METHOD.md section 5) written as
+//! images: `layer-K.png` (anti-aliased coverage, white = scratch), `layers.png` (all layers
+//! tinted by direction), `layers.json` (parameters, per-layer angle, direction and measured
+//! coverage) and, with `--stages`, the three stages of the seed's Fig. 4 for layer 0.
+//!
+//! Pixel mapping: texel `(x, y)` (column, row; row 0 at the top) of an `R x R` image covers
+//! `u in [x/R, (x+1)/R]`, `v in [1 - (y+1)/R, 1 - y/R]`: `u` to the right, `v` up.
+//!
+//! Everything is validated and computed in memory first; files are then written atomically,
+//! and if one fails the ones already written (and a folder this run created) are removed.
+
+use anyhow::{bail, Context, Result};
+use std::path::{Path, PathBuf};
+use striae::layers::raster::{self, CombinedImage};
+use striae::layers::{LayerParams, LayerSet};
 
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// The seed's scratch setting (Table 1): 1 = (L 0.3, W 0.001, tau 0.1), 2 = (L 0.6, W 0.010, tau 0.1).
+    /// The default when neither a setting nor --length/--width/--threshold is given is 1.
+    #[arg(long, conflicts_with_all = ["length", "width", "threshold"])]
+    setting: Option<u32>,
+    /// Scratch length scale L (texture units; scratches are 2 tau L long).
+    #[arg(long, requires_all = ["width", "threshold"], allow_hyphen_values = true)]
+    length: Option<f64>,
+    /// Scratch width scale W (scratches are 2 tau W wide).
+    #[arg(long, requires_all = ["length", "threshold"], allow_hyphen_values = true)]
+    width: Option<f64>,
+    /// Threshold tau on the cell noise's F1, in (0, 1]; coverage is about pi tau^2.
+    #[arg(long, requires_all = ["length", "width"], allow_hyphen_values = true)]
+    threshold: Option<f64>,
+    /// Number of layers K.
+    #[arg(long, default_value_t = LayerParams::DEFAULT_LAYERS, allow_hyphen_values = true)]
+    layers: usize,
+    /// Image side R in pixels.
+    #[arg(long, default_value_t = 1024)]
+    res: usize,
+    /// Seed of the layer set (angles and noise of every layer).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Also write the three stages of the seed's Fig. 4 for layer 0.
+    #[arg(long)]
+    stages: bool,
+    /// Output folder (created if missing).
+    #[arg(short = 'o', long = "out")]
+    out: PathBuf,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`striae layers` is not implemented yet")
+/// Available memory from /proc/meminfo (Linux), if readable.
+fn mem_available() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = s.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let mut params = match (args.setting, args.length, args.width, args.threshold) {
+        (Some(n), ..) => LayerParams::setting(n)?,
+        (None, Some(length), Some(width), Some(threshold)) => {
+            LayerParams { length, width, threshold, layers: LayerParams::DEFAULT_LAYERS }
+        }
+        (None, None, None, None) => LayerParams::setting(1)?,
+        _ => bail!("give either --setting or all of --length, --width and --threshold"),
+    };
+    params.layers = args.layers;
+    let set = LayerSet::new(params, args.seed).context("invalid scratch layer parameters")?;
+    let res = args.res;
+    raster::check_resolution(res).context("invalid --res")?;
+    // Peak memory: one layer's coverage and mips (f32, 4/3), the combined image (3 f32), the
+    // stage images (f32) and the encoded PNGs (at most about one byte per texel each).
+    let texels = (res as u64) * (res as u64);
+    let need = texels * (6 + 12 + if args.stages { 8 } else { 0 }) + texels * (set.len() as u64 + 4);
+    if let Some(avail) = mem_available() {
+        if need > avail {
+            bail!(
+                "invalid --res {res}: the layers would need about {:.1} GiB of memory, {:.1} GiB is available",
+                need as f64 / (1u64 << 30) as f64,
+                avail as f64 / (1u64 << 30) as f64
+            );
+        }
+    }
+    if args.out.exists() && !args.out.is_dir() {
+        bail!("output {} exists and is not a folder", args.out.display());
+    }
+
+    let mut files: Vec<(String, Vec<u8>)> = Vec::new();
+    let mut combined = CombinedImage::new(res);
+    let mut entries = Vec::new();
+    for (k, layer) in set.layers().iter().enumerate() {
+        let r = set.rasterize(k, res)?;
+        let name = format!("layer-{k}.png");
+        let png = r.to_png()?;
+        if args.stages && k == 0 {
+            files.push(("stage-c-threshold.png".into(), png.clone()));
+        }
+        files.push((name.clone(), png));
+        combined.add(&r, layer.angle());
+        let coverage = r.mean();
+        entries.push(serde_json::json!({
+            "index": k,
+            "file": name,
+            "angle_rad": layer.angle(),
+            "direction": layer.direction(),
+            "coverage": coverage,
+        }));
+        println!(
+            "layer {k}: angle {:7.2} deg, direction ({:+.4}, {:+.4}), coverage {:.4}",
+            layer.angle().to_degrees(),
+            layer.direction()[0],
+            layer.direction()[1],
+            coverage
+        );
+    }
+    files.push(("layers.png".into(), combined.to_png()?));
+    if args.stages {
+        let layer0 = &set.layers()[0];
+        let a = raster::stage_noise(layer0, res)?;
+        files.push(("stage-a-noise.png".into(), raster::encode_png(res, &raster::to_u8(&a), 1, "stage a")?));
+        let b = raster::stage_stretched(layer0, res)?;
+        files.push(("stage-b-stretched.png".into(), raster::encode_png(res, &raster::to_u8(&b), 1, "stage b")?));
+    }
+    let p = set.params();
+    let json = serde_json::json!({
+        "striae_version": striae::VERSION,
+        "method": "METHOD.md section 5: q = S^-1 R(-alpha) (p - c), S = diag(L, W), c = (1/2, 1/2); scratch where F1(q) < tau",
+        "seed": args.seed,
+        "setting": args.setting,
+        "params": { "length": p.length, "width": p.width, "threshold": p.threshold, "layers": p.layers },
+        "resolution": res,
+        "pixel_mapping": "texel (x, y), row 0 at the top, covers u in [x/R, (x+1)/R], v in [1-(y+1)/R, 1-y/R]; u right, v up; angles counter-clockwise from +u",
+        "pixel_value": "coverage fraction of the texel, 0 = black, 1 = white (linear, 8 bit)",
+        "expected_coverage": set.expected_coverage(),
+        "pi_tau_squared": std::f64::consts::PI * p.threshold * p.threshold,
+        "layers": entries,
+    });
+    files.push(("layers.json".into(), serde_json::to_vec_pretty(&json)?));
+    write_all(&args.out, &files)?;
+    println!("wrote {} files to {}", files.len(), args.out.display());
+    Ok(())
+}
+
+/// Write every file atomically; on failure remove what this call wrote (and the folder if it
+/// created it).
+fn write_all(dir: &Path, files: &[(String, Vec<u8>)]) -> Result<()> {
+    let created = !dir.exists();
+    std::fs::create_dir_all(dir).with_context(|| format!("could not create {}", dir.display()))?;
+    let mut written = Vec::new();
+    for (name, bytes) in files {
+        let path = dir.join(name);
+        let r = striae::io::write_atomically(&path, |tmp| std::fs::write(tmp, bytes));
+        if let Err(e) = r {
+            for p in &written {
+                let _ = std::fs::remove_file(p);
+            }
+            if created {
+                let _ = std::fs::remove_dir(dir);
+            }
+            return Err(e).with_context(|| format!("could not write {}", path.display()));
+        }
+        written.push(path);
+    }
+    Ok(())
 }

@@ -1,0 +1,188 @@
+//! One scratch layer (METHOD.md section 5): the affine map from texture space to noise space,
+//! `q = S^-1 R(-alpha) (p - c)`, and the procedural queries on it: is a point scratched, and
+//! what fraction of a footprint do the scratches cover.
+
+use super::footprint::{union_discs_polygon_area, MAX_DISCS};
+use super::worley::{Worley, WorleySample};
+use super::{LayerError, LayerParams, LAYER_NOISE_PERIOD};
+use crate::math::Vec2;
+use glam::DVec2;
+
+/// Footprints whose noise-space bounding box spans more cells than this use the layer's
+/// expected coverage (the prefiltered limit) instead of enumerating scratches.
+pub const MAX_FOOTPRINT_CELLS: usize = 256;
+
+/// The texture centre `c` about which the noise is rotated.
+pub const CENTRE: DVec2 = DVec2::new(0.5, 0.5);
+
+#[inline]
+fn cross(a: DVec2, b: DVec2) -> f64 {
+    a.x * b.y - a.y * b.x
+}
+
+/// Scratch layer `k` of a [`super::LayerSet`].
+#[derive(Clone, Debug)]
+pub struct ScratchLayer {
+    index: usize,
+    alpha: f64,
+    noise: Worley,
+    tau: f64,
+    length: f64,
+    width: f64,
+    /// Rows of `M = S^-1 R(-alpha)`.
+    m: [DVec2; 2],
+    /// Rows of `M^-1 = R(alpha) S`.
+    m_inv: [DVec2; 2],
+}
+
+impl ScratchLayer {
+    /// Layer `index` with angle `alpha` and noise seed `noise_seed` (parameters already valid).
+    pub fn new(index: usize, alpha: f64, noise_seed: u64, params: &LayerParams) -> Result<Self, LayerError> {
+        params.validate()?;
+        let (s, c) = alpha.sin_cos();
+        let (l, w) = (params.length, params.width);
+        Ok(ScratchLayer {
+            index,
+            alpha,
+            noise: Worley::new(noise_seed, LAYER_NOISE_PERIOD)?,
+            tau: params.threshold,
+            length: l,
+            width: w,
+            m: [DVec2::new(c / l, s / l), DVec2::new(-s / w, c / w)],
+            m_inv: [DVec2::new(c * l, -s * w), DVec2::new(s * l, c * w)],
+        })
+    }
+
+    pub fn index(&self) -> usize {
+        self.index
+    }
+
+    /// The rotation angle `alpha` (radians, from the `u` axis towards `v`), in `[0, 2 pi)`.
+    pub fn angle(&self) -> f64 {
+        self.alpha
+    }
+
+    /// The scratch direction `d = (cos alpha, sin alpha)` in texture space.
+    pub fn direction(&self) -> [f64; 2] {
+        let (s, c) = self.alpha.sin_cos();
+        [c, s]
+    }
+
+    pub fn noise(&self) -> &Worley {
+        &self.noise
+    }
+
+    pub fn threshold(&self) -> f64 {
+        self.tau
+    }
+
+    /// Half-axes `(tau L, tau W)` of every scratch ellipse, along `d` and across it.
+    pub fn half_axes(&self) -> (f64, f64) {
+        (self.tau * self.length, self.tau * self.width)
+    }
+
+    /// `q = S^-1 R(-alpha) (p - c)`, METHOD.md section 5.
+    #[inline]
+    pub fn to_noise(&self, p: DVec2) -> DVec2 {
+        let d = p - CENTRE;
+        DVec2::new(self.m[0].dot(d), self.m[1].dot(d))
+    }
+
+    /// A texture-space vector to noise space (the linear part of [`Self::to_noise`]).
+    #[inline]
+    pub fn vector_to_noise(&self, v: DVec2) -> DVec2 {
+        DVec2::new(self.m[0].dot(v), self.m[1].dot(v))
+    }
+
+    /// The inverse map, `p = c + R(alpha) S q`.
+    #[inline]
+    pub fn to_texture(&self, q: DVec2) -> DVec2 {
+        CENTRE + DVec2::new(self.m_inv[0].dot(q), self.m_inv[1].dot(q))
+    }
+
+    /// The noise (F1, F2, nearest feature point) behind texture point `p` (stage b of Fig. 4).
+    pub fn noise_at(&self, p: DVec2) -> WorleySample {
+        self.noise.eval(self.to_noise(p))
+    }
+
+    /// `F1(q(p)) < tau` at an `f64` texture point.
+    #[inline]
+    pub fn is_scratched_at(&self, p: DVec2) -> bool {
+        self.noise.any_within(self.to_noise(p), self.tau)
+    }
+
+    /// Whether texture point `uv` is scratched (`F1(q) < tau`), evaluated in `f64`.
+    #[inline]
+    pub fn is_scratched(&self, uv: Vec2) -> bool {
+        self.is_scratched_at(uv.as_dvec2())
+    }
+
+    /// Coverage of the footprint `{uv + s duvdx + t duvdy : s, t in [-1/2, 1/2]}` by this
+    /// layer's scratches, in `[0, 1]`; `expected` is the value for footprints too large to
+    /// enumerate (the set's [`super::LayerSet::expected_coverage`]).
+    pub fn coverage(&self, uv: Vec2, duvdx: Vec2, duvdy: Vec2, expected: f64) -> f32 {
+        self.coverage_at(uv.as_dvec2(), duvdx.as_dvec2(), duvdy.as_dvec2(), expected) as f32
+    }
+
+    /// [`Self::coverage`] in `f64`. Exact (area of the union of scratch ellipses clipped to the
+    /// parallelogram, [`super::footprint`]) when the footprint's noise-space bounding box spans
+    /// at most [`MAX_FOOTPRINT_CELLS`] cells and touches at most `MAX_DISCS` scratches;
+    /// otherwise `expected`. A degenerate footprint (zero area) is a point query; non-finite
+    /// input gives 0.
+    pub fn coverage_at(&self, p: DVec2, a: DVec2, b: DVec2, expected: f64) -> f64 {
+        self.footprint_coverage(p, a, b, MAX_FOOTPRINT_CELLS).unwrap_or(expected)
+    }
+
+    /// The exact coverage of the footprint `{p + s a + t b : s, t in [-1/2, 1/2]}`, or `None`
+    /// when its noise-space bounding box spans more than `max_cells` cells or it touches more
+    /// than `MAX_DISCS` scratches.
+    pub fn footprint_coverage(&self, p: DVec2, a: DVec2, b: DVec2, max_cells: usize) -> Option<f64> {
+        let q0 = self.to_noise(p);
+        let (qa, qb) = (self.vector_to_noise(a), self.vector_to_noise(b));
+        let cr = cross(qa, qb);
+        if !(q0.is_finite() && cr.is_finite()) {
+            return Some(0.0);
+        }
+        let tau = self.tau;
+        if cr.abs() < 1e-12 {
+            return Some(self.noise.any_within(q0, tau) as u8 as f64);
+        }
+        let (qa, qb) = if cr > 0.0 { (qa, qb) } else { (qb, qa) };
+        let poly = [(-qa - qb) * 0.5, (qa - qb) * 0.5, (qa + qb) * 0.5, (qb - qa) * 0.5];
+        let ext = (qa.abs() + qb.abs()) * 0.5 + DVec2::splat(tau);
+        let (i0, i1) = ((q0.x - ext.x).floor(), (q0.x + ext.x).floor());
+        let (j0, j1) = ((q0.y - ext.y).floor(), (q0.y + ext.y).floor());
+        let cells = (i1 - i0 + 1.0) * (j1 - j0 + 1.0);
+        if cells > max_cells as f64 {
+            return None;
+        }
+        // Outward edge normals for the quick rejection of discs that cannot touch the polygon.
+        let mut planes = [(DVec2::ZERO, 0.0f64); 4];
+        for e in 0..4 {
+            let d = poly[(e + 1) % 4] - poly[e];
+            let n = DVec2::new(d.y, -d.x).normalize_or_zero();
+            planes[e] = (n, n.dot(poly[e]));
+        }
+        let mut centres = [DVec2::ZERO; MAX_DISCS];
+        let mut n = 0;
+        let (i0, i1, j0, j1) = (i0 as i64, i1 as i64, j0 as i64, j1 as i64);
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                let o = self.noise.offset(i, j);
+                let f = DVec2::new((i as f64 - q0.x) + o.x, (j as f64 - q0.y) + o.y);
+                if planes.iter().any(|&(nrm, d)| nrm.dot(f) - d >= tau) {
+                    continue;
+                }
+                if n == MAX_DISCS {
+                    return None;
+                }
+                centres[n] = f;
+                n += 1;
+            }
+        }
+        if n == 0 {
+            return Some(0.0);
+        }
+        Some((union_discs_polygon_area(&centres[..n], tau, &poly) / cr.abs()).clamp(0.0, 1.0))
+    }
+}

@@ -1,0 +1,234 @@
+//! Scratch layers from Worley cell noise (METHOD.md section 5, the seed's section 3.2 and Fig. 4).
+//!
+//! A scratch texture is tileable Worley noise ([`worley`]) seen through an affine map: texture
+//! point `p` goes to noise point `q = S^-1 R(-alpha) (p - c)`, `S = diag(L, W)`, `c = (1/2, 1/2)`,
+//! and `p` is scratched where `F1(q) < tau`. Every feature point thus becomes an ellipse of
+//! half-axes `tau L` (along `d = (cos alpha, sin alpha)`) and `tau W`. A [`LayerSet`] holds `K`
+//! such layers, each with its own `alpha_k` and noise seed drawn from one set seed.
+//!
+//! Two ways to use it:
+//! * the renderer asks procedural questions, nothing rasterised: [`LayerSet::is_scratched`],
+//!   [`LayerSet::scratched_mask`], [`LayerSet::coverage`] and [`LayerSet::coverage_all`] (the
+//!   exact scratch coverage of a ray-differential footprint, [`footprint`]);
+//! * people get anti-aliased rasters with a mip chain ([`raster`]) and PNGs.
+//!
+//! Conventions. Texture space is `(u, v)` in `[0, 1]^2`; `alpha` is measured from the `u` axis
+//! towards the `v` axis. Queries take `f32` texture coordinates (the renderer's) and work in
+//! `f64` internally: with `W = 0.001` the noise coordinate reaches about 700, where `f32` would
+//! keep only 1e-4 of a cell. Images map texel `(x, y)` (column `x`, row `y`, row 0 at the top)
+//! of an `R x R` raster to `u in [x/R, (x+1)/R]`, `v in [1 - (y+1)/R, 1 - y/R]`: `u` runs right,
+//! `v` runs up, so an angle `alpha` appears counter-clockwise from the right in the picture.
+//! The layer is defined on the whole plane; `[0, 1]^2` is the part the rasters show (the noise
+//! continues, it is not wrapped, outside it).
+
+pub mod footprint;
+pub mod layer;
+pub mod raster;
+pub mod worley;
+
+pub use layer::ScratchLayer;
+pub use raster::CoverageRaster;
+pub use worley::{Worley, WorleySample};
+
+use crate::math::Vec2;
+use serde::{Deserialize, Serialize};
+
+/// Most layers a set may hold (a point query returns them as a 64-bit mask).
+pub const MAX_LAYERS: usize = 64;
+/// Smallest scratch length or width: below it the scratch is finer than `f32` texture
+/// coordinates can place (their spacing near 1 is 6e-8).
+pub const MIN_SIZE: f64 = 1e-6;
+/// The noise period of every layer (cells). With `MIN_SIZE` the texture spans at most 1.5e6
+/// cells, so no layer repeats inside `[0, 1]^2`.
+pub const LAYER_NOISE_PERIOD: u64 = 1 << 24;
+
+/// Errors of the scratch-layer module: each names the parameter and the bad value.
+#[derive(Debug, thiserror::Error)]
+pub enum LayerError {
+    #[error("scratch `length` must be a finite number >= {MIN_SIZE}, got {0}")]
+    Length(f64),
+    #[error("scratch `width` must be a finite number >= {MIN_SIZE}, got {0}")]
+    Width(f64),
+    #[error("scratch `threshold` (tau) must lie in (0, 1], got {0}")]
+    Threshold(f64),
+    #[error("number of `layers` must be between 1 and {MAX_LAYERS}, got {0}")]
+    LayerCount(usize),
+    #[error("unknown scratch `setting` {0}: the seed defines settings 1 and 2")]
+    Setting(u32),
+    #[error("noise `period` must be a power of two in [1, 2^32], got {0}")]
+    Period(u64),
+    #[error("raster `resolution` {res} is not allowed: {reason}")]
+    Resolution { res: usize, reason: String },
+    #[error("layer index {index} out of range: the set has {count} layers")]
+    LayerIndex { index: usize, count: usize },
+    #[error("could not encode {what} as PNG: {msg}")]
+    Png { what: String, msg: String },
+}
+
+/// The user's scratch parameters (METHOD.md section 5, the seed's Table 1). Deserializes from
+/// `{ length, width, threshold, layers }` (unknown keys are errors); validate with
+/// [`LayerParams::validate`] (done by [`LayerSet::new`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LayerParams {
+    /// Scratch length scale `L` (texture units): scratches are `2 tau L` long.
+    pub length: f64,
+    /// Scratch width scale `W`: scratches are `2 tau W` wide.
+    pub width: f64,
+    /// Threshold `tau` on F1, in (0, 1]; coverage is about `pi tau^2`.
+    pub threshold: f64,
+    /// Number of layers `K`.
+    #[serde(default = "default_layers")]
+    pub layers: usize,
+}
+
+fn default_layers() -> usize {
+    LayerParams::DEFAULT_LAYERS
+}
+
+impl LayerParams {
+    /// Layers per set when not given (the seed does not say; 8 is what the benchmarks use).
+    pub const DEFAULT_LAYERS: usize = 8;
+
+    /// The seed's settings (Table 1): 1 = (L 0.3, W 0.001, tau 0.1), 2 = (L 0.6, W 0.010,
+    /// tau 0.1), with [`Self::DEFAULT_LAYERS`] layers.
+    pub fn setting(n: u32) -> Result<Self, LayerError> {
+        let (length, width) = match n {
+            1 => (0.3, 0.001),
+            2 => (0.6, 0.010),
+            _ => return Err(LayerError::Setting(n)),
+        };
+        Ok(LayerParams { length, width, threshold: 0.1, layers: Self::DEFAULT_LAYERS })
+    }
+
+    pub fn validate(&self) -> Result<(), LayerError> {
+        if !(self.length.is_finite() && self.length >= MIN_SIZE) {
+            return Err(LayerError::Length(self.length));
+        }
+        if !(self.width.is_finite() && self.width >= MIN_SIZE) {
+            return Err(LayerError::Width(self.width));
+        }
+        if !(self.threshold > 0.0 && self.threshold <= 1.0) {
+            return Err(LayerError::Threshold(self.threshold));
+        }
+        if !(1..=MAX_LAYERS).contains(&self.layers) {
+            return Err(LayerError::LayerCount(self.layers));
+        }
+        Ok(())
+    }
+}
+
+/// `K` scratch layers drawn from one seed (METHOD.md section 5). Layer `k`'s angle and noise
+/// seed depend only on `(seed, k)`, so adding layers keeps the first ones unchanged.
+#[derive(Clone, Debug)]
+pub struct LayerSet {
+    params: LayerParams,
+    seed: u64,
+    layers: Vec<ScratchLayer>,
+    expected_coverage: f64,
+}
+
+impl LayerSet {
+    /// Validate `params` and draw the layers: `alpha_k` uniform in `[0, 2 pi)` (a direction, not
+    /// just an axis: an asymmetric scratch profile tells `d` from `-d`) and a 64-bit noise seed.
+    pub fn new(params: LayerParams, seed: u64) -> Result<Self, LayerError> {
+        params.validate()?;
+        let layers = (0..params.layers)
+            .map(|k| {
+                // Bijective in k for a given seed, so no two layers of a set share their stream.
+                let h = worley::mix64(
+                    worley::mix64(seed ^ 0xa076_1d64_78bd_642f)
+                        .wrapping_add((k as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15)),
+                );
+                let alpha = (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64) * std::f64::consts::TAU;
+                let noise_seed = worley::mix64(h ^ 0x9e37_79b9_7f4a_7c15);
+                ScratchLayer::new(k, alpha, noise_seed, &params)
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let expected_coverage = footprint::expected_coverage(params.threshold, 48);
+        Ok(LayerSet { params, seed, layers, expected_coverage })
+    }
+
+    pub fn params(&self) -> &LayerParams {
+        &self.params
+    }
+
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    pub fn layers(&self) -> &[ScratchLayer] {
+        &self.layers
+    }
+
+    pub fn len(&self) -> usize {
+        self.layers.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.layers.is_empty()
+    }
+
+    /// Layer `k`, or an error naming the index.
+    pub fn layer(&self, k: usize) -> Result<&ScratchLayer, LayerError> {
+        self.layers.get(k).ok_or(LayerError::LayerIndex { index: k, count: self.layers.len() })
+    }
+
+    /// Layer `k`'s scratch direction `d_k = (cos alpha_k, sin alpha_k)` in texture space.
+    /// # Panics
+    /// If `k >= len()`.
+    pub fn direction(&self, k: usize) -> [f64; 2] {
+        self.layers[k].direction()
+    }
+
+    /// The mean scratch coverage of one layer over the noise (exact for the hash's uniform
+    /// placement; about `pi tau^2`): see [`footprint::expected_coverage`].
+    pub fn expected_coverage(&self) -> f64 {
+        self.expected_coverage
+    }
+
+    /// Whether texture point `uv` is scratched in layer `k` (`F1(q) < tau`).
+    /// # Panics
+    /// If `k >= len()`.
+    #[inline]
+    pub fn is_scratched(&self, k: usize, uv: Vec2) -> bool {
+        self.layers[k].is_scratched(uv)
+    }
+
+    /// Bit `k` set iff layer `k` is scratched at `uv`: the point query over all layers.
+    #[inline]
+    pub fn scratched_mask(&self, uv: Vec2) -> u64 {
+        let mut mask = 0u64;
+        for (k, layer) in self.layers.iter().enumerate() {
+            mask |= (layer.is_scratched(uv) as u64) << k;
+        }
+        mask
+    }
+
+    /// Fraction of the footprint `{uv + s duvdx + t duvdy : s, t in [-1/2, 1/2]}` (one pixel's
+    /// parallelogram from ray differentials) that layer `k`'s scratches cover, in `[0, 1]`.
+    /// See [`ScratchLayer::coverage`]. # Panics: if `k >= len()`.
+    #[inline]
+    pub fn coverage(&self, k: usize, uv: Vec2, duvdx: Vec2, duvdy: Vec2) -> f32 {
+        self.layers[k].coverage(uv, duvdx, duvdy, self.expected_coverage)
+    }
+
+    /// Per-layer coverage of one footprint into `out[0..len()]` (the renderer then picks the
+    /// layer with the largest share, METHOD.md section 6).
+    /// # Panics
+    /// If `out.len() < len()`.
+    pub fn coverage_all(&self, uv: Vec2, duvdx: Vec2, duvdy: Vec2, out: &mut [f32]) {
+        for (layer, o) in self.layers.iter().zip(&mut out[..self.layers.len()]) {
+            *o = layer.coverage(uv, duvdx, duvdy, self.expected_coverage);
+        }
+    }
+
+    /// Rasterise layer `k` at `res x res` (see [`raster`]).
+    pub fn rasterize(&self, k: usize, res: usize) -> Result<CoverageRaster, LayerError> {
+        raster::rasterize(self.layer(k)?, res)
+    }
+}
+
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,345 @@
+//! Tests of the layer set against METHOD.md section 5: determinism, coverage ~ pi tau^2,
+//! orientation and scratch size measured on rasters, and procedural queries against rasters.
+
+use super::*;
+use crate::testing::MeanEstimate;
+use glam::DVec2;
+use rand::{Rng, SeedableRng};
+use std::f64::consts::PI;
+
+fn params(length: f64, width: f64, threshold: f64, layers: usize) -> LayerParams {
+    LayerParams { length, width, threshold, layers }
+}
+
+fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(f)
+}
+
+#[test]
+fn same_seed_gives_bit_identical_layers_whatever_the_thread_count() {
+    let p = LayerParams::setting(1).unwrap();
+    let a = LayerSet::new(p, 42).unwrap();
+    let b = LayerSet::new(p, 42).unwrap();
+    let c = LayerSet::new(p, 43).unwrap();
+    for k in 0..a.len() {
+        assert_eq!(a.layers()[k].angle().to_bits(), b.layers()[k].angle().to_bits());
+        assert_ne!(a.layers()[k].angle(), c.layers()[k].angle());
+    }
+    let bits = |r: &CoverageRaster| r.level(0).1.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    for k in [0, 5] {
+        let one = in_pool(1, || a.rasterize(k, 300).unwrap());
+        let many = in_pool(4, || b.rasterize(k, 300).unwrap());
+        assert_eq!(bits(&one), bits(&many), "layer {k}");
+        assert!(one.mean() > 0.0);
+        let other = c.rasterize(k, 300).unwrap();
+        assert_ne!(bits(&one), bits(&other));
+    }
+    // A set with more layers keeps the first ones.
+    let more = LayerSet::new(LayerParams { layers: 12, ..p }, 42).unwrap();
+    assert_eq!(more.direction(3), a.direction(3));
+}
+
+/// Coverage: each layer's measured coverage (raster mean) must match the expected coverage
+/// `E(tau)` (exact mean over the hash, `footprint::expected_coverage`) within 4 standard errors
+/// of the mean over 16 independent layers; and `E(tau)` is `pi tau^2` less the overlaps, within
+/// 3 % at tau = 0.1 (5 % at 0.2). The standard error itself must be small (< 3 % of E), so the
+/// test has the power to see a wrong threshold or a wrong stretch.
+#[test]
+fn coverage_follows_pi_tau_squared() {
+    for (tau, rel) in [(0.1, 0.03), (0.2, 0.05)] {
+        let set = LayerSet::new(params(0.02, 0.015, tau, 16), 7).unwrap();
+        let e = set.expected_coverage();
+        assert!((e / (PI * tau * tau) - 1.0).abs() < rel && e < PI * tau * tau, "E {e}");
+        let mut m = MeanEstimate::default();
+        for k in 0..set.len() {
+            m.push(set.rasterize(k, 200).unwrap().mean());
+        }
+        assert!(m.std_error() < 0.03 * e, "se {}", m.std_error());
+        assert!(m.agrees_with(e, 4.0, 0.0), "tau {tau}: measured {} +- {} vs expected {e}", m.mean(), m.std_error());
+    }
+}
+
+/// Orientation from a raster: the structure tensor of the coverage image (gradients summed as
+/// outer products) has its dominant eigenvector across the scratches, so the scratches run at
+/// that angle + pi/2. It must match alpha (mod pi, the raster cannot tell d from -d) within
+/// 1° (measured: 0.1° to 0.6°; the box anti-aliasing smears the scratch tips along the texel
+/// axes a little). Gradients are derivative-of-Gaussian filters (sigma 2 texels): plain finite differences
+/// of lines thinner than their stencil are anisotropic and bias the angle by degrees.
+#[test]
+fn orientation_measured_on_the_raster_matches_alpha() {
+    let set = LayerSet::new(LayerParams::setting(2).unwrap(), 3).unwrap();
+    let res = 384;
+    let (sigma, rad) = (2.0f64, 8i64);
+    let g: Vec<f64> = (-rad..=rad).map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp()).collect();
+    let dg: Vec<f64> = (-rad..=rad).zip(&g).map(|(i, w)| -(i as f64) / (sigma * sigma) * w).collect();
+    // Separable convolution: kernel kx along x (columns), ky along y (rows).
+    let conv = |img: &[f64], kx: &[f64], ky: &[f64]| -> Vec<f64> {
+        let mut tmp = vec![0.0; res * res];
+        for y in 0..res {
+            for x in rad as usize..res - rad as usize {
+                tmp[y * res + x] = kx.iter().enumerate().map(|(t, w)| w * img[y * res + x + t - rad as usize]).sum();
+            }
+        }
+        let mut out = vec![0.0; res * res];
+        for y in rad as usize..res - rad as usize {
+            for x in 0..res {
+                out[y * res + x] = ky.iter().enumerate().map(|(t, w)| w * tmp[(y + t - rad as usize) * res + x]).sum();
+            }
+        }
+        out
+    };
+    let mut angles = Vec::new();
+    for k in 0..6 {
+        let r = set.rasterize(k, res).unwrap();
+        let img: Vec<f64> = r.level(0).1.iter().map(|&c| c as f64).collect();
+        // d/dx of the image is the convolution with -G'; rows run down while v runs up.
+        let gx = conv(&img, &dg, &g);
+        let gy = conv(&img, &g, &dg);
+        let (mut j11, mut j12, mut j22) = (0.0f64, 0.0f64, 0.0f64);
+        let m = rad as usize + 1;
+        for y in m..res - m {
+            for x in m..res - m {
+                let (gu, gv) = (-gx[y * res + x], gy[y * res + x]);
+                j11 += gu * gu;
+                j12 += gu * gv;
+                j22 += gv * gv;
+            }
+        }
+        let across = 0.5 * (2.0 * j12).atan2(j11 - j22);
+        let along = across + PI / 2.0;
+        let alpha = set.layers()[k].angle();
+        let diff = (along - alpha).rem_euclid(PI);
+        let diff = diff.min(PI - diff);
+        assert!(diff < 1f64.to_radians(), "layer {k}: measured {along} vs alpha {alpha}");
+        angles.push(alpha.rem_euclid(PI));
+    }
+    // The layers really point different ways, so the check covers more than one angle.
+    let spread = angles.iter().cloned().fold(f64::NEG_INFINITY, f64::max) - angles.iter().cloned().fold(f64::INFINITY, f64::min);
+    assert!(spread > 0.5, "angles {angles:?}");
+}
+
+/// Size of isolated scratches measured on the raster: connected components of non-zero texels
+/// not touching the border; for each, the coverage-weighted covariance gives the major
+/// half-axis `a = 2 sqrt(lambda_max)` (a uniform ellipse has variance a^2/4 along its axis) and
+/// the summed coverage its area, hence the minor half-axis `b = area / (pi a)` (exact even below
+/// a texel, thanks to the anti-aliasing). The medians over all components (merged crossings are
+/// rare outliers) must match `2 tau L` and `2 tau W` within 2 % and 4 %.
+#[test]
+fn scratch_length_and_width_measured_on_the_raster() {
+    for (p, res) in [(LayerParams::setting(2).unwrap(), 1024), (params(0.25, 0.02, 0.15, 1), 512)] {
+        let set = LayerSet::new(p, 11).unwrap();
+        for k in 0..set.len().min(2) {
+            let r = set.rasterize(k, res).unwrap();
+            let (mut lengths, mut widths) = (Vec::new(), Vec::new());
+            let mut seen = vec![false; res * res];
+            for start in 0..res * res {
+                if seen[start] || r.level(0).1[start] == 0.0 {
+                    continue;
+                }
+                let (mut stack, mut pix, mut border) = (vec![start], Vec::new(), false);
+                seen[start] = true;
+                while let Some(i) = stack.pop() {
+                    let (x, y) = ((i % res) as i64, (i / res) as i64);
+                    pix.push(i);
+                    border |= x == 0 || y == 0 || x == res as i64 - 1 || y == res as i64 - 1;
+                    for (dx, dy) in [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
+                        let (nx, ny) = (x + dx, y + dy);
+                        if nx >= 0 && ny >= 0 && nx < res as i64 && ny < res as i64 {
+                            let n = (ny * res as i64 + nx) as usize;
+                            if !seen[n] && r.level(0).1[n] > 0.0 {
+                                seen[n] = true;
+                                stack.push(n);
+                            }
+                        }
+                    }
+                }
+                if border {
+                    continue;
+                }
+                let (mut w, mut mu) = (0.0f64, DVec2::ZERO);
+                for &i in &pix {
+                    let c = r.level(0).1[i] as f64;
+                    w += c;
+                    mu += c * raster::texel_centre(res, i % res, i / res);
+                }
+                mu /= w;
+                let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+                for &i in &pix {
+                    let c = r.level(0).1[i] as f64;
+                    let d = raster::texel_centre(res, i % res, i / res) - mu;
+                    sxx += c * d.x * d.x;
+                    sxy += c * d.x * d.y;
+                    syy += c * d.y * d.y;
+                }
+                let (sxx, sxy, syy) = (sxx / w, sxy / w, syy / w);
+                let lmax = 0.5 * (sxx + syy) + (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
+                let a = 2.0 * lmax.sqrt();
+                let area = w / (res * res) as f64;
+                lengths.push(2.0 * a);
+                widths.push(2.0 * area / (PI * a));
+            }
+            let median = |v: &mut Vec<f64>| {
+                v.sort_by(|a, b| a.total_cmp(b));
+                v[v.len() / 2]
+            };
+            assert!(lengths.len() > 40, "{} components", lengths.len());
+            let (l, w) = (median(&mut lengths), median(&mut widths));
+            let (l_ref, w_ref) = (2.0 * p.threshold * p.length, 2.0 * p.threshold * p.width);
+            assert!((l / l_ref - 1.0).abs() < 0.02, "length {l} vs {l_ref}");
+            assert!((w / w_ref - 1.0).abs() < 0.04, "width {w} vs {w_ref}");
+        }
+    }
+}
+
+/// Procedural queries against the raster. (1) The footprint query over a texel's square equals
+/// the raster texel (two independent enumerations of the same exact geometry): within 1e-5.
+/// (2) 8 x 8 stratified point queries per texel average to the raster value: zero texels have
+/// no scratched sample, and partial texels agree on average within 0.02 (stratification error).
+#[test]
+fn point_and_footprint_queries_agree_with_the_raster() {
+    for (p, res) in [(LayerParams::setting(1).unwrap(), 256), (LayerParams::setting(2).unwrap(), 128), (params(0.05, 0.05, 0.3, 1), 64)] {
+        let set = LayerSet::new(p, 5).unwrap();
+        let r = set.rasterize(0, res).unwrap();
+        let texel = 1.0 / res as f32;
+        let (mut worst, mut sum_ss, mut partial) = (0.0f64, 0.0f64, 0usize);
+        for y in 0..res {
+            for x in 0..res {
+                let c = raster::texel_centre(res, x, y);
+                let ras = r.get(x, y) as f64;
+                let fp = set.coverage(0, c.as_vec2(), Vec2::new(texel, 0.0), Vec2::new(0.0, texel)) as f64;
+                worst = worst.max((fp - ras).abs());
+                let mut hits = 0;
+                for sy in 0..8 {
+                    for sx in 0..8 {
+                        let p = c + DVec2::new(sx as f64 - 3.5, sy as f64 - 3.5) / (8.0 * res as f64);
+                        hits += set.layers()[0].is_scratched_at(p) as usize;
+                    }
+                }
+                let ss = hits as f64 / 64.0;
+                if ras == 0.0 {
+                    assert_eq!(hits, 0, "texel ({x}, {y}) is empty in the raster");
+                } else {
+                    sum_ss += (ss - ras).abs();
+                    partial += 1;
+                }
+            }
+        }
+        assert!(worst < 1e-5, "footprint vs raster differ by {worst}");
+        assert!(partial > 100 && sum_ss / (partial as f64) < 0.02, "mean |points - raster| {}", sum_ss / partial as f64);
+    }
+}
+
+/// Footprint coverage of random rotated parallelograms (a few texels to a few scratches big)
+/// against Monte Carlo over point queries: within 4 binomial standard errors plus 0.005.
+/// Also: `coverage_all` and `scratched_mask` agree with the per-layer queries.
+#[test]
+fn footprint_coverage_matches_point_sampling() {
+    let set = LayerSet::new(params(0.1, 0.01, 0.2, 4), 9).unwrap();
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(4);
+    let mut all = vec![0.0f32; 4];
+    let mut nonzero = 0;
+    for case in 0..120 {
+        let k = case % 4;
+        let uv = Vec2::new(rng.random_range(0.1..0.9), rng.random_range(0.1..0.9));
+        let s = rng.random_range(0.002f32..0.03);
+        let (a, b) = (Vec2::new(s, rng.random_range(-s..s)), Vec2::new(rng.random_range(-s..s), -s * rng.random_range(0.2..1.0)));
+        let cov = set.coverage(k, uv, a, b) as f64;
+        set.coverage_all(uv, a, b, &mut all);
+        assert_eq!(all[k] as f64, cov);
+        let n = 4000;
+        let mut hits = 0;
+        for _ in 0..n {
+            let (s, t) = (rng.random::<f32>() - 0.5, rng.random::<f32>() - 0.5);
+            let p = uv + s * a + t * b;
+            let hit = set.is_scratched(k, p);
+            assert_eq!(hit, set.scratched_mask(p) >> k & 1 == 1);
+            hits += hit as usize;
+        }
+        let mc = hits as f64 / n as f64;
+        let se = (mc * (1.0 - mc) / n as f64).sqrt();
+        nonzero += (cov > 0.0) as usize;
+        assert!((cov - mc).abs() < 4.0 * se + 0.005, "case {case}: footprint {cov} vs points {mc}");
+    }
+    assert!(nonzero > 30);
+    // A huge footprint falls back to the expected coverage; a degenerate one is a point query.
+    let big = set.coverage(0, Vec2::splat(0.5), Vec2::new(0.5, 0.0), Vec2::new(0.0, 0.5)) as f64;
+    assert!((big - set.expected_coverage()).abs() < 1e-6);
+    let uv = Vec2::new(0.3, 0.7);
+    assert_eq!(set.coverage(1, uv, Vec2::ZERO, Vec2::ZERO), set.is_scratched(1, uv) as u8 as f32);
+    assert_eq!(set.coverage(1, Vec2::new(f32::NAN, 0.0), Vec2::ZERO, Vec2::X), 0.0);
+}
+
+/// The ellipse of a scratch: points at 0.99 and 1.01 times the half-axes from a feature point,
+/// along and across d, are inside and outside (where no other scratch interferes).
+#[test]
+fn scratches_are_ellipses_with_half_axes_tau_l_and_tau_w() {
+    let set = LayerSet::new(LayerParams::setting(2).unwrap(), 1).unwrap();
+    let layer = &set.layers()[2];
+    let (hl, hw) = layer.half_axes();
+    let d = DVec2::from(layer.direction());
+    let n = d.perp();
+    let mut checked = 0;
+    for j in -20..20 {
+        for i in -3..3 {
+            let q = layer.noise().feature_point(i, j);
+            let f = layer.to_texture(q);
+            let alone = (-2..=2).all(|dj| (-2..=2).all(|di| (di, dj) == (0, 0) || (layer.noise().feature_point(i + di, j + dj) - q).length() > 2.2 * layer.threshold()));
+            if !alone {
+                continue;
+            }
+            checked += 1;
+            for (axis, h) in [(d, hl), (-d, hl), (n, hw), (-n, hw)] {
+                assert!(layer.is_scratched_at(f + 0.99 * h * axis));
+                assert!(!layer.is_scratched_at(f + 1.01 * h * axis));
+            }
+        }
+    }
+    assert!(checked > 100);
+}
+
+#[test]
+fn mip_chain_averages_coverage() {
+    let set = LayerSet::new(LayerParams::setting(2).unwrap(), 2).unwrap();
+    for res in [256, 100] {
+        let r = set.rasterize(1, res).unwrap();
+        let (last, d) = r.level(r.level_count() - 1);
+        assert_eq!(last, 1);
+        let (n1, l1) = r.level(1);
+        assert_eq!(n1, res / 2);
+        // Level 1 texel = mean of its 2x2 block.
+        let expect = (r.get(6, 8) + r.get(7, 8) + r.get(6, 9) + r.get(7, 9)) / 4.0;
+        assert!((l1[4 * n1 + 3] - expect).abs() < 1e-6);
+        if res.is_power_of_two() {
+            assert!((d[0] as f64 - r.mean()).abs() < 1e-5);
+        }
+    }
+}
+
+#[test]
+fn bad_parameters_are_clear_errors() {
+    let ok = LayerParams::setting(1).unwrap();
+    assert_eq!(ok, params(0.3, 0.001, 0.1, 8));
+    assert_eq!(LayerParams::setting(2).unwrap(), params(0.6, 0.01, 0.1, 8));
+    assert!(matches!(LayerParams::setting(3), Err(LayerError::Setting(3))));
+    for (p, want) in [
+        (LayerParams { length: 0.0, ..ok }, "length"),
+        (LayerParams { length: -1.0, ..ok }, "length"),
+        (LayerParams { width: f64::NAN, ..ok }, "width"),
+        (LayerParams { width: 0.0, ..ok }, "width"),
+        (LayerParams { threshold: 0.0, ..ok }, "threshold"),
+        (LayerParams { threshold: 1.5, ..ok }, "threshold"),
+        (LayerParams { layers: 0, ..ok }, "layers"),
+        (LayerParams { layers: 65, ..ok }, "layers"),
+    ] {
+        let e = LayerSet::new(p, 1).unwrap_err().to_string();
+        assert!(e.contains(want), "{e}");
+    }
+    let set = LayerSet::new(LayerParams { threshold: 1.0, ..ok }, 1).unwrap();
+    assert!(set.rasterize(0, 0).is_err());
+    assert!(set.rasterize(0, raster::MAX_RESOLUTION + 1).unwrap_err().to_string().contains("GiB"));
+    assert!(matches!(set.rasterize(8, 16), Err(LayerError::LayerIndex { index: 8, count: 8 })));
+    // Serde: the four keys, `layers` optional, unknown keys rejected.
+    let p: LayerParams = serde_json::from_str(r#"{"length":0.3,"width":0.001,"threshold":0.1}"#).unwrap();
+    assert_eq!(p, ok);
+    assert!(serde_json::from_str::<LayerParams>(r#"{"length":0.3,"width":0.001,"treshold":0.1}"#).is_err());
+}
