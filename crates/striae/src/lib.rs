@@ -42,6 +42,7 @@ pub mod layers;
 // Issue 4: the path tracer.
 pub mod bsdf;
 pub mod camera;
+pub mod envmap;
 pub mod film;
 pub mod geometry;
 pub mod integrator;
