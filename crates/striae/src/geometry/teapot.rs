@@ -33,7 +33,7 @@
 //! from the same control points, so rays do not slip between neighbouring patches.
 
 use super::TriangleMesh;
-use crate::math::{Vec2, Vec3};
+use crate::math::Vec2;
 use glam::DVec3;
 
 const DATA: &str = include_str!("../../../../data/newell_teapot.txt");
@@ -222,6 +222,7 @@ impl TriangleMesh {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::Vec3;
 
     /// Signed volume by the divergence theorem, `sum over triangles of p0 . (p1 x p2) / 6`.
     fn signed_volume(m: &TriangleMesh) -> f64 {

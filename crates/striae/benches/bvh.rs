@@ -1,0 +1,91 @@
+//! Rays per second of `Geometry::intersect` (closest hit) and `Geometry::occluded` (any hit) on
+//! the Utah teapot tessellated at 64 x 64 quads per patch (~260k triangles), for obvhs' CWBVH
+//! and BVH2, with coherent camera rays and incoherent random rays. Single-threaded.
+//!
+//! `cargo bench -p striae --bench bvh`; results in BENCHMARKS.md, section "BVH".
+
+use std::time::Instant;
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+use striae::geometry::{BvhKind, Geometry, Shape, ShapeGeometry, TriangleMesh};
+use striae::math::{Ray, Vec2, Vec3};
+use striae::sampling::square_to_uniform_sphere;
+
+const SUBDIVISIONS: u32 = 64;
+
+fn teapot_shapes() -> Vec<Shape> {
+    vec![Shape { geometry: ShapeGeometry::Mesh(TriangleMesh::teapot(SUBDIVISIONS)), material: 0, area_light: None }]
+}
+
+/// A 256 x 256 pinhole camera looking at the teapot, filling most of the frame.
+fn coherent_rays() -> Vec<Ray> {
+    let (w, h) = (256, 256);
+    let eye = Vec3::new(2.0, -7.0, 3.5);
+    let target = Vec3::new(0.3, 0.0, 1.4);
+    let fwd = (target - eye).normalize();
+    let right = fwd.cross(Vec3::Z).normalize();
+    let up = right.cross(fwd);
+    let tan_half = (20.0f32).to_radians().tan();
+    let mut rays = Vec::with_capacity(w * h);
+    for j in 0..h {
+        for i in 0..w {
+            let x = (2.0 * (i as f32 + 0.5) / w as f32 - 1.0) * tan_half;
+            let y = (1.0 - 2.0 * (j as f32 + 0.5) / h as f32) * tan_half;
+            rays.push(Ray::new(eye, (fwd + x * right + y * up).normalize()));
+        }
+    }
+    rays
+}
+
+/// 65536 rays with origins uniform in a ball of radius 4 around the teapot and uniform directions
+/// (like secondary bounces).
+fn incoherent_rays() -> Vec<Ray> {
+    let mut rng = Pcg64::seed_from_u64(1);
+    (0..65536)
+        .map(|_| {
+            let o = Vec3::new(0.0, 0.0, 1.5) + 4.0 * rng.random::<f32>().cbrt() * square_to_uniform_sphere(Vec2::new(rng.random(), rng.random()));
+            Ray::new(o, square_to_uniform_sphere(Vec2::new(rng.random(), rng.random())))
+        })
+        .collect()
+}
+
+fn bench(c: &mut Criterion) {
+    let shapes = teapot_shapes();
+    let triangles = match &shapes[0].geometry {
+        ShapeGeometry::Mesh(m) => m.triangle_count(),
+        _ => unreachable!(),
+    };
+    let mut geometries = Vec::new();
+    for kind in [BvhKind::Cwbvh, BvhKind::Bvh2] {
+        let start = Instant::now();
+        let g = Geometry::with_bvh(shapes.clone(), kind);
+        eprintln!("{kind:?}: built over {triangles} triangles in {:.1} ms", start.elapsed().as_secs_f64() * 1e3);
+        geometries.push((kind, g));
+    }
+    for (name, rays) in [("coherent", coherent_rays()), ("incoherent", incoherent_rays())] {
+        let hit_fraction = rays.iter().filter(|r| geometries[0].1.occluded(r)).count() as f64 / rays.len() as f64;
+        eprintln!("{name}: {:.1}% of {} rays hit", 100.0 * hit_fraction, rays.len());
+        let mut group = c.benchmark_group(format!("bvh/{name}"));
+        group.throughput(Throughput::Elements(rays.len() as u64));
+        group.sample_size(10);
+        for (kind, g) in &geometries {
+            group.bench_with_input(BenchmarkId::new("intersect", format!("{kind:?}")), &rays, |b, rays| {
+                b.iter(|| rays.iter().filter(|r| g.intersect(r).is_some()).count())
+            });
+            group.bench_with_input(BenchmarkId::new("occluded", format!("{kind:?}")), &rays, |b, rays| {
+                b.iter(|| rays.iter().filter(|r| g.occluded(r)).count())
+            });
+        }
+        group.finish();
+    }
+}
+
+criterion_group! {
+    name = benches;
+    // No plots: the plotters backend needs fonts the build machines lack.
+    config = Criterion::default().without_plots();
+    targets = bench
+}
+criterion_main!(benches);
