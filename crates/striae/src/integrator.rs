@@ -25,7 +25,10 @@ use crate::film::Image;
 use crate::math::{Frame, Ray, RayDifferential, Rgb, Vec2, Vec3};
 use crate::sampler::PixelSampler;
 use crate::sampling::power_heuristic;
-use crate::scene::Scene;
+use crate::bsdf::Bsdf;
+use crate::geometry::SurfaceHit;
+use crate::material::Material;
+use crate::scene::{material_bsdf, Scene, NO_MATERIAL};
 use crate::shading::{footprint, spawn_differentials, ShadingContext};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -88,6 +91,76 @@ pub fn guard_shading_normal(ns: Vec3, ng: Vec3, wo: Vec3) -> Vec3 {
     }
     let t = (MARGIN - c) / g.abs().max(1e-6);
     (ns + t * ng).normalize_or(ng)
+}
+
+/// The material's view of a hit and the BSDF it presents there.
+pub struct Shaded {
+    pub ctx: ShadingContext,
+    pub bsdf: Bsdf,
+    /// Position derivatives per pixel step (for the spawned ray's differentials).
+    pub dpdx: Vec3,
+    pub dpdy: Vec3,
+}
+
+/// Build the shading context at `hit` seen from `wo_world` and ask the material for its BSDF.
+/// The frame handed to the material is the final one: flipped to `wo`'s side for opaque
+/// BSDFs and guarded against `wo` falling behind the shading normal (the material is asked
+/// again in those rare cases, so its BSDF always lives in `ctx.frame`).
+pub fn shade(material: &Material, hit: &SurfaceHit, rd: &RayDifferential, wo_world: Vec3, u_layer: f32) -> Shaded {
+    let (dpdx, dpdy, duvdx, duvdy) = footprint(hit, rd);
+    let mut ctx = ShadingContext {
+        p: hit.p,
+        uv: hit.uv,
+        duvdx,
+        duvdy,
+        dpdu: hit.dpdu,
+        dpdv: hit.dpdv,
+        frame: Frame::from_normal_tangent(hit.ns, hit.dpdu),
+        ng: hit.ng,
+        u_layer,
+    };
+    let mut bsdf = material_bsdf(material, &ctx);
+    let (mut ng, mut ns) = (hit.ng, hit.ns);
+    if !bsdf.has_transmission() && wo_world.dot(ng) < 0.0 {
+        // Opaque surfaces are two-sided: shade on wo's side.
+        ng = -ng;
+        ns = -ns;
+    }
+    let guarded = guard_shading_normal(ns, ng, wo_world);
+    if guarded != hit.ns {
+        ctx.frame = Frame::from_normal_tangent(guarded, hit.dpdu);
+        bsdf = material_bsdf(material, &ctx);
+    }
+    Shaded { ctx, bsdf, dpdx, dpdy }
+}
+
+/// The shading contexts along the camera ray through film position `film` (pinhole centre of
+/// the lens), following delta bounces (the first lobe a BSDF samples with `u = 0.5`) for up to
+/// `max_hits` hits; stops after the first non-delta BSDF. For tests and debugging views of the
+/// footprint (e.g. the scratch masks of issue 5).
+pub fn trace_contexts(scene: &Scene, film: Vec2, max_hits: usize) -> Vec<ShadingContext> {
+    let (mut ray, mut rd) = scene.camera.generate_ray(film, Vec2::splat(0.5));
+    let mut out = Vec::new();
+    while out.len() < max_hits {
+        let Some(hit) = scene.geometry.intersect(&ray) else { break };
+        let shape = &scene.geometry.shapes()[hit.shape as usize];
+        if shape.material == NO_MATERIAL {
+            break;
+        }
+        let wo_world = -ray.d;
+        let sh = shade(&scene.materials[shape.material as usize], &hit, &rd, wo_world, 0.5);
+        out.push(sh.ctx);
+        let wo = sh.ctx.frame.to_local(wo_world);
+        let Some(bs) = sh.bsdf.sample(wo, 0.5, Vec2::splat(0.5)) else { break };
+        if !bs.delta {
+            break;
+        }
+        let wi = sh.ctx.frame.to_world(bs.wi);
+        let eta_path = if bs.wi.z * wo.z < 0.0 { 1.0 / bs.eta } else { 1.0 };
+        rd = spawn_differentials(hit.p, sh.dpdx, sh.dpdy, ray.d, &rd, sh.ctx.frame.n, wi, true, eta_path);
+        ray = Ray::new(offset_origin(hit.p, hit.ng, wi), wi);
+    }
+    out
 }
 
 /// Render the whole image. `progress` is called (from worker threads) with the number of
@@ -205,34 +278,15 @@ fn radiance(scene: &Scene, mut ray: Ray, mut rd: RayDifferential, sampler: &mut 
         }
         // Paths of at most `max_depth` segments: the next vertex would make depth + 2. A shape
         // without a material (a pure emitter) absorbs everything.
-        if depth + 2 > max_depth || shape.material == crate::scene::NO_MATERIAL {
+        if depth + 2 > max_depth || shape.material == NO_MATERIAL {
             break;
         }
 
         // Shading frame and the material's BSDF.
-        let (dpdx, dpdy, duvdx, duvdy) = footprint(&hit, &rd);
         let u_layer = sampler.next_1d();
         let material = &scene.materials[shape.material as usize];
-        let (mut ng, mut ns) = (hit.ng, hit.ns);
-        let provisional = ShadingContext {
-            p: hit.p,
-            uv: hit.uv,
-            duvdx,
-            duvdy,
-            dpdu: hit.dpdu,
-            dpdv: hit.dpdv,
-            frame: Frame::from_normal_tangent(ns, hit.dpdu),
-            ng: hit.ng,
-            u_layer,
-        };
-        let bsdf = crate::scene::material_bsdf(material, &provisional);
-        if !bsdf.has_transmission() && wo_world.dot(ng) < 0.0 {
-            // Opaque surfaces are two-sided: shade on wo's side.
-            ng = -ng;
-            ns = -ns;
-        }
-        let ns = guard_shading_normal(ns, ng, wo_world);
-        let frame = Frame::from_normal_tangent(ns, hit.dpdu);
+        let Shaded { ctx, bsdf, dpdx, dpdy } = shade(material, &hit, &rd, wo_world, u_layer);
+        let frame = ctx.frame;
         let wo = frame.to_local(wo_world);
 
         // Next-event estimation: one light, chosen uniformly.

@@ -252,3 +252,58 @@ fn bad_scene_files_give_clear_errors() {
     let err = Scene::load(Path::new("no/such/scene.toml"), &Overrides::default()).unwrap_err();
     assert!(matches!(err, SceneError::Read { .. }) && err.to_string().contains("no/such/scene.toml"), "{err}");
 }
+
+/// The footprint a pixel of a `height`-pixel image with vertical fov `fov_deg` has on a plane
+/// facing the camera at distance `dist`: its width in world units.
+fn pixel_width(dist: f64, fov_deg: f64, height: f64) -> f64 {
+    2.0 * dist * (fov_deg.to_radians() / 2.0).tan() / height
+}
+
+const FOOTPRINT_CAMERA: &str = "[render]\nwidth = 64\nheight = 64\n[camera]\nposition = [0, 0, 4]\nlook_at = [0, 0, 0]\nfov = 30\n";
+
+fn assert_footprint(ctx: &striae::shading::ShadingContext, expected_du: f64, what: &str) {
+    for (name, d) in [("duvdx", ctx.duvdx), ("duvdy", ctx.duvdy)] {
+        let got = d.length() as f64;
+        assert!((got / expected_du - 1.0).abs() < 0.01, "{what}: |{name}| = {got}, expected {expected_du}");
+    }
+    let cos = ctx.duvdx.dot(ctx.duvdy) / (ctx.duvdx.length() * ctx.duvdy.length());
+    assert!(cos.abs() < 0.01, "{what}: square pixels stay square ({:?}, {:?})", ctx.duvdx, ctx.duvdy);
+}
+
+#[test]
+fn footprint_of_a_plane_seen_head_on() {
+    // A rectangle scaled by 2 maps world x in [-2, 2] to u in [0, 1]: du = dx / 4.
+    let s = scene(&format!("{FOOTPRINT_CAMERA}[materials.d]\ntype = \"diffuse\"\n[[shapes]]\ntype = \"rectangle\"\nmaterial = \"d\"\ntransform = {{ scale = 2 }}\n"));
+    let ctx = striae::integrator::trace_contexts(&s, striae::math::Vec2::new(32.0, 32.0), 4);
+    assert_eq!(ctx.len(), 1);
+    assert_footprint(&ctx[0], pixel_width(4.0, 30.0, 64.0) / 4.0, "head-on plane");
+    assert!(ctx[0].duvdy.y < 0.0, "v grows upward, image rows downward");
+}
+
+#[test]
+fn footprint_after_a_mirror_grows_with_the_unfolded_distance() {
+    // Mirror at the origin turned 45 degrees sends the view to +x, onto a plane at x = 3:
+    // the footprint there is that of a plane at distance 4 + 3 seen head-on.
+    let s = scene(&format!(
+        "{FOOTPRINT_CAMERA}[materials.d]\ntype = \"diffuse\"\n[materials.m]\ntype = \"conductor\"\npreset = \"none\"\n\
+         [[shapes]]\ntype = \"rectangle\"\nmaterial = \"m\"\ntransform = [{{ scale = 3 }}, {{ rotate = {{ axis = [0, 1, 0], angle = 45 }} }}]\n\
+         [[shapes]]\ntype = \"rectangle\"\nmaterial = \"d\"\ntransform = [{{ scale = 2 }}, {{ rotate = {{ axis = [0, 1, 0], angle = -90 }} }}, {{ translate = [3, 0, 0] }}]\n"
+    ));
+    let ctx = striae::integrator::trace_contexts(&s, striae::math::Vec2::new(32.0, 32.0), 4);
+    assert_eq!(ctx.len(), 2, "mirror, then the plane");
+    assert_footprint(&ctx[1], pixel_width(7.0, 30.0, 64.0) / 4.0, "plane seen in a mirror");
+}
+
+#[test]
+fn footprint_behind_a_glass_slab_uses_the_reduced_distance() {
+    // A slab of thickness 1 and IOR 1.5 (faces at z = +-0.5) in front of a plane at z = -2:
+    // paraxially the beam spreads as over 3.5 + 1 / 1.5 + 1.5 in air.
+    let s = scene(&format!(
+        "{FOOTPRINT_CAMERA}[materials.d]\ntype = \"diffuse\"\n[materials.g]\ntype = \"dielectric\"\nior = 1.5\n\
+         [[shapes]]\ntype = \"box\"\nmaterial = \"g\"\ntransform = {{ scale = [3, 3, 0.5] }}\n\
+         [[shapes]]\ntype = \"rectangle\"\nmaterial = \"d\"\ntransform = [{{ scale = 2 }}, {{ translate = [0, 0, -2] }}]\n"
+    ));
+    let ctx = striae::integrator::trace_contexts(&s, striae::math::Vec2::new(32.0, 32.0), 4);
+    assert_eq!(ctx.len(), 3, "front face, back face, plane");
+    assert_footprint(&ctx[2], pixel_width(3.5 + 1.0 / 1.5 + 1.5, 30.0, 64.0) / 4.0, "plane behind glass");
+}
