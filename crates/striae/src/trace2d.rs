@@ -144,6 +144,7 @@ impl TraceSettings {
         let law_ok = match self.fresnel_law {
             FresnelLaw::Schlick { n } | FresnelLaw::Dielectric { n } => n.is_finite() && n > 0.0,
             FresnelLaw::Conductor { eta, k } => eta.is_finite() && k.is_finite() && eta > 0.0 && k >= 0.0,
+            FresnelLaw::None => true,
         };
         if !law_ok {
             return bad("fresnel_law", format!("{:?}", self.fresnel_law), "indices must be finite, n > 0, k >= 0");

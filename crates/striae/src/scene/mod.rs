@@ -109,8 +109,11 @@ impl Scene {
 /// The BSDF a material presents at a hit. The one place the integrator asks a material for its
 /// BSDF: the scratched material (issue 5) takes the whole [`ShadingContext`] here.
 #[inline]
-pub fn material_bsdf(material: &Material, ctx: &ShadingContext) -> Bsdf {
-    material.bsdf_at(ctx.uv)
+pub fn material_bsdf<'a>(material: &'a Material, ctx: &ShadingContext) -> Bsdf<'a> {
+    match material {
+        Material::Scratched(m) => m.bsdf(ctx),
+        _ => material.bsdf_at(ctx.uv),
+    }
 }
 
 fn invalid(file: &Path, key: impl Into<String>, value: impl std::fmt::Debug, reason: impl std::fmt::Display) -> SceneError {
