@@ -68,7 +68,7 @@ impl ScratchLobeTable {
             for t in 0..ALBEDO_THETA_POINTS {
                 let theta = FRAC_PI_2 * t as f64 / (ALBEDO_THETA_POINTS - 1) as f64;
                 let a: f64 = (0..m).map(|j| table.rho(theta, j, o) * w[j]).sum();
-                albedo[o * ALBEDO_THETA_POINTS + t] = a.clamp(0.0, 1.0) as f32;
+                albedo[o * ALBEDO_THETA_POINTS + t] = a.max(0.0) as f32;
             }
         }
         ScratchLobeTable { brdf: ScratchBrdf::new(table), albedo, hash }
@@ -93,6 +93,11 @@ impl ScratchLobeTable {
 
     /// `a(wo)` for `wo` in the scratch frame (0 below the surface): the nearest `phi_o` bin
     /// (the BRDF is piecewise constant in `phi_o`) and linear interpolation in `|theta_o|`.
+    ///
+    /// This sums a table *column* (fixed `phi_o`, over `phi_i`), while eq. (1') bounds the
+    /// *rows* (fixed `phi_i`) by 1: a lossless diffuse table is reciprocal only up to its Monte
+    /// Carlo noise, so `a` may exceed 1 by that noise (a few per cent for small tables). The
+    /// BSDF then scales the lobe by `1 / a` ([`ScratchLobeTable::scaled_albedo`]).
     #[inline]
     pub fn albedo(&self, wo: Vec3) -> f32 {
         if wo.z <= 0.0 {
@@ -107,6 +112,18 @@ impl ScratchLobeTable {
         let f = (x - i as f32).clamp(0.0, 1.0);
         let row = &self.albedo[o * ALBEDO_THETA_POINTS..(o + 1) * ALBEDO_THETA_POINTS];
         row[i] * (1.0 - f) + row[i + 1] * f
+    }
+
+    /// `(min(a, 1), s)` with `s = min(1, 1 / a)` the factor applied to the lobe at `wo` so that
+    /// it never reflects more than it receives (departure: noise of the table, see `albedo`).
+    #[inline]
+    pub fn scaled_albedo(&self, wo: Vec3) -> (f32, f32) {
+        let a = self.albedo(wo);
+        if a > 1.0 {
+            (1.0, 1.0 / a)
+        } else {
+            (a, 1.0)
+        }
     }
 }
 
@@ -196,7 +213,7 @@ impl<'a> ScratchedBsdf<'a> {
     #[inline]
     fn lobe_probability(&self, l: &ScratchLobe, wo_s: Vec3) -> f32 {
         if self.is_glass() {
-            l.coverage * self.table.albedo(wo_s)
+            l.coverage * self.table.scaled_albedo(wo_s).0
         } else {
             l.coverage
         }
@@ -211,7 +228,9 @@ impl<'a> ScratchedBsdf<'a> {
         }
         let mut f = 0.0f64;
         for l in self.lobes() {
-            f += l.coverage as f64 * self.table.brdf().eval(l.to_scratch(wo), l.to_scratch(wi));
+            let wo_s = l.to_scratch(wo);
+            let scale = self.table.scaled_albedo(wo_s).1;
+            f += (l.coverage * scale) as f64 * self.table.brdf().eval(wo_s, l.to_scratch(wi));
         }
         self.tint * f as f32
     }
@@ -298,11 +317,13 @@ impl<'a> ScratchedBsdf<'a> {
             return None;
         }
         let l = &self.lobes[k];
-        let s = self.table.brdf().sample(l.to_scratch(wo), [u.x as f64, u.y as f64])?;
+        let wo_s = l.to_scratch(wo);
+        let s = self.table.brdf().sample(wo_s, [u.x as f64, u.y as f64])?;
         let wi = l.from_scratch(s.wi);
         if s.delta {
-            // Coefficient c_k value / (P_k pmf): glass P_k = c_k a_k, metal P_k = c_k.
-            let w = (s.weight * (l.coverage / pk) as f64) as f32;
+            // Coefficient c_k s value / (P_k pmf): glass P_k = c_k a_k, metal P_k = c_k.
+            let scale = self.table.scaled_albedo(wo_s).1;
+            let w = (s.weight * (l.coverage * scale / pk) as f64) as f32;
             return Some(BsdfSample { wi, weight: self.tint * w, pdf: pk * s.pdf as f32, delta: true, eta: 1.0 });
         }
         let pdf = self.pdf(wo, wi);
