@@ -39,7 +39,7 @@ pub struct Args {
     pub quiet: bool,
 }
 
-fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
+pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("`{s}` is not WIDTHxHEIGHT (e.g. 512x384)"))?;
     let w: u32 = w.trim().parse().map_err(|_| format!("bad width in `{s}`"))?;
     let h: u32 = h.trim().parse().map_err(|_| format!("bad height in `{s}`"))?;
