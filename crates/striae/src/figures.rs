@@ -6,8 +6,9 @@
 //! parameters and render times. `striae figures -o DIR` is the command.
 //!
 //! The renders use the shipped scene files (embedded here, so the figures do not depend on the
-//! working directory) at the caller's resolution and samples per pixel. Fig. 2 plots the table
-//! the glass scenes use (a 90-degree V groove with diffuse walls) at `phi_i = 30` degrees;
+//! working directory) at the caller's resolution and samples per pixel. Fig. 2 plots the
+//! profile the glass scenes use (a 90-degree V groove with diffuse walls) at `phi_i = 30`
+//! degrees, traced at the seed's sizes (`M 256, N 10000, N_r 100`; cached after the first run);
 //! Fig. 4 shows layer 0 of a setting-2 layer set (setting 1's scratches, 0.0002 wide, are
 //! thinner than a texel of a 512-pixel image and would barely show).
 
@@ -30,6 +31,13 @@ pub const FIGURE_SCENES: [(&str, &str, &str, &str); 5] = [
 
 /// Incident angle of Fig. 2 (degrees).
 pub const FIG2_PHI_I_DEG: f64 = 30.0;
+
+/// The table of Fig. 2: the glass scenes' profile (a 90-degree V groove, diffuse walls) at the
+/// seed's sizes `M = 256, N = 10000, N_r = 100` (about 30 s on 2 cores, then cached).
+pub fn fig2_table_params() -> crate::table::TableParams {
+    let profile = crate::profile::Profile::parse(crate::scratched::DEFAULT_PROFILE).expect("valid built-in profile");
+    crate::table::TableParams::new(profile, crate::trace2d::TraceSettings::default())
+}
 
 /// What to generate.
 #[derive(Clone, Debug)]
@@ -75,6 +83,8 @@ pub enum FigureError {
     Film(#[from] FilmError),
     #[error("{path}: {source}")]
     Io { path: PathBuf, source: std::io::Error },
+    #[error(transparent)]
+    Table(Box<crate::table::TableError>),
     #[error("scene {0} has no scratched material")]
     NoScratches(String),
 }
@@ -111,27 +121,21 @@ pub fn generate(dir: &Path, opts: &FigureOptions, log: &dyn Fn(&str)) -> Result<
     let overrides = Overrides { spp: Some(opts.spp), resolution: Some(opts.resolution), seed: None, max_depth: None };
     let mut figures = Vec::new();
 
-    // Fig. 2: the lobe of the glass scenes' table.
+    // Fig. 2: the lobe of the glass scenes' profile at the seed's table size.
     let start = Instant::now();
-    let (_, _, name, text) = FIGURE_SCENES[0];
-    let scene = Scene::parse(text, Path::new(name), Path::new("."), &overrides)?;
-    let mut params = scratch_params(&scene, name)?;
-    let table = scene
-        .materials
-        .iter()
-        .find_map(|m| match m {
-            Material::Scratched(s) => s.prepared().map(|p| p.table.clone()),
-            _ => None,
-        })
-        .ok_or_else(|| FigureError::NoScratches(name.to_string()))?;
+    let params = fig2_table_params();
+    let table = crate::scratched::obtain_table(&params).map_err(|e| FigureError::Table(Box::new(e)))?;
     let file = "fig2-lobe.png".to_string();
     crate::plot::plot_lobe(table.table(), FIG2_PHI_I_DEG, &dir.join(&file))?;
-    params.retain(|(k, _)| k == "profile" || k == "table");
-    params.push(("phi_i".into(), format!("{FIG2_PHI_I_DEG} degrees")));
+    let t = &params.trace;
+    let params = vec![
+        ("profile".to_string(), params.profile.spec.clone()),
+        ("table".to_string(), format!("{:?} walls, M {} N {} N_r {} (the seed's sizes)", t.walls, t.m, t.n, t.nr)),
+        ("phi_i".to_string(), format!("{FIG2_PHI_I_DEG} degrees (the nearest bin centre)")),
+    ];
     let seconds = start.elapsed().as_secs_f64();
-    log(&format!("fig2: lobe at phi_i = {FIG2_PHI_I_DEG} deg ({seconds:.2} s)"));
+    log(&format!("fig2: lobe at phi_i = {FIG2_PHI_I_DEG} deg ({seconds:.2} s, table computed or read from the cache)"));
     figures.push(Figure { id: "fig2".into(), caption: "Fig. 2: the 2D scratch BRDF rho_m(phi_o, phi_i), polar plot".into(), file, params, seconds });
-    drop(scene);
 
     // Fig. 4: the stages of layer 0 of a setting-2 set.
     let lp = LayerParams::setting(2)?;

@@ -74,6 +74,21 @@ pub enum LayerMix {
     Sum,
 }
 
+/// How a hit measures the layers' scratch coverage.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum CoverageMode {
+    /// The exact share of the pixel footprint (`uv`, `duvdx`, `duvdy`) each layer's scratches
+    /// cover (METHOD.md section 6, [Raymond16]).
+    #[default]
+    Footprint,
+    /// The scratch test at the hit point only (`c` is 0 or 1 per layer). The camera ray's hit
+    /// is uniformly distributed over the pixel's footprint, so averaging a pixel's samples
+    /// estimates the same coverage without bias, at a fraction of the cost (the footprint
+    /// query enumerates every noise cell the footprint touches; see BENCHMARKS.md).
+    Point,
+}
+
 /// Default table size: small enough to compute in seconds (the seed: 256, 10000, 100).
 pub const DEFAULT_M: usize = 128;
 pub const DEFAULT_N: usize = 2000;
@@ -117,6 +132,8 @@ pub struct ScratchSpec {
     /// Seed of the layer set (default 1).
     pub seed: Option<u64>,
     pub layer_mix: Option<LayerMix>,
+    /// `footprint` (default, section 6) or `point` (see [`CoverageMode`]).
+    pub coverage: Option<CoverageMode>,
     /// A table file (`.npz`, relative to the scene file) to load instead of computing one;
     /// excludes the table keys above.
     pub table: Option<PathBuf>,
@@ -138,6 +155,7 @@ pub struct Resolved {
     pub layers: LayerParams,
     pub layer_seed: u64,
     pub mix: LayerMix,
+    pub coverage: CoverageMode,
 }
 
 /// What rendering needs: the base, the shared table, the layer set.
@@ -147,6 +165,7 @@ pub struct Prepared {
     pub table: Arc<ScratchLobeTable>,
     pub layers: LayerSet,
     pub mix: LayerMix,
+    pub coverage: CoverageMode,
 }
 
 impl std::fmt::Debug for Prepared {
@@ -156,6 +175,7 @@ impl std::fmt::Debug for Prepared {
             .field("table", &self.table.hash())
             .field("layers", &self.layers.len())
             .field("mix", &self.mix)
+            .field("coverage", &self.coverage)
             .finish()
     }
 }
@@ -329,7 +349,7 @@ impl ScratchedMaterial {
             return Err(layer_error(LayerError::LayerCount(layers.layers)));
         }
         layers.validate().map_err(layer_error)?;
-        Ok(Resolved { base, tint, table, layers, layer_seed: s.seed.unwrap_or(DEFAULT_LAYER_SEED), mix: s.layer_mix.unwrap_or_default() })
+        Ok(Resolved { base, tint, table, layers, layer_seed: s.seed.unwrap_or(DEFAULT_LAYER_SEED), mix: s.layer_mix.unwrap_or_default(), coverage: s.coverage.unwrap_or_default() })
     }
 
     /// Validate (no table is computed).
@@ -347,12 +367,12 @@ impl ScratchedMaterial {
         }
         .map_err(|e| MaterialError::ScratchTable { key: if self.scratches.table.is_some() { "scratches.table" } else { "scratches" }, source: Box::new(e) })?;
         let layers = LayerSet::new(r.layers, r.layer_seed).map_err(layer_error)?;
-        self.prepared = Some(Arc::new(Prepared { base: r.base, tint: r.tint, table, layers, mix: r.mix }));
+        self.prepared = Some(Arc::new(Prepared { base: r.base, tint: r.tint, table, layers, mix: r.mix, coverage: r.coverage }));
         Ok(())
     }
 
     /// Build directly from parts (tests, benchmarks).
-    pub fn from_parts(base: ScratchedBase, tint: Rgb, table: Arc<ScratchLobeTable>, layers: LayerSet, mix: LayerMix) -> Self {
+    pub fn from_parts(base: ScratchedBase, tint: Rgb, table: Arc<ScratchLobeTable>, layers: LayerSet, mix: LayerMix, coverage: CoverageMode) -> Self {
         ScratchedMaterial {
             base: match base {
                 ScratchedBase::Glass { .. } => BaseKind::Glass,
@@ -363,7 +383,7 @@ impl ScratchedMaterial {
             eta: None,
             k: None,
             scratches: ScratchSpec::default(),
-            prepared: Some(Arc::new(Prepared { base, tint, table, layers, mix })),
+            prepared: Some(Arc::new(Prepared { base, tint, table, layers, mix, coverage })),
         }
     }
 
@@ -394,7 +414,18 @@ impl ScratchedMaterial {
         }
         let k = p.layers.len();
         let mut cov = [0.0f32; MAX_LAYERS];
-        p.layers.coverage_all(ctx.uv, ctx.duvdx, ctx.duvdy, &mut cov[..k]);
+        match p.coverage {
+            CoverageMode::Footprint => p.layers.coverage_all(ctx.uv, ctx.duvdx, ctx.duvdy, &mut cov[..k]),
+            CoverageMode::Point => {
+                let mask = p.layers.scratched_mask(ctx.uv);
+                if mask == 0 {
+                    return self.base_bsdf();
+                }
+                for (i, c) in cov[..k].iter_mut().enumerate() {
+                    *c = ((mask >> i) & 1) as f32;
+                }
+            }
+        }
         let mut lobes = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
         let count = match p.mix {
             LayerMix::Max => {

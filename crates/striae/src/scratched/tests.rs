@@ -272,8 +272,8 @@ fn flat_ctx(uv: Vec2, footprint: f32, wo: Vec3, u_layer: f32) -> ShadingContext 
 fn layer_choice_frames_and_ties() {
     let t = lossless_diffuse();
     let layers = wide_layers(4, 7);
-    let m = ScratchedMaterial::from_parts(ScratchedBase::Glass { eta: 1.5 }, Rgb::ONE, t.clone(), layers.clone(), LayerMix::Max);
-    let sum = ScratchedMaterial::from_parts(ScratchedBase::Glass { eta: 1.5 }, Rgb::ONE, t, layers.clone(), LayerMix::Sum);
+    let m = ScratchedMaterial::from_parts(ScratchedBase::Glass { eta: 1.5 }, Rgb::ONE, t.clone(), layers.clone(), LayerMix::Max, CoverageMode::Footprint);
+    let sum = ScratchedMaterial::from_parts(ScratchedBase::Glass { eta: 1.5 }, Rgb::ONE, t, layers.clone(), LayerMix::Sum, CoverageMode::Footprint);
     let mut rng = Pcg64::seed_from_u64(25);
     let (mut plain, mut scratched, mut ties_seen) = (0, 0, 0);
     for _ in 0..4000 {
@@ -323,6 +323,20 @@ fn layer_choice_frames_and_ties() {
         }
     }
     assert!(plain > 100 && scratched > 100 && ties_seen > 5, "{plain} {scratched} {ties_seen}");
+    // Point coverage: the scratch test at the hit, whatever the footprint (the same choice as a
+    // zero footprint).
+    let point = ScratchedMaterial::from_parts(ScratchedBase::Glass { eta: 1.5 }, Rgb::ONE, lossless_diffuse(), layers.clone(), LayerMix::Max, CoverageMode::Point);
+    for _ in 0..500 {
+        let uv = Vec2::new(rng.random(), rng.random());
+        let u = rng.random::<f32>();
+        let a = point.bsdf(&flat_ctx(uv, 0.05, Vec3::Z, u));
+        let b = m.bsdf(&flat_ctx(uv, 0.0, Vec3::Z, u));
+        match (a, b) {
+            (Bsdf::Dielectric(_), Bsdf::Dielectric(_)) => {}
+            (Bsdf::Scratched(a), Bsdf::Scratched(b)) => assert_eq!(a.lobes(), b.lobes()),
+            (a, b) => panic!("{a:?} vs {b:?}"),
+        }
+    }
     // A footprint: the chosen coverage is the largest of the layers' exact coverages.
     for _ in 0..300 {
         let uv = Vec2::new(rng.random(), rng.random());
@@ -342,7 +356,7 @@ fn scratch_frame_follows_dpdu_dpdv() {
     let t = lossless_diffuse();
     let layers = LayerSet::new(LayerParams { length: 0.3, width: 0.05, threshold: 1.0, layers: 1 }, 3).unwrap();
     let d = layers.direction(0);
-    let m = ScratchedMaterial::from_parts(ScratchedBase::Glass { eta: 1.5 }, Rgb::ONE, t, layers, LayerMix::Max);
+    let m = ScratchedMaterial::from_parts(ScratchedBase::Glass { eta: 1.5 }, Rgb::ONE, t, layers, LayerMix::Max, CoverageMode::Footprint);
     let mut ctx = flat_ctx(Vec2::splat(0.5), 0.0, Vec3::Z, 0.5);
     ctx.dpdu = Vec3::new(2.0, 0.0, 0.3);
     ctx.dpdv = Vec3::new(1.0, 1.0, 0.0);
@@ -374,7 +388,7 @@ fn keys_are_validated() {
     let ok = parse("type = \"scratched\"\nbase = \"glass\"\nior = 1.5\n[scratches]\nsetting = 2\nlayers = 3\nlayer_mix = \"sum\"\nm = 16").unwrap();
     let r = ok.resolve(Path::new(".")).unwrap();
     assert_eq!(r.layers, LayerParams { layers: 3, ..LayerParams::setting(2).unwrap() });
-    assert_eq!(r.mix, LayerMix::Sum);
+    assert_eq!(r.mix, LayerMix::Sum, CoverageMode::Footprint);
     let TableSource::Compute(p) = r.table else { panic!() };
     assert_eq!((p.trace.m, p.trace.walls, p.trace.fresnel_law), (16, Walls::Diffuse, FresnelLaw::Schlick { n: 1.5 }));
     // Metal defaults: mirror walls, Fresnel at the walls, the base's law; `none` for F = 1.
