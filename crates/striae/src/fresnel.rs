@@ -139,9 +139,17 @@ impl FresnelLaw {
                     return Err(format!("unknown Fresnel law `{s}` (expected schlick, dielectric, conductor:ETA,K or none)"));
                 };
                 let parts: Vec<&str> = rest.split(',').collect();
-                let [eta, k] = parts[..] else { return Err(format!("`{s}`: expected conductor:ETA,K")) };
-                let eta: f64 = eta.trim().parse().map_err(|_| format!("`{s}`: ETA `{eta}` is not a number"))?;
-                let k: f64 = k.trim().parse().map_err(|_| format!("`{s}`: K `{k}` is not a number"))?;
+                let [eta, k] = parts[..] else {
+                    return Err(format!("`{s}`: expected conductor:ETA,K"));
+                };
+                let eta: f64 = eta
+                    .trim()
+                    .parse()
+                    .map_err(|_| format!("`{s}`: ETA `{eta}` is not a number"))?;
+                let k: f64 = k
+                    .trim()
+                    .parse()
+                    .map_err(|_| format!("`{s}`: K `{k}` is not a number"))?;
                 FresnelLaw::Conductor { eta, k }
             }
         })

@@ -38,7 +38,10 @@
 //! inside skips the layer queries (its scratches are on the outer side, `bsdf::scratched`).
 
 use crate::bsdf::scratched::MAX_SCRATCH_LOBES;
-use crate::bsdf::{Bsdf, Conductor, ConductorIor, Dielectric, ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf};
+use crate::bsdf::{
+    Bsdf, Conductor, ConductorIor, Dielectric, ScratchLobe, ScratchLobeTable, ScratchedBase,
+    ScratchedBsdf,
+};
 use crate::fresnel::FresnelLaw;
 use crate::layers::{LayerError, LayerParams, LayerSet, MAX_LAYERS};
 use crate::material::{Material, MaterialError};
@@ -201,12 +204,25 @@ pub struct ScratchedMaterial {
 impl PartialEq for ScratchedMaterial {
     /// Equal descriptions (the prepared table and layers follow from them).
     fn eq(&self, o: &Self) -> bool {
-        self.base == o.base && self.ior == o.ior && self.preset == o.preset && self.eta == o.eta && self.k == o.k && self.scratches == o.scratches
+        self.base == o.base
+            && self.ior == o.ior
+            && self.preset == o.preset
+            && self.eta == o.eta
+            && self.k == o.k
+            && self.scratches == o.scratches
     }
 }
 
-fn invalid(key: &'static str, value: impl std::fmt::Display, reason: impl Into<String>) -> MaterialError {
-    MaterialError::InvalidValue { key, value: value.to_string(), reason: reason.into() }
+fn invalid(
+    key: &'static str,
+    value: impl std::fmt::Display,
+    reason: impl Into<String>,
+) -> MaterialError {
+    MaterialError::InvalidValue {
+        key,
+        value: value.to_string(),
+        reason: reason.into(),
+    }
 }
 
 /// `scratches.KEY` for a trace parameter's name.
@@ -246,29 +262,61 @@ impl ScratchedMaterial {
         let s = &self.scratches;
         let (base, tint, default_law, default_walls, default_mode) = match self.base {
             BaseKind::Glass => {
-                for (key, given) in [("preset", self.preset.is_some()), ("eta", self.eta.is_some()), ("k", self.k.is_some())] {
+                for (key, given) in [
+                    ("preset", self.preset.is_some()),
+                    ("eta", self.eta.is_some()),
+                    ("k", self.k.is_some()),
+                ] {
                     if given {
                         return Err(invalid(key, "(given)", "applies to base = \"metal\" only"));
                     }
                 }
                 let ior = self.ior.unwrap_or(1.5);
                 if !(ior.is_finite() && ior >= 1.0) {
-                    return Err(invalid("ior", ior, "an index of refraction must be finite and >= 1"));
+                    return Err(invalid(
+                        "ior",
+                        ior,
+                        "an index of refraction must be finite and >= 1",
+                    ));
                 }
-                let law = FresnelLaw::Schlick { n: s.ior.unwrap_or(ior as f64) };
-                (ScratchedBase::Glass { eta: ior }, Rgb::ONE, law, Walls::Diffuse, FresnelMode::Seed)
+                let law = FresnelLaw::Schlick {
+                    n: s.ior.unwrap_or(ior as f64),
+                };
+                (
+                    ScratchedBase::Glass { eta: ior },
+                    Rgb::ONE,
+                    law,
+                    Walls::Diffuse,
+                    FresnelMode::Seed,
+                )
             }
             BaseKind::Metal => {
                 if self.ior.is_some() {
-                    return Err(invalid("ior", self.ior.unwrap_or_default(), "applies to base = \"glass\" only (metal takes preset or eta and k)"));
+                    return Err(invalid(
+                        "ior",
+                        self.ior.unwrap_or_default(),
+                        "applies to base = \"glass\" only (metal takes preset or eta and k)",
+                    ));
                 }
-                let cond = Material::Conductor { preset: self.preset.clone(), eta: self.eta, k: self.k, roughness: 0.0 };
+                let cond = Material::Conductor {
+                    preset: self.preset.clone(),
+                    eta: self.eta,
+                    k: self.k,
+                    roughness: 0.0,
+                };
                 cond.validate()?;
-                let Bsdf::Conductor(Conductor { ior }) = cond.bsdf_at(crate::math::Vec2::ZERO) else {
+                let Bsdf::Conductor(Conductor { ior }) = cond.bsdf_at(crate::math::Vec2::ZERO)
+                else {
                     unreachable!("a smooth conductor material gives a smooth conductor BSDF")
                 };
                 let (law, tint) = metal_law_and_tint(&ior);
-                (ScratchedBase::Metal { ior }, tint, law, Walls::Specular, FresnelMode::Walls)
+                (
+                    ScratchedBase::Metal { ior },
+                    tint,
+                    law,
+                    Walls::Specular,
+                    FresnelMode::Walls,
+                )
             }
         };
 
@@ -294,9 +342,14 @@ impl ScratchedMaterial {
                 TableSource::File(base_dir.join(path))
             }
             None => {
-                let spec = s.profile.clone().unwrap_or_else(|| DEFAULT_PROFILE.to_string());
+                let spec = s
+                    .profile
+                    .clone()
+                    .unwrap_or_else(|| DEFAULT_PROFILE.to_string());
                 let profile = match spec.strip_prefix("file:") {
-                    Some(p) if Path::new(p).is_relative() => Profile::parse(&format!("file:{}", base_dir.join(p).display())),
+                    Some(p) if Path::new(p).is_relative() => {
+                        Profile::parse(&format!("file:{}", base_dir.join(p).display()))
+                    }
                     _ => Profile::parse(&spec),
                 }
                 .map_err(|e| invalid("scratches.profile", format!("{spec:?}"), e.to_string()))?;
@@ -306,12 +359,22 @@ impl ScratchedMaterial {
                             ScratchedBase::Glass { eta } => eta as f64,
                             ScratchedBase::Metal { .. } => 1.5,
                         });
-                        FresnelLaw::parse(text, n).map_err(|e| invalid("scratches.fresnel_law", format!("{text:?}"), e))?
+                        FresnelLaw::parse(text, n)
+                            .map_err(|e| invalid("scratches.fresnel_law", format!("{text:?}"), e))?
                     }
                     None => default_law,
                 };
-                if let (Some(n), Some(_)) = (s.ior, s.fresnel_law.as_deref().filter(|l| l.starts_with("conductor") || *l == "none")) {
-                    return Err(invalid("scratches.ior", n, "applies to the schlick and dielectric laws only"));
+                if let (Some(n), Some(_)) = (
+                    s.ior,
+                    s.fresnel_law
+                        .as_deref()
+                        .filter(|l| l.starts_with("conductor") || *l == "none"),
+                ) {
+                    return Err(invalid(
+                        "scratches.ior",
+                        n,
+                        "applies to the schlick and dielectric laws only",
+                    ));
                 }
                 let trace = TraceSettings {
                     walls: s.walls.unwrap_or(default_walls),
@@ -336,12 +399,25 @@ impl ScratchedMaterial {
         let mut layers = match (s.setting, s.length, s.width, s.threshold) {
             (Some(n), None, None, None) => LayerParams::setting(n).map_err(layer_error)?,
             (Some(_), ..) => {
-                return Err(invalid("scratches.setting", s.setting.unwrap_or(0), "a setting excludes `length`, `width` and `threshold`"));
+                return Err(invalid(
+                    "scratches.setting",
+                    s.setting.unwrap_or(0),
+                    "a setting excludes `length`, `width` and `threshold`",
+                ));
             }
             (None, None, None, None) => LayerParams::setting(1).map_err(layer_error)?,
-            (None, Some(length), Some(width), Some(threshold)) => LayerParams { length, width, threshold, layers: LayerParams::DEFAULT_LAYERS },
+            (None, Some(length), Some(width), Some(threshold)) => LayerParams {
+                length,
+                width,
+                threshold,
+                layers: LayerParams::DEFAULT_LAYERS,
+            },
             (None, ..) => {
-                return Err(invalid("scratches.length", format!("{:?}/{:?}/{:?}", s.length, s.width, s.threshold), "give all of `length`, `width` and `threshold` (or a `setting`)"));
+                return Err(invalid(
+                    "scratches.length",
+                    format!("{:?}/{:?}/{:?}", s.length, s.width, s.threshold),
+                    "give all of `length`, `width` and `threshold` (or a `setting`)",
+                ));
             }
         };
         layers.layers = s.layers.unwrap_or(LayerParams::DEFAULT_LAYERS);
@@ -349,7 +425,15 @@ impl ScratchedMaterial {
             return Err(layer_error(LayerError::LayerCount(layers.layers)));
         }
         layers.validate().map_err(layer_error)?;
-        Ok(Resolved { base, tint, table, layers, layer_seed: s.seed.unwrap_or(DEFAULT_LAYER_SEED), mix: s.layer_mix.unwrap_or_default(), coverage: s.coverage.unwrap_or_default() })
+        Ok(Resolved {
+            base,
+            tint,
+            table,
+            layers,
+            layer_seed: s.seed.unwrap_or(DEFAULT_LAYER_SEED),
+            mix: s.layer_mix.unwrap_or_default(),
+            coverage: s.coverage.unwrap_or_default(),
+        })
     }
 
     /// Validate (no table is computed).
@@ -365,14 +449,35 @@ impl ScratchedMaterial {
             TableSource::Compute(params) => obtain_table(params),
             TableSource::File(path) => load_table_file(path),
         }
-        .map_err(|e| MaterialError::ScratchTable { key: if self.scratches.table.is_some() { "scratches.table" } else { "scratches" }, source: Box::new(e) })?;
+        .map_err(|e| MaterialError::ScratchTable {
+            key: if self.scratches.table.is_some() {
+                "scratches.table"
+            } else {
+                "scratches"
+            },
+            source: Box::new(e),
+        })?;
         let layers = LayerSet::new(r.layers, r.layer_seed).map_err(layer_error)?;
-        self.prepared = Some(Arc::new(Prepared { base: r.base, tint: r.tint, table, layers, mix: r.mix, coverage: r.coverage }));
+        self.prepared = Some(Arc::new(Prepared {
+            base: r.base,
+            tint: r.tint,
+            table,
+            layers,
+            mix: r.mix,
+            coverage: r.coverage,
+        }));
         Ok(())
     }
 
     /// Build directly from parts (tests, benchmarks).
-    pub fn from_parts(base: ScratchedBase, tint: Rgb, table: Arc<ScratchLobeTable>, layers: LayerSet, mix: LayerMix, coverage: CoverageMode) -> Self {
+    pub fn from_parts(
+        base: ScratchedBase,
+        tint: Rgb,
+        table: Arc<ScratchLobeTable>,
+        layers: LayerSet,
+        mix: LayerMix,
+        coverage: CoverageMode,
+    ) -> Self {
         ScratchedMaterial {
             base: match base {
                 ScratchedBase::Glass { .. } => BaseKind::Glass,
@@ -383,7 +488,14 @@ impl ScratchedMaterial {
             eta: None,
             k: None,
             scratches: ScratchSpec::default(),
-            prepared: Some(Arc::new(Prepared { base, tint, table, layers, mix, coverage })),
+            prepared: Some(Arc::new(Prepared {
+                base,
+                tint,
+                table,
+                layers,
+                mix,
+                coverage,
+            })),
         }
     }
 
@@ -396,8 +508,15 @@ impl ScratchedMaterial {
         let base = match &self.prepared {
             Some(p) => p.base,
             None => match self.base {
-                BaseKind::Glass => ScratchedBase::Glass { eta: self.ior.unwrap_or(1.5) },
-                BaseKind::Metal => ScratchedBase::Metal { ior: ConductorIor { eta: Rgb::ZERO, k: Rgb::ONE } },
+                BaseKind::Glass => ScratchedBase::Glass {
+                    eta: self.ior.unwrap_or(1.5),
+                },
+                BaseKind::Metal => ScratchedBase::Metal {
+                    ior: ConductorIor {
+                        eta: Rgb::ZERO,
+                        k: Rgb::ONE,
+                    },
+                },
             },
         };
         match base {
@@ -408,14 +527,19 @@ impl ScratchedMaterial {
 
     /// The BSDF at a hit (see the module notes).
     pub fn bsdf(&self, ctx: &ShadingContext) -> Bsdf<'_> {
-        let Some(p) = self.prepared.as_deref() else { return self.base_bsdf() };
+        let Some(p) = self.prepared.as_deref() else {
+            return self.base_bsdf();
+        };
         if matches!(p.base, ScratchedBase::Glass { .. }) && ctx.wo.dot(ctx.ng) <= 0.0 {
             return self.base_bsdf();
         }
         let k = p.layers.len();
         let mut cov = [0.0f32; MAX_LAYERS];
         match p.coverage {
-            CoverageMode::Footprint => p.layers.coverage_all(ctx.uv, ctx.duvdx, ctx.duvdy, &mut cov[..k]),
+            CoverageMode::Footprint => {
+                p.layers
+                    .coverage_all(ctx.uv, ctx.duvdx, ctx.duvdy, &mut cov[..k])
+            }
             CoverageMode::Point => {
                 let mask = p.layers.scratched_mask(ctx.uv);
                 if mask == 0 {
@@ -466,7 +590,12 @@ impl ScratchedMaterial {
                 n
             }
         };
-        Bsdf::Scratched(ScratchedBsdf::new(p.base, &p.table, p.tint, &lobes[..count]))
+        Bsdf::Scratched(ScratchedBsdf::new(
+            p.base,
+            &p.table,
+            p.tint,
+            &lobes[..count],
+        ))
     }
 }
 
@@ -477,8 +606,16 @@ fn lobe(p: &Prepared, ctx: &ShadingContext, layer: usize, c: f32) -> ScratchLobe
     let t: Vec3 = ctx.dpdu * d[0] as f32 + ctx.dpdv * d[1] as f32;
     let (x, y) = (t.dot(ctx.frame.s), t.dot(ctx.frame.t));
     let len = (x * x + y * y).sqrt();
-    let (cos, sin) = if len > 1e-20 && len.is_finite() { (x / len, y / len) } else { (1.0, 0.0) };
-    ScratchLobe { coverage: c, cos, sin }
+    let (cos, sin) = if len > 1e-20 && len.is_finite() {
+        (x / len, y / len)
+    } else {
+        (1.0, 0.0)
+    };
+    ScratchLobe {
+        coverage: c,
+        cos,
+        sin,
+    }
 }
 
 /// Metal scratches: the table's Fresnel law is a scalar, so it takes the base's complex IOR in
@@ -495,7 +632,11 @@ fn metal_law_and_tint(ior: &ConductorIor) -> (FresnelLaw, Rgb) {
         2
     };
     let (eta, k) = (ior.eta[c] as f64, ior.k[c] as f64);
-    let law = if eta > 0.0 { FresnelLaw::Conductor { eta, k } } else { FresnelLaw::None };
+    let law = if eta > 0.0 {
+        FresnelLaw::Conductor { eta, k }
+    } else {
+        FresnelLaw::None
+    };
     let fmax = f[c].max(1e-6);
     (law, (f / fmax).min(Rgb::ONE))
 }
@@ -503,8 +644,14 @@ fn metal_law_and_tint(ior: &ConductorIor) -> (FresnelLaw, Rgb) {
 /// The on-disk table cache: `$STRIAE_CACHE`, else `$XDG_CACHE_HOME/striae`, else
 /// `~/.cache/striae` (`None` if none can be named).
 pub fn cache_dir() -> Option<PathBuf> {
-    let var = |k: &str| std::env::var_os(k).filter(|v| !v.is_empty()).map(PathBuf::from);
-    var("STRIAE_CACHE").or_else(|| var("XDG_CACHE_HOME").map(|d| d.join("striae"))).or_else(|| var("HOME").map(|h| h.join(".cache").join("striae")))
+    let var = |k: &str| {
+        std::env::var_os(k)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
+    var("STRIAE_CACHE")
+        .or_else(|| var("XDG_CACHE_HOME").map(|d| d.join("striae")))
+        .or_else(|| var("HOME").map(|h| h.join(".cache").join("striae")))
 }
 
 /// The cache file of a table: `scratch-table-HASH.npz`.
@@ -547,14 +694,23 @@ pub fn load_table_file(path: &Path) -> Result<Arc<ScratchLobeTable>, TableError>
 }
 
 /// The disk-cache step of [`obtain_table`] with an explicit cache folder (`None`: no cache).
-pub fn load_or_compute(params: &TableParams, hash: &str, dir: Option<&Path>) -> Result<ScratchTable, TableError> {
+pub fn load_or_compute(
+    params: &TableParams,
+    hash: &str,
+    dir: Option<&Path>,
+) -> Result<ScratchTable, TableError> {
     if let Some(dir) = dir {
         let file = cache_file(dir, hash);
         if file.exists() {
             match ScratchTable::load(&file) {
                 Ok(t) if t.params.hash() == hash => return Ok(t),
-                Ok(_) => eprintln!("striae: warning: cached table {} holds other parameters; recomputing it", file.display()),
-                Err(e) => eprintln!("striae: warning: cached table unreadable ({e}); recomputing it"),
+                Ok(_) => eprintln!(
+                    "striae: warning: cached table {} holds other parameters; recomputing it",
+                    file.display()
+                ),
+                Err(e) => {
+                    eprintln!("striae: warning: cached table unreadable ({e}); recomputing it")
+                }
             }
         }
     }
@@ -570,16 +726,32 @@ pub fn load_or_compute(params: &TableParams, hash: &str, dir: Option<&Path>) -> 
         t.nr
     );
     let table = ScratchTable::compute(params, &|_| {})?;
-    eprintln!("striae: scratch table {} computed in {:.2} s", &hash[..12], start.elapsed().as_secs_f64());
+    eprintln!(
+        "striae: scratch table {} computed in {:.2} s",
+        &hash[..12],
+        start.elapsed().as_secs_f64()
+    );
     if let Some(dir) = dir {
         // A name unique to this process and call, then a rename: concurrent writers of the same
         // table (tests, two renders) never see a half-written file.
         static COUNTER: AtomicU64 = AtomicU64::new(0);
-        let tmp = dir.join(format!(".{hash}.{}-{}.npz", std::process::id(), COUNTER.fetch_add(1, Ordering::Relaxed)));
+        let tmp = dir.join(format!(
+            ".{hash}.{}-{}.npz",
+            std::process::id(),
+            COUNTER.fetch_add(1, Ordering::Relaxed)
+        ));
         let result = std::fs::create_dir_all(dir)
-            .map_err(|e| TableError::Io { path: dir.to_path_buf(), source: e })
+            .map_err(|e| TableError::Io {
+                path: dir.to_path_buf(),
+                source: e,
+            })
             .and_then(|_| table.save(&tmp))
-            .and_then(|_| std::fs::rename(&tmp, cache_file(dir, hash)).map_err(|e| TableError::Io { path: cache_file(dir, hash), source: e }));
+            .and_then(|_| {
+                std::fs::rename(&tmp, cache_file(dir, hash)).map_err(|e| TableError::Io {
+                    path: cache_file(dir, hash),
+                    source: e,
+                })
+            });
         if let Err(e) = result {
             let _ = std::fs::remove_file(&tmp);
             eprintln!("striae: warning: could not cache the scratch table ({e})");

@@ -37,8 +37,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if threads == 0 {
         bail!("--threads must be at least 1");
     }
-    let opts = FigureOptions { spp: args.spp, resolution: args.res, layer_resolution: args.layer_res };
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("starting the thread pool")?;
+    let opts = FigureOptions {
+        spp: args.spp,
+        resolution: args.res,
+        layer_resolution: args.layer_res,
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("starting the thread pool")?;
     let start = Instant::now();
     let figures = pool
         .install(|| generate(&args.out, &opts, &|line| eprintln!("{line}")))

@@ -71,7 +71,11 @@ impl ScratchLobeTable {
                 albedo[o * ALBEDO_THETA_POINTS + t] = a.max(0.0) as f32;
             }
         }
-        ScratchLobeTable { brdf: ScratchBrdf::new(table), albedo, hash }
+        ScratchLobeTable {
+            brdf: ScratchBrdf::new(table),
+            albedo,
+            hash,
+        }
     }
 
     pub fn brdf(&self) -> &ScratchBrdf {
@@ -150,12 +154,20 @@ impl ScratchLobe {
     /// `y = w . t`.
     #[inline]
     pub fn to_scratch(&self, w: Vec3) -> Vec3 {
-        Vec3::new(self.sin * w.x - self.cos * w.y, self.cos * w.x + self.sin * w.y, w.z)
+        Vec3::new(
+            self.sin * w.x - self.cos * w.y,
+            self.cos * w.x + self.sin * w.y,
+            w.z,
+        )
     }
 
     #[inline]
     pub fn from_scratch(&self, v: Vec3) -> Vec3 {
-        Vec3::new(self.sin * v.x + self.cos * v.y, -self.cos * v.x + self.sin * v.y, v.z)
+        Vec3::new(
+            self.sin * v.x + self.cos * v.y,
+            -self.cos * v.x + self.sin * v.y,
+            v.z,
+        )
     }
 }
 
@@ -175,11 +187,20 @@ pub struct ScratchedBsdf<'a> {
 impl<'a> ScratchedBsdf<'a> {
     /// `lobes` with coverages `c_k >= 0`; at most [`MAX_SCRATCH_LOBES`] (extra ones are
     /// ignored), rescaled so that `sum c_k <= 1` (the `sum` mode's normalisation).
-    pub fn new(base: ScratchedBase, table: &'a ScratchLobeTable, tint: Rgb, lobes: &[ScratchLobe]) -> Self {
+    pub fn new(
+        base: ScratchedBase,
+        table: &'a ScratchLobeTable,
+        tint: Rgb,
+        lobes: &[ScratchLobe],
+    ) -> Self {
         let mut out = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
         let mut count = 0;
         let mut total = 0.0f32;
-        for l in lobes.iter().filter(|l| l.coverage > 0.0).take(MAX_SCRATCH_LOBES) {
+        for l in lobes
+            .iter()
+            .filter(|l| l.coverage > 0.0)
+            .take(MAX_SCRATCH_LOBES)
+        {
             out[count] = *l;
             total += l.coverage.min(1.0);
             out[count].coverage = l.coverage.min(1.0);
@@ -191,7 +212,14 @@ impl<'a> ScratchedBsdf<'a> {
             }
             total = 1.0;
         }
-        ScratchedBsdf { base, table, tint, lobes: out, count: count as u8, total }
+        ScratchedBsdf {
+            base,
+            table,
+            tint,
+            lobes: out,
+            count: count as u8,
+            total,
+        }
     }
 
     pub fn lobes(&self) -> &[ScratchLobe] {
@@ -265,7 +293,13 @@ impl<'a> ScratchedBsdf<'a> {
                 let base = 1.0 - self.total;
                 let p_reflect = base * fr.r as f32;
                 if u_lobe < p_reflect {
-                    return Some(BsdfSample { wi: reflect_z(wo), weight: Rgb::ONE, pdf: p_reflect, delta: true, eta: 1.0 });
+                    return Some(BsdfSample {
+                        wi: reflect_z(wo),
+                        weight: Rgb::ONE,
+                        pdf: p_reflect,
+                        delta: true,
+                        eta: 1.0,
+                    });
                 }
                 let mut p_scatter = [0.0f32; MAX_SCRATCH_LOBES];
                 let mut p_transmit = base * (1.0 - fr.r as f32);
@@ -279,7 +313,13 @@ impl<'a> ScratchedBsdf<'a> {
                     let eta_it = fr.eta_it as f32;
                     let eta_ti = 1.0 / eta_it;
                     let wi = Vec3::new(-eta_ti * wo.x, -eta_ti * wo.y, fr.cos_theta_t as f32);
-                    return Some(BsdfSample { wi, weight: Rgb::splat(eta_ti * eta_ti), pdf: p_transmit, delta: true, eta: eta_it });
+                    return Some(BsdfSample {
+                        wi,
+                        weight: Rgb::splat(eta_ti * eta_ti),
+                        pdf: p_transmit,
+                        delta: true,
+                        eta: eta_it,
+                    });
                 }
                 for k in 0..self.count as usize {
                     acc += p_scatter[k];
@@ -295,7 +335,13 @@ impl<'a> ScratchedBsdf<'a> {
                 }
                 let base = 1.0 - self.total;
                 if u_lobe < base || self.count == 0 {
-                    return Some(BsdfSample { wi: reflect_z(wo), weight: ior.fresnel(wo.z), pdf: base, delta: true, eta: 1.0 });
+                    return Some(BsdfSample {
+                        wi: reflect_z(wo),
+                        weight: ior.fresnel(wo.z),
+                        pdf: base,
+                        delta: true,
+                        eta: 1.0,
+                    });
                 }
                 let mut acc = base;
                 for k in 0..self.count as usize {
@@ -324,14 +370,26 @@ impl<'a> ScratchedBsdf<'a> {
             // Coefficient c_k s value / (P_k pmf): glass P_k = c_k a_k, metal P_k = c_k.
             let scale = self.table.scaled_albedo(wo_s).1;
             let w = (s.weight * (l.coverage * scale / pk) as f64) as f32;
-            return Some(BsdfSample { wi, weight: self.tint * w, pdf: pk * s.pdf as f32, delta: true, eta: 1.0 });
+            return Some(BsdfSample {
+                wi,
+                weight: self.tint * w,
+                pdf: pk * s.pdf as f32,
+                delta: true,
+                eta: 1.0,
+            });
         }
         let pdf = self.pdf(wo, wi);
         if !(pdf > 0.0) || wi.z <= 0.0 {
             return None;
         }
         let f = self.eval(wo, wi);
-        Some(BsdfSample { wi, weight: f * (wi.z / pdf), pdf, delta: false, eta: 1.0 })
+        Some(BsdfSample {
+            wi,
+            weight: f * (wi.z / pdf),
+            pdf,
+            delta: false,
+            eta: 1.0,
+        })
     }
 
     #[inline]

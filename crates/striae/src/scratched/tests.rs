@@ -12,8 +12,21 @@ use rand_pcg::Pcg64;
 use std::f64::consts::{FRAC_PI_2, PI};
 
 fn table(profile: &str, walls: Walls, law: FresnelLaw, m: usize) -> Arc<ScratchLobeTable> {
-    let trace = TraceSettings { walls, m, n: 800, nr: 8, seed: 4, fresnel_mode: FresnelMode::Seed, fresnel_law: law, ..TraceSettings::default() };
-    let t = ScratchTable::compute(&TableParams::new(Profile::parse(profile).unwrap(), trace), &|_| {}).unwrap();
+    let trace = TraceSettings {
+        walls,
+        m,
+        n: 800,
+        nr: 8,
+        seed: 4,
+        fresnel_mode: FresnelMode::Seed,
+        fresnel_law: law,
+        ..TraceSettings::default()
+    };
+    let t = ScratchTable::compute(
+        &TableParams::new(Profile::parse(profile).unwrap(), trace),
+        &|_| {},
+    )
+    .unwrap();
     Arc::new(ScratchLobeTable::new(t))
 }
 
@@ -22,7 +35,12 @@ fn lossless_diffuse() -> Arc<ScratchLobeTable> {
 }
 
 fn schlick_diffuse() -> Arc<ScratchLobeTable> {
-    table("round:depth=0.4", Walls::Diffuse, FresnelLaw::Schlick { n: 1.5 }, 24)
+    table(
+        "round:depth=0.4",
+        Walls::Diffuse,
+        FresnelLaw::Schlick { n: 1.5 },
+        24,
+    )
 }
 
 fn dir(theta_deg: f32, phi_deg: f32) -> Vec3 {
@@ -32,11 +50,20 @@ fn dir(theta_deg: f32, phi_deg: f32) -> Vec3 {
 
 /// Outgoing directions: normal, oblique, grazing (88 degrees), several azimuths.
 fn wos() -> Vec<Vec3> {
-    vec![dir(0.0, 0.0), dir(35.0, 20.0), dir(60.0, 200.0), dir(88.0, 110.0)]
+    vec![
+        dir(0.0, 0.0),
+        dir(35.0, 20.0),
+        dir(60.0, 200.0),
+        dir(88.0, 110.0),
+    ]
 }
 
 fn lobe(c: f32, beta: f32) -> ScratchLobe {
-    ScratchLobe { coverage: c, cos: beta.cos(), sin: beta.sin() }
+    ScratchLobe {
+        coverage: c,
+        cos: beta.cos(),
+        sin: beta.sin(),
+    }
 }
 
 /// `integral f_s cos dwi` of one lobe by quadrature over the scratch frame's `(theta, phi)`,
@@ -48,7 +75,11 @@ fn albedo_by_quadrature(t: &ScratchLobeTable, wo_scratch: Vec3) -> f64 {
         let th = -FRAC_PI_2 + (a as f64 + 0.5) * PI / n as f64;
         for b in 0..n {
             let ph = -FRAC_PI_2 + (b as f64 + 0.5) * PI / n as f64;
-            let wi = Vec3::new((th.cos() * ph.sin()) as f32, th.sin() as f32, (th.cos() * ph.cos()) as f32);
+            let wi = Vec3::new(
+                (th.cos() * ph.sin()) as f32,
+                th.sin() as f32,
+                (th.cos() * ph.cos()) as f32,
+            );
             sum += t.brdf().eval(wo_scratch, wi) * wi.z as f64 * th.cos() * (PI / n as f64).powi(2);
         }
     }
@@ -65,14 +96,27 @@ fn albedo_table_matches_quadrature() {
         for wo in wos() {
             let a = t.albedo(wo) as f64;
             let q = albedo_by_quadrature(&t, wo);
-            assert!((a - q).abs() < 0.01 * q.max(0.02), "{wo:?}: table {a} vs quadrature {q}");
+            assert!(
+                (a - q).abs() < 0.01 * q.max(0.02),
+                "{wo:?}: table {a} vs quadrature {q}"
+            );
         }
     }
     // Lossless walls keep (almost) everything; Schlick glass at normal incidence about 4 %.
     assert!(lossless_diffuse().albedo(Vec3::Z) > 0.97);
     // Where the noisy table's column sum exceeds 1 the lobe is scaled down to albedo 1.
     let t = lossless_diffuse();
-    let b = ScratchedBsdf::new(ScratchedBase::Metal { ior: ConductorIor { eta: Rgb::ZERO, k: Rgb::ONE } }, &t, Rgb::ONE, &[lobe(1.0, 0.0)]);
+    let b = ScratchedBsdf::new(
+        ScratchedBase::Metal {
+            ior: ConductorIor {
+                eta: Rgb::ZERO,
+                k: Rgb::ONE,
+            },
+        },
+        &t,
+        Rgb::ONE,
+        &[lobe(1.0, 0.0)],
+    );
     for wo in wos() {
         let n = 200;
         let mut q = 0.0;
@@ -80,7 +124,11 @@ fn albedo_table_matches_quadrature() {
             let th = -FRAC_PI_2 + (a as f64 + 0.5) * PI / n as f64;
             for c in 0..n {
                 let ph = -FRAC_PI_2 + (c as f64 + 0.5) * PI / n as f64;
-                let wi = Vec3::new((th.cos() * ph.sin()) as f32, th.sin() as f32, (th.cos() * ph.cos()) as f32);
+                let wi = Vec3::new(
+                    (th.cos() * ph.sin()) as f32,
+                    th.sin() as f32,
+                    (th.cos() * ph.cos()) as f32,
+                );
                 q += b.eval(wo, wi).x as f64 * wi.z as f64 * th.cos() * (PI / n as f64).powi(2);
             }
         }
@@ -96,7 +144,12 @@ fn nondelta_sampler_chi2_pdf_and_weight() {
     let grid = SphereGrid::new(24, 48);
     let mut rng = Pcg64::seed_from_u64(21);
     let glass = ScratchedBase::Glass { eta: 1.5 };
-    let metal = ScratchedBase::Metal { ior: ConductorIor { eta: Rgb::ZERO, k: Rgb::ONE } };
+    let metal = ScratchedBase::Metal {
+        ior: ConductorIor {
+            eta: Rgb::ZERO,
+            k: Rgb::ONE,
+        },
+    };
     let cases: Vec<(ScratchedBase, Vec<ScratchLobe>)> = vec![
         (glass, vec![lobe(0.7, 0.6)]),
         (glass, vec![lobe(0.3, 0.2), lobe(0.5, 2.1)]), // sum mode: two lobes, two frames
@@ -133,9 +186,20 @@ fn nondelta_sampler_chi2_pdf_and_weight() {
             // sum_k c_k (metal).
             let expect: f64 = lobes
                 .iter()
-                .map(|l| l.coverage as f64 * if matches!(base, ScratchedBase::Glass { .. }) { t.scaled_albedo(l.to_scratch(wo)).0 as f64 } else { 1.0 })
+                .map(|l| {
+                    l.coverage as f64
+                        * if matches!(base, ScratchedBase::Glass { .. }) {
+                            t.scaled_albedo(l.to_scratch(wo)).0 as f64
+                        } else {
+                            1.0
+                        }
+                })
                 .sum();
-            assert!((r.pdf_mass - expect).abs() < 0.01, "{base:?} {wo:?}: {} vs {expect}", r.pdf_mass);
+            assert!(
+                (r.pdf_mass - expect).abs() < 0.01,
+                "{base:?} {wo:?}: {} vs {expect}",
+                r.pdf_mass
+            );
         }
     }
 }
@@ -153,7 +217,10 @@ fn glass_delta_choices_weights_and_energy() {
     for wo in wos() {
         let f = crate::fresnel::dielectric(wo.z as f64, eta as f64).r;
         let p_reflect = (1.0 - 0.6) * f;
-        let p_scatter: f64 = lobes.iter().map(|l| l.coverage as f64 * albedo_by_quadrature(&t, l.to_scratch(wo))).sum();
+        let p_scatter: f64 = lobes
+            .iter()
+            .map(|l| l.coverage as f64 * albedo_by_quadrature(&t, l.to_scratch(wo)))
+            .sum();
         let expected = [p_reflect, 1.0 - p_reflect - p_scatter, p_scatter];
         let n = 200_000;
         let mut counts = [0u64; 3];
@@ -181,7 +248,12 @@ fn glass_delta_choices_weights_and_energy() {
         let exp: Vec<f64> = expected.iter().map(|p| p * n as f64).collect();
         let r = chi2_discrete(&counts, &exp);
         assert!(r.p_value > 1e-3, "{wo:?}: {counts:?} vs {exp:?} ({r:?})");
-        assert!(energy.agrees_with(1.0, 4.0, 1e-3), "{wo:?}: energy {} +- {}", energy.mean(), energy.std_error());
+        assert!(
+            energy.agrees_with(1.0, 4.0, 1e-3),
+            "{wo:?}: energy {} +- {}",
+            energy.mean(),
+            energy.std_error()
+        );
     }
     // From inside the scratched point is the smooth dielectric.
     let inside = Vec3::new(0.3, 0.1, -0.9).normalize();
@@ -198,7 +270,10 @@ fn metal_energy_is_base_plus_scratch_albedo() {
     // the lossless walls keep everything but the bounce cap's share).
     let t = lossless_diffuse();
     let lobes = [lobe(0.5, 0.9)];
-    let none = ConductorIor { eta: Rgb::ZERO, k: Rgb::ONE };
+    let none = ConductorIor {
+        eta: Rgb::ZERO,
+        k: Rgb::ONE,
+    };
     let b = ScratchedBsdf::new(ScratchedBase::Metal { ior: none }, &t, Rgb::ONE, &lobes);
     assert!(!b.has_transmission());
     let mut rng = Pcg64::seed_from_u64(23);
@@ -208,18 +283,27 @@ fn metal_energy_is_base_plus_scratch_albedo() {
         for _ in 0..100_000 {
             e.push(sample(&b, wo, &mut rng).map_or(0.0, |s| s.weight.x as f64));
         }
-        assert!(e.agrees_with(expect, 4.0, 2e-3), "{wo:?}: {} vs {expect}", e.mean());
+        assert!(
+            e.agrees_with(expect, 4.0, 2e-3),
+            "{wo:?}: {} vs {expect}",
+            e.mean()
+        );
         assert!(expect > 0.98);
     }
     // Below the surface nothing is sampled.
-    assert!(b.sample(Vec3::new(0.0, 0.0, -1.0), 0.5, Vec2::splat(0.5)).is_none());
+    assert!(b
+        .sample(Vec3::new(0.0, 0.0, -1.0), 0.5, Vec2::splat(0.5))
+        .is_none());
 }
 
 #[test]
 fn mirror_walls_give_a_delta_in_theta() {
     let t = table("round:depth=0.35", Walls::Specular, FresnelLaw::None, 32);
     let l = lobe(0.6, 0.8);
-    let none = ConductorIor { eta: Rgb::ZERO, k: Rgb::ONE };
+    let none = ConductorIor {
+        eta: Rgb::ZERO,
+        k: Rgb::ONE,
+    };
     let b = ScratchedBsdf::new(ScratchedBase::Metal { ior: none }, &t, Rgb::ONE, &[l]);
     assert!(b.is_delta());
     let mut rng = Pcg64::seed_from_u64(24);
@@ -243,14 +327,34 @@ fn mirror_walls_give_a_delta_in_theta() {
         assert!((scratch as f64 / 50_000.0 - 0.6).abs() < 0.02);
         // Energy: (1 - c) + c sum of the delta terms (lossless mirror walls: about 1; a column
         // sum above 1, from the binning, is scaled back to 1).
-        let sum: f64 = t.brdf().delta_terms(wo_s).iter().map(|d| d.value).sum::<f64>().min(1.0);
-        assert!(e.agrees_with(0.4 + 0.6 * sum, 4.0, 3e-3), "{} vs {}", e.mean(), 0.4 + 0.6 * sum);
+        let sum: f64 = t
+            .brdf()
+            .delta_terms(wo_s)
+            .iter()
+            .map(|d| d.value)
+            .sum::<f64>()
+            .min(1.0);
+        assert!(
+            e.agrees_with(0.4 + 0.6 * sum, 4.0, 3e-3),
+            "{} vs {}",
+            e.mean(),
+            0.4 + 0.6 * sum
+        );
         assert!(sum > 0.5, "{sum}");
     }
 }
 
 fn wide_layers(k: usize, seed: u64) -> LayerSet {
-    LayerSet::new(LayerParams { length: 0.3, width: 0.05, threshold: 0.3, layers: k }, seed).unwrap()
+    LayerSet::new(
+        LayerParams {
+            length: 0.3,
+            width: 0.05,
+            threshold: 0.3,
+            layers: k,
+        },
+        seed,
+    )
+    .unwrap()
 }
 
 fn flat_ctx(uv: Vec2, footprint: f32, wo: Vec3, u_layer: f32) -> ShadingContext {
@@ -261,7 +365,11 @@ fn flat_ctx(uv: Vec2, footprint: f32, wo: Vec3, u_layer: f32) -> ShadingContext 
         duvdy: Vec2::new(0.0, footprint),
         dpdu: Vec3::X,
         dpdv: Vec3::Y,
-        frame: Frame { s: Vec3::X, t: Vec3::Y, n: Vec3::Z },
+        frame: Frame {
+            s: Vec3::X,
+            t: Vec3::Y,
+            n: Vec3::Z,
+        },
         ng: Vec3::Z,
         u_layer,
         wo,
@@ -272,8 +380,22 @@ fn flat_ctx(uv: Vec2, footprint: f32, wo: Vec3, u_layer: f32) -> ShadingContext 
 fn layer_choice_frames_and_ties() {
     let t = lossless_diffuse();
     let layers = wide_layers(4, 7);
-    let m = ScratchedMaterial::from_parts(ScratchedBase::Glass { eta: 1.5 }, Rgb::ONE, t.clone(), layers.clone(), LayerMix::Max, CoverageMode::Footprint);
-    let sum = ScratchedMaterial::from_parts(ScratchedBase::Glass { eta: 1.5 }, Rgb::ONE, t, layers.clone(), LayerMix::Sum, CoverageMode::Footprint);
+    let m = ScratchedMaterial::from_parts(
+        ScratchedBase::Glass { eta: 1.5 },
+        Rgb::ONE,
+        t.clone(),
+        layers.clone(),
+        LayerMix::Max,
+        CoverageMode::Footprint,
+    );
+    let sum = ScratchedMaterial::from_parts(
+        ScratchedBase::Glass { eta: 1.5 },
+        Rgb::ONE,
+        t,
+        layers.clone(),
+        LayerMix::Sum,
+        CoverageMode::Footprint,
+    );
     let mut rng = Pcg64::seed_from_u64(25);
     let (mut plain, mut scratched, mut ties_seen) = (0, 0, 0);
     for _ in 0..4000 {
@@ -302,7 +424,11 @@ fn layer_choice_frames_and_ties() {
                     // Every covering layer is chosen for some u_layer, and only those.
                     let mut chosen = 0u64;
                     for i in 0..64 {
-                        let Bsdf::Scratched(b) = m.bsdf(&flat_ctx(uv, 0.0, Vec3::Z, (i as f32 + 0.5) / 64.0)) else { panic!() };
+                        let Bsdf::Scratched(b) =
+                            m.bsdf(&flat_ctx(uv, 0.0, Vec3::Z, (i as f32 + 0.5) / 64.0))
+                        else {
+                            panic!()
+                        };
                         let l = b.lobes()[0];
                         let k = (0..4).find(|&k| {
                             let d = layers.direction(k);
@@ -312,20 +438,35 @@ fn layer_choice_frames_and_ties() {
                     }
                     assert_eq!(chosen, mask);
                     // Sum mode combines them all, normalised to a total of 1.
-                    let Bsdf::Scratched(b) = sum.bsdf(&flat_ctx(uv, 0.0, Vec3::Z, 0.5)) else { panic!() };
+                    let Bsdf::Scratched(b) = sum.bsdf(&flat_ctx(uv, 0.0, Vec3::Z, 0.5)) else {
+                        panic!()
+                    };
                     assert_eq!(b.lobes().len(), mask.count_ones() as usize);
                     assert!((b.total_coverage() - 1.0).abs() < 1e-6);
                 }
                 // Seen from inside, the same point is smooth glass.
-                assert!(matches!(m.bsdf(&flat_ctx(uv, 0.0, -Vec3::Z, 0.5)), Bsdf::Dielectric(_)));
+                assert!(matches!(
+                    m.bsdf(&flat_ctx(uv, 0.0, -Vec3::Z, 0.5)),
+                    Bsdf::Dielectric(_)
+                ));
             }
             other => panic!("{other:?}"),
         }
     }
-    assert!(plain > 100 && scratched > 100 && ties_seen > 5, "{plain} {scratched} {ties_seen}");
+    assert!(
+        plain > 100 && scratched > 100 && ties_seen > 5,
+        "{plain} {scratched} {ties_seen}"
+    );
     // Point coverage: the scratch test at the hit, whatever the footprint (the same choice as a
     // zero footprint).
-    let point = ScratchedMaterial::from_parts(ScratchedBase::Glass { eta: 1.5 }, Rgb::ONE, lossless_diffuse(), layers.clone(), LayerMix::Max, CoverageMode::Point);
+    let point = ScratchedMaterial::from_parts(
+        ScratchedBase::Glass { eta: 1.5 },
+        Rgb::ONE,
+        lossless_diffuse(),
+        layers.clone(),
+        LayerMix::Max,
+        CoverageMode::Point,
+    );
     for _ in 0..500 {
         let uv = Vec2::new(rng.random(), rng.random());
         let u = rng.random::<f32>();
@@ -354,13 +495,31 @@ fn layer_choice_frames_and_ties() {
 fn scratch_frame_follows_dpdu_dpdv() {
     // A sheared parametrisation: t = d.x dP/du + d.y dP/dv, projected and normalised.
     let t = lossless_diffuse();
-    let layers = LayerSet::new(LayerParams { length: 0.3, width: 0.05, threshold: 1.0, layers: 1 }, 3).unwrap();
+    let layers = LayerSet::new(
+        LayerParams {
+            length: 0.3,
+            width: 0.05,
+            threshold: 1.0,
+            layers: 1,
+        },
+        3,
+    )
+    .unwrap();
     let d = layers.direction(0);
-    let m = ScratchedMaterial::from_parts(ScratchedBase::Glass { eta: 1.5 }, Rgb::ONE, t, layers, LayerMix::Max, CoverageMode::Footprint);
+    let m = ScratchedMaterial::from_parts(
+        ScratchedBase::Glass { eta: 1.5 },
+        Rgb::ONE,
+        t,
+        layers,
+        LayerMix::Max,
+        CoverageMode::Footprint,
+    );
     let mut ctx = flat_ctx(Vec2::splat(0.5), 0.0, Vec3::Z, 0.5);
     ctx.dpdu = Vec3::new(2.0, 0.0, 0.3);
     ctx.dpdv = Vec3::new(1.0, 1.0, 0.0);
-    let Bsdf::Scratched(b) = m.bsdf(&ctx) else { panic!("tau = 1 covers every point") };
+    let Bsdf::Scratched(b) = m.bsdf(&ctx) else {
+        panic!("tau = 1 covers every point")
+    };
     let t3 = ctx.dpdu * d[0] as f32 + ctx.dpdv * d[1] as f32;
     let expect = Vec2::new(t3.x, t3.y).normalize();
     let l = b.lobes()[0];
@@ -387,35 +546,102 @@ fn parse(text: &str) -> Result<ScratchedMaterial, String> {
 fn keys_are_validated() {
     let ok = parse("type = \"scratched\"\nbase = \"glass\"\nior = 1.5\n[scratches]\nsetting = 2\nlayers = 3\nlayer_mix = \"sum\"\nm = 16").unwrap();
     let r = ok.resolve(Path::new(".")).unwrap();
-    assert_eq!(r.layers, LayerParams { layers: 3, ..LayerParams::setting(2).unwrap() });
-    assert_eq!(r.mix, LayerMix::Sum, CoverageMode::Footprint);
-    let TableSource::Compute(p) = r.table else { panic!() };
-    assert_eq!((p.trace.m, p.trace.walls, p.trace.fresnel_law), (16, Walls::Diffuse, FresnelLaw::Schlick { n: 1.5 }));
+    assert_eq!(
+        r.layers,
+        LayerParams {
+            layers: 3,
+            ..LayerParams::setting(2).unwrap()
+        }
+    );
+    assert_eq!((r.mix, r.coverage), (LayerMix::Sum, CoverageMode::Footprint));
+    let TableSource::Compute(p) = r.table else {
+        panic!()
+    };
+    assert_eq!(
+        (p.trace.m, p.trace.walls, p.trace.fresnel_law),
+        (16, Walls::Diffuse, FresnelLaw::Schlick { n: 1.5 })
+    );
     // Metal defaults: mirror walls, Fresnel at the walls, the base's law; `none` for F = 1.
-    let r = parse("type = \"scratched\"\nbase = \"metal\"\npreset = \"none\"").unwrap().resolve(Path::new(".")).unwrap();
-    let TableSource::Compute(p) = r.table else { panic!() };
-    assert_eq!((p.trace.walls, p.trace.fresnel_mode, p.trace.fresnel_law), (Walls::Specular, FresnelMode::Walls, FresnelLaw::None));
+    let r = parse("type = \"scratched\"\nbase = \"metal\"\npreset = \"none\"")
+        .unwrap()
+        .resolve(Path::new("."))
+        .unwrap();
+    let TableSource::Compute(p) = r.table else {
+        panic!()
+    };
+    assert_eq!(
+        (p.trace.walls, p.trace.fresnel_mode, p.trace.fresnel_law),
+        (Walls::Specular, FresnelMode::Walls, FresnelLaw::None)
+    );
     assert_eq!(r.tint, Rgb::ONE);
-    let r = parse("type = \"scratched\"\nbase = \"metal\"\npreset = \"gold\"").unwrap().resolve(Path::new(".")).unwrap();
+    let r = parse("type = \"scratched\"\nbase = \"metal\"\npreset = \"gold\"")
+        .unwrap()
+        .resolve(Path::new("."))
+        .unwrap();
     assert!(r.tint.x == 1.0 && r.tint.z < 0.6, "{:?}", r.tint);
     let cases: &[(&str, &[&str])] = &[
         ("base = \"wood\"", &["wood"]),
         ("base = \"glass\"\nior = 0.5", &["`ior`", "0.5"]),
-        ("base = \"glass\"\npreset = \"gold\"", &["`preset`", "metal"]),
-        ("base = \"metal\"\nior = 1.5\npreset = \"gold\"", &["`ior`", "glass"]),
-        ("base = \"metal\"\npreset = \"unobtainium\"", &["unobtainium"]),
-        ("base = \"glass\"\n[scratches]\nm = 0", &["`scratches.m`", "0"]),
-        ("base = \"glass\"\n[scratches]\nsetting = 3", &["`scratches.setting`", "3"]),
-        ("base = \"glass\"\n[scratches]\nsetting = 1\nwidth = 0.1", &["`scratches.setting`", "excludes"]),
-        ("base = \"glass\"\n[scratches]\nlength = 0.1", &["`scratches.length`"]),
-        ("base = \"glass\"\n[scratches]\nlength = 0.1\nwidth = -1\nthreshold = 0.1", &["`scratches.width`", "-1"]),
-        ("base = \"glass\"\n[scratches]\nlayers = 0", &["`scratches.layers`"]),
-        ("base = \"glass\"\n[scratches]\nlayers = 65", &["`scratches.layers`", "65"]),
-        ("base = \"glass\"\n[scratches]\nprofile = \"zigzag\"", &["`scratches.profile`", "zigzag"]),
-        ("base = \"glass\"\n[scratches]\nfresnel_law = \"fancy\"", &["`scratches.fresnel_law`", "fancy"]),
-        ("base = \"glass\"\n[scratches]\ntable = \"t.npz\"\nm = 64", &["`scratches.m`", "table"]),
-        ("base = \"glass\"\n[scratches]\nlayer_mix = \"avg\"", &["avg"]),
-        ("base = \"glass\"\n[scratches]\nwalls = \"rough\"", &["rough"]),
+        (
+            "base = \"glass\"\npreset = \"gold\"",
+            &["`preset`", "metal"],
+        ),
+        (
+            "base = \"metal\"\nior = 1.5\npreset = \"gold\"",
+            &["`ior`", "glass"],
+        ),
+        (
+            "base = \"metal\"\npreset = \"unobtainium\"",
+            &["unobtainium"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nm = 0",
+            &["`scratches.m`", "0"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nsetting = 3",
+            &["`scratches.setting`", "3"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nsetting = 1\nwidth = 0.1",
+            &["`scratches.setting`", "excludes"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nlength = 0.1",
+            &["`scratches.length`"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nlength = 0.1\nwidth = -1\nthreshold = 0.1",
+            &["`scratches.width`", "-1"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nlayers = 0",
+            &["`scratches.layers`"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nlayers = 65",
+            &["`scratches.layers`", "65"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nprofile = \"zigzag\"",
+            &["`scratches.profile`", "zigzag"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nfresnel_law = \"fancy\"",
+            &["`scratches.fresnel_law`", "fancy"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\ntable = \"t.npz\"\nm = 64",
+            &["`scratches.m`", "table"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nlayer_mix = \"avg\"",
+            &["avg"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nwalls = \"rough\"",
+            &["rough"],
+        ),
         ("base = \"glass\"\n[scratches]\nfoo = 1", &["foo"]),
         ("base = \"glass\"\nroughness = 0.1", &["roughness"]),
     ];
@@ -432,7 +658,13 @@ fn keys_are_validated() {
 fn table_cache_writes_reads_and_recovers_from_corruption() {
     let dir = std::env::temp_dir().join(format!("striae-cache-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let trace = TraceSettings { m: 8, n: 100, nr: 2, seed: 99, ..TraceSettings::default() };
+    let trace = TraceSettings {
+        m: 8,
+        n: 100,
+        nr: 2,
+        seed: 99,
+        ..TraceSettings::default()
+    };
     let params = TableParams::new(Profile::parse("v:angle=80").unwrap(), trace);
     let hash = params.hash();
     let a = load_or_compute(&params, &hash, Some(&dir)).unwrap();
@@ -458,7 +690,13 @@ fn table_cache_writes_reads_and_recovers_from_corruption() {
 
 #[test]
 fn tables_are_shared_by_hash() {
-    let trace = TraceSettings { m: 8, n: 50, nr: 2, seed: 12345, ..TraceSettings::default() };
+    let trace = TraceSettings {
+        m: 8,
+        n: 50,
+        nr: 2,
+        seed: 12345,
+        ..TraceSettings::default()
+    };
     let params = TableParams::new(Profile::parse("v:angle=70").unwrap(), trace);
     let a = obtain_table(&params).unwrap();
     let b = obtain_table(&params).unwrap();
