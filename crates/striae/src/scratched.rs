@@ -569,8 +569,8 @@ impl ScratchedMaterial {
                 let mut order: [usize; MAX_LAYERS] = std::array::from_fn(|i| i);
                 let covered = {
                     let mut n = 0;
-                    for i in 0..k {
-                        if cov[i] > 0.0 {
+                    for (i, &c) in cov[..k].iter().enumerate() {
+                        if c > 0.0 {
                             order[n] = i;
                             n += 1;
                         }

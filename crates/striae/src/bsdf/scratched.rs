@@ -321,10 +321,11 @@ impl<'a> ScratchedBsdf<'a> {
                         eta: eta_it,
                     });
                 }
-                for k in 0..self.count as usize {
-                    acc += p_scatter[k];
-                    if u_lobe < acc || k + 1 == self.count as usize {
-                        return self.sample_lobe(k, wo, p_scatter[k], u);
+                let count = self.count as usize;
+                for (k, &pk) in p_scatter[..count].iter().enumerate() {
+                    acc += pk;
+                    if u_lobe < acc || k + 1 == count {
+                        return self.sample_lobe(k, wo, pk, u);
                     }
                 }
                 None
