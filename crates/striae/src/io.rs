@@ -6,7 +6,10 @@ use std::path::{Path, PathBuf};
 /// The temporary sibling used while `path` is being written: `.NAME.tmp-PID` in the same folder,
 /// so the final rename is atomic on one filesystem.
 pub fn temp_path(path: &Path) -> PathBuf {
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let tmp = format!(".{name}.tmp-{}", std::process::id());
     match path.parent() {
         Some(dir) if !dir.as_os_str().is_empty() => dir.join(tmp),
@@ -16,10 +19,7 @@ pub fn temp_path(path: &Path) -> PathBuf {
 
 /// Write `path` atomically: `write` fills a temporary file, which is renamed to `path` only if
 /// `write` succeeded; on failure the temporary file is removed and `path` is untouched.
-pub fn write_atomically<E>(
-    path: &Path,
-    write: impl FnOnce(&Path) -> Result<(), E>,
-) -> Result<(), E>
+pub fn write_atomically<E>(path: &Path, write: impl FnOnce(&Path) -> Result<(), E>) -> Result<(), E>
 where
     E: From<std::io::Error>,
 {
@@ -51,7 +51,11 @@ mod tests {
         });
         assert!(r.is_err());
         assert!(!out.exists());
-        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "temporary file removed");
+        assert_eq!(
+            std::fs::read_dir(&dir).unwrap().count(),
+            0,
+            "temporary file removed"
+        );
         write_atomically::<std::io::Error>(&out, |p| std::fs::write(p, b"done")).unwrap();
         assert_eq!(std::fs::read(&out).unwrap(), b"done");
         std::fs::remove_dir_all(&dir).unwrap();

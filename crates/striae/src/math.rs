@@ -19,7 +19,11 @@ pub struct Ray {
 
 impl Ray {
     pub fn new(o: Vec3, d: Vec3) -> Self {
-        Ray { o, d, t_max: f32::INFINITY }
+        Ray {
+            o,
+            d,
+            t_max: f32::INFINITY,
+        }
     }
     pub fn at(&self, t: f32) -> Vec3 {
         self.o + t * self.d
@@ -64,7 +68,11 @@ impl Frame {
             return Frame::from_normal(n);
         }
         let s = s / len2.sqrt();
-        Frame { s, t: n.cross(s), n }
+        Frame {
+            s,
+            t: n.cross(s),
+            n,
+        }
     }
 
     pub fn to_local(&self, v: Vec3) -> Vec3 {
@@ -100,11 +108,24 @@ mod tests {
 
     #[test]
     fn frames_are_orthonormal_and_invert() {
-        for n in [Vec3::Z, -Vec3::Z, Vec3::X, Vec3::new(0.3, -0.4, 0.5).normalize(), Vec3::new(0.0, 0.0, -0.9999).normalize()] {
-            for f in [Frame::from_normal(n), Frame::from_normal_tangent(n, Vec3::new(1.0, 2.0, 3.0))] {
+        for n in [
+            Vec3::Z,
+            -Vec3::Z,
+            Vec3::X,
+            Vec3::new(0.3, -0.4, 0.5).normalize(),
+            Vec3::new(0.0, 0.0, -0.9999).normalize(),
+        ] {
+            for f in [
+                Frame::from_normal(n),
+                Frame::from_normal_tangent(n, Vec3::new(1.0, 2.0, 3.0)),
+            ] {
                 assert!((f.s.length() - 1.0).abs() < 1e-5);
                 assert!((f.t.length() - 1.0).abs() < 1e-5);
-                assert!(f.s.dot(f.t).abs() < 1e-5 && f.s.dot(f.n).abs() < 1e-5 && f.t.dot(f.n).abs() < 1e-5);
+                assert!(
+                    f.s.dot(f.t).abs() < 1e-5
+                        && f.s.dot(f.n).abs() < 1e-5
+                        && f.t.dot(f.n).abs() < 1e-5
+                );
                 assert!((f.s.cross(f.t) - f.n).length() < 1e-4, "right-handed");
                 let v = Vec3::new(0.2, -0.7, 0.4);
                 assert!((f.to_world(f.to_local(v)) - v).length() < 1e-5);

@@ -29,17 +29,27 @@ fn register_font() {
 }
 
 fn draw_err(path: &Path) -> impl Fn(String) -> PlotError + '_ {
-    move |why| PlotError::Draw { path: path.to_path_buf(), why }
+    move |why| PlotError::Draw {
+        path: path.to_path_buf(),
+        why,
+    }
 }
 
 /// Render to a temporary PNG and rename it into place (no half-written file).
-fn render(path: &Path, size: (u32, u32), draw: impl FnOnce(&Path) -> Result<(), String>) -> Result<(), PlotError> {
+fn render(
+    path: &Path,
+    size: (u32, u32),
+    draw: impl FnOnce(&Path) -> Result<(), String>,
+) -> Result<(), PlotError> {
     register_font();
     let _ = size;
     let err = draw_err(path);
     let tmp = crate::io::temp_path(path);
     // plotters picks the encoder from the extension: keep `.png` on the temporary name.
-    let tmp = tmp.with_file_name(format!("{}.png", tmp.file_name().unwrap_or_default().to_string_lossy()));
+    let tmp = tmp.with_file_name(format!(
+        "{}.png",
+        tmp.file_name().unwrap_or_default().to_string_lossy()
+    ));
     match draw(&tmp) {
         Ok(()) => std::fs::rename(&tmp, path).map_err(|e| {
             let _ = std::fs::remove_file(&tmp);
@@ -93,11 +103,21 @@ pub fn plot_lobe(table: &ScratchTable, phi_i_deg: f64, path: &Path) -> Result<()
         let step = nice_step(rmax / 4.0);
         let mut r = step;
         while r < rmax {
-            let arc: Vec<(f64, f64)> =
-                (0..=180).map(|k| (k as f64).to_radians()).map(|a| (r * a.cos(), r * a.sin())).collect();
-            chart.draw_series(LineSeries::new(arc, RGBColor(210, 210, 210))).map_err(|e| e.to_string())?;
+            let arc: Vec<(f64, f64)> = (0..=180)
+                .map(|k| (k as f64).to_radians())
+                .map(|a| (r * a.cos(), r * a.sin()))
+                .collect();
             chart
-                .draw_series(std::iter::once(Text::new(format!("{r:.3}"), (r, 0.0), ("sans-serif", 13).into_font())))
+                .draw_series(LineSeries::new(arc, RGBColor(210, 210, 210)))
+                .map_err(|e| e.to_string())?;
+            chart
+                .draw_series(std::iter::once(Text::new(
+                    format!("{r:.3}"),
+                    (-0.259 * r, 0.966 * r),
+                    ("sans-serif", 13)
+                        .into_font()
+                        .color(&RGBColor(120, 120, 120)),
+                )))
                 .map_err(|e| e.to_string())?;
             r += step;
         }
@@ -108,8 +128,13 @@ pub fn plot_lobe(table: &ScratchTable, phi_i_deg: f64, path: &Path) -> Result<()
             (row[j] * s, row[j] * c)
         }));
         pts.push((0.0, 0.0));
+        // Separate 2-point segments: a thick polyline's miter joins overshoot at the sharp
+        // turns of mirror spikes.
         chart
-            .draw_series(LineSeries::new(pts, BLUE.stroke_width(2)))
+            .draw_series(
+                pts.windows(2)
+                    .map(|w| PathElement::new(vec![w[0], w[1]], BLUE.stroke_width(2))),
+            )
             .map_err(|e| e.to_string())?
             .label("rho_m(phi_o, phi_i)")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(2)));
@@ -152,9 +177,18 @@ fn nice_step(x: f64) -> f64 {
 
 /// A viridis-like colour map on `[0, 1]` (piecewise linear through 5 of viridis' colours).
 fn colour(t: f64) -> RGBColor {
-    const STOPS: [(f64, f64, f64); 5] =
-        [(68.0, 1.0, 84.0), (59.0, 82.0, 139.0), (33.0, 145.0, 140.0), (94.0, 201.0, 98.0), (253.0, 231.0, 37.0)];
-    let t = if t.is_finite() { t.clamp(0.0, 1.0) } else { 0.0 } * 4.0;
+    const STOPS: [(f64, f64, f64); 5] = [
+        (68.0, 1.0, 84.0),
+        (59.0, 82.0, 139.0),
+        (33.0, 145.0, 140.0),
+        (94.0, 201.0, 98.0),
+        (253.0, 231.0, 37.0),
+    ];
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    } * 4.0;
     let k = (t as usize).min(3);
     let f = t - k as f64;
     let (a, b) = (STOPS[k], STOPS[k + 1]);
@@ -169,7 +203,9 @@ pub fn plot_heatmap(table: &ScratchTable, path: &Path) -> Result<(), PlotError> 
     let m = table.m;
     let mut sorted = table.rho_m.clone();
     sorted.sort_by(|a, b| a.total_cmp(b));
-    let vmax = sorted[((sorted.len() - 1) as f64 * 0.99) as usize].max(sorted[sorted.len() - 1] * 1e-3).max(1e-12);
+    let vmax = sorted[((sorted.len() - 1) as f64 * 0.99) as usize]
+        .max(sorted[sorted.len() - 1] * 1e-3)
+        .max(1e-12);
     let (w, h) = (900u32, 760u32);
     render(path, (w, h), |tmp| {
         let root = BitMapBackend::new(tmp, (w, h)).into_drawing_area();
@@ -201,7 +237,10 @@ pub fn plot_heatmap(table: &ScratchTable, path: &Path) -> Result<(), PlotError> 
                 let (i, j) = (k / m, k % m);
                 let x0 = -90.0 + j as f64 * bw;
                 let y0 = -90.0 + i as f64 * bw;
-                Rectangle::new([(x0, y0), (x0 + bw, y0 + bw)], colour(table.rho_m[k] / vmax).filled())
+                Rectangle::new(
+                    [(x0, y0), (x0 + bw, y0 + bw)],
+                    colour(table.rho_m[k] / vmax).filled(),
+                )
             }))
             .map_err(|e| e.to_string())?;
         // Colour bar.
@@ -224,7 +263,10 @@ pub fn plot_heatmap(table: &ScratchTable, path: &Path) -> Result<(), PlotError> 
         bar.draw_series((0..steps).map(|k| {
             let a = vmax * k as f64 / steps as f64;
             let b = vmax * (k + 1) as f64 / steps as f64;
-            Rectangle::new([(0.0, a), (1.0, b)], colour((k as f64 + 0.5) / steps as f64).filled())
+            Rectangle::new(
+                [(0.0, a), (1.0, b)],
+                colour((k as f64 + 0.5) / steps as f64).filled(),
+            )
         }))
         .map_err(|e| e.to_string())?;
         root.present().map_err(|e| e.to_string())
@@ -240,8 +282,18 @@ mod tests {
 
     #[test]
     fn plots_are_written_and_bad_angles_rejected() {
-        let s = TraceSettings { walls: Walls::Diffuse, m: 16, n: 200, nr: 4, ..TraceSettings::default() };
-        let t = ScratchTable::compute(&TableParams::new(Profile::parse("v:angle=90").unwrap(), s), &|_| {}).unwrap();
+        let s = TraceSettings {
+            walls: Walls::Diffuse,
+            m: 16,
+            n: 200,
+            nr: 4,
+            ..TraceSettings::default()
+        };
+        let t = ScratchTable::compute(
+            &TableParams::new(Profile::parse("v:angle=90").unwrap(), s),
+            &|_| {},
+        )
+        .unwrap();
         let dir = std::env::temp_dir().join(format!("striae-plot-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let lobe = dir.join("lobe.png");
@@ -254,7 +306,10 @@ mod tests {
         let heat = dir.join("heat.png");
         plot_heatmap(&t, &heat).unwrap();
         assert!(image::open(&heat).is_ok());
-        assert!(matches!(plot_lobe(&t, 90.0, &dir.join("x.png")), Err(PlotError::BadAngle(_))));
+        assert!(matches!(
+            plot_lobe(&t, 90.0, &dir.join("x.png")),
+            Err(PlotError::BadAngle(_))
+        ));
         assert!(!dir.join("x.png").exists());
         std::fs::remove_dir_all(&dir).ok();
     }

@@ -19,27 +19,59 @@ pub enum ProfileError {
     #[error("unknown profile kind `{0}` (expected v, round, trapezoid, flat or file:PATH)")]
     UnknownKind(String),
     #[error("profile `{spec}`: unknown parameter `{key}` (expected {expected})")]
-    UnknownParameter { spec: String, key: String, expected: &'static str },
+    UnknownParameter {
+        spec: String,
+        key: String,
+        expected: &'static str,
+    },
     #[error("profile `{spec}`: missing parameter `{key}`")]
     MissingParameter { spec: String, key: &'static str },
     #[error("profile `{spec}`: parameter `{key}` given twice")]
     DuplicateParameter { spec: String, key: String },
     #[error("profile `{spec}`: parameter `{key}` = `{value}` is invalid: {why}")]
-    BadParameter { spec: String, key: String, value: String, why: String },
+    BadParameter {
+        spec: String,
+        key: String,
+        value: String,
+        why: String,
+    },
     #[error("profile `{spec}`: `{item}` is not of the form key=value")]
     Malformed { spec: String, item: String },
-    #[error("profile file {path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    #[error("cannot read profile file {path}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("profile file {path}, line {line}: cannot read `{text}` as two numbers `x z`")]
-    BadLine { path: PathBuf, line: usize, text: String },
+    BadLine {
+        path: PathBuf,
+        line: usize,
+        text: String,
+    },
     #[error("profile {what}: has {segments} segment(s), at least 2 are needed")]
     TooFewSegments { what: String, segments: usize },
     #[error("profile {what}: point {index} ({x}, {z}) is not finite")]
-    NonFinite { what: String, index: usize, x: f64, z: f64 },
+    NonFinite {
+        what: String,
+        index: usize,
+        x: f64,
+        z: f64,
+    },
     #[error("profile {what}: point {index} ({x}, {z}) lies above the surface z = 0")]
-    AboveSurface { what: String, index: usize, x: f64, z: f64 },
+    AboveSurface {
+        what: String,
+        index: usize,
+        x: f64,
+        z: f64,
+    },
     #[error("profile {what}: endpoints must lie on the surface z = 0 with x increasing, got ({x0}, {z0}) and ({x1}, {z1})")]
-    BadEndpoints { what: String, x0: f64, z0: f64, x1: f64, z1: f64 },
+    BadEndpoints {
+        what: String,
+        x0: f64,
+        z0: f64,
+        x1: f64,
+        z1: f64,
+    },
     #[error("profile {what}: segment {index} has zero length")]
     ZeroLength { what: String, index: usize },
     #[error("profile {what}: segments {a} and {b} intersect")]
@@ -59,7 +91,10 @@ const Z_TOL: f64 = 1e-12;
 
 impl Profile {
     /// A profile from explicit vertices, validated. `what` names it in errors.
-    pub fn from_points(spec: impl Into<String>, points: Vec<[f64; 2]>) -> Result<Self, ProfileError> {
+    pub fn from_points(
+        spec: impl Into<String>,
+        points: Vec<[f64; 2]>,
+    ) -> Result<Self, ProfileError> {
         let spec = spec.into();
         validate(&spec, &points)?;
         Ok(Profile { spec, points })
@@ -88,10 +123,20 @@ impl Profile {
         let spec = format!("round:depth={depth},segments={segments}");
         positive(&spec, "depth", depth)?;
         if depth > 0.5 {
-            return Err(bad(&spec, "depth", depth, "must be at most 0.5 (a half circle)"));
+            return Err(bad(
+                &spec,
+                "depth",
+                depth,
+                "must be at most 0.5 (a half circle)",
+            ));
         }
         if !(2..=100_000).contains(&segments) {
-            return Err(bad(&spec, "segments", segments as f64, "must be in 2..=100000"));
+            return Err(bad(
+                &spec,
+                "segments",
+                segments as f64,
+                "must be in 2..=100000",
+            ));
         }
         // Radius r and centre (0, c) with r^2 = 1/4 + c^2 and c - r = -d.
         let r = (0.25 + depth * depth) / (2.0 * depth);
@@ -118,15 +163,26 @@ impl Profile {
         let spec = format!("trapezoid:depth={depth},bottom={bottom}");
         positive(&spec, "depth", depth)?;
         if !(bottom.is_finite() && bottom > 0.0 && bottom < 1.0) {
-            return Err(bad(&spec, "bottom", bottom, "must be in (0, 1) (use v: for a V-groove)"));
+            return Err(bad(
+                &spec,
+                "bottom",
+                bottom,
+                "must be in (0, 1) (use v: for a V-groove)",
+            ));
         }
         let h = bottom / 2.0;
-        Profile::from_points(spec, vec![[-0.5, 0.0], [-h, -depth], [h, -depth], [0.5, 0.0]])
+        Profile::from_points(
+            spec,
+            vec![[-0.5, 0.0], [-h, -depth], [h, -depth], [0.5, 0.0]],
+        )
     }
 
     /// The flat surface as two collinear segments: every ray hits at its entry point.
     pub fn flat() -> Self {
-        Profile { spec: "flat".into(), points: vec![[-0.5, 0.0], [0.0, 0.0], [0.5, 0.0]] }
+        Profile {
+            spec: "flat".into(),
+            points: vec![[-0.5, 0.0], [0.0, 0.0], [0.5, 0.0]],
+        }
     }
 
     /// Read a polyline file (format in `docs/table-format.md`): one vertex `x z` per line
@@ -134,36 +190,65 @@ impl Profile {
     /// endpoints must have `z = 0` and `x0 < x_last`; the polyline is translated and scaled
     /// uniformly so that they land on `(-1/2, 0)` and `(1/2, 0)`.
     pub fn from_file(path: &Path) -> Result<Self, ProfileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io { path: path.into(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io {
+            path: path.into(),
+            source,
+        })?;
         let mut raw = Vec::new();
         for (i, line) in text.lines().enumerate() {
             let body = line.split('#').next().unwrap_or("").trim();
             if body.is_empty() {
                 continue;
             }
-            let nums: Vec<&str> = body.split(|c: char| c == ',' || c.is_whitespace()).filter(|s| !s.is_empty()).collect();
+            let nums: Vec<&str> = body
+                .split(|c: char| c == ',' || c.is_whitespace())
+                .filter(|s| !s.is_empty())
+                .collect();
             let parsed: Option<Vec<f64>> = nums.iter().map(|s| s.parse::<f64>().ok()).collect();
             match parsed {
                 Some(v) if v.len() == 2 => raw.push([v[0], v[1]]),
-                _ => return Err(ProfileError::BadLine { path: path.into(), line: i + 1, text: line.to_string() }),
+                _ => {
+                    return Err(ProfileError::BadLine {
+                        path: path.into(),
+                        line: i + 1,
+                        text: line.to_string(),
+                    })
+                }
             }
         }
         let what = format!("file {}", path.display());
         let spec = format!("file:{}", path.display());
         if raw.len() < 3 {
-            return Err(ProfileError::TooFewSegments { what, segments: raw.len().saturating_sub(1) });
+            return Err(ProfileError::TooFewSegments {
+                what,
+                segments: raw.len().saturating_sub(1),
+            });
         }
         for (index, p) in raw.iter().enumerate() {
             if !(p[0].is_finite() && p[1].is_finite()) {
-                return Err(ProfileError::NonFinite { what, index, x: p[0], z: p[1] });
+                return Err(ProfileError::NonFinite {
+                    what,
+                    index,
+                    x: p[0],
+                    z: p[1],
+                });
             }
         }
         let (a, b) = (raw[0], raw[raw.len() - 1]);
         if a[1].abs() > Z_TOL || b[1].abs() > Z_TOL || b[0] <= a[0] {
-            return Err(ProfileError::BadEndpoints { what, x0: a[0], z0: a[1], x1: b[0], z1: b[1] });
+            return Err(ProfileError::BadEndpoints {
+                what,
+                x0: a[0],
+                z0: a[1],
+                x1: b[0],
+                z1: b[1],
+            });
         }
         let s = 1.0 / (b[0] - a[0]);
-        let mut points: Vec<[f64; 2]> = raw.iter().map(|p| [(p[0] - a[0]) * s - 0.5, p[1] * s]).collect();
+        let mut points: Vec<[f64; 2]> = raw
+            .iter()
+            .map(|p| [(p[0] - a[0]) * s - 0.5, p[1] * s])
+            .collect();
         let last = points.len() - 1;
         points[0] = [-0.5, 0.0];
         points[last] = [0.5, 0.0];
@@ -189,13 +274,23 @@ impl Profile {
         for item in rest.split(',').map(str::trim).filter(|s| !s.is_empty()) {
             let (k, v) = item
                 .split_once('=')
-                .ok_or_else(|| ProfileError::Malformed { spec: spec.into(), item: item.into() })?;
+                .ok_or_else(|| ProfileError::Malformed {
+                    spec: spec.into(),
+                    item: item.into(),
+                })?;
             let (k, v) = (k.trim(), v.trim());
             if !allowed.0.contains(&k) {
-                return Err(ProfileError::UnknownParameter { spec: spec.into(), key: k.into(), expected: allowed.1 });
+                return Err(ProfileError::UnknownParameter {
+                    spec: spec.into(),
+                    key: k.into(),
+                    expected: allowed.1,
+                });
             }
             if params.iter().any(|(p, _)| p == k) {
-                return Err(ProfileError::DuplicateParameter { spec: spec.into(), key: k.into() });
+                return Err(ProfileError::DuplicateParameter {
+                    spec: spec.into(),
+                    key: k.into(),
+                });
             }
             let x: f64 = v.parse().map_err(|_| ProfileError::BadParameter {
                 spec: spec.into(),
@@ -206,7 +301,12 @@ impl Profile {
             params.push((k.to_string(), x));
         }
         let get = |k: &str| params.iter().find(|(p, _)| p == k).map(|(_, v)| *v);
-        let need = |k: &'static str| get(k).ok_or_else(|| ProfileError::MissingParameter { spec: spec.into(), key: k });
+        let need = |k: &'static str| {
+            get(k).ok_or_else(|| ProfileError::MissingParameter {
+                spec: spec.into(),
+                key: k,
+            })
+        };
         let mut profile = match kind {
             "v" => match (get("depth"), get("angle")) {
                 (Some(d), None) => Profile::v_depth(d)?,
@@ -219,12 +319,22 @@ impl Profile {
                         why: "give depth or angle, not both".into(),
                     })
                 }
-                (None, None) => return Err(ProfileError::MissingParameter { spec: spec.into(), key: "depth or angle" }),
+                (None, None) => {
+                    return Err(ProfileError::MissingParameter {
+                        spec: spec.into(),
+                        key: "depth or angle",
+                    })
+                }
             },
             "round" => {
                 let segs = get("segments").unwrap_or(64.0);
                 if segs.fract() != 0.0 || !(2.0..=100_000.0).contains(&segs) {
-                    return Err(bad(spec, "segments", segs, "must be an integer in 2..=100000"));
+                    return Err(bad(
+                        spec,
+                        "segments",
+                        segs,
+                        "must be an integer in 2..=100000",
+                    ));
                 }
                 Profile::round(need("depth")?, segs as usize)?
             }
@@ -242,7 +352,12 @@ impl Profile {
 }
 
 fn bad(spec: &str, key: &str, value: f64, why: &str) -> ProfileError {
-    ProfileError::BadParameter { spec: spec.into(), key: key.into(), value: value.to_string(), why: why.into() }
+    ProfileError::BadParameter {
+        spec: spec.into(),
+        key: key.into(),
+        value: value.to_string(),
+        why: why.into(),
+    }
 }
 
 fn positive(spec: &str, key: &str, v: f64) -> Result<(), ProfileError> {
@@ -267,11 +382,17 @@ fn segments_touch(p1: [f64; 2], p2: [f64; 2], q1: [f64; 2], q2: [f64; 2]) -> boo
     let d2 = cross(sub(q2, q1), sub(p2, q1));
     let d3 = cross(sub(p2, p1), sub(q1, p1));
     let d4 = cross(sub(p2, p1), sub(q2, p1));
-    if ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0)) && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0)) {
+    if ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0))
+        && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0))
+    {
         return true;
     }
     let on = |a: [f64; 2], b: [f64; 2], p: [f64; 2], d: f64| {
-        d == 0.0 && p[0] >= a[0].min(b[0]) && p[0] <= a[0].max(b[0]) && p[1] >= a[1].min(b[1]) && p[1] <= a[1].max(b[1])
+        d == 0.0
+            && p[0] >= a[0].min(b[0])
+            && p[0] <= a[0].max(b[0])
+            && p[1] >= a[1].min(b[1])
+            && p[1] <= a[1].max(b[1])
     };
     on(q1, q2, p1, d1) || on(q1, q2, p2, d2) || on(p1, p2, q1, d3) || on(p1, p2, q2, d4)
 }
@@ -280,19 +401,38 @@ fn validate(what: &str, points: &[[f64; 2]]) -> Result<(), ProfileError> {
     let what = what.to_string();
     let segs = points.len().saturating_sub(1);
     if segs < 2 {
-        return Err(ProfileError::TooFewSegments { what, segments: segs });
+        return Err(ProfileError::TooFewSegments {
+            what,
+            segments: segs,
+        });
     }
     for (index, p) in points.iter().enumerate() {
         if !(p[0].is_finite() && p[1].is_finite()) {
-            return Err(ProfileError::NonFinite { what, index, x: p[0], z: p[1] });
+            return Err(ProfileError::NonFinite {
+                what,
+                index,
+                x: p[0],
+                z: p[1],
+            });
         }
         if p[1] > Z_TOL {
-            return Err(ProfileError::AboveSurface { what, index, x: p[0], z: p[1] });
+            return Err(ProfileError::AboveSurface {
+                what,
+                index,
+                x: p[0],
+                z: p[1],
+            });
         }
     }
     let (a, b) = (points[0], points[segs]);
     if a != [-0.5, 0.0] || b != [0.5, 0.0] {
-        return Err(ProfileError::BadEndpoints { what, x0: a[0], z0: a[1], x1: b[0], z1: b[1] });
+        return Err(ProfileError::BadEndpoints {
+            what,
+            x0: a[0],
+            z0: a[1],
+            x1: b[0],
+            z1: b[1],
+        });
     }
     for i in 0..segs {
         let e = sub(points[i + 1], points[i]);
@@ -329,7 +469,10 @@ mod tests {
         let v = Profile::parse("v:depth=0.5").unwrap();
         assert_eq!(v.points, vec![[-0.5, 0.0], [0.0, -0.5], [0.5, 0.0]]);
         let a = Profile::parse("v:angle=90").unwrap();
-        assert!((a.points[1][1] + 0.5).abs() < 1e-12, "90 degrees is depth 1/2");
+        assert!(
+            (a.points[1][1] + 0.5).abs() < 1e-12,
+            "90 degrees is depth 1/2"
+        );
         let r = Profile::parse("round:depth=0.3").unwrap();
         assert_eq!(r.segments(), 64);
         assert!(r.points.iter().all(|p| p[1] <= 0.0));
@@ -343,7 +486,12 @@ mod tests {
         let t = Profile::parse("trapezoid:depth=0.2,bottom=0.4").unwrap();
         assert_eq!(t.points[1], [-0.2, -0.2]);
         assert_eq!(Profile::parse("flat").unwrap().segments(), 2);
-        assert_eq!(Profile::parse("round:depth=0.5,segments=8").unwrap().segments(), 8);
+        assert_eq!(
+            Profile::parse("round:depth=0.5,segments=8")
+                .unwrap()
+                .segments(),
+            8
+        );
     }
 
     #[test]
@@ -380,9 +528,18 @@ mod tests {
     #[test]
     fn invalid_polylines_are_rejected() {
         let p = |pts: Vec<[f64; 2]>| Profile::from_points("test", pts);
-        assert!(matches!(p(vec![[-0.5, 0.0], [0.5, 0.0]]), Err(ProfileError::TooFewSegments { .. })));
-        assert!(matches!(p(vec![[-0.5, 0.0], [0.0, 0.1], [0.5, 0.0]]), Err(ProfileError::AboveSurface { .. })));
-        assert!(matches!(p(vec![[-0.5, 0.0], [0.0, f64::NAN], [0.5, 0.0]]), Err(ProfileError::NonFinite { .. })));
+        assert!(matches!(
+            p(vec![[-0.5, 0.0], [0.5, 0.0]]),
+            Err(ProfileError::TooFewSegments { .. })
+        ));
+        assert!(matches!(
+            p(vec![[-0.5, 0.0], [0.0, 0.1], [0.5, 0.0]]),
+            Err(ProfileError::AboveSurface { .. })
+        ));
+        assert!(matches!(
+            p(vec![[-0.5, 0.0], [0.0, f64::NAN], [0.5, 0.0]]),
+            Err(ProfileError::NonFinite { .. })
+        ));
         assert!(matches!(
             p(vec![[-0.5, 0.0], [0.0, -0.5], [0.0, -0.5], [0.5, 0.0]]),
             Err(ProfileError::ZeroLength { .. })
@@ -398,7 +555,13 @@ mod tests {
             Err(ProfileError::SelfIntersecting { .. })
         ));
         assert!(matches!(
-            p(vec![[-0.5, 0.0], [0.0, -0.5], [0.0, -0.2], [0.0, -0.7], [0.5, 0.0]]),
+            p(vec![
+                [-0.5, 0.0],
+                [0.0, -0.5],
+                [0.0, -0.2],
+                [0.0, -0.7],
+                [0.5, 0.0]
+            ]),
             Err(ProfileError::SelfIntersecting { .. })
         ));
         // Right shape accepted.
@@ -425,7 +588,10 @@ mod tests {
         ] {
             let f = dir.join(name);
             std::fs::write(&f, text).unwrap();
-            assert!(Profile::parse(&format!("file:{}", f.display())).is_err(), "{name} accepted");
+            assert!(
+                Profile::parse(&format!("file:{}", f.display())).is_err(),
+                "{name} accepted"
+            );
         }
         std::fs::remove_dir_all(&dir).ok();
     }

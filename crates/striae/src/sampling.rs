@@ -90,8 +90,14 @@ impl Distribution1D {
     /// If `weights` is empty or holds a negative or non-finite value (a programming error:
     /// callers validate user data first).
     pub fn new(weights: &[f64]) -> Self {
-        assert!(!weights.is_empty(), "Distribution1D needs at least one cell");
-        assert!(weights.iter().all(|w| w.is_finite() && *w >= 0.0), "weights must be finite and >= 0");
+        assert!(
+            !weights.is_empty(),
+            "Distribution1D needs at least one cell"
+        );
+        assert!(
+            weights.iter().all(|w| w.is_finite() && *w >= 0.0),
+            "weights must be finite and >= 0"
+        );
         let n = weights.len();
         let mut cdf = Vec::with_capacity(n + 1);
         cdf.push(0.0);
@@ -109,7 +115,11 @@ impl Distribution1D {
             }
         }
         cdf[n] = 1.0;
-        Distribution1D { func: weights.to_vec(), cdf, integral }
+        Distribution1D {
+            func: weights.to_vec(),
+            cdf,
+            integral,
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -150,7 +160,11 @@ impl Distribution1D {
             k => (k - 1).min(n - 1),
         };
         let w = self.cdf[i + 1] - self.cdf[i];
-        let du = if w > 0.0 { ((u - self.cdf[i]) / w).clamp(0.0, 1.0 - f64::EPSILON) } else { 0.5 };
+        let du = if w > 0.0 {
+            ((u - self.cdf[i]) / w).clamp(0.0, 1.0 - f64::EPSILON)
+        } else {
+            0.5
+        };
         (i, du)
     }
 
@@ -232,7 +246,12 @@ mod tests {
         let r = chi2_sphere(
             &grid,
             200_000,
-            || Some(square_to_cosine_hemisphere(Vec2::new(rng.random(), rng.random()))),
+            || {
+                Some(square_to_cosine_hemisphere(Vec2::new(
+                    rng.random(),
+                    rng.random(),
+                )))
+            },
             |w| cosine_hemisphere_pdf(w) as f64,
         );
         assert!(r.p_value > 0.01, "{r:?}");
@@ -246,8 +265,19 @@ mod tests {
         let r = chi2_sphere(
             &grid,
             100_000,
-            || Some(square_to_uniform_cone(Vec2::new(rng.random(), rng.random()), cos_max)),
-            |w| if w.z >= cos_max { uniform_cone_pdf(cos_max) as f64 } else { 0.0 },
+            || {
+                Some(square_to_uniform_cone(
+                    Vec2::new(rng.random(), rng.random()),
+                    cos_max,
+                ))
+            },
+            |w| {
+                if w.z >= cos_max {
+                    uniform_cone_pdf(cos_max) as f64
+                } else {
+                    0.0
+                }
+            },
         );
         assert!(r.p_value > 0.01, "{r:?}");
     }

@@ -386,6 +386,7 @@ impl ScratchedMaterial {
                     seed: s.trace_seed.unwrap_or(0),
                     fresnel_mode: s.fresnel.unwrap_or(default_mode),
                     fresnel_law: law,
+                    ..TraceSettings::default()
                 };
                 trace.validate().map_err(|e| {
                     let TraceError::BadParameter { key, value, why } = e;

@@ -52,7 +52,13 @@ pub fn chi2_discrete(counts: &[u64], expected: &[f64]) -> Chi2Result {
     };
     let total: u64 = counts.iter().sum();
     let mass = expected.iter().sum::<f64>() / total.max(1) as f64;
-    Chi2Result { statistic: stat, dof, p_value, impossible_hits: impossible, pdf_mass: mass }
+    Chi2Result {
+        statistic: stat,
+        dof,
+        p_value,
+        impossible_hits: impossible,
+        pdf_mass: mass,
+    }
 }
 
 /// An equal-area grid on the unit sphere: `n_z` bands in `z = cos theta` over `[-1, 1]` times
@@ -82,7 +88,8 @@ impl SphereGrid {
         if phi < 0.0 {
             phi += 2.0 * std::f64::consts::PI;
         }
-        let ip = ((phi / (2.0 * std::f64::consts::PI) * self.n_phi as f64) as usize).min(self.n_phi - 1);
+        let ip =
+            ((phi / (2.0 * std::f64::consts::PI) * self.n_phi as f64) as usize).min(self.n_phi - 1);
         iz * self.n_phi + ip
     }
 
@@ -124,12 +131,22 @@ pub fn chi2_sphere(
     let mut counts = vec![0u64; grid.cells()];
     for _ in 0..n {
         if let Some(w) = sample() {
-            assert!(w.is_finite(), "sampler returned a non-finite direction {w:?}");
-            assert!((w.length() - 1.0).abs() < 1e-3, "sampler returned a non-unit direction {w:?}");
+            assert!(
+                w.is_finite(),
+                "sampler returned a non-finite direction {w:?}"
+            );
+            assert!(
+                (w.length() - 1.0).abs() < 1e-3,
+                "sampler returned a non-unit direction {w:?}"
+            );
             counts[grid.cell_of(w)] += 1;
         }
     }
-    let expected: Vec<f64> = grid.integrate(pdf).into_iter().map(|p| p * n as f64).collect();
+    let expected: Vec<f64> = grid
+        .integrate(pdf)
+        .into_iter()
+        .map(|p| p * n as f64)
+        .collect();
     let mut r = chi2_discrete(&counts, &expected);
     r.pdf_mass = expected.iter().sum::<f64>() / n as f64;
     r
@@ -173,15 +190,25 @@ impl MeanEstimate {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sampling::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
     use crate::math::Vec2;
+    use crate::sampling::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
     use rand::{Rng, SeedableRng};
 
     #[test]
     fn chi2_accepts_a_right_sampler_and_rejects_a_wrong_one() {
         let grid = SphereGrid::new(16, 32);
         let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
-        let ok = chi2_sphere(&grid, 100_000, || Some(square_to_uniform_sphere(Vec2::new(rng.random(), rng.random()))), |_| UNIFORM_SPHERE_PDF as f64);
+        let ok = chi2_sphere(
+            &grid,
+            100_000,
+            || {
+                Some(square_to_uniform_sphere(Vec2::new(
+                    rng.random(),
+                    rng.random(),
+                )))
+            },
+            |_| UNIFORM_SPHERE_PDF as f64,
+        );
         assert!(ok.p_value > 0.01, "{ok:?}");
         assert!((ok.pdf_mass - 1.0).abs() < 1e-6);
         // Claim uniform but sample with a slight bias toward +z: must be rejected.

@@ -20,7 +20,6 @@
 
 use crate::fresnel::FresnelLaw;
 use crate::profile::Profile;
-use rand::Rng;
 use rayon::prelude::*;
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -49,6 +48,33 @@ pub enum FresnelMode {
     Walls,
 }
 
+/// How diffuse walls are estimated (section 3.1).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Estimator {
+    /// The seed's `N_r` scheme: `N_r` independent random walks per entry point.
+    #[default]
+    Walks,
+    /// Departure from the seed (an option, not the default): a kernel estimator. With
+    /// diffuse walls the walk after the first wall hit depends only on the hit position, so
+    /// the expected exit distribution from a wall point (the kernel) is tabulated once per
+    /// wall at `KERNEL_NODES` positions by random walks, and each entry point adds the
+    /// (linearly interpolated) kernel row of its first hit, weighted by that hit. Same
+    /// expectation as the `N_r` scheme (up to the interpolation in position); lower variance
+    /// per row, but the kernel's Monte Carlo error is shared by all rows. Exact only for
+    /// diffuse walls with `FresnelMode::Seed` in a convex groove; other cases are refused.
+    Kernel,
+}
+
+impl Estimator {
+    fn is_walks(&self) -> bool {
+        *self == Estimator::Walks
+    }
+}
+
+/// Kernel nodes per wall segment ([`Estimator::Kernel`]).
+pub const KERNEL_NODES: usize = 256;
+
 /// Settings of one trace (the table's parameters minus the profile).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TraceSettings {
@@ -67,6 +93,10 @@ pub struct TraceSettings {
     pub fresnel_mode: FresnelMode,
     /// The law used by `FresnelMode::Walls` (and by the table for `Seed`).
     pub fresnel_law: FresnelLaw,
+    /// The diffuse-wall estimator (absent from a table's parameters when `walks`, so older
+    /// tables and their hashes are unchanged).
+    #[serde(default, skip_serializing_if = "Estimator::is_walks")]
+    pub estimator: Estimator,
 }
 
 impl Default for TraceSettings {
@@ -82,6 +112,7 @@ impl Default for TraceSettings {
             seed: 0,
             fresnel_mode: FresnelMode::Seed,
             fresnel_law: FresnelLaw::Schlick { n: 1.5 },
+            estimator: Estimator::Walks,
         }
     }
 }
@@ -119,7 +150,11 @@ pub struct TraceOutput {
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum TraceError {
     #[error("invalid trace parameter `{key}` = {value}: {why}")]
-    BadParameter { key: &'static str, value: String, why: &'static str },
+    BadParameter {
+        key: &'static str,
+        value: String,
+        why: &'static str,
+    },
 }
 
 impl TraceSettings {
@@ -139,15 +174,42 @@ impl TraceSettings {
             return bad("albedo", self.albedo.to_string(), "must be in [0, 1]");
         }
         if !(1..=100_000).contains(&self.max_bounces) {
-            return bad("max_bounces", self.max_bounces.to_string(), "must be in 1..=100000");
+            return bad(
+                "max_bounces",
+                self.max_bounces.to_string(),
+                "must be in 1..=100000",
+            );
         }
         let law_ok = match self.fresnel_law {
             FresnelLaw::Schlick { n } | FresnelLaw::Dielectric { n } => n.is_finite() && n > 0.0,
-            FresnelLaw::Conductor { eta, k } => eta.is_finite() && k.is_finite() && eta > 0.0 && k >= 0.0,
+            FresnelLaw::Conductor { eta, k } => {
+                eta.is_finite() && k.is_finite() && eta > 0.0 && k >= 0.0
+            }
             FresnelLaw::None => true,
         };
         if !law_ok {
-            return bad("fresnel_law", format!("{:?}", self.fresnel_law), "indices must be finite, n > 0, k >= 0");
+            return bad(
+                "fresnel_law",
+                format!("{:?}", self.fresnel_law),
+                "indices must be finite, n > 0, k >= 0",
+            );
+        }
+        if self.estimator == Estimator::Kernel {
+            if self.walls != Walls::Diffuse {
+                return bad(
+                    "estimator",
+                    "kernel".into(),
+                    "the kernel estimator needs diffuse walls (mirror walls are deterministic)",
+                );
+            }
+            if self.fresnel_mode != FresnelMode::Seed {
+                return bad(
+                    "estimator",
+                    "kernel".into(),
+                    "the kernel estimator supports only --fresnel seed (with Fresnel at every \
+                     wall the weights depend on each path's cosines)",
+                );
+            }
         }
         Ok(())
     }
@@ -178,6 +240,9 @@ struct Segment {
 /// The profile as segments, with ray queries.
 struct Walls2D {
     segs: Vec<Segment>,
+    /// The groove closed by its opening is a convex polygon (V, round, trapezoid, flat): a
+    /// ray leaving a wall escapes iff it points between the opening's corners.
+    convex: bool,
 }
 
 const T_EPS: f64 = 1e-10;
@@ -191,10 +256,32 @@ impl Walls2D {
                 let e = [w[1][0] - w[0][0], w[1][1] - w[0][1]];
                 let l = e[0].hypot(e[1]);
                 let t = [e[0] / l, e[1] / l];
-                Segment { p: w[0], e, n: [-t[1], t[0]], t }
+                Segment {
+                    p: w[0],
+                    e,
+                    n: [-t[1], t[0]],
+                    t,
+                }
             })
-            .collect();
-        Walls2D { segs }
+            .collect::<Vec<Segment>>();
+        // Counter-clockwise polygon: convex iff it turns left (or goes straight) at every
+        // profile vertex (at the opening's corners it always does, the profile being below).
+        let convex = segs
+            .windows(2)
+            .all(|w| w[0].t[0] * w[1].t[1] - w[0].t[1] * w[1].t[0] >= -1e-12);
+        Walls2D { segs, convex }
+    }
+
+    /// For a convex two-wall groove (a V): a ray leaving wall `seg` that does not escape hits
+    /// the other wall; its line parameter in closed form (no culling loop). `None` only when
+    /// round-off makes the ray parallel to or leave the other wall.
+    #[inline]
+    fn other_wall_hit(&self, o: [f64; 2], d: [f64; 2], seg: usize) -> Option<(usize, f64)> {
+        let k = 1 - seg;
+        let s = &self.segs[k];
+        let denom = d[0] * s.e[1] - d[1] * s.e[0];
+        let t = ((s.p[0] - o[0]) * s.e[1] - (s.p[1] - o[1]) * s.e[0]) / denom;
+        (denom > 0.0 && t > 0.0).then_some((k, t))
     }
 
     /// Nearest wall hit of the ray `o + t d` with `t > t_min`, skipping segment `skip`.
@@ -209,73 +296,295 @@ impl Walls2D {
         let (mut best_num, mut best_den) = (1.0f64, 0.0f64);
         for (k, s) in self.segs.iter().enumerate() {
             let denom = d[0] * s.e[1] - d[1] * s.e[0];
-            if denom <= 0.0 || k == skip {
-                continue;
-            }
             let w = [s.p[0] - o[0], s.p[1] - o[1]];
             let t_num = w[0] * s.e[1] - w[1] * s.e[0];
             let u_num = w[0] * d[1] - w[1] * d[0];
             let tol = 1e-12 * denom;
-            if t_num > t_min * denom && t_num * best_den < best_num * denom && u_num >= -tol && u_num <= denom + tol {
-                best = k;
-                best_num = t_num;
-                best_den = denom;
-            }
+            // Non-short-circuit `&` so that the choice compiles to selects, not branches
+            // (the outcome is unpredictable and mispredictions dominated the cost).
+            let ok = (denom > 0.0)
+                & (k != skip)
+                & (t_num > t_min * denom)
+                & (t_num * best_den < best_num * denom)
+                & (u_num >= -tol)
+                & (u_num <= denom + tol);
+            best = if ok { k } else { best };
+            best_num = if ok { t_num } else { best_num };
+            best_den = if ok { denom } else { best_den };
         }
         (best != usize::MAX).then(|| (best, best_num / best_den))
     }
 }
 
-/// Per-entry random stream from `(seed, phi_i index, entry index)` (SplitMix64 finaliser).
-fn entry_rng(seed: u64, row: usize, entry: usize) -> rand_pcg::Pcg64Mcg {
-    let mut z = seed ^ 0x9E37_79B9_7F4A_7C15u64.wrapping_mul(row as u64 + 1);
-    let mut mix = |x: u64| {
-        z = z.wrapping_add(x).wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut y = z;
-        y = (y ^ (y >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        y = (y ^ (y >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        y ^ (y >> 31)
-    };
-    let a = mix(entry as u64);
-    let b = mix(0x5851_F42D_4C95_7F2D);
-    rand_pcg::Pcg64Mcg::new(((a as u128) << 64) | b as u128)
+/// The SplitMix64 finaliser: a bijective 64-bit mixer.
+#[inline(always)]
+fn mix64(mut y: u64) -> u64 {
+    y = (y ^ (y >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    y = (y ^ (y >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    y ^ (y >> 31)
+}
+
+const GOLDEN: u64 = 0x9E37_79B9_7F4A_7C15;
+
+/// The key of an entry point's random streams, from `(seed, phi_i index, entry index)`
+/// (distinct for every `(row, entry)` as `row < 2^13`, `entry < 2^32`).
+#[inline]
+fn entry_key(seed: u64, row: usize, entry: usize) -> u64 {
+    mix64(mix64(seed.wrapping_add(GOLDEN)) ^ (((row as u64) << 32) | entry as u64))
+}
+
+/// Counter-based random numbers (SplitMix64 of `key + counter * golden`): draw `counter` of
+/// an entry's stream is computed directly, so walks are independent of the order (or the
+/// interleaving) in which they are traced. Counter 0 is the entry's jitter; walk `r` uses
+/// counters `1 + r * max_bounces + k` for its bounces `k = 0..max_bounces`.
+#[inline(always)]
+fn draw(key: u64, counter: u64) -> u64 {
+    mix64(key.wrapping_add(counter.wrapping_mul(GOLDEN)))
+}
+
+/// Uniform in `[0, 1)` from the top 53 bits.
+#[inline(always)]
+fn unit(x: u64) -> f64 {
+    (x >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+}
+
+/// `sin(a)` of the 2D Lambert law: uniform in `[-1, 1)` from the top 53 bits (`2 u - 1`).
+#[inline(always)]
+fn signed_unit(x: u64) -> f64 {
+    (x >> 11) as f64 * (1.0 / (1u64 << 52) as f64) - 1.0
+}
+
+/// The counter of bounce `k` of walk `r` (see [`draw`]).
+#[inline(always)]
+fn walk_counter(r: usize, k: usize, max_bounces: usize) -> u64 {
+    1 + r as u64 * max_bounces as u64 + k as u64
 }
 
 /// Bins an upward unit exit direction by `sin(phi_o) = d.x` (no `atan2`): a lookup table on
 /// a uniform grid in `d.x` gives a starting bin, corrected against the exact edge sines.
 struct ExitBinner {
+    m: usize,
+    /// The `m + 1` edges, padded with `+inf` to a power-of-two length (index masks instead of
+    /// bounds checks in the hot path).
     edge_sin: Vec<f64>,
-    lut: Vec<u32>,
+    edge_mask: usize,
+    /// Bin of each cell's lower end, padded to a power-of-two length.
+    lut: Vec<u16>,
+    lut_mask: usize,
     scale: f64,
 }
 
 impl ExitBinner {
     fn new(m: usize) -> Self {
-        let edge_sin: Vec<f64> = (0..=m).map(|k| (-FRAC_PI_2 + k as f64 * PI / m as f64).sin()).collect();
-        let cells = 4 * m;
-        let scale = cells as f64 / 2.0;
-        let lut = (0..=cells)
-            .map(|q| {
-                let x = -1.0 + q as f64 / scale;
-                (edge_sin.partition_point(|&e| e <= x).saturating_sub(1)).min(m - 1) as u32
-            })
-            .collect();
-        ExitBinner { edge_sin, lut, scale }
+        Self::from_edges(
+            (0..=m)
+                .map(|k| (-FRAC_PI_2 + k as f64 * PI / m as f64).sin())
+                .collect(),
+        )
     }
 
-    #[inline]
+    /// From `m + 1` non-decreasing edges in `[-1, 1]`.
+    fn from_edges(mut edge_sin: Vec<f64>) -> Self {
+        let m = edge_sin.len() - 1;
+        // 4 cells per bin on average; near the ends several bins share a cell (slow path).
+        let cells = 4 * m;
+        let scale = cells as f64 / 2.0;
+        let mut lut: Vec<u16> = (0..=cells)
+            .map(|q| {
+                let x = -1.0 + q as f64 / scale;
+                (edge_sin.partition_point(|&e| e <= x).saturating_sub(1)).min(m - 1) as u16
+            })
+            .collect();
+        lut.resize((cells + 1).next_power_of_two(), (m - 1) as u16);
+        edge_sin.resize((m + 2).next_power_of_two(), f64::INFINITY);
+        ExitBinner {
+            m,
+            edge_mask: edge_sin.len() - 1,
+            edge_sin,
+            lut_mask: lut.len() - 1,
+            lut,
+            scale,
+        }
+    }
+
+    /// The bin `j` with `edge_j <= dx < edge_{j+1}` (`dx` clamped to `[-1, 1]`, `j < m`).
+    #[inline(always)]
     fn bin(&self, dx: f64) -> usize {
-        let m = self.edge_sin.len() - 1;
+        let (e, em) = (&self.edge_sin, self.edge_mask);
         let dx = dx.clamp(-1.0, 1.0);
-        let mut j = self.lut[((dx + 1.0) * self.scale) as usize] as usize;
+        let mut j = self.lut[((dx + 1.0) * self.scale) as i64 as usize & self.lut_mask] as usize;
+        // One branch-free correction step; a (rare, predictable) slow path where a cell
+        // spans several edges.
+        j += (dx >= e[(j + 1) & em]) as usize;
+        if (dx >= e[(j + 1) & em]) | (dx < e[j & em]) {
+            j = self.bin_slow(dx, j);
+        }
+        j.min(self.m - 1)
+    }
+
+    #[cold]
+    fn bin_slow(&self, dx: f64, mut j: usize) -> usize {
+        let m = self.m;
         while j + 1 < m && dx >= self.edge_sin[j + 1] {
             j += 1;
         }
-        while j > 0 && dx < self.edge_sin[j] {
+        while j > 0 && dx < self.edge_sin[j.min(m)] {
             j -= 1;
         }
         j
     }
+}
+
+/// `sin(a) = k 2^-52 - 1` of the 53-bit integer `k` (exact).
+#[inline(always)]
+fn sin_of_int(k: u64) -> f64 {
+    k as f64 * (1.0 / (1u64 << 52) as f64) - 1.0
+}
+
+/// The smallest 53-bit integer `k` with `sin_of_int(k) >= e` (`2^53` if none; `e` may be
+/// infinite).
+fn int_threshold(e: f64) -> u64 {
+    first_int_where(|x| x >= e, e)
+}
+
+/// The smallest 53-bit integer `k` with `sin_of_int(k) > e` (`2^53` if none).
+fn int_threshold_above(e: f64) -> u64 {
+    first_int_where(|x| x > e, e)
+}
+
+/// The smallest `k` in `0..=2^53` where the monotone predicate `holds(sin_of_int(k))` is true
+/// (`2^53` if none), starting near `e`.
+fn first_int_where(holds: impl Fn(f64) -> bool, e: f64) -> u64 {
+    const TOP: u64 = 1 << 53;
+    if e.is_nan() || e > 1.0 {
+        return TOP;
+    }
+    let mut k = (((e + 1.0) * (1u64 << 52) as f64).ceil().max(0.0) as u64).min(TOP);
+    while k > 0 && holds(sin_of_int(k - 1)) {
+        k -= 1;
+    }
+    while k < TOP && !holds(sin_of_int(k)) {
+        k += 1;
+    }
+    k
+}
+
+/// Exit bins of a diffuse bounce off one wall, on the random integer itself.
+///
+/// The bounce's direction has `sin(a) = k 2^-52 - 1` ([`signed_unit`]) about the inner normal,
+/// which makes the angle `alpha` with the vertical, so the exit angle is `phi_o = alpha + a`,
+/// increasing in `k`: bin `j` is a range of `k` between integer thresholds of the edges
+/// `sin(edge_j - alpha)` (clamped to `[-1, 1]` for edges the bounce cannot reach). An escaping
+/// bounce is binned with neither its direction (no `sqrt`) nor a float comparison: a table on
+/// the top bits of `k` and one threshold comparison.
+struct WallBinner {
+    m: usize,
+    /// Thresholds of the `m + 1` edges, padded with `u64::MAX` to a power-of-two length.
+    thresholds: Vec<u64>,
+    threshold_mask: usize,
+    /// Per cell of `k >> shift`: the bin of the cell's first `k`; `MULTI` flags a cell that
+    /// spans more than one threshold (slow path).
+    lut: Vec<u16>,
+    lut_mask: usize,
+    shift: u32,
+}
+
+impl WallBinner {
+    const MULTI: u16 = 0x8000;
+
+    fn new(m: usize, alpha: f64) -> Self {
+        let mut thresholds: Vec<u64> = (0..=m)
+            .map(|k| {
+                let a = -FRAC_PI_2 + k as f64 * PI / m as f64 - alpha;
+                int_threshold(a.clamp(-FRAC_PI_2, FRAC_PI_2).sin())
+            })
+            .collect();
+        let slow_bin = |th: &[u64], k: u64| -> usize {
+            th.partition_point(|&t| t <= k).saturating_sub(1).min(m - 1)
+        };
+        // ~16 cells per bin: cells spanning several thresholds are rare (|sin a| > 0.997).
+        let bits = (16 * m).next_power_of_two().trailing_zeros().max(1);
+        let shift = 53 - bits;
+        let lut: Vec<u16> = (0..1u64 << bits)
+            .map(|c| {
+                let (first, last) = (c << shift, ((c + 1) << shift) - 1);
+                let (j0, j1) = (slow_bin(&thresholds, first), slow_bin(&thresholds, last));
+                let multi = if j1 > j0 + 1 { Self::MULTI } else { 0 };
+                j0 as u16 | multi
+            })
+            .collect();
+        thresholds.resize((m + 2).next_power_of_two(), u64::MAX);
+        WallBinner {
+            m,
+            threshold_mask: thresholds.len() - 1,
+            thresholds,
+            lut_mask: lut.len() - 1,
+            lut,
+            shift,
+        }
+    }
+
+    /// The bin of the bounce with random integer `k < 2^53`.
+    #[inline(always)]
+    fn bin(&self, k: u64) -> usize {
+        let entry = self.lut[(k >> self.shift) as usize & self.lut_mask];
+        if entry & Self::MULTI != 0 {
+            return self.bin_slow(k);
+        }
+        let j = entry as usize;
+        // `k` beyond the last edge (a direction past the horizon, never an escape) would
+        // give `m`: clamped.
+        (j + (k >= self.thresholds[(j + 1) & self.threshold_mask]) as usize).min(self.m - 1)
+    }
+
+    #[cold]
+    fn bin_slow(&self, k: u64) -> usize {
+        self.thresholds[..=self.m]
+            .partition_point(|&t| t <= k)
+            .saturating_sub(1)
+            .min(self.m - 1)
+    }
+}
+
+/// The first bounces of an entry's `walks` walks (the hot loop of [`trace_block_convex`], kept
+/// apart so that its few live values stay in registers): a walk escapes iff its random
+/// integer `k` lies in `lo_k .. lo_k + span`; escapes are counted per exit bin, the others
+/// are written to `pending`, whose length is returned. Branch-free: every walk is binned and
+/// adds 0 or 1 (the escape outcome is unpredictable).
+#[inline(never)]
+fn first_bounces(
+    key: u64,
+    walks: usize,
+    max_bounces: usize,
+    (lo_k, span): (u64, u64),
+    wb: &WallBinner,
+    counts: &mut [u32],
+    pending: &mut [u32],
+) -> usize {
+    let mut n_pending = 0;
+    let pending = &mut pending[..walks];
+    for r in 0..walks {
+        let k = draw(key, walk_counter(r, 0, max_bounces)) >> 11;
+        let escapes = k.wrapping_sub(lo_k) < span;
+        counts[wb.bin(k)] += escapes as u32;
+        pending[n_pending.min(walks - 1)] = r as u32;
+        n_pending += (!escapes) as usize;
+    }
+    n_pending
+}
+
+/// A walk of the convex fast path, queued after a bounce that stays inside.
+#[derive(Clone, Copy)]
+struct Walk {
+    /// The key of its entry's random streams.
+    key: u64,
+    /// Index among the entry's `N_r` walks (selects its random numbers).
+    r: u32,
+    seg: u32,
+    /// The last wall hit and the direction leaving it.
+    pos: [f64; 2],
+    dir: [f64; 2],
+    w: [f64; 4],
 }
 
 /// Walks interleaved per entry point (see `trace_block`).
@@ -289,6 +598,8 @@ struct Lane {
     seg: usize,
     w: [f64; 4],
     bounces: usize,
+    /// Index `r` of the walk among the entry's `N_r` (selects its random numbers).
+    walk: usize,
     active: bool,
 }
 
@@ -305,22 +616,65 @@ const BLOCK: usize = 256;
 
 /// Trace the profile (section 3). `progress` is called from worker threads with the number of
 /// walks just finished. Runs on the current rayon pool.
-pub fn trace(profile: &Profile, s: &TraceSettings, progress: &(dyn Fn(u64) + Sync)) -> Result<TraceOutput, TraceError> {
+pub fn trace(
+    profile: &Profile,
+    s: &TraceSettings,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<TraceOutput, TraceError> {
+    trace_with(profile, s, progress, TracePath::Auto)
+}
+
+/// Which implementation [`trace_with`] uses (the generic one exists to test the fast one).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum TracePath {
+    /// The convex fast path where it applies, else the generic tracer.
+    Auto,
+    /// Always the generic tracer.
+    #[cfg_attr(not(test), allow(dead_code))]
+    Generic,
+}
+
+fn trace_with(
+    profile: &Profile,
+    s: &TraceSettings,
+    progress: &(dyn Fn(u64) + Sync),
+    path: TracePath,
+) -> Result<TraceOutput, TraceError> {
     s.validate()?;
     let geo = Walls2D::new(profile);
+    if s.estimator == Estimator::Kernel {
+        return trace_kernel(&geo, s, progress);
+    }
     let m = s.m;
+    let binner = ExitBinner::new(m);
     let channels = match s.fresnel_mode {
         FresnelMode::Seed => 1,
         FresnelMode::Walls => 4,
     };
+    // The fast path for diffuse walls in convex grooves (same random numbers, same walks).
+    let wall_binners: Option<Vec<WallBinner>> =
+        (geo.convex && s.walls == Walls::Diffuse && path == TracePath::Auto).then(|| {
+            geo.segs
+                .iter()
+                .map(|sg| WallBinner::new(m, sg.n[0].atan2(sg.n[1])))
+                .collect()
+        });
     let blocks = s.n.div_ceil(BLOCK);
-    let items: Vec<(usize, usize)> = (0..m).flat_map(|i| (0..blocks).map(move |b| (i, b))).collect();
+    let items: Vec<(usize, usize)> = (0..m)
+        .flat_map(|i| (0..blocks).map(move |b| (i, b)))
+        .collect();
     let partials: Vec<Partial> = items
         .par_iter()
         .map(|&(row, block)| {
             let lo = block * BLOCK;
             let hi = (lo + BLOCK).min(s.n);
-            let p = trace_block(&geo, s, channels, row, lo..hi);
+            let p = match &wall_binners {
+                Some(wb) if channels == 4 => {
+                    trace_block_convex::<true>(&geo, &binner, wb, s, row, lo..hi)
+                }
+                Some(wb) => trace_block_convex::<false>(&geo, &binner, wb, s, row, lo..hi),
+                None => trace_block(&geo, &binner, s, channels, row, lo..hi),
+            };
             progress(((hi - lo) * s.walks_per_entry()) as u64);
             p
         })
@@ -331,7 +685,9 @@ pub fn trace(profile: &Profile, s: &TraceSettings, progress: &(dyn Fn(u64) + Syn
     let mut out = vec![0.0; channels * m * m];
     let mut dropped = vec![0.0; m];
     let mut lost = vec![0.0; m];
-    let norm: Vec<f64> = (0..m).map(|j| m as f64 / (PI * s.n as f64 * walks * bin_centre(j, m).cos())).collect();
+    let norm: Vec<f64> = (0..m)
+        .map(|j| m as f64 / (PI * s.n as f64 * walks * bin_centre(j, m).cos()))
+        .collect();
     for (row, chunk) in partials.chunks(blocks).enumerate() {
         let mut acc = vec![0.0; channels * m];
         for p in chunk {
@@ -351,40 +707,57 @@ pub fn trace(profile: &Profile, s: &TraceSettings, progress: &(dyn Fn(u64) + Syn
     }
     let rho_m = out[..m * m].to_vec();
     let rho_walls = (channels == 4).then(|| out[m * m..].to_vec());
-    Ok(TraceOutput { m, rho_m, rho_walls, dropped, lost })
+    Ok(TraceOutput {
+        m,
+        rho_m,
+        rho_walls,
+        dropped,
+        lost,
+    })
 }
 
 /// Trace the entries `entries` of incident bin `row`; weights are per walk (1 each, the
 /// `1 / N_r` is applied in the normalisation).
-fn trace_block(geo: &Walls2D, s: &TraceSettings, channels: usize, row: usize, entries: std::ops::Range<usize>) -> Partial {
+fn trace_block(
+    geo: &Walls2D,
+    binner: &ExitBinner,
+    s: &TraceSettings,
+    channels: usize,
+    row: usize,
+    entries: std::ops::Range<usize>,
+) -> Partial {
     // Monomorphise the hot loop for the wall model and the Fresnel mode.
     match (s.walls, channels == 4) {
-        (Walls::Diffuse, false) => trace_block_impl::<true, false>(geo, s, row, entries),
-        (Walls::Diffuse, true) => trace_block_impl::<true, true>(geo, s, row, entries),
-        (Walls::Specular, false) => trace_block_impl::<false, false>(geo, s, row, entries),
-        (Walls::Specular, true) => trace_block_impl::<false, true>(geo, s, row, entries),
+        (Walls::Diffuse, false) => trace_block_impl::<true, false>(geo, binner, s, row, entries),
+        (Walls::Diffuse, true) => trace_block_impl::<true, true>(geo, binner, s, row, entries),
+        (Walls::Specular, false) => trace_block_impl::<false, false>(geo, binner, s, row, entries),
+        (Walls::Specular, true) => trace_block_impl::<false, true>(geo, binner, s, row, entries),
     }
 }
 
 fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
     geo: &Walls2D,
+    binner: &ExitBinner,
     s: &TraceSettings,
     row: usize,
     entries: std::ops::Range<usize>,
 ) -> Partial {
     let channels = if WALLS_MODE { 4 } else { 1 };
     let m = s.m;
-    let mut part = Partial { hist: vec![0.0; channels * m], dropped: 0.0, lost: 0.0 };
+    let mut part = Partial {
+        hist: vec![0.0; channels * m],
+        dropped: 0.0,
+        lost: 0.0,
+    };
     let phi_i = bin_centre(row, m);
     let d0 = [-phi_i.sin(), -phi_i.cos()];
     let walks = s.walks_per_entry();
     let law = s.fresnel_law;
-    let binner = ExitBinner::new(m);
     let albedo = s.albedo;
     let max_bounces = s.max_bounces;
     for k in entries {
-        let mut rng = entry_rng(s.seed, row, k);
-        let x = -0.5 + (k as f64 + rng.random::<f64>()) / s.n as f64;
+        let key = entry_key(s.seed, row, k);
+        let x = -0.5 + (k as f64 + unit(draw(key, 0))) / s.n as f64;
         let o = [x, 0.0];
         // The first segment is shared by the N_r walks of this entry point.
         let Some((seg0, t0)) = geo.nearest(o, d0, usize::MAX, -1e-12) else {
@@ -397,13 +770,27 @@ fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
         // them. A finished lane restarts with the entry's next walk. Every walk still draws
         // its own fresh uniforms (from the entry's stream, in a fixed order), so the estimator
         // is exactly the seed's N_r scheme and the output is deterministic.
-        let fresh = Lane { pos: hit0, dir: d0, seg: seg0, w: [1.0; 4], bounces: 0, active: true };
-        let mut lanes = [Lane { active: false, ..fresh }; LANES];
+        let fresh = Lane {
+            pos: hit0,
+            dir: d0,
+            seg: seg0,
+            w: [1.0; 4],
+            bounces: 0,
+            walk: 0,
+            active: true,
+        };
+        let mut lanes = [Lane {
+            active: false,
+            ..fresh
+        }; LANES];
         let mut started = 0;
         let mut active = 0;
         for lane in lanes.iter_mut() {
             if started < walks {
-                *lane = fresh;
+                *lane = Lane {
+                    walk: started,
+                    ..fresh
+                };
                 started += 1;
                 active += 1;
             }
@@ -428,13 +815,14 @@ fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
                     lane.bounces += 1;
                     lane.w[0] *= albedo;
                     if WALLS_MODE {
-                        for c in 0..3 {
-                            lane.w[c + 1] *= albedo * law.reflectance(COS_THETA_SLICES[c] * cos_in);
+                        for (w, cos_theta) in lane.w[1..].iter_mut().zip(COS_THETA_SLICES) {
+                            *w *= albedo * law.reflectance(cos_theta * cos_in);
                         }
                     }
                     let dir = if DIFFUSE {
                         // sin(a) uniform in [-1, 1] about the wall normal (2D Lambert).
-                        let sa = 2.0 * rng.random::<f64>() - 1.0;
+                        let counter = walk_counter(lane.walk, lane.bounces - 1, max_bounces);
+                        let sa = signed_unit(draw(key, counter));
                         let ca = (1.0 - sa * sa).max(0.0).sqrt();
                         [ca * n[0] + sa * sg.t[0], ca * n[1] + sa * sg.t[1]]
                     } else {
@@ -463,7 +851,10 @@ fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
                 };
                 if done {
                     if started < walks {
-                        *lane = fresh;
+                        *lane = Lane {
+                            walk: started,
+                            ..fresh
+                        };
                         started += 1;
                     } else {
                         lane.active = false;
@@ -476,31 +867,428 @@ fn trace_block_impl<const DIFFUSE: bool, const WALLS_MODE: bool>(
     part
 }
 
+/// The fast path of [`trace_block`] for diffuse walls in a convex groove: the same walks with
+/// the same random numbers (up to round-off at bin edges and corners), cheaper per walk.
+///
+/// * The entry's first wall hit is shared by its `N_r` walks, so the escape test of their
+///   first bounce is precomputed: a bounce from a point `p` of a convex groove escapes iff its
+///   direction lies between those of the opening's corners, i.e. iff `sin(a)` lies between the
+///   corners' `sin(a)` (`phi_o = alpha + a` is increasing in `sin a`).
+/// * An escaping bounce is binned by `sin(a)` directly (a per-wall [`WallBinner`]):
+///   no `sqrt`, no intersection. Only the walks that stay inside build their direction.
+/// * Later bounces test escape by two cross products with the corner directions.
+fn trace_block_convex<const WALLS_MODE: bool>(
+    geo: &Walls2D,
+    binner: &ExitBinner,
+    wall_binners: &[WallBinner],
+    s: &TraceSettings,
+    row: usize,
+    entries: std::ops::Range<usize>,
+) -> Partial {
+    let channels = if WALLS_MODE { 4 } else { 1 };
+    let m = s.m;
+    let mut part = Partial {
+        hist: vec![0.0; channels * m],
+        dropped: 0.0,
+        lost: 0.0,
+    };
+    let phi_i = bin_centre(row, m);
+    let d0 = [-phi_i.sin(), -phi_i.cos()];
+    let walks = s.nr;
+    let law = s.fresnel_law;
+    let albedo = s.albedo;
+    let max_bounces = s.max_bounces;
+    // Weights after a wall hit with incidence cosine `cos_in` (2D), per channel.
+    let hit_weights = |w: [f64; 4], cos_in: f64| -> [f64; 4] {
+        let mut w = w;
+        w[0] *= albedo;
+        if WALLS_MODE {
+            for (w, cos_theta) in w[1..].iter_mut().zip(COS_THETA_SLICES) {
+                *w *= albedo * law.reflectance(cos_theta * cos_in);
+            }
+        }
+        w
+    };
+    let two_walls = geo.segs.len() == 2;
+    // Walks whose first bounce stays inside: (walk index, sin a).
+    let mut pending: Vec<u32> = vec![0; walks];
+    let mut queue: Vec<Walk> = Vec::new();
+    // First-bounce escapes per (wall, exit bin).
+    let mut first_counts = vec![0u32; geo.segs.len() * m];
+    // Exit histogram, `channels x (M + 1)`: the last bin of each channel is scratch.
+    let mut hist = vec![0.0; channels * (m + 1)];
+    for k in entries {
+        let key = entry_key(s.seed, row, k);
+        let x = -0.5 + (k as f64 + unit(draw(key, 0))) / s.n as f64;
+        let o = [x, 0.0];
+        let Some((seg0, t0)) = geo.nearest(o, d0, usize::MAX, -1e-12) else {
+            part.lost += walks as f64;
+            continue;
+        };
+        let hit0 = [o[0] + t0.max(0.0) * d0[0], o[1] + t0.max(0.0) * d0[1]];
+        let sg = &geo.segs[seg0];
+        let cos_in0 = -(sg.n[0] * d0[0] + sg.n[1] * d0[1]);
+        let w0 = hit_weights([1.0; 4], cos_in0.abs());
+        // `sin a` of the directions to the opening's corners: the escape interval.
+        let corner_sin = |cx: f64, fallback: f64| {
+            let v = [cx - hit0[0], -hit0[1]];
+            let len = v[0].hypot(v[1]);
+            if len > 0.0 {
+                ((v[0] * sg.t[0] + v[1] * sg.t[1]) / len).clamp(-1.0, 1.0)
+            } else {
+                fallback
+            }
+        };
+        let lo = corner_sin(-0.5, -1.0);
+        let hi = corner_sin(0.5, 1.0);
+        let wb = &wall_binners[seg0];
+        let first_counts = &mut first_counts[seg0 * m..(seg0 + 1) * m];
+        // The escape interval on the random integer: `lo_k <= k < hi_k`.
+        let lo_k = int_threshold(lo);
+        let span = int_threshold_above(hi).saturating_sub(lo_k);
+        // First bounces of all walks: an escape adds its weight to its exit bin, a walk that
+        // stays inside is queued.
+        let n_pending = first_bounces(
+            key,
+            walks,
+            max_bounces,
+            (lo_k, span),
+            wb,
+            first_counts,
+            &mut pending,
+        );
+        // Queue the walks still inside (advanced after the block's first bounces).
+        queue.extend(pending[..n_pending].iter().map(|&r| {
+            let sa = signed_unit(draw(key, walk_counter(r as usize, 0, max_bounces)));
+            let ca = (1.0 - sa * sa).max(0.0).sqrt();
+            Walk {
+                key,
+                r,
+                seg: seg0 as u32,
+                pos: hit0,
+                dir: [ca * sg.n[0] + sa * sg.t[0], ca * sg.n[1] + sa * sg.t[1]],
+                w: w0,
+            }
+        }));
+    }
+    // The walks of the whole block still inside advance breadth-first, one bounce per pass
+    // over the queue: its walks are independent, so their `sqrt`/division latencies overlap,
+    // and the queue is compacted without branching on the (unpredictable) escapes.
+    // `bounces`: wall hits so far of every walk in the queue.
+    let mut bounces = 1;
+    while !queue.is_empty() {
+        let mut kept = 0;
+        for q in 0..queue.len() {
+            let Walk {
+                key,
+                r,
+                seg,
+                pos,
+                dir,
+                w,
+            } = queue[q];
+            let seg = seg as usize;
+            let hit = if two_walls {
+                geo.other_wall_hit(pos, dir, seg)
+            } else {
+                geo.nearest(pos, dir, seg, T_EPS)
+            };
+            let Some((next, t)) = hit else {
+                // Only at round-off of a corner: treat as the generic tracer does.
+                if dir[1] > 0.0 {
+                    let j = binner.bin(dir[0]);
+                    for c in 0..channels {
+                        part.hist[c * m + j] += w[c];
+                    }
+                } else {
+                    part.lost += w[0];
+                }
+                continue;
+            };
+            if bounces == max_bounces {
+                part.dropped += w[0];
+                continue;
+            }
+            let pos = [pos[0] + t * dir[0], pos[1] + t * dir[1]];
+            let sg = &geo.segs[next];
+            let cos_in = -(sg.n[0] * dir[0] + sg.n[1] * dir[1]);
+            let w = hit_weights(w, cos_in.abs());
+            let k = draw(key, walk_counter(r as usize, bounces, max_bounces)) >> 11;
+            let sa = sin_of_int(k);
+            let ca = (1.0 - sa * sa).max(0.0).sqrt();
+            let dir = [ca * sg.n[0] + sa * sg.t[0], ca * sg.n[1] + sa * sg.t[1]];
+            // Escape iff the new direction lies between the corner directions.
+            let (vl, vr) = ([-0.5 - pos[0], -pos[1]], [0.5 - pos[0], -pos[1]]);
+            let right_of_left = vl[0] * dir[1] - vl[1] * dir[0] <= 0.0;
+            let left_of_right = vr[0] * dir[1] - vr[1] * dir[0] >= 0.0;
+            let escapes = right_of_left & left_of_right;
+            let j = wall_binners[next].bin(k);
+            let e = (escapes as u8) as f64;
+            for c in 0..channels {
+                hist[c * (m + 1) + j] += e * w[c];
+            }
+            queue[kept] = Walk {
+                key,
+                r,
+                seg: next as u32,
+                pos,
+                dir,
+                w,
+            };
+            kept += (!escapes) as usize;
+        }
+        queue.truncate(kept);
+        bounces += 1;
+    }
+    for (seg, counts) in first_counts.chunks(m).enumerate() {
+        let sg = &geo.segs[seg];
+        let w0 = hit_weights([1.0; 4], (sg.n[0] * d0[0] + sg.n[1] * d0[1]).abs());
+        for c in 0..channels {
+            for (h, &n) in hist[c * (m + 1)..].iter_mut().zip(counts) {
+                *h += n as f64 * w0[c];
+            }
+        }
+    }
+    for c in 0..channels {
+        part.hist[c * m..(c + 1) * m].copy_from_slice(&hist[c * (m + 1)..c * (m + 1) + m]);
+    }
+    part
+}
+
+/// Salt of the kernel walks' random streams (distinct from the entry streams).
+const KERNEL_SALT: u64 = 0x4B45_524E_454C_0001;
+
+/// [`Estimator::Kernel`]: tabulate the kernel of every wall, then give each entry point the
+/// interpolated kernel row of its first hit. Fresnel mode `Seed` and diffuse walls (checked
+/// by `validate`); the groove must be convex.
+fn trace_kernel(
+    geo: &Walls2D,
+    s: &TraceSettings,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<TraceOutput, TraceError> {
+    if !geo.convex {
+        return Err(TraceError::BadParameter {
+            key: "estimator",
+            value: "kernel".into(),
+            why: "the kernel estimator needs a convex groove profile (V, round, trapezoid, \
+                  flat or a convex polyline)",
+        });
+    }
+    let m = s.m;
+    let nodes = KERNEL_NODES;
+    let nseg = geo.segs.len();
+    let binner = ExitBinner::new(m);
+    let wall_binners: Vec<WallBinner> = geo
+        .segs
+        .iter()
+        .map(|sg| WallBinner::new(m, sg.n[0].atan2(sg.n[1])))
+        .collect();
+    // 1. Each row's entry weights per kernel node (first hits, linear interpolation in the
+    //    position along the wall), and its lost entries (last element).
+    let node_weights: Vec<Vec<f64>> = (0..m)
+        .into_par_iter()
+        .map(|row| {
+            let phi_i = bin_centre(row, m);
+            let d0 = [-phi_i.sin(), -phi_i.cos()];
+            let mut node_w = vec![0.0; nseg * nodes + 1];
+            for k in 0..s.n {
+                let key = entry_key(s.seed, row, k);
+                let x = -0.5 + (k as f64 + unit(draw(key, 0))) / s.n as f64;
+                let o = [x, 0.0];
+                let Some((seg0, t0)) = geo.nearest(o, d0, usize::MAX, -1e-12) else {
+                    node_w[nseg * nodes] += 1.0;
+                    continue;
+                };
+                let hit0 = [o[0] + t0.max(0.0) * d0[0], o[1] + t0.max(0.0) * d0[1]];
+                let sg = &geo.segs[seg0];
+                let e2 = sg.e[0] * sg.e[0] + sg.e[1] * sg.e[1];
+                let u = ((hit0[0] - sg.p[0]) * sg.e[0] + (hit0[1] - sg.p[1]) * sg.e[1]) / e2;
+                let f = u * nodes as f64 - 0.5;
+                let i0 = (f.floor().max(0.0) as usize).min(nodes - 2);
+                let frac = (f - i0 as f64).clamp(0.0, 1.0);
+                // The first hit's weight: the facet albedo (no Fresnel in `Seed` mode).
+                node_w[seg0 * nodes + i0] += (1.0 - frac) * s.albedo;
+                node_w[seg0 * nodes + i0 + 1] += frac * s.albedo;
+            }
+            node_w
+        })
+        .collect();
+    // 2. Walks per node: `W_n = N N_r max_i(w_in / N)`. Then each row's kernel variance,
+    //    `sum_n (w_in / N)^2 var_n / W_n <= sum_n (w_in / N) var / (N N_r)`, is at most what
+    //    the N_r scheme's walks give (grazing rows, whose first hits crowd into a few nodes
+    //    near a wall's top, get those nodes densely sampled). At least 64 walks per node.
+    let paths = s.n as f64 * s.nr as f64;
+    let walks_per_node: Vec<usize> = (0..nseg * nodes)
+        .map(|id| {
+            let max_w = node_weights.iter().map(|w| w[id]).fold(0.0f64, f64::max);
+            ((paths * max_w / s.n as f64).ceil() as usize).clamp(64, s.n * s.nr)
+        })
+        .collect();
+    let kernel_walks: u64 = walks_per_node.iter().map(|&w| w as u64).sum();
+    // 3. The kernel row of node `i` of wall `seg` (index `seg * nodes + i`): the exit
+    //    histogram per walk started by a diffuse bounce there (its hit already counted),
+    //    then the dropped and the lost fractions.
+    let kernel: Vec<Vec<f64>> = (0..nseg * nodes)
+        .into_par_iter()
+        .map(|id| {
+            let (seg, node) = (id / nodes, id % nodes);
+            let sg = &geo.segs[seg];
+            let u = (node as f64 + 0.5) / nodes as f64;
+            let pos = [sg.p[0] + u * sg.e[0], sg.p[1] + u * sg.e[1]];
+            let key = mix64(mix64(s.seed ^ KERNEL_SALT) ^ (((seg as u64) << 32) | node as u64));
+            let walks = walks_per_node[id];
+            let mut row = vec![0.0; m + 2];
+            for r in 0..walks {
+                kernel_walk(geo, &wall_binners, &binner, s, key, r, pos, seg, &mut row);
+            }
+            for v in row.iter_mut() {
+                *v /= walks as f64;
+            }
+            progress((walks as u64 * s.total_paths()).div_ceil(kernel_walks.max(1)));
+            row
+        })
+        .collect();
+    // 4. Each row: its node weights times the kernel rows.
+    let phi_rows: Vec<Vec<f64>> = node_weights
+        .par_iter()
+        .map(|node_w| {
+            let mut acc = vec![0.0; m + 2];
+            for (w, krow) in node_w.iter().zip(&kernel) {
+                if *w != 0.0 {
+                    for (a, kv) in acc.iter_mut().zip(krow) {
+                        *a += w * kv;
+                    }
+                }
+            }
+            acc[m + 1] += node_w[nseg * nodes];
+            acc
+        })
+        .collect();
+
+    let norm: Vec<f64> = (0..m)
+        .map(|j| m as f64 / (PI * s.n as f64 * bin_centre(j, m).cos()))
+        .collect();
+    let mut rho_m = vec![0.0; m * m];
+    let mut dropped = vec![0.0; m];
+    let mut lost = vec![0.0; m];
+    for (row, acc) in phi_rows.iter().enumerate() {
+        for j in 0..m {
+            rho_m[row * m + j] = acc[j] * norm[j];
+        }
+        dropped[row] = acc[m] / s.n as f64;
+        lost[row] = acc[m + 1] / s.n as f64;
+    }
+    Ok(TraceOutput {
+        m,
+        rho_m,
+        rho_walls: None,
+        dropped,
+        lost,
+    })
+}
+
+/// One kernel walk `r` from wall `seg` at `pos`, its first hit (bounce 1) already counted:
+/// adds its exit weight to `row[bin]`, or to `row[m]` (dropped by the cap) or `row[m + 1]`
+/// (lost). The same bounce rules as the convex fast path.
+#[allow(clippy::too_many_arguments)]
+fn kernel_walk(
+    geo: &Walls2D,
+    wall_binners: &[WallBinner],
+    binner: &ExitBinner,
+    s: &TraceSettings,
+    key: u64,
+    r: usize,
+    mut pos: [f64; 2],
+    mut seg: usize,
+    row: &mut [f64],
+) {
+    let m = s.m;
+    let two_walls = geo.segs.len() == 2;
+    let mut w = 1.0;
+    let mut bounces = 1;
+    loop {
+        let sg = &geo.segs[seg];
+        let k = draw(key, walk_counter(r, bounces - 1, s.max_bounces)) >> 11;
+        let sa = sin_of_int(k);
+        let ca = (1.0 - sa * sa).max(0.0).sqrt();
+        let dir = [ca * sg.n[0] + sa * sg.t[0], ca * sg.n[1] + sa * sg.t[1]];
+        let (vl, vr) = ([-0.5 - pos[0], -pos[1]], [0.5 - pos[0], -pos[1]]);
+        if (vl[0] * dir[1] - vl[1] * dir[0] <= 0.0) & (vr[0] * dir[1] - vr[1] * dir[0] >= 0.0) {
+            row[wall_binners[seg].bin(k)] += w;
+            return;
+        }
+        let hit = if two_walls {
+            geo.other_wall_hit(pos, dir, seg)
+        } else {
+            geo.nearest(pos, dir, seg, T_EPS)
+        };
+        let Some((next, t)) = hit else {
+            if dir[1] > 0.0 {
+                row[binner.bin(dir[0])] += w;
+            } else {
+                row[m + 1] += w;
+            }
+            return;
+        };
+        if bounces == s.max_bounces {
+            row[m] += w;
+            return;
+        }
+        pos = [pos[0] + t * dir[0], pos[1] + t * dir[1]];
+        seg = next;
+        bounces += 1;
+        w *= s.albedo;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn small(walls: Walls) -> TraceSettings {
-        TraceSettings { walls, m: 32, n: 2000, nr: 8, ..TraceSettings::default() }
+        TraceSettings {
+            walls,
+            m: 32,
+            n: 2000,
+            nr: 8,
+            ..TraceSettings::default()
+        }
     }
 
     /// Sum over `phi_o` of `rho_m cos(phi_o) pi/M`: the 2D albedo of row `i`.
     fn albedo_2d(rho: &[f64], m: usize, i: usize) -> f64 {
-        (0..m).map(|j| rho[i * m + j] * bin_centre(j, m).cos() * PI / m as f64).sum()
+        (0..m)
+            .map(|j| rho[i * m + j] * bin_centre(j, m).cos() * PI / m as f64)
+            .sum()
     }
 
     #[test]
     fn lossless_profiles_conserve_energy() {
-        for spec in ["v:angle=90", "round:depth=0.4", "trapezoid:depth=0.3,bottom=0.2", "v:depth=2"] {
+        for spec in [
+            "v:angle=90",
+            "round:depth=0.4",
+            "trapezoid:depth=0.3,bottom=0.2",
+            "v:depth=2",
+        ] {
             let p = Profile::parse(spec).unwrap();
             for walls in [Walls::Specular, Walls::Diffuse] {
                 let out = trace(&p, &small(walls), &|_| {}).unwrap();
                 for i in 0..out.m {
                     let a = albedo_2d(&out.rho_m, out.m, i);
                     let dropped = out.dropped[i];
-                    assert!(out.lost[i] == 0.0, "{spec} {walls:?} row {i} lost {}", out.lost[i]);
-                    assert!((a + dropped - 1.0).abs() < 1e-9, "{spec} {walls:?} row {i}: {a} + {dropped}");
-                    assert!(dropped < 1e-3, "{spec} {walls:?} row {i}: dropped {dropped}");
+                    assert!(
+                        out.lost[i] == 0.0,
+                        "{spec} {walls:?} row {i} lost {}",
+                        out.lost[i]
+                    );
+                    assert!(
+                        (a + dropped - 1.0).abs() < 1e-9,
+                        "{spec} {walls:?} row {i}: {a} + {dropped}"
+                    );
+                    assert!(
+                        dropped < 1e-3,
+                        "{spec} {walls:?} row {i}: dropped {dropped}"
+                    );
                 }
             }
         }
@@ -509,7 +1297,10 @@ mod tests {
     #[test]
     fn albedo_scales_energy() {
         // A flat profile: one bounce each, so the 2D albedo is exactly the facet albedo.
-        let s = TraceSettings { albedo: 0.7, ..small(Walls::Diffuse) };
+        let s = TraceSettings {
+            albedo: 0.7,
+            ..small(Walls::Diffuse)
+        };
         let out = trace(&Profile::flat(), &s, &|_| {}).unwrap();
         for i in 0..out.m {
             assert!((albedo_2d(&out.rho_m, out.m, i) - 0.7).abs() < 1e-9);
@@ -521,7 +1312,13 @@ mod tests {
         // sin(a) uniform: P(phi_o in bin j) = (sin b_{j+1} - sin b_j)/2 ~ cos(phi_j) (pi/M)/2,
         // so eq. (1') gives 1/2 per bin. Compare with the exact bin integral, within MC error.
         let m = 16;
-        let s = TraceSettings { walls: Walls::Diffuse, m, n: 4000, nr: 16, ..TraceSettings::default() };
+        let s = TraceSettings {
+            walls: Walls::Diffuse,
+            m,
+            n: 4000,
+            nr: 16,
+            ..TraceSettings::default()
+        };
         let out = trace(&Profile::flat(), &s, &|_| {}).unwrap();
         let walks = (s.n * s.nr) as f64;
         let mut max_z = 0.0f64;
@@ -579,15 +1376,187 @@ mod tests {
     #[test]
     fn mirror_v_groove_retroreflects_the_two_wall_fraction() {
         let m = 64;
-        let s = TraceSettings { walls: Walls::Specular, m, n: 20_000, ..TraceSettings::default() };
+        let s = TraceSettings {
+            walls: Walls::Specular,
+            m,
+            n: 20_000,
+            ..TraceSettings::default()
+        };
         let out = trace(&Profile::parse("v:angle=90").unwrap(), &s, &|_| {}).unwrap();
         for i in 0..m {
             let phi = bin_centre(i, m);
             let retro = out.rho_m[i * m + i] * phi.cos() * PI / m as f64;
             let expect = (1.0 - phi.abs().tan()).max(0.0);
             // Stratified entries: error at most a couple of strata.
-            assert!((retro - expect).abs() < 3.0 / s.n as f64, "phi {phi}: {retro} vs {expect}");
+            assert!(
+                (retro - expect).abs() < 3.0 / s.n as f64,
+                "phi {phi}: {retro} vs {expect}"
+            );
         }
+    }
+
+    /// The convex fast path traces the same walks with the same random numbers as the generic
+    /// tracer: the tables agree up to the rare walk that round-off at a bin edge or a corner
+    /// sends elsewhere.
+    #[test]
+    fn convex_fast_path_matches_generic_tracer() {
+        for (spec, mode, albedo) in [
+            ("v:angle=90", FresnelMode::Seed, 1.0),
+            ("v:depth=1.5", FresnelMode::Walls, 0.9),
+            ("round:depth=0.4", FresnelMode::Seed, 0.8),
+            ("trapezoid:depth=0.3,bottom=0.2", FresnelMode::Walls, 1.0),
+        ] {
+            let p = Profile::parse(spec).unwrap();
+            assert!(Walls2D::new(&p).convex, "{spec}");
+            let s = TraceSettings {
+                m: 24,
+                n: 500,
+                nr: 12,
+                albedo,
+                fresnel_mode: mode,
+                seed: 7,
+                ..TraceSettings::default()
+            };
+            let fast = trace_with(&p, &s, &|_| {}, TracePath::Auto).unwrap();
+            let slow = trace_with(&p, &s, &|_| {}, TracePath::Generic).unwrap();
+            // One walk's weight in rho units is at most M / (pi N N_r cos(phi_o)).
+            let one_walk = s.m as f64 / (PI * (s.n * s.nr) as f64 * bin_centre(0, s.m).cos());
+            let mut walks_moved = 0.0;
+            let pairs = [(&fast.rho_m, &slow.rho_m)].into_iter().chain(
+                fast.rho_walls
+                    .iter()
+                    .zip(slow.rho_walls.iter())
+                    .map(|(a, b)| (a, b)),
+            );
+            for (a, b) in pairs {
+                assert_eq!(a.len(), b.len());
+                for (x, y) in a.iter().zip(b) {
+                    walks_moved += (x - y).abs() / one_walk;
+                }
+            }
+            assert!(walks_moved < 4.0, "{spec}: ~{walks_moved} walks differ");
+            for i in 0..s.m {
+                assert!((fast.dropped[i] - slow.dropped[i]).abs() < 1e-12);
+                assert_eq!(fast.lost[i], 0.0);
+            }
+        }
+        // A non-convex profile takes the generic path.
+        let w = Profile::from_points(
+            "w",
+            vec![
+                [-0.5, 0.0],
+                [-0.25, -0.5],
+                [0.0, -0.1],
+                [0.25, -0.5],
+                [0.5, 0.0],
+            ],
+        )
+        .unwrap();
+        assert!(!Walls2D::new(&w).convex);
+    }
+
+    /// The kernel estimator has the expectation of the `N_r` scheme: per bin, the difference
+    /// is within the two estimates' Monte Carlo error (binomial per walk); it conserves
+    /// energy exactly (rows sum to the albedo of the walks); it is deterministic.
+    #[test]
+    fn kernel_estimator_agrees_with_walks() {
+        for (spec, albedo) in [("v:angle=90", 1.0), ("round:depth=0.4", 0.8)] {
+            let p = Profile::parse(spec).unwrap();
+            let s = TraceSettings {
+                m: 16,
+                n: 1000,
+                nr: 64,
+                albedo,
+                seed: 3,
+                ..TraceSettings::default()
+            };
+            let k = TraceSettings {
+                estimator: Estimator::Kernel,
+                ..s.clone()
+            };
+            let walks = trace(&p, &s, &|_| {}).unwrap();
+            let kernel = trace(&p, &k, &|_| {}).unwrap();
+            let m = s.m;
+            let paths = (s.n * s.nr) as f64;
+            let (mut max_z, mut sum_z2, mut count) = (0.0f64, 0.0, 0);
+            for i in 0..m {
+                // Fraction of the incident energy in bin j.
+                let frac =
+                    |rho: &[f64], j: usize| rho[i * m + j] * bin_centre(j, m).cos() * PI / m as f64;
+                for j in 0..m {
+                    let (fw, fk) = (frac(&walks.rho_m, j), frac(&kernel.rho_m, j));
+                    let f = 0.5 * (fw + fk);
+                    if f <= 0.0 {
+                        continue;
+                    }
+                    // Walk weights are at most 1: binomial variance bounds each estimate's.
+                    let sigma = (2.0 * f * (1.0 - f).max(0.0) / paths).sqrt();
+                    let z = (fw - fk) / sigma;
+                    max_z = max_z.max(z.abs());
+                    sum_z2 += z * z;
+                    count += 1;
+                }
+                if albedo == 1.0 {
+                    let total: f64 = (0..m).map(|j| frac(&kernel.rho_m, j)).sum();
+                    assert!(
+                        (total + kernel.dropped[i] - 1.0).abs() < 1e-9,
+                        "{spec} row {i}: {total} + {}",
+                        kernel.dropped[i]
+                    );
+                }
+                assert_eq!(kernel.lost[i], 0.0);
+            }
+            let mean_z2 = sum_z2 / count as f64;
+            assert!(max_z < 5.0, "{spec}: max |z| {max_z}");
+            assert!(mean_z2 < 2.0, "{spec}: mean z^2 {mean_z2}");
+            // And it is a different estimate, not a copy.
+            assert_ne!(walks.rho_m, kernel.rho_m);
+            let one = rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .build()
+                .unwrap()
+                .install(|| trace(&p, &k, &|_| {}).unwrap());
+            assert_eq!(one, kernel, "{spec}: thread-count dependent");
+        }
+    }
+
+    #[test]
+    fn kernel_estimator_refuses_inexact_cases() {
+        let k = TraceSettings {
+            m: 8,
+            n: 50,
+            nr: 4,
+            estimator: Estimator::Kernel,
+            ..TraceSettings::default()
+        };
+        let v = Profile::parse("v:angle=90").unwrap();
+        for s in [
+            TraceSettings {
+                walls: Walls::Specular,
+                ..k.clone()
+            },
+            TraceSettings {
+                fresnel_mode: FresnelMode::Walls,
+                ..k.clone()
+            },
+        ] {
+            let e = trace(&v, &s, &|_| {}).unwrap_err();
+            assert!(e.to_string().contains("estimator"), "{e}");
+        }
+        let w = Profile::from_points(
+            "w",
+            vec![
+                [-0.5, 0.0],
+                [-0.25, -0.5],
+                [0.0, -0.1],
+                [0.25, -0.5],
+                [0.5, 0.0],
+            ],
+        )
+        .unwrap();
+        let e = trace(&w, &k, &|_| {}).unwrap_err();
+        assert!(e.to_string().contains("convex"), "{e}");
+        assert!(trace(&v, &k, &|_| {}).is_ok());
     }
 
     #[test]
@@ -602,13 +1571,25 @@ mod tests {
             ..TraceSettings::default()
         };
         let run = |threads| {
-            rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| trace(&p, &s, &|_| {}).unwrap())
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| trace(&p, &s, &|_| {}).unwrap())
         };
         let a = run(1);
         let b = run(3);
         assert_eq!(a, b);
         // And a different seed changes the output.
-        let c = trace(&p, &TraceSettings { seed: 43, ..s.clone() }, &|_| {}).unwrap();
+        let c = trace(
+            &p,
+            &TraceSettings {
+                seed: 43,
+                ..s.clone()
+            },
+            &|_| {},
+        )
+        .unwrap();
         assert_ne!(a.rho_m, c.rho_m);
     }
 
@@ -616,7 +1597,10 @@ mod tests {
     fn walls_fresnel_for_mirrors_at_grazing_slice_is_lossless() {
         // Slice theta = pi/2 has incidence cosine 0: Schlick gives F = 1, so the slice equals
         // rho_m; slice 0 of a flat mirror is exactly F(cos phi_i).
-        let s = TraceSettings { fresnel_mode: FresnelMode::Walls, ..small(Walls::Specular) };
+        let s = TraceSettings {
+            fresnel_mode: FresnelMode::Walls,
+            ..small(Walls::Specular)
+        };
         let out = trace(&Profile::flat(), &s, &|_| {}).unwrap();
         let m = s.m;
         let w = out.rho_walls.unwrap();
@@ -624,7 +1608,10 @@ mod tests {
             for j in 0..m {
                 assert_eq!(w[2 * m * m + i * m + j], out.rho_m[i * m + j]);
                 let f = crate::fresnel::schlick(1.5, bin_centre(i, m).cos());
-                assert!((w[i * m + j] - f * out.rho_m[i * m + j]).abs() < 1e-9 * out.rho_m[i * m + j].max(1.0));
+                assert!(
+                    (w[i * m + j] - f * out.rho_m[i * m + j]).abs()
+                        < 1e-9 * out.rho_m[i * m + j].max(1.0)
+                );
             }
         }
     }
@@ -641,7 +1628,10 @@ mod tests {
                 // Equal except within rounding of an edge.
                 if got != want {
                     let edge = -FRAC_PI_2 + got.max(want) as f64 * PI / m as f64;
-                    assert!((phi - edge).abs() < 1e-12, "m {m} phi {phi}: {got} vs {want}");
+                    assert!(
+                        (phi - edge).abs() < 1e-12,
+                        "m {m} phi {phi}: {got} vs {want}"
+                    );
                 }
             }
         }
@@ -652,14 +1642,41 @@ mod tests {
         let p = Profile::flat();
         let base = small(Walls::Diffuse);
         for s in [
-            TraceSettings { m: 0, ..base.clone() },
-            TraceSettings { n: 0, ..base.clone() },
-            TraceSettings { nr: 0, ..base.clone() },
-            TraceSettings { albedo: 1.5, ..base.clone() },
-            TraceSettings { albedo: f64::NAN, ..base.clone() },
-            TraceSettings { max_bounces: 0, ..base.clone() },
-            TraceSettings { fresnel_law: FresnelLaw::Schlick { n: -1.0 }, ..base.clone() },
-            TraceSettings { fresnel_law: FresnelLaw::Conductor { eta: 0.2, k: f64::INFINITY }, ..base.clone() },
+            TraceSettings {
+                m: 0,
+                ..base.clone()
+            },
+            TraceSettings {
+                n: 0,
+                ..base.clone()
+            },
+            TraceSettings {
+                nr: 0,
+                ..base.clone()
+            },
+            TraceSettings {
+                albedo: 1.5,
+                ..base.clone()
+            },
+            TraceSettings {
+                albedo: f64::NAN,
+                ..base.clone()
+            },
+            TraceSettings {
+                max_bounces: 0,
+                ..base.clone()
+            },
+            TraceSettings {
+                fresnel_law: FresnelLaw::Schlick { n: -1.0 },
+                ..base.clone()
+            },
+            TraceSettings {
+                fresnel_law: FresnelLaw::Conductor {
+                    eta: 0.2,
+                    k: f64::INFINITY,
+                },
+                ..base.clone()
+            },
         ] {
             assert!(trace(&p, &s, &|_| {}).is_err(), "{s:?}");
         }

@@ -21,7 +21,8 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let table = ScratchTable::load(&a.table).with_context(|| format!("loading {}", a.table.display()))?;
+    let table =
+        ScratchTable::load(&a.table).with_context(|| format!("loading {}", a.table.display()))?;
     if a.heatmap {
         striae::plot::plot_heatmap(&table, &a.output)?;
     } else {

@@ -6,7 +6,7 @@ use std::time::Instant;
 use striae::fresnel::FresnelLaw;
 use striae::profile::Profile;
 use striae::table::{ScratchTable, TableParams};
-use striae::trace2d::{FresnelMode, TraceSettings, Walls};
+use striae::trace2d::{Estimator, FresnelMode, TraceSettings, Walls};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -43,6 +43,13 @@ pub struct Args {
     max_bounces: usize,
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Diffuse-wall estimator. `walks`: the seed's N_r scheme (METHOD.md 3.1). `kernel`: a
+    /// departure from the seed, same expectation, lower variance and much faster: the exit
+    /// distribution from each wall position is tabulated once (256 nodes per wall, N*N_r/256
+    /// walks each) and every entry point adds the interpolated row of its first hit. Only for
+    /// diffuse walls, --fresnel seed and convex profiles (see docs/table-format.md).
+    #[arg(long, value_enum, default_value_t = EstimatorArg::Walks)]
+    estimator: EstimatorArg,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -58,6 +65,12 @@ enum WallsArg {
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
+enum EstimatorArg {
+    Walks,
+    Kernel,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
 enum ModeArg {
     Seed,
     Walls,
@@ -69,7 +82,8 @@ fn parse_law(s: &str, ior: f64) -> anyhow::Result<FresnelLaw> {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let profile = Profile::parse(&a.profile).with_context(|| format!("--profile `{}`", a.profile))?;
+    let profile =
+        Profile::parse(&a.profile).with_context(|| format!("--profile `{}`", a.profile))?;
     let trace = TraceSettings {
         walls: match a.walls {
             WallsArg::Specular => Walls::Specular,
@@ -86,27 +100,58 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             ModeArg::Walls => FresnelMode::Walls,
         },
         fresnel_law: parse_law(&a.fresnel_law, a.ior)?,
+        estimator: match a.estimator {
+            EstimatorArg::Walks => Estimator::Walks,
+            EstimatorArg::Kernel => Estimator::Kernel,
+        },
     };
     trace.validate().context("invalid precompute parameters")?;
     let params = TableParams::new(profile, trace);
     let total = params.trace.total_paths();
     let bar = indicatif::ProgressBar::new(total);
     bar.set_style(
-        indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {percent}% ({per_sec}, eta {eta})")
-            .expect("template"),
+        indicatif::ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {wide_bar} {percent}% ({per_sec}, eta {eta})",
+        )
+        .expect("template"),
     );
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(a.threads.unwrap_or(0)).build()?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()?;
     let start = Instant::now();
     let table = pool.install(|| ScratchTable::compute(&params, &|k| bar.inc(k)))?;
     let secs = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
-    table.save(&a.output).with_context(|| format!("writing {}", a.output.display()))?;
+    table
+        .save(&a.output)
+        .with_context(|| format!("writing {}", a.output.display()))?;
     let alb = table.albedo_2d();
-    let (lo, hi) = alb.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+    let (lo, hi) = alb
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
+            (l.min(x), h.max(x))
+        });
     let dropped = table.dropped.iter().cloned().fold(0.0, f64::max);
-    println!("profile {}  walls {:?}  M {}  N {}  N_r {}", params.profile.spec, params.trace.walls, table.m, params.trace.n, params.trace.nr);
-    println!("wall time {secs:.3} s, {total} paths, {:.3e} paths/s ({} threads)", total as f64 / secs, pool.current_num_threads());
-    println!("2D albedo range [{lo:.6}, {hi:.6}]; max energy dropped by the bounce cap {dropped:.3e}");
-    println!("wrote {} (params hash {})", a.output.display(), &params.hash()[..16]);
+    println!(
+        "profile {}  walls {:?}  M {}  N {}  N_r {}",
+        params.profile.spec, params.trace.walls, table.m, params.trace.n, params.trace.nr
+    );
+    let estimator = match params.trace.estimator {
+        Estimator::Walks => "",
+        Estimator::Kernel => " (kernel estimator: equivalent N_r-scheme paths)",
+    };
+    println!(
+        "wall time {secs:.3} s, {total} paths, {:.3e} paths/s ({} threads){estimator}",
+        total as f64 / secs,
+        pool.current_num_threads()
+    );
+    println!(
+        "2D albedo range [{lo:.6}, {hi:.6}]; max energy dropped by the bounce cap {dropped:.3e}"
+    );
+    println!(
+        "wrote {} (params hash {})",
+        a.output.display(),
+        &params.hash()[..16]
+    );
     Ok(())
 }
