@@ -57,9 +57,12 @@ fn mem_available() -> Option<u64> {
 pub fn run(args: Args) -> Result<()> {
     let mut params = match (args.setting, args.length, args.width, args.threshold) {
         (Some(n), ..) => LayerParams::setting(n)?,
-        (None, Some(length), Some(width), Some(threshold)) => {
-            LayerParams { length, width, threshold, layers: LayerParams::DEFAULT_LAYERS }
-        }
+        (None, Some(length), Some(width), Some(threshold)) => LayerParams {
+            length,
+            width,
+            threshold,
+            layers: LayerParams::DEFAULT_LAYERS,
+        },
         (None, None, None, None) => LayerParams::setting(1)?,
         _ => bail!("give either --setting or all of --length, --width and --threshold"),
     };
@@ -70,7 +73,8 @@ pub fn run(args: Args) -> Result<()> {
     // Peak memory: one layer's coverage and mips (f32, 4/3), the combined image (3 f32), the
     // stage images (f32) and the encoded PNGs (at most about one byte per texel each).
     let texels = (res as u64) * (res as u64);
-    let need = texels * (6 + 12 + if args.stages { 8 } else { 0 }) + texels * (set.len() as u64 + 4);
+    let need =
+        texels * (6 + 12 + if args.stages { 8 } else { 0 }) + texels * (set.len() as u64 + 4);
     if let Some(avail) = mem_available() {
         if need > avail {
             bail!(
@@ -116,9 +120,15 @@ pub fn run(args: Args) -> Result<()> {
     if args.stages {
         let layer0 = &set.layers()[0];
         let a = raster::stage_noise(layer0, res)?;
-        files.push(("stage-a-noise.png".into(), raster::encode_png(res, &raster::to_u8(&a), 1, "stage a")?));
+        files.push((
+            "stage-a-noise.png".into(),
+            raster::encode_png(res, &raster::to_u8(&a), 1, "stage a")?,
+        ));
         let b = raster::stage_stretched(layer0, res)?;
-        files.push(("stage-b-stretched.png".into(), raster::encode_png(res, &raster::to_u8(&b), 1, "stage b")?));
+        files.push((
+            "stage-b-stretched.png".into(),
+            raster::encode_png(res, &raster::to_u8(&b), 1, "stage b")?,
+        ));
     }
     let p = set.params();
     let json = serde_json::json!({

@@ -37,7 +37,12 @@ pub struct ScratchLayer {
 
 impl ScratchLayer {
     /// Layer `index` with angle `alpha` and noise seed `noise_seed` (parameters already valid).
-    pub fn new(index: usize, alpha: f64, noise_seed: u64, params: &LayerParams) -> Result<Self, LayerError> {
+    pub fn new(
+        index: usize,
+        alpha: f64,
+        noise_seed: u64,
+        params: &LayerParams,
+    ) -> Result<Self, LayerError> {
         params.validate()?;
         let (s, c) = alpha.sin_cos();
         let (l, w) = (params.length, params.width);
@@ -130,13 +135,20 @@ impl ScratchLayer {
     /// otherwise `expected`. A degenerate footprint (zero area) is a point query; non-finite
     /// input gives 0.
     pub fn coverage_at(&self, p: DVec2, a: DVec2, b: DVec2, expected: f64) -> f64 {
-        self.footprint_coverage(p, a, b, MAX_FOOTPRINT_CELLS).unwrap_or(expected)
+        self.footprint_coverage(p, a, b, MAX_FOOTPRINT_CELLS)
+            .unwrap_or(expected)
     }
 
     /// The exact coverage of the footprint `{p + s a + t b : s, t in [-1/2, 1/2]}`, or `None`
     /// when its noise-space bounding box spans more than `max_cells` cells or it touches more
     /// than `MAX_DISCS` scratches.
-    pub fn footprint_coverage(&self, p: DVec2, a: DVec2, b: DVec2, max_cells: usize) -> Option<f64> {
+    pub fn footprint_coverage(
+        &self,
+        p: DVec2,
+        a: DVec2,
+        b: DVec2,
+        max_cells: usize,
+    ) -> Option<f64> {
         let q0 = self.to_noise(p);
         let (qa, qb) = (self.vector_to_noise(a), self.vector_to_noise(b));
         let cr = cross(qa, qb);
@@ -148,7 +160,12 @@ impl ScratchLayer {
             return Some(self.noise.any_within(q0, tau) as u8 as f64);
         }
         let (qa, qb) = if cr > 0.0 { (qa, qb) } else { (qb, qa) };
-        let poly = [(-qa - qb) * 0.5, (qa - qb) * 0.5, (qa + qb) * 0.5, (qb - qa) * 0.5];
+        let poly = [
+            (-qa - qb) * 0.5,
+            (qa - qb) * 0.5,
+            (qa + qb) * 0.5,
+            (qb - qa) * 0.5,
+        ];
         let ext = (qa.abs() + qb.abs()) * 0.5 + DVec2::splat(tau);
         let (i0, i1) = ((q0.x - ext.x).floor(), (q0.x + ext.x).floor());
         let (j0, j1) = ((q0.y - ext.y).floor(), (q0.y + ext.y).floor());

@@ -98,7 +98,12 @@ impl LayerParams {
             2 => (0.6, 0.010),
             _ => return Err(LayerError::Setting(n)),
         };
-        Ok(LayerParams { length, width, threshold: 0.1, layers: Self::DEFAULT_LAYERS })
+        Ok(LayerParams {
+            length,
+            width,
+            threshold: 0.1,
+            layers: Self::DEFAULT_LAYERS,
+        })
     }
 
     pub fn validate(&self) -> Result<(), LayerError> {
@@ -146,7 +151,12 @@ impl LayerSet {
             })
             .collect::<Result<Vec<_>, _>>()?;
         let expected_coverage = footprint::expected_coverage(params.threshold, 48);
-        Ok(LayerSet { params, seed, layers, expected_coverage })
+        Ok(LayerSet {
+            params,
+            seed,
+            layers,
+            expected_coverage,
+        })
     }
 
     pub fn params(&self) -> &LayerParams {
@@ -171,7 +181,10 @@ impl LayerSet {
 
     /// Layer `k`, or an error naming the index.
     pub fn layer(&self, k: usize) -> Result<&ScratchLayer, LayerError> {
-        self.layers.get(k).ok_or(LayerError::LayerIndex { index: k, count: self.layers.len() })
+        self.layers.get(k).ok_or(LayerError::LayerIndex {
+            index: k,
+            count: self.layers.len(),
+        })
     }
 
     /// Layer `k`'s scratch direction `d_k = (cos alpha_k, sin alpha_k)` in texture space.
@@ -228,7 +241,6 @@ impl LayerSet {
         raster::rasterize(self.layer(k)?, res)
     }
 }
-
 
 #[cfg(test)]
 mod tests;

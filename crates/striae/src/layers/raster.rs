@@ -35,7 +35,10 @@ pub fn texel_centre(res: usize, x: usize, y: usize) -> DVec2 {
 /// Check a raster side: at least 1 and at most [`MAX_RESOLUTION`].
 pub fn check_resolution(res: usize) -> Result<(), LayerError> {
     if res == 0 {
-        return Err(LayerError::Resolution { res, reason: "it must be at least 1".into() });
+        return Err(LayerError::Resolution {
+            res,
+            reason: "it must be at least 1".into(),
+        });
     }
     if res > MAX_RESOLUTION {
         let gib = (res as f64).powi(2) * 4.0 * 4.0 / 3.0 / (1u64 << 30) as f64;
@@ -68,7 +71,12 @@ impl CoverageRaster {
             for y in 0..m {
                 for x in 0..m {
                     let (mut s, mut c) = (0.0f32, 0.0f32);
-                    for (yy, xx) in [(2 * y, 2 * x), (2 * y, 2 * x + 1), (2 * y + 1, 2 * x), (2 * y + 1, 2 * x + 1)] {
+                    for (yy, xx) in [
+                        (2 * y, 2 * x),
+                        (2 * y, 2 * x + 1),
+                        (2 * y + 1, 2 * x),
+                        (2 * y + 1, 2 * x + 1),
+                    ] {
                         if yy < n && xx < n {
                             s += src[yy * n + xx];
                             c += 1.0;
@@ -118,17 +126,31 @@ impl CoverageRaster {
 
 /// `[0, 1]` values to bytes.
 pub fn to_u8(d: &[f32]) -> Vec<u8> {
-    d.iter().map(|&c| (c.clamp(0.0, 1.0) * 255.0).round() as u8).collect()
+    d.iter()
+        .map(|&c| (c.clamp(0.0, 1.0) * 255.0).round() as u8)
+        .collect()
 }
 
 /// Encode a square 8-bit image with 1 (grey) or 3 (RGB) channels as PNG bytes.
-pub fn encode_png(n: usize, bytes: &[u8], channels: usize, what: &str) -> Result<Vec<u8>, LayerError> {
+pub fn encode_png(
+    n: usize,
+    bytes: &[u8],
+    channels: usize,
+    what: &str,
+) -> Result<Vec<u8>, LayerError> {
     use image::ImageEncoder;
     let mut out = Vec::new();
-    let ty = if channels == 3 { image::ExtendedColorType::Rgb8 } else { image::ExtendedColorType::L8 };
+    let ty = if channels == 3 {
+        image::ExtendedColorType::Rgb8
+    } else {
+        image::ExtendedColorType::L8
+    };
     image::codecs::png::PngEncoder::new(&mut out)
         .write_image(bytes, n as u32, n as u32, ty)
-        .map_err(|e| LayerError::Png { what: what.into(), msg: e.to_string() })?;
+        .map_err(|e| LayerError::Png {
+            what: what.into(),
+            msg: e.to_string(),
+        })?;
     Ok(out)
 }
 
@@ -152,22 +174,32 @@ pub struct CombinedImage {
 
 impl CombinedImage {
     pub fn new(res: usize) -> Self {
-        CombinedImage { res, dark: vec![1.0; 3 * res * res] }
+        CombinedImage {
+            res,
+            dark: vec![1.0; 3 * res * res],
+        }
     }
 
     pub fn add(&mut self, raster: &CoverageRaster, alpha: f64) {
         assert_eq!(raster.res(), self.res);
         let t = direction_tint(alpha);
         let (_, d) = raster.level(0);
-        self.dark.par_chunks_mut(3).zip(d.par_iter()).for_each(|(px, &c)| {
-            for ch in 0..3 {
-                px[ch] *= 1.0 - c * t[ch];
-            }
-        });
+        self.dark
+            .par_chunks_mut(3)
+            .zip(d.par_iter())
+            .for_each(|(px, &c)| {
+                for ch in 0..3 {
+                    px[ch] *= 1.0 - c * t[ch];
+                }
+            });
     }
 
     pub fn to_png(&self) -> Result<Vec<u8>, LayerError> {
-        let bytes: Vec<u8> = self.dark.iter().map(|&d| ((1.0 - d).clamp(0.0, 1.0) * 255.0).round() as u8).collect();
+        let bytes: Vec<u8> = self
+            .dark
+            .iter()
+            .map(|&d| ((1.0 - d).clamp(0.0, 1.0) * 255.0).round() as u8)
+            .collect();
         encode_png(self.res, &bytes, 3, "the combined layers image")
     }
 }
@@ -179,7 +211,13 @@ pub fn stage_noise(layer: &ScratchLayer, res: usize) -> Result<Vec<f32>, LayerEr
     check_resolution(res)?;
     let (hl, hw) = layer.half_axes();
     let scale = 1.0 / (hl * hw / (layer.threshold() * layer.threshold())).sqrt();
-    Ok(per_texel(res, |p| 1.0 - layer.noise().eval((p - super::layer::CENTRE) * scale).f1.min(1.0)))
+    Ok(per_texel(res, |p| {
+        1.0 - layer
+            .noise()
+            .eval((p - super::layer::CENTRE) * scale)
+            .f1
+            .min(1.0)
+    }))
 }
 
 /// Stage (b) of Fig. 4: the same noise after rotation by `alpha` and stretch by `(L, W)`, i.e.
@@ -217,8 +255,14 @@ pub fn rasterize(layer: &ScratchLayer, res: usize) -> Result<CoverageRaster, Lay
     let noise = layer.noise();
     // Cells whose disc can reach the texture square: its noise-space bounding box plus tau.
     let corners = [DVec2::ZERO, DVec2::X, DVec2::ONE, DVec2::Y].map(|p| layer.to_noise(p));
-    let lo = corners.iter().fold(DVec2::splat(f64::INFINITY), |m, c| m.min(*c)) - tau;
-    let hi = corners.iter().fold(DVec2::splat(f64::NEG_INFINITY), |m, c| m.max(*c)) + tau;
+    let lo = corners
+        .iter()
+        .fold(DVec2::splat(f64::INFINITY), |m, c| m.min(*c))
+        - tau;
+    let hi = corners
+        .iter()
+        .fold(DVec2::splat(f64::NEG_INFINITY), |m, c| m.max(*c))
+        + tau;
     let (i0, i1, j0, j1) = (lo.x.floor(), hi.x.floor(), lo.y.floor(), hi.y.floor());
     let cells = (i1 - i0 + 1.0) * (j1 - j0 + 1.0);
     if cells > MAX_RASTER_CELLS {
@@ -250,7 +294,10 @@ pub fn rasterize(layer: &ScratchLayer, res: usize) -> Result<CoverageRaster, Lay
             let mut clustered = false;
             'n: for dj in -reach..=reach {
                 for di in -reach..=reach {
-                    if (di, dj) != (0, 0) && (noise.feature_point(i + di, j + dj) - q).length_squared() < 4.0 * tau * tau {
+                    if (di, dj) != (0, 0)
+                        && (noise.feature_point(i + di, j + dj) - q).length_squared()
+                            < 4.0 * tau * tau
+                    {
                         clustered = true;
                         break 'n;
                     }
@@ -279,7 +326,12 @@ pub fn rasterize(layer: &ScratchLayer, res: usize) -> Result<CoverageRaster, Lay
     // One texel in noise space: a parallelogram around its centre.
     let (ta, tb) = (mx / r, my / r);
     let texel_area = ta.perp_dot(tb);
-    let poly = [(-ta - tb) * 0.5, (ta - tb) * 0.5, (ta + tb) * 0.5, (tb - ta) * 0.5];
+    let poly = [
+        (-ta - tb) * 0.5,
+        (ta - tb) * 0.5,
+        (ta + tb) * 0.5,
+        (tb - ta) * 0.5,
+    ];
     let mut planes = [(DVec2::ZERO, 0.0f64); 4];
     for e in 0..4 {
         let d = poly[(e + 1) % 4] - poly[e];
@@ -289,59 +341,70 @@ pub fn rasterize(layer: &ScratchLayer, res: usize) -> Result<CoverageRaster, Lay
     let disc_area = std::f64::consts::PI * tau * tau;
 
     let mut data = vec![0.0f32; res * res];
-    data.par_chunks_mut(BAND * res).enumerate().for_each(|(b, chunk)| {
-        let rows = chunk.len() / res;
-        let mut acc = vec![0.0f64; chunk.len()];
-        let mut needs_union = vec![false; chunk.len()];
-        for &k in &lists[b] {
-            let s = &scratches[k as usize];
-            let (y0, y1) = row_range(s);
-            for y in y0.max(b * BAND)..=y1.min(b * BAND + rows - 1) {
-                // The slab of this row, clipped to the ellipse's v-range, gives the chord centres.
-                let (vb, vt) = (1.0 - (y + 1) as f64 / r, 1.0 - y as f64 / r);
-                let dv0 = (vb - s.p.y).max(-ey);
-                let dv1 = (vt - s.p.y).min(ey);
-                let (ca, cb) = (k_chord * dv0, k_chord * dv1);
-                let u0 = s.p.x + ca.min(cb) - h0;
-                let u1 = s.p.x + ca.max(cb) + h0;
-                if u1 < 0.0 || u0 > 1.0 {
-                    continue;
-                }
-                let x0 = (u0 * r).floor().max(0.0) as usize;
-                let x1 = ((u1 * r).floor() as usize).min(res - 1);
-                let row = (y - b * BAND) * res;
-                for x in x0..=x1 {
-                    let qt = layer.to_noise(texel_centre(res, x, y));
-                    let c = s.q - qt;
-                    let mut inside = true;
-                    let mut touches = true;
-                    for &(n, d) in &planes {
-                        let sd = d - n.dot(c);
-                        if sd <= -tau {
-                            touches = false;
-                            break;
-                        }
-                        inside &= sd >= tau;
-                    }
-                    if !touches {
+    data.par_chunks_mut(BAND * res)
+        .enumerate()
+        .for_each(|(b, chunk)| {
+            let rows = chunk.len() / res;
+            let mut acc = vec![0.0f64; chunk.len()];
+            let mut needs_union = vec![false; chunk.len()];
+            for &k in &lists[b] {
+                let s = &scratches[k as usize];
+                let (y0, y1) = row_range(s);
+                for y in y0.max(b * BAND)..=y1.min(b * BAND + rows - 1) {
+                    // The slab of this row, clipped to the ellipse's v-range, gives the chord centres.
+                    let (vb, vt) = (1.0 - (y + 1) as f64 / r, 1.0 - y as f64 / r);
+                    let dv0 = (vb - s.p.y).max(-ey);
+                    let dv1 = (vt - s.p.y).min(ey);
+                    let (ca, cb) = (k_chord * dv0, k_chord * dv1);
+                    let u0 = s.p.x + ca.min(cb) - h0;
+                    let u1 = s.p.x + ca.max(cb) + h0;
+                    if u1 < 0.0 || u0 > 1.0 {
                         continue;
                     }
-                    let a = if inside { disc_area } else { union_discs_polygon_area(&[c], tau, &poly) };
-                    acc[row + x] += a;
-                    needs_union[row + x] |= s.clustered;
+                    let x0 = (u0 * r).floor().max(0.0) as usize;
+                    let x1 = ((u1 * r).floor() as usize).min(res - 1);
+                    let row = (y - b * BAND) * res;
+                    for x in x0..=x1 {
+                        let qt = layer.to_noise(texel_centre(res, x, y));
+                        let c = s.q - qt;
+                        let mut inside = true;
+                        let mut touches = true;
+                        for &(n, d) in &planes {
+                            let sd = d - n.dot(c);
+                            if sd <= -tau {
+                                touches = false;
+                                break;
+                            }
+                            inside &= sd >= tau;
+                        }
+                        if !touches {
+                            continue;
+                        }
+                        let a = if inside {
+                            disc_area
+                        } else {
+                            union_discs_polygon_area(&[c], tau, &poly)
+                        };
+                        acc[row + x] += a;
+                        needs_union[row + x] |= s.clustered;
+                    }
                 }
             }
-        }
-        for (k, (o, &a)) in chunk.iter_mut().zip(&acc).enumerate() {
-            let mut v = a / texel_area;
-            if needs_union[k] {
-                let (x, y) = (k % res, b * BAND + k / res);
-                if let Some(exact) = layer.footprint_coverage(texel_centre(res, x, y), DVec2::X / r, DVec2::Y / r, usize::MAX) {
-                    v = exact;
+            for (k, (o, &a)) in chunk.iter_mut().zip(&acc).enumerate() {
+                let mut v = a / texel_area;
+                if needs_union[k] {
+                    let (x, y) = (k % res, b * BAND + k / res);
+                    if let Some(exact) = layer.footprint_coverage(
+                        texel_centre(res, x, y),
+                        DVec2::X / r,
+                        DVec2::Y / r,
+                        usize::MAX,
+                    ) {
+                        v = exact;
+                    }
                 }
+                *o = v.clamp(0.0, 1.0) as f32;
             }
-            *o = v.clamp(0.0, 1.0) as f32;
-        }
-    });
+        });
     Ok(CoverageRaster::from_coverage(res, data))
 }

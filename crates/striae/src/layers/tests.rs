@@ -8,11 +8,20 @@ use rand::{Rng, SeedableRng};
 use std::f64::consts::PI;
 
 fn params(length: f64, width: f64, threshold: f64, layers: usize) -> LayerParams {
-    LayerParams { length, width, threshold, layers }
+    LayerParams {
+        length,
+        width,
+        threshold,
+        layers,
+    }
 }
 
 fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
-    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(f)
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
 }
 
 #[test]
@@ -22,7 +31,10 @@ fn same_seed_gives_bit_identical_layers_whatever_the_thread_count() {
     let b = LayerSet::new(p, 42).unwrap();
     let c = LayerSet::new(p, 43).unwrap();
     for k in 0..a.len() {
-        assert_eq!(a.layers()[k].angle().to_bits(), b.layers()[k].angle().to_bits());
+        assert_eq!(
+            a.layers()[k].angle().to_bits(),
+            b.layers()[k].angle().to_bits()
+        );
         assert_ne!(a.layers()[k].angle(), c.layers()[k].angle());
     }
     let bits = |r: &CoverageRaster| r.level(0).1.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
@@ -49,13 +61,21 @@ fn coverage_follows_pi_tau_squared() {
     for (tau, rel) in [(0.1, 0.03), (0.2, 0.05)] {
         let set = LayerSet::new(params(0.02, 0.015, tau, 16), 7).unwrap();
         let e = set.expected_coverage();
-        assert!((e / (PI * tau * tau) - 1.0).abs() < rel && e < PI * tau * tau, "E {e}");
+        assert!(
+            (e / (PI * tau * tau) - 1.0).abs() < rel && e < PI * tau * tau,
+            "E {e}"
+        );
         let mut m = MeanEstimate::default();
         for k in 0..set.len() {
             m.push(set.rasterize(k, 200).unwrap().mean());
         }
         assert!(m.std_error() < 0.03 * e, "se {}", m.std_error());
-        assert!(m.agrees_with(e, 4.0, 0.0), "tau {tau}: measured {} +- {} vs expected {e}", m.mean(), m.std_error());
+        assert!(
+            m.agrees_with(e, 4.0, 0.0),
+            "tau {tau}: measured {} +- {} vs expected {e}",
+            m.mean(),
+            m.std_error()
+        );
     }
 }
 
@@ -70,20 +90,33 @@ fn orientation_measured_on_the_raster_matches_alpha() {
     let set = LayerSet::new(LayerParams::setting(2).unwrap(), 3).unwrap();
     let res = 384;
     let (sigma, rad) = (2.0f64, 8i64);
-    let g: Vec<f64> = (-rad..=rad).map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp()).collect();
-    let dg: Vec<f64> = (-rad..=rad).zip(&g).map(|(i, w)| -(i as f64) / (sigma * sigma) * w).collect();
+    let g: Vec<f64> = (-rad..=rad)
+        .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp())
+        .collect();
+    let dg: Vec<f64> = (-rad..=rad)
+        .zip(&g)
+        .map(|(i, w)| -(i as f64) / (sigma * sigma) * w)
+        .collect();
     // Separable convolution: kernel kx along x (columns), ky along y (rows).
     let conv = |img: &[f64], kx: &[f64], ky: &[f64]| -> Vec<f64> {
         let mut tmp = vec![0.0; res * res];
         for y in 0..res {
             for x in rad as usize..res - rad as usize {
-                tmp[y * res + x] = kx.iter().enumerate().map(|(t, w)| w * img[y * res + x + t - rad as usize]).sum();
+                tmp[y * res + x] = kx
+                    .iter()
+                    .enumerate()
+                    .map(|(t, w)| w * img[y * res + x + t - rad as usize])
+                    .sum();
             }
         }
         let mut out = vec![0.0; res * res];
         for y in rad as usize..res - rad as usize {
             for x in 0..res {
-                out[y * res + x] = ky.iter().enumerate().map(|(t, w)| w * tmp[(y + t - rad as usize) * res + x]).sum();
+                out[y * res + x] = ky
+                    .iter()
+                    .enumerate()
+                    .map(|(t, w)| w * tmp[(y + t - rad as usize) * res + x])
+                    .sum();
             }
         }
         out
@@ -110,11 +143,15 @@ fn orientation_measured_on_the_raster_matches_alpha() {
         let alpha = set.layers()[k].angle();
         let diff = (along - alpha).rem_euclid(PI);
         let diff = diff.min(PI - diff);
-        assert!(diff < 1f64.to_radians(), "layer {k}: measured {along} vs alpha {alpha}");
+        assert!(
+            diff < 1f64.to_radians(),
+            "layer {k}: measured {along} vs alpha {alpha}"
+        );
         angles.push(alpha.rem_euclid(PI));
     }
     // The layers really point different ways, so the check covers more than one angle.
-    let spread = angles.iter().cloned().fold(f64::NEG_INFINITY, f64::max) - angles.iter().cloned().fold(f64::INFINITY, f64::min);
+    let spread = angles.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+        - angles.iter().cloned().fold(f64::INFINITY, f64::min);
     assert!(spread > 0.5, "angles {angles:?}");
 }
 
@@ -126,7 +163,10 @@ fn orientation_measured_on_the_raster_matches_alpha() {
 /// rare outliers) must match `2 tau L` and `2 tau W` within 2 % and 4 %.
 #[test]
 fn scratch_length_and_width_measured_on_the_raster() {
-    for (p, res) in [(LayerParams::setting(2).unwrap(), 1024), (params(0.25, 0.02, 0.15, 1), 512)] {
+    for (p, res) in [
+        (LayerParams::setting(2).unwrap(), 1024),
+        (params(0.25, 0.02, 0.15, 1), 512),
+    ] {
         let set = LayerSet::new(p, 11).unwrap();
         for k in 0..set.len().min(2) {
             let r = set.rasterize(k, res).unwrap();
@@ -142,7 +182,16 @@ fn scratch_length_and_width_measured_on_the_raster() {
                     let (x, y) = ((i % res) as i64, (i / res) as i64);
                     pix.push(i);
                     border |= x == 0 || y == 0 || x == res as i64 - 1 || y == res as i64 - 1;
-                    for (dx, dy) in [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
+                    for (dx, dy) in [
+                        (-1, -1),
+                        (0, -1),
+                        (1, -1),
+                        (-1, 0),
+                        (1, 0),
+                        (-1, 1),
+                        (0, 1),
+                        (1, 1),
+                    ] {
                         let (nx, ny) = (x + dx, y + dy);
                         if nx >= 0 && ny >= 0 && nx < res as i64 && ny < res as i64 {
                             let n = (ny * res as i64 + nx) as usize;
@@ -197,7 +246,11 @@ fn scratch_length_and_width_measured_on_the_raster() {
 /// no scratched sample, and partial texels agree on average within 0.02 (stratification error).
 #[test]
 fn point_and_footprint_queries_agree_with_the_raster() {
-    for (p, res) in [(LayerParams::setting(1).unwrap(), 256), (LayerParams::setting(2).unwrap(), 128), (params(0.05, 0.05, 0.3, 1), 64)] {
+    for (p, res) in [
+        (LayerParams::setting(1).unwrap(), 256),
+        (LayerParams::setting(2).unwrap(), 128),
+        (params(0.05, 0.05, 0.3, 1), 64),
+    ] {
         let set = LayerSet::new(p, 5).unwrap();
         let r = set.rasterize(0, res).unwrap();
         let texel = 1.0 / res as f32;
@@ -206,12 +259,14 @@ fn point_and_footprint_queries_agree_with_the_raster() {
             for x in 0..res {
                 let c = raster::texel_centre(res, x, y);
                 let ras = r.get(x, y) as f64;
-                let fp = set.coverage(0, c.as_vec2(), Vec2::new(texel, 0.0), Vec2::new(0.0, texel)) as f64;
+                let fp = set.coverage(0, c.as_vec2(), Vec2::new(texel, 0.0), Vec2::new(0.0, texel))
+                    as f64;
                 worst = worst.max((fp - ras).abs());
                 let mut hits = 0;
                 for sy in 0..8 {
                     for sx in 0..8 {
-                        let p = c + DVec2::new(sx as f64 - 3.5, sy as f64 - 3.5) / (8.0 * res as f64);
+                        let p =
+                            c + DVec2::new(sx as f64 - 3.5, sy as f64 - 3.5) / (8.0 * res as f64);
                         hits += set.layers()[0].is_scratched_at(p) as usize;
                     }
                 }
@@ -225,7 +280,11 @@ fn point_and_footprint_queries_agree_with_the_raster() {
             }
         }
         assert!(worst < 1e-5, "footprint vs raster differ by {worst}");
-        assert!(partial > 100 && sum_ss / (partial as f64) < 0.02, "mean |points - raster| {}", sum_ss / partial as f64);
+        assert!(
+            partial > 100 && sum_ss / (partial as f64) < 0.02,
+            "mean |points - raster| {}",
+            sum_ss / partial as f64
+        );
     }
 }
 
@@ -242,7 +301,10 @@ fn footprint_coverage_matches_point_sampling() {
         let k = case % 4;
         let uv = Vec2::new(rng.random_range(0.1..0.9), rng.random_range(0.1..0.9));
         let s = rng.random_range(0.002f32..0.03);
-        let (a, b) = (Vec2::new(s, rng.random_range(-s..s)), Vec2::new(rng.random_range(-s..s), -s * rng.random_range(0.2..1.0)));
+        let (a, b) = (
+            Vec2::new(s, rng.random_range(-s..s)),
+            Vec2::new(rng.random_range(-s..s), -s * rng.random_range(0.2..1.0)),
+        );
         let cov = set.coverage(k, uv, a, b) as f64;
         set.coverage_all(uv, a, b, &mut all);
         assert_eq!(all[k] as f64, cov);
@@ -258,15 +320,29 @@ fn footprint_coverage_matches_point_sampling() {
         let mc = hits as f64 / n as f64;
         let se = (mc * (1.0 - mc) / n as f64).sqrt();
         nonzero += (cov > 0.0) as usize;
-        assert!((cov - mc).abs() < 4.0 * se + 0.005, "case {case}: footprint {cov} vs points {mc}");
+        assert!(
+            (cov - mc).abs() < 4.0 * se + 0.005,
+            "case {case}: footprint {cov} vs points {mc}"
+        );
     }
     assert!(nonzero > 30);
     // A huge footprint falls back to the expected coverage; a degenerate one is a point query.
-    let big = set.coverage(0, Vec2::splat(0.5), Vec2::new(0.5, 0.0), Vec2::new(0.0, 0.5)) as f64;
+    let big = set.coverage(
+        0,
+        Vec2::splat(0.5),
+        Vec2::new(0.5, 0.0),
+        Vec2::new(0.0, 0.5),
+    ) as f64;
     assert!((big - set.expected_coverage()).abs() < 1e-6);
     let uv = Vec2::new(0.3, 0.7);
-    assert_eq!(set.coverage(1, uv, Vec2::ZERO, Vec2::ZERO), set.is_scratched(1, uv) as u8 as f32);
-    assert_eq!(set.coverage(1, Vec2::new(f32::NAN, 0.0), Vec2::ZERO, Vec2::X), 0.0);
+    assert_eq!(
+        set.coverage(1, uv, Vec2::ZERO, Vec2::ZERO),
+        set.is_scratched(1, uv) as u8 as f32
+    );
+    assert_eq!(
+        set.coverage(1, Vec2::new(f32::NAN, 0.0), Vec2::ZERO, Vec2::X),
+        0.0
+    );
 }
 
 /// The ellipse of a scratch: points at 0.99 and 1.01 times the half-axes from a feature point,
@@ -283,7 +359,13 @@ fn scratches_are_ellipses_with_half_axes_tau_l_and_tau_w() {
         for i in -3..3 {
             let q = layer.noise().feature_point(i, j);
             let f = layer.to_texture(q);
-            let alone = (-2..=2).all(|dj| (-2..=2).all(|di| (di, dj) == (0, 0) || (layer.noise().feature_point(i + di, j + dj) - q).length() > 2.2 * layer.threshold()));
+            let alone = (-2..=2).all(|dj| {
+                (-2..=2).all(|di| {
+                    (di, dj) == (0, 0)
+                        || (layer.noise().feature_point(i + di, j + dj) - q).length()
+                            > 2.2 * layer.threshold()
+                })
+            });
             if !alone {
                 continue;
             }
@@ -320,26 +402,65 @@ fn bad_parameters_are_clear_errors() {
     let ok = LayerParams::setting(1).unwrap();
     assert_eq!(ok, params(0.3, 0.001, 0.1, 8));
     assert_eq!(LayerParams::setting(2).unwrap(), params(0.6, 0.01, 0.1, 8));
-    assert!(matches!(LayerParams::setting(3), Err(LayerError::Setting(3))));
+    assert!(matches!(
+        LayerParams::setting(3),
+        Err(LayerError::Setting(3))
+    ));
     for (p, want) in [
         (LayerParams { length: 0.0, ..ok }, "length"),
         (LayerParams { length: -1.0, ..ok }, "length"),
-        (LayerParams { width: f64::NAN, ..ok }, "width"),
+        (
+            LayerParams {
+                width: f64::NAN,
+                ..ok
+            },
+            "width",
+        ),
         (LayerParams { width: 0.0, ..ok }, "width"),
-        (LayerParams { threshold: 0.0, ..ok }, "threshold"),
-        (LayerParams { threshold: 1.5, ..ok }, "threshold"),
+        (
+            LayerParams {
+                threshold: 0.0,
+                ..ok
+            },
+            "threshold",
+        ),
+        (
+            LayerParams {
+                threshold: 1.5,
+                ..ok
+            },
+            "threshold",
+        ),
         (LayerParams { layers: 0, ..ok }, "layers"),
         (LayerParams { layers: 65, ..ok }, "layers"),
     ] {
         let e = LayerSet::new(p, 1).unwrap_err().to_string();
         assert!(e.contains(want), "{e}");
     }
-    let set = LayerSet::new(LayerParams { threshold: 1.0, ..ok }, 1).unwrap();
+    let set = LayerSet::new(
+        LayerParams {
+            threshold: 1.0,
+            ..ok
+        },
+        1,
+    )
+    .unwrap();
     assert!(set.rasterize(0, 0).is_err());
-    assert!(set.rasterize(0, raster::MAX_RESOLUTION + 1).unwrap_err().to_string().contains("GiB"));
-    assert!(matches!(set.rasterize(8, 16), Err(LayerError::LayerIndex { index: 8, count: 8 })));
+    assert!(set
+        .rasterize(0, raster::MAX_RESOLUTION + 1)
+        .unwrap_err()
+        .to_string()
+        .contains("GiB"));
+    assert!(matches!(
+        set.rasterize(8, 16),
+        Err(LayerError::LayerIndex { index: 8, count: 8 })
+    ));
     // Serde: the four keys, `layers` optional, unknown keys rejected.
-    let p: LayerParams = serde_json::from_str(r#"{"length":0.3,"width":0.001,"threshold":0.1}"#).unwrap();
+    let p: LayerParams =
+        serde_json::from_str(r#"{"length":0.3,"width":0.001,"threshold":0.1}"#).unwrap();
     assert_eq!(p, ok);
-    assert!(serde_json::from_str::<LayerParams>(r#"{"length":0.3,"width":0.001,"treshold":0.1}"#).is_err());
+    assert!(
+        serde_json::from_str::<LayerParams>(r#"{"length":0.3,"width":0.001,"treshold":0.1}"#)
+            .is_err()
+    );
 }

@@ -34,6 +34,13 @@ pub(crate) fn mix64(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// `floor(x)` as an integer without a libm call (baseline x86-64 has no `roundsd`); `|x| < 2^62`.
+#[inline(always)]
+pub(crate) fn floor_i64(x: f64) -> i64 {
+    let t = x as i64;
+    t - ((t as f64) > x) as i64
+}
+
 /// Tileable Worley noise with period `P` (a power of two) in both axes.
 #[derive(Clone, Copy, Debug)]
 pub struct Worley {
@@ -52,7 +59,11 @@ impl Worley {
         if !period.is_power_of_two() || period > MAX_PERIOD {
             return Err(LayerError::Period(period));
         }
-        Ok(Worley { seed, key: mix64(seed ^ 0x5eed_0f_c0ffee), mask: period as i64 - 1 })
+        Ok(Worley {
+            seed,
+            key: mix64(seed ^ 0x005e_ed0f_c0ff_ee00),
+            mask: period as i64 - 1,
+        })
     }
 
     pub fn seed(&self) -> u64 {
@@ -89,9 +100,8 @@ impl Worley {
     /// touches (one to four for `r <= 1/2`).
     #[inline]
     pub fn any_within(&self, q: DVec2, r: f64) -> bool {
-        let (cx, cy) = (q.x.floor(), q.y.floor());
-        let (i, j) = (cx as i64, cy as i64);
-        let f = q - DVec2::new(cx, cy);
+        let (i, j) = (floor_i64(q.x), floor_i64(q.y));
+        let f = q - DVec2::new(i as f64, j as f64);
         let r2 = r * r;
         let hit = |di: i64, dj: i64| {
             let p = DVec2::new(di as f64, dj as f64) + self.offset(i + di, j + dj);
@@ -102,12 +112,26 @@ impl Worley {
             if hit(0, 0) {
                 return true;
             }
-            let dx = if f.x < r { -1 } else if f.x > 1.0 - r { 1 } else { 0 };
-            let dy = if f.y < r { -1 } else if f.y > 1.0 - r { 1 } else { 0 };
-            (dx != 0 && hit(dx, 0)) || (dy != 0 && hit(0, dy)) || (dx != 0 && dy != 0 && hit(dx, dy))
+            let dx = if f.x < r {
+                -1
+            } else if f.x > 1.0 - r {
+                1
+            } else {
+                0
+            };
+            let dy = if f.y < r {
+                -1
+            } else if f.y > 1.0 - r {
+                1
+            } else {
+                0
+            };
+            (dx != 0 && hit(dx, 0))
+                || (dy != 0 && hit(0, dy))
+                || (dx != 0 && dy != 0 && hit(dx, dy))
         } else {
-            let (i0, i1) = ((f.x - r).floor() as i64, (f.x + r).floor() as i64);
-            let (j0, j1) = ((f.y - r).floor() as i64, (f.y + r).floor() as i64);
+            let (i0, i1) = (floor_i64(f.x - r), floor_i64(f.x + r));
+            let (j0, j1) = (floor_i64(f.y - r), floor_i64(f.y + r));
             (j0..=j1).any(|dj| (i0..=i1).any(|di| hit(di, dj)))
         }
     }
@@ -116,8 +140,8 @@ impl Worley {
 /// Exact F1/F2 search around `q` for any placement `offset(i, j)` in `[0, 1)^2` per cell.
 /// Generic so that a test can feed it another implementation's feature points.
 pub fn worley_search(q: DVec2, offset: impl Fn(i64, i64) -> DVec2) -> WorleySample {
-    let (cx, cy) = (q.x.floor(), q.y.floor());
-    let (i, j) = (cx as i64, cy as i64);
+    let (i, j) = (floor_i64(q.x), floor_i64(q.y));
+    let (cx, cy) = (i as f64, j as f64);
     let f = q - DVec2::new(cx, cy);
     // (F1^2, F2^2, nearest cell offset and point relative to the query's cell)
     let mut st = (f64::INFINITY, f64::INFINITY, (0i64, 0i64, DVec2::ZERO));
@@ -194,10 +218,16 @@ mod tests {
         let w = Worley::new(7, 1 << 16).unwrap();
         let mut rng = rand_pcg::Pcg64::seed_from_u64(1);
         for _ in 0..20_000 {
-            let q = DVec2::new(rng.random_range(-300.0..300.0), rng.random_range(-300.0..300.0));
+            let q = DVec2::new(
+                rng.random_range(-300.0..300.0),
+                rng.random_range(-300.0..300.0),
+            );
             let s = w.eval(q);
             let (f1, f2, cell) = brute(&w, q);
-            assert!((s.f1 - f1).abs() < 1e-12 && (s.f2 - f2).abs() < 1e-12, "{q:?}");
+            assert!(
+                (s.f1 - f1).abs() < 1e-12 && (s.f2 - f2).abs() < 1e-12,
+                "{q:?}"
+            );
             assert_eq!(s.cell, cell);
             assert!((s.nearest - w.feature_point(cell[0], cell[1])).length() < 1e-12);
             for r in [0.05, 0.1, 0.3, 0.5, 0.7, 1.0] {
@@ -208,14 +238,21 @@ mod tests {
 
     #[test]
     fn same_seed_same_noise_and_seeds_differ() {
-        let (a, b, c) = (Worley::new(3, 256).unwrap(), Worley::new(3, 256).unwrap(), Worley::new(4, 256).unwrap());
+        let (a, b, c) = (
+            Worley::new(3, 256).unwrap(),
+            Worley::new(3, 256).unwrap(),
+            Worley::new(4, 256).unwrap(),
+        );
         let mut differ = 0;
         for k in 0..1000 {
             let q = DVec2::new(k as f64 * 0.37, k as f64 * -0.91);
             assert_eq!(a.eval(q), b.eval(q));
             differ += (a.eval(q).f1 != c.eval(q).f1) as usize;
         }
-        assert!(differ > 990, "another seed gives another noise ({differ}/1000 differ)");
+        assert!(
+            differ > 990,
+            "another seed gives another noise ({differ}/1000 differ)"
+        );
     }
 
     #[test]
@@ -284,7 +321,11 @@ mod tests {
             n.set_cellular_jitter(Some(1.0));
             n
         };
-        let (d1, d2, cv) = (make(CellularReturnType::Distance), make(CellularReturnType::Distance2), make(CellularReturnType::CellValue));
+        let (d1, d2, cv) = (
+            make(CellularReturnType::Distance),
+            make(CellularReturnType::Distance2),
+            make(CellularReturnType::CellValue),
+        );
         // fastnoise's cell (xi, yi) is centred on the integer point; ours spans [i, i+1): our
         // query q corresponds to fastnoise's q - 1/2, and our offset is 1/2 + its jitter.
         const N: i64 = 24;
@@ -293,20 +334,28 @@ mod tests {
         let mut values = std::collections::HashMap::new();
         for j in -2..N + 2 {
             for i in -2..N + 2 {
-                let f = |n: &FastNoiseLite, x: f64, y: f64| n.get_noise_2d(x as f32, y as f32) as f64 + 1.0;
+                let f = |n: &FastNoiseLite, x: f64, y: f64| {
+                    n.get_noise_2d(x as f32, y as f32) as f64 + 1.0
+                };
                 let r2 = f(&d1, i as f64, j as f64).powi(2);
                 let a = (r2 - f(&d1, i as f64 + h, j as f64).powi(2) + h * h) / (2.0 * h);
                 let b = (r2 - f(&d1, i as f64, j as f64 + h).powi(2) + h * h) / (2.0 * h);
                 assert!(a.abs() < 0.44 && b.abs() < 0.44);
                 offs.insert((i, j), DVec2::new(0.5 + a, 0.5 + b));
-                values.insert((i, j), cv.get_noise_2d((i as f64 + a) as f32, (j as f64 + b) as f32));
+                values.insert(
+                    (i, j),
+                    cv.get_noise_2d((i as f64 + a) as f32, (j as f64 + b) as f32),
+                );
             }
         }
         let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
         let (mut worst1, mut worst2, mut same_cell) = (0.0f64, 0.0f64, 0);
         let n = 5000;
         for _ in 0..n {
-            let q = DVec2::new(rng.random_range(1.0..N as f64 - 1.0), rng.random_range(1.0..N as f64 - 1.0));
+            let q = DVec2::new(
+                rng.random_range(1.0..N as f64 - 1.0),
+                rng.random_range(1.0..N as f64 - 1.0),
+            );
             let s = worley_search(q, |i, j| offs[&(i, j)]);
             let x = (q.x - 0.5) as f32;
             let y = (q.y - 0.5) as f32;
@@ -314,8 +363,14 @@ mod tests {
             worst2 = worst2.max((s.f2 - (d2.get_noise_2d(x, y) as f64 + 1.0)).abs());
             same_cell += (values[&(s.cell[0], s.cell[1])] == cv.get_noise_2d(x, y)) as usize;
         }
-        assert!(worst1 < 2e-4 && worst2 < 2e-4, "F1 off by {worst1}, F2 off by {worst2}");
+        assert!(
+            worst1 < 2e-4 && worst2 < 2e-4,
+            "F1 off by {worst1}, F2 off by {worst2}"
+        );
         // Ties within f32 rounding may pick the other point; they are vanishingly rare.
-        assert!(same_cell >= n - 2, "nearest cell agrees at {same_cell}/{n} queries");
+        assert!(
+            same_cell >= n - 2,
+            "nearest cell agrees at {same_cell}/{n} queries"
+        );
     }
 }
