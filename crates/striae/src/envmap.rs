@@ -25,6 +25,9 @@
 //! cell and a uniform point in it, then maps to the sphere; the solid-angle density is
 //! `p(u, v) / (2 pi^2 sin theta)`.
 
+// `!(x > 0.0)` is used on purpose: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::math::{luminance, Rgb, Vec2, Vec3, PI};
 use crate::sampling::Distribution2D;
 use crate::texture::{RgbImage, TextureError};

@@ -18,6 +18,10 @@
 //! base = "glass"                         # `crate::scratched` and docs/scratched.md
 //! ```
 //!
+//! `roughness` is the GGX `alpha` (Mitsuba's `alpha`, not squared). Mitsuba's dielectric
+//! defaults differ from ours (`int_ior` 1.5046, `ext_ior` 1.000277): set both explicitly in
+//! both renderers when comparing.
+//!
 //! Conductor presets and their sources are listed in [`CONDUCTOR_PRESETS`]. `preset = "none"`
 //! is Mitsuba 3's perfect mirror (`eta = 0, k = 1`: `F = 1` at every angle) for furnace tests.
 //!

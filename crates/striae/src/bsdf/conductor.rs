@@ -5,9 +5,9 @@
 //! Presets live in `material` (Mitsuba 3's `conductor` list); `eta = 0, k = 1` is Mitsuba's
 //! `none`, a perfect mirror with `F = 1` at every angle.
 
+use super::fresnel_f32;
 use super::microfacet::Ggx;
 use super::BsdfSample;
-use crate::fresnel;
 use crate::math::{reflect, reflect_z, Rgb, Vec2, Vec3};
 
 /// The complex index of refraction of a conductor, per RGB channel.
@@ -21,12 +21,7 @@ impl ConductorIor {
     /// Unpolarised reflectance per channel at `cos_theta` in `[0, 1]`.
     #[inline]
     pub fn fresnel(&self, cos_theta: f32) -> Rgb {
-        let c = cos_theta as f64;
-        Rgb::new(
-            fresnel::conductor(c, self.eta.x as f64, self.k.x as f64) as f32,
-            fresnel::conductor(c, self.eta.y as f64, self.k.y as f64) as f32,
-            fresnel::conductor(c, self.eta.z as f64, self.k.z as f64) as f32,
-        )
+        fresnel_f32::conductor(cos_theta, self.eta, self.k)
     }
 }
 
@@ -99,6 +94,27 @@ impl RoughConductor {
             return 0.0;
         }
         self.distribution.pdf_visible(wo, m) / (4.0 * wo_m)
+    }
+
+    /// `(eval, pdf)` sharing the half vector, `D` and `G1(wo)`.
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return (Rgb::ZERO, 0.0);
+        }
+        let m = (wo + wi).normalize();
+        let wo_m = wo.dot(m);
+        if wo_m <= 0.0 {
+            return (Rgb::ZERO, 0.0);
+        }
+        let d = self.distribution.d(m);
+        let g1_o = self.distribution.g1(wo, m);
+        let g = g1_o * self.distribution.g1(wi, m);
+        let pdf = g1_o * wo_m * d / wo.z / (4.0 * wo_m);
+        if d * g <= 0.0 {
+            return (Rgb::ZERO, pdf);
+        }
+        (self.ior.fresnel(wo_m) * (d * g / (4.0 * wo.z * wi.z)), pdf)
     }
 
     /// Reflect `wo` about a visible normal; weight `F(wo.m) G1(wi, m)`.

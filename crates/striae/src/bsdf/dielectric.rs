@@ -6,9 +6,9 @@
 //! normal (`+z`) points to. Refraction scales radiance by `1 / eta_t^2` with `eta_t` the
 //! relative index `n(wi side) / n(wo side)` (radiance transport, see the module `bsdf`).
 
+use super::fresnel_f32;
 use super::microfacet::Ggx;
 use super::BsdfSample;
-use crate::fresnel;
 use crate::math::{reflect, reflect_z, Rgb, Vec2, Vec3};
 
 /// Refract `wo` through the (micro)normal `m` given the signed cosine of the transmitted
@@ -35,8 +35,7 @@ impl Dielectric {
     /// lobes then carry weight 1 (times `1 / eta_t^2` for refraction, radiance transport).
     #[inline]
     pub fn sample(&self, wo: Vec3, u_lobe: f32) -> Option<BsdfSample> {
-        let fr = fresnel::dielectric(wo.z as f64, self.eta as f64);
-        let r = fr.r as f32;
+        let (r, cos_t, eta_it) = fresnel_f32::dielectric(wo.z, self.eta);
         if u_lobe < r || r >= 1.0 {
             return Some(BsdfSample {
                 wi: reflect_z(wo),
@@ -46,9 +45,8 @@ impl Dielectric {
                 eta: 1.0,
             });
         }
-        let eta_it = fr.eta_it as f32;
         let eta_ti = 1.0 / eta_it;
-        let wi = Vec3::new(-eta_ti * wo.x, -eta_ti * wo.y, fr.cos_theta_t as f32);
+        let wi = Vec3::new(-eta_ti * wo.x, -eta_ti * wo.y, cos_t);
         Some(BsdfSample {
             wi,
             weight: Rgb::splat(eta_ti * eta_ti),
@@ -113,7 +111,7 @@ impl RoughDielectric {
             return Rgb::ZERO;
         };
         let (wo_m, wi_m) = (wo.dot(m), wi.dot(m));
-        let f = fresnel::dielectric(wo_m as f64, self.eta as f64).r as f32;
+        let f = fresnel_f32::dielectric(wo_m, self.eta).0;
         let dg = self.distribution.d(m) * self.distribution.g(wo, wi, m);
         let v = if reflect {
             dg * f / (4.0 * (wo.z * wi.z).abs())
@@ -132,7 +130,7 @@ impl RoughDielectric {
             return 0.0;
         };
         let (wo_m, wi_m) = (wo.dot(m), wi.dot(m));
-        let f = fresnel::dielectric(wo_m as f64, self.eta as f64).r as f32;
+        let f = fresnel_f32::dielectric(wo_m, self.eta).0;
         let v = wo * wo.z.signum();
         let pdf_m = self.distribution.pdf_visible(v, m);
         if reflect {
@@ -140,6 +138,32 @@ impl RoughDielectric {
         } else {
             let denom = (wi_m + wo_m / eta_p).powi(2);
             (1.0 - f) * pdf_m * wi_m.abs() / denom
+        }
+    }
+
+    /// `(eval, pdf)` sharing the half vector, Fresnel term and `D` (what light sampling with
+    /// MIS needs).
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        let Some((m, eta_p, reflect)) = half_vector(self.eta, wo, wi) else {
+            return (Rgb::ZERO, 0.0);
+        };
+        let (wo_m, wi_m) = (wo.dot(m), wi.dot(m));
+        let f = fresnel_f32::dielectric(wo_m, self.eta).0;
+        let d = self.distribution.d(m);
+        let g1_o = self.distribution.g1(wo, m);
+        let g = g1_o * self.distribution.g1(wi, m);
+        // pdf_visible(v, m) with v = wo flipped to the upper side: G1(wo) |wo.m| D / |wo.z|.
+        let pdf_m = g1_o * wo_m.abs() * d / wo.z.abs();
+        if reflect {
+            let v = d * g * f / (4.0 * (wo.z * wi.z).abs());
+            (Rgb::splat(v), f * pdf_m / (4.0 * wo_m.abs()))
+        } else {
+            let denom = (wi_m + wo_m / eta_p).powi(2);
+            let v = d * g * (1.0 - f) * (wi_m * wo_m).abs()
+                / ((wi.z * wo.z).abs() * denom)
+                / (eta_p * eta_p);
+            (Rgb::splat(v), (1.0 - f) * pdf_m * wi_m.abs() / denom)
         }
     }
 
@@ -157,8 +181,7 @@ impl RoughDielectric {
             return None;
         }
         let wo_m = wo.dot(m);
-        let fr = fresnel::dielectric(wo_m as f64, self.eta as f64);
-        let f = fr.r as f32;
+        let (f, cos_t, eta_it) = fresnel_f32::dielectric(wo_m, self.eta);
         if u_lobe < f || f >= 1.0 {
             let wi = reflect(wo, m);
             if wi.z * wo.z <= 0.0 {
@@ -177,8 +200,8 @@ impl RoughDielectric {
                 eta: 1.0,
             })
         } else {
-            let eta_p = fr.eta_it as f32;
-            let wi = refract(wo, m, fr.cos_theta_t as f32, 1.0 / eta_p).normalize();
+            let eta_p = eta_it;
+            let wi = refract(wo, m, cos_t, 1.0 / eta_p).normalize();
             if wi.z * wo.z >= 0.0 || !wi.is_finite() {
                 return None;
             }

@@ -5,11 +5,11 @@
 //! Five models, each in its own file, gathered in the closed enum [`Bsdf`] so the integrator
 //! dispatches without virtual calls:
 //!
-//! * [`Diffuse`]: Lambertian.
-//! * [`Dielectric`]: a smooth interface with the exact Fresnel equations (Mitsuba 3's
+//! * [`Diffuse`], Lambertian.
+//! * [`Dielectric`], a smooth interface with the exact Fresnel equations (Mitsuba 3's
 //!   `dielectric`, pbrt-v4's `DielectricBxDF` with zero roughness).
-//! * [`Conductor`]: a smooth mirror with a complex index of refraction per RGB channel.
-//! * [`RoughConductor`], [`RoughDielectric`]: GGX microfacet models after Walter et al. 2007,
+//! * [`Conductor`], a smooth mirror with a complex index of refraction per RGB channel.
+//! * [`RoughConductor`] and [`RoughDielectric`], GGX microfacet models after Walter et al. 2007,
 //!   sampled by visible normals (Heitz 2018), with the separable Smith shadowing
 //!   `G = G1(wo) G1(wi)` that Mitsuba 3 uses (so that renders agree with it).
 //!
@@ -30,9 +30,13 @@
 //! Issue 5 adds the [`Scratched`](ScratchedBsdf) variant (`scratched.rs`): it borrows the
 //! scene's scratch table, so [`Bsdf`] carries the lifetime of the material it came from.
 
+// `!(x > 0.0)` is used on purpose: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 mod conductor;
 mod dielectric;
 mod diffuse;
+mod fresnel_f32;
 pub mod microfacet;
 pub mod scratched;
 
@@ -93,6 +97,19 @@ impl Bsdf<'_> {
             Bsdf::RoughDielectric(b) => b.pdf(wo, wi),
             Bsdf::RoughConductor(b) => b.pdf(wo, wi),
             Bsdf::Scratched(b) => b.pdf(wo, wi),
+        }
+    }
+
+    /// `(eval(wo, wi), pdf(wo, wi))` in one call, sharing the work the two have in common
+    /// (the microfacet models compute the half vector, `D` and Fresnel once). Use it for light
+    /// sampling with MIS.
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        match self {
+            Bsdf::Diffuse(b) => (b.eval(wo, wi), b.pdf(wo, wi)),
+            Bsdf::Dielectric(_) | Bsdf::Conductor(_) => (Rgb::ZERO, 0.0),
+            Bsdf::RoughDielectric(b) => b.eval_pdf(wo, wi),
+            Bsdf::RoughConductor(b) => b.eval_pdf(wo, wi),
         }
     }
 

@@ -405,3 +405,37 @@ fn reciprocity() {
     }
     assert!(checked.iter().all(|&c| c > 100), "{checked:?}");
 }
+
+/// `eval_pdf` agrees with `eval` and `pdf` for every BSDF, both sides, random directions.
+#[test]
+fn eval_pdf_matches_eval_and_pdf() {
+    let mut rng = Pcg64::seed_from_u64(78);
+    let (eta_au, k_au) = gold();
+    let bsdfs = [
+        Bsdf::Diffuse(Diffuse::new(Rgb::new(0.3, 0.6, 0.9))),
+        Bsdf::Dielectric(Dielectric::new(1.5)),
+        Bsdf::Conductor(Conductor::new(eta_au, k_au)),
+        Bsdf::RoughConductor(RoughConductor::new(eta_au, k_au, 0.3)),
+        Bsdf::RoughDielectric(RoughDielectric::new(1.5, 0.3)),
+        Bsdf::RoughDielectric(RoughDielectric::new(1.0 / 1.33, 0.05)),
+    ];
+    let mut nonzero = 0;
+    for _ in 0..5000 {
+        let a = crate::sampling::square_to_uniform_sphere(Vec2::new(rng.random(), rng.random()));
+        let b = crate::sampling::square_to_uniform_sphere(Vec2::new(rng.random(), rng.random()));
+        for bsdf in &bsdfs {
+            let (f, p) = bsdf.eval_pdf(a, b);
+            let (f2, p2) = (bsdf.eval(a, b), bsdf.pdf(a, b));
+            assert!(
+                (f - f2).abs().max_element() <= 1e-4 * f2.max_element().max(1e-3),
+                "{bsdf:?}: {f:?} vs {f2:?}"
+            );
+            assert!(
+                (p - p2).abs() <= 1e-4 * p2.max(1e-3),
+                "{bsdf:?}: {p} vs {p2}"
+            );
+            nonzero += (p > 0.0) as usize;
+        }
+    }
+    assert!(nonzero > 5000, "{nonzero}");
+}
