@@ -79,7 +79,12 @@ impl WatertightRay {
         p2: Vec3,
         t_max: f32,
     ) -> Option<(f32, f32, f32)> {
-        let (a, b, c) = (p0 - self.o, p1 - self.o, p2 - self.o);
+        // Arrays indexed by the permutation (a `Vec3` index is a `match`).
+        let (a, b, c) = (
+            (p0 - self.o).to_array(),
+            (p1 - self.o).to_array(),
+            (p2 - self.o).to_array(),
+        );
         let (kx, ky, kz) = (self.kx, self.ky, self.kz);
         let ax = a[kx] + self.sx * a[kz];
         let ay = a[ky] + self.sy * a[kz];

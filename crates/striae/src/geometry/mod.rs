@@ -9,6 +9,9 @@
 //! * [`bvh`]: [`Geometry`], the CWBVH with the watertight ray-triangle test.
 //! * [`uv_footprint`]: texture-space footprint of a pixel from ray differentials (pbrt-v4).
 
+// `!(x > y)` is used on purpose: it is also true for NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod bvh;
 pub mod mesh;
 pub mod obj;

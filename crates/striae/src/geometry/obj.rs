@@ -1,7 +1,9 @@
 //! Wavefront OBJ meshes, loaded with `tobj` (triangulated, single index) into one
 //! [`TriangleMesh`] per file: all models of the file are merged. Normals and uvs are kept
-//! when every model has them.
+//! when every model has them. [`TriangleMesh::write_obj`] exports a mesh (e.g. the built-in
+//! teapot, so Mitsuba can render the identical geometry).
 
+use std::io::Write;
 use std::path::Path;
 
 use super::{GeometryError, TriangleMesh};
@@ -99,6 +101,52 @@ impl TriangleMesh {
         .map_err(|e| GeometryError::ObjInvalid {
             path: path.to_path_buf(),
             reason: e.to_string(),
+        })
+    }
+
+    /// Writes the mesh as OBJ (positions, uvs and normals when present; counter-clockwise faces,
+    /// the same winding as here), atomically (`io::write_atomically`). Floats are written in
+    /// their shortest exact form, so loading the file back gives identical positions.
+    /// Tangents are not part of OBJ and are not written.
+    pub fn write_obj(&self, path: impl AsRef<Path>) -> std::io::Result<()> {
+        let path = path.as_ref();
+        crate::io::write_atomically(path, |tmp: &Path| -> std::io::Result<()> {
+            let mut f = std::io::BufWriter::new(std::fs::File::create(tmp)?);
+            writeln!(
+                f,
+                "# striae {} mesh: {} vertices, {} triangles",
+                crate::VERSION,
+                self.positions().len(),
+                self.triangle_count()
+            )?;
+            for p in self.positions() {
+                writeln!(f, "v {} {} {}", p.x, p.y, p.z)?;
+            }
+            if let Some(uvs) = self.uvs() {
+                for t in uvs {
+                    writeln!(f, "vt {} {}", t.x, t.y)?;
+                }
+            }
+            if let Some(ns) = self.normals() {
+                for n in ns {
+                    writeln!(f, "vn {} {} {}", n.x, n.y, n.z)?;
+                }
+            }
+            let (has_uv, has_n) = (self.uvs().is_some(), self.normals().is_some());
+            for tri in self.indices() {
+                write!(f, "f")?;
+                for &i in tri {
+                    let k = i + 1;
+                    match (has_uv, has_n) {
+                        (true, true) => write!(f, " {k}/{k}/{k}")?,
+                        (true, false) => write!(f, " {k}/{k}")?,
+                        (false, true) => write!(f, " {k}//{k}")?,
+                        (false, false) => write!(f, " {k}")?,
+                    }
+                }
+                writeln!(f)?;
+            }
+            f.into_inner().map_err(|e| e.into_error())?.sync_all()
         })
     }
 }

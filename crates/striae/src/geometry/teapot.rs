@@ -402,17 +402,14 @@ mod tests {
         }
         // Knob top (lid patches 21-24 at t = 0) faces up, the bottom centre faces down.
         let ps = patches();
-        for pi in 20..24 {
+        for (pi, patch) in ps.iter().enumerate().take(24).skip(20) {
             for s in [0.0, 0.3, 1.0] {
-                assert!(patch_normal(&ps[pi], s, 0.0).z > 0.999, "lid patch {pi}");
+                assert!(patch_normal(patch, s, 0.0).z > 0.999, "lid patch {pi}");
             }
         }
-        for pi in 28..32 {
+        for (pi, patch) in ps.iter().enumerate().skip(28) {
             for s in [0.0, 0.3, 1.0] {
-                assert!(
-                    patch_normal(&ps[pi], s, 0.0).z < -0.999,
-                    "bottom patch {pi}"
-                );
+                assert!(patch_normal(patch, s, 0.0).z < -0.999, "bottom patch {pi}");
             }
         }
     }
@@ -493,5 +490,65 @@ mod tests {
             }
         }
         assert!(hits > 1000, "{hits}");
+    }
+}
+
+/// Renders the teapot's shading normals, uv checker and tangent directions to PNGs in the
+/// temporary directory, for a visual check: `cargo test -p striae --lib teapot_preview -- --ignored`.
+#[cfg(test)]
+#[test]
+#[ignore]
+fn teapot_preview() {
+    use crate::geometry::{Geometry, Shape, ShapeGeometry};
+    use crate::math::{Ray, Vec3};
+    let g = Geometry::new(vec![Shape {
+        geometry: ShapeGeometry::Mesh(TriangleMesh::teapot(8)),
+        material: 0,
+        area_light: None,
+    }]);
+    let (w, h) = (480u32, 360u32);
+    let eye = Vec3::new(3.0, -6.5, 4.0);
+    let target = Vec3::new(0.2, 0.0, 1.3);
+    let fwd = (target - eye).normalize();
+    let right = fwd.cross(Vec3::Z).normalize();
+    let up = right.cross(fwd);
+    let tan_half = 22f32.to_radians().tan();
+    let mut images = [
+        image::RgbImage::new(w, h),
+        image::RgbImage::new(w, h),
+        image::RgbImage::new(w, h),
+    ];
+    for j in 0..h {
+        for i in 0..w {
+            let x = (2.0 * (i as f32 + 0.5) / w as f32 - 1.0) * tan_half * w as f32 / h as f32;
+            let y = (1.0 - 2.0 * (j as f32 + 0.5) / h as f32) * tan_half;
+            let ray = Ray::new(eye, (fwd + x * right + y * up).normalize());
+            let px = match g.intersect(&ray) {
+                None => [[30u8; 3]; 3],
+                Some(hit) => {
+                    let to8 = |v: Vec3| {
+                        [0, 1, 2].map(|k| ((v[k] * 0.5 + 0.5).clamp(0.0, 1.0) * 255.0) as u8)
+                    };
+                    let front = if hit.ng.dot(ray.d) < 0.0 { 1.0 } else { 0.3 };
+                    let check =
+                        ((hit.uv.x * 16.0).floor() as i32 + (hit.uv.y * 16.0).floor() as i32) & 1;
+                    let c = if check == 0 {
+                        Vec3::new(hit.uv.x, hit.uv.y, 0.2)
+                    } else {
+                        Vec3::new(hit.uv.x, hit.uv.y, 0.2) * 0.4
+                    };
+                    let uv = [0, 1, 2].map(|k| (c[k] * front * 255.0) as u8);
+                    [to8(hit.ns * front), uv, to8(hit.dpdu.normalize())]
+                }
+            };
+            for k in 0..3 {
+                images[k].put_pixel(i, j, image::Rgb(px[k]));
+            }
+        }
+    }
+    for (k, name) in ["normals", "uv", "dpdu"].iter().enumerate() {
+        let path = std::env::temp_dir().join(format!("striae_teapot_{name}.png"));
+        images[k].save(&path).unwrap();
+        eprintln!("wrote {}", path.display());
     }
 }
