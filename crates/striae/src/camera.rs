@@ -8,6 +8,9 @@
 //!   the right of the view direction (`forward x up`), image row 0 is the top.
 //! * Film positions are continuous pixel coordinates: pixel `(i, j)` covers `[i, i+1) x [j, j+1)`.
 
+// `!(x > 0.0)` is meant: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::math::{Frame, Ray, RayDifferential, Vec2, Vec3};
 use crate::sampling::square_to_concentric_disk;
 
@@ -44,6 +47,7 @@ pub enum CameraError {
 impl PerspectiveCamera {
     /// A camera at `position` looking at `look_at`, `fov_y_deg` the vertical field of view,
     /// rendering a `width x height` image. `lens_radius = 0` is a pinhole.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         position: Vec3,
         look_at: Vec3,
@@ -78,7 +82,11 @@ impl PerspectiveCamera {
         let tan_half_x = tan_half_y * width as f32 / height as f32;
         Ok(PerspectiveCamera {
             position,
-            frame: Frame { s: right, t: true_up, n: forward },
+            frame: Frame {
+                s: right,
+                t: true_up,
+                n: forward,
+            },
             width,
             height,
             tan_half_y,
@@ -113,7 +121,10 @@ impl PerspectiveCamera {
             let p_lens = Vec3::new(lens.x, lens.y, 0.0);
             let p_focus = d * self.focus_distance;
             let dir = (p_focus - p_lens).normalize();
-            Ray::new(self.position + self.frame.to_world(p_lens), self.frame.to_world(dir))
+            Ray::new(
+                self.position + self.frame.to_world(p_lens),
+                self.frame.to_world(dir),
+            )
         } else {
             Ray::new(self.position, self.frame.to_world(d.normalize()))
         }
@@ -127,7 +138,15 @@ impl PerspectiveCamera {
         let ray = self.ray_through(film, lens);
         let rx = self.ray_through(film + Vec2::X, lens);
         let ry = self.ray_through(film + Vec2::Y, lens);
-        (ray, RayDifferential { rx_o: rx.o, rx_d: rx.d, ry_o: ry.o, ry_d: ry.d })
+        (
+            ray,
+            RayDifferential {
+                rx_o: rx.o,
+                rx_d: rx.d,
+                ry_o: ry.o,
+                ry_d: ry.d,
+            },
+        )
     }
 
     /// The film position a world direction from the camera centre projects to, if it is in
@@ -139,7 +158,10 @@ impl PerspectiveCamera {
         }
         let sx = l.x / l.z / self.tan_half_x;
         let sy = l.y / l.z / self.tan_half_y;
-        Some(Vec2::new((sx + 1.0) * 0.5 * self.width as f32, (1.0 - sy) * 0.5 * self.height as f32))
+        Some(Vec2::new(
+            (sx + 1.0) * 0.5 * self.width as f32,
+            (1.0 - sy) * 0.5 * self.height as f32,
+        ))
     }
 }
 
@@ -148,7 +170,17 @@ mod tests {
     use super::*;
 
     fn cam(lens: f32) -> PerspectiveCamera {
-        PerspectiveCamera::new(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y, 60.0, 200, 100, lens, 5.0).unwrap()
+        PerspectiveCamera::new(
+            Vec3::new(0.0, 0.0, 5.0),
+            Vec3::ZERO,
+            Vec3::Y,
+            60.0,
+            200,
+            100,
+            lens,
+            5.0,
+        )
+        .unwrap()
     }
 
     #[test]
@@ -182,8 +214,17 @@ mod tests {
 
     #[test]
     fn bad_cameras_are_rejected() {
-        assert_eq!(PerspectiveCamera::new(Vec3::ZERO, Vec3::ZERO, Vec3::Y, 40.0, 8, 8, 0.0, 1.0).unwrap_err(), CameraError::DegenerateView);
-        assert_eq!(PerspectiveCamera::new(Vec3::ZERO, Vec3::Y, Vec3::Y, 40.0, 8, 8, 0.0, 1.0).unwrap_err(), CameraError::DegenerateUp);
-        assert!(PerspectiveCamera::new(Vec3::ZERO, Vec3::X, Vec3::Y, 180.0, 8, 8, 0.0, 1.0).is_err());
+        assert_eq!(
+            PerspectiveCamera::new(Vec3::ZERO, Vec3::ZERO, Vec3::Y, 40.0, 8, 8, 0.0, 1.0)
+                .unwrap_err(),
+            CameraError::DegenerateView
+        );
+        assert_eq!(
+            PerspectiveCamera::new(Vec3::ZERO, Vec3::Y, Vec3::Y, 40.0, 8, 8, 0.0, 1.0).unwrap_err(),
+            CameraError::DegenerateUp
+        );
+        assert!(
+            PerspectiveCamera::new(Vec3::ZERO, Vec3::X, Vec3::Y, 180.0, 8, 8, 0.0, 1.0).is_err()
+        );
     }
 }

@@ -23,13 +23,19 @@ pub enum FilmError {
 
 impl From<std::io::Error> for FilmError {
     fn from(e: std::io::Error) -> Self {
-        FilmError::Write { path: PathBuf::new(), message: e.to_string() }
+        FilmError::Write {
+            path: PathBuf::new(),
+            message: e.to_string(),
+        }
     }
 }
 
 fn with_path(path: &Path, e: FilmError) -> FilmError {
     match e {
-        FilmError::Write { path: p, message } if p.as_os_str().is_empty() => FilmError::Write { path: path.to_path_buf(), message },
+        FilmError::Write { path: p, message } if p.as_os_str().is_empty() => FilmError::Write {
+            path: path.to_path_buf(),
+            message,
+        },
         other => other,
     }
 }
@@ -47,7 +53,11 @@ pub fn linear_to_srgb(x: f32) -> f32 {
 
 impl Image {
     pub fn new(width: u32, height: u32) -> Self {
-        Image { width, height, pixels: vec![Rgb::ZERO; (width * height) as usize] }
+        Image {
+            width,
+            height,
+            pixels: vec![Rgb::ZERO; (width * height) as usize],
+        }
     }
 
     pub fn get(&self, x: u32, y: u32) -> Rgb {
@@ -66,7 +76,10 @@ impl Image {
                 let p = self.pixels[y * self.width as usize + x];
                 (p.x, p.y, p.z)
             })
-            .map_err(|e| FilmError::Write { path: path.to_path_buf(), message: e.to_string() })
+            .map_err(|e| FilmError::Write {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })
         })
         .map_err(|e| with_path(path, e))
     }
@@ -88,10 +101,18 @@ impl Image {
     pub fn write_png(&self, path: &Path, exposure: f32) -> Result<(), FilmError> {
         let bytes = self.to_srgb8(exposure);
         crate::io::write_atomically(path, |tmp| {
-            let img = image::RgbImage::from_raw(self.width, self.height, bytes)
-                .ok_or_else(|| FilmError::Write { path: path.to_path_buf(), message: "image buffer size mismatch".into() })?;
+            let img =
+                image::RgbImage::from_raw(self.width, self.height, bytes).ok_or_else(|| {
+                    FilmError::Write {
+                        path: path.to_path_buf(),
+                        message: "image buffer size mismatch".into(),
+                    }
+                })?;
             img.save_with_format(tmp, image::ImageFormat::Png)
-                .map_err(|e| FilmError::Write { path: path.to_path_buf(), message: e.to_string() })
+                .map_err(|e| FilmError::Write {
+                    path: path.to_path_buf(),
+                    message: e.to_string(),
+                })
         })
         .map_err(|e| with_path(path, e))
     }
@@ -121,14 +142,19 @@ mod tests {
         let back = exr::prelude::read_first_rgba_layer_from_file(
             dir.join("a.exr"),
             |res, _| vec![Rgb::ZERO; res.width() * res.height()],
-            |px: &mut Vec<Rgb>, pos, (r, g, b, _a): (f32, f32, f32, f32)| px[pos.y() * 3 + pos.x()] = Rgb::new(r, g, b),
+            |px: &mut Vec<Rgb>, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                px[pos.y() * 3 + pos.x()] = Rgb::new(r, g, b)
+            },
         )
         .unwrap();
         assert_eq!(back.layer_data.channel_data.pixels, img.pixels);
         let png = image::open(dir.join("a.png")).unwrap().to_rgb8();
         assert_eq!(png.get_pixel(1, 1).0, [137, 255, 0]);
         // A write into a missing folder fails cleanly, naming the file.
-        let err = img.write_png(&dir.join("missing/b.png"), 0.0).unwrap_err().to_string();
+        let err = img
+            .write_png(&dir.join("missing/b.png"), 0.0)
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("b.png"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
     }

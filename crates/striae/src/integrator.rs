@@ -21,13 +21,16 @@
 //!   places, so the image does not depend on the thread count.
 //! * A sample whose radiance is not finite (NaN or infinite) is counted as black, and counted.
 
+// `!(x > 0.0)` is meant: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use crate::bsdf::Bsdf;
 use crate::film::Image;
+use crate::geometry::SurfaceHit;
+use crate::material::Material;
 use crate::math::{Frame, Ray, RayDifferential, Rgb, Vec2, Vec3};
 use crate::sampler::PixelSampler;
 use crate::sampling::power_heuristic;
-use crate::bsdf::Bsdf;
-use crate::geometry::SurfaceHit;
-use crate::material::Material;
 use crate::scene::{material_bsdf, Scene, NO_MATERIAL};
 use crate::shading::{footprint, spawn_differentials, ShadingContext};
 use rayon::prelude::*;
@@ -106,7 +109,13 @@ pub struct Shaded<'a> {
 /// The frame handed to the material is the final one: flipped to `wo`'s side for opaque
 /// BSDFs and guarded against `wo` falling behind the shading normal (the material is asked
 /// again in those rare cases, so its BSDF always lives in `ctx.frame`).
-pub fn shade<'a>(material: &'a Material, hit: &SurfaceHit, rd: &RayDifferential, wo_world: Vec3, u_layer: f32) -> Shaded<'a> {
+pub fn shade<'a>(
+    material: &'a Material,
+    hit: &SurfaceHit,
+    rd: &RayDifferential,
+    wo_world: Vec3,
+    u_layer: f32,
+) -> Shaded<'a> {
     let (dpdx, dpdy, duvdx, duvdy) = footprint(hit, rd);
     let mut ctx = ShadingContext {
         p: hit.p,
@@ -132,7 +141,12 @@ pub fn shade<'a>(material: &'a Material, hit: &SurfaceHit, rd: &RayDifferential,
         ctx.frame = Frame::from_normal_tangent(guarded, hit.dpdu);
         bsdf = material_bsdf(material, &ctx);
     }
-    Shaded { ctx, bsdf, dpdx, dpdy }
+    Shaded {
+        ctx,
+        bsdf,
+        dpdx,
+        dpdy,
+    }
 }
 
 /// The shading contexts along the camera ray through film position `film` (pinhole centre of
@@ -143,22 +157,46 @@ pub fn trace_contexts(scene: &Scene, film: Vec2, max_hits: usize) -> Vec<Shading
     let (mut ray, mut rd) = scene.camera.generate_ray(film, Vec2::splat(0.5));
     let mut out = Vec::new();
     while out.len() < max_hits {
-        let Some(hit) = scene.geometry.intersect(&ray) else { break };
+        let Some(hit) = scene.geometry.intersect(&ray) else {
+            break;
+        };
         let shape = &scene.geometry.shapes()[hit.shape as usize];
         if shape.material == NO_MATERIAL {
             break;
         }
         let wo_world = -ray.d;
-        let sh = shade(&scene.materials[shape.material as usize], &hit, &rd, wo_world, 0.5);
+        let sh = shade(
+            &scene.materials[shape.material as usize],
+            &hit,
+            &rd,
+            wo_world,
+            0.5,
+        );
         out.push(sh.ctx);
         let wo = sh.ctx.frame.to_local(wo_world);
-        let Some(bs) = sh.bsdf.sample(wo, 0.5, Vec2::splat(0.5)) else { break };
+        let Some(bs) = sh.bsdf.sample(wo, 0.5, Vec2::splat(0.5)) else {
+            break;
+        };
         if !bs.delta {
             break;
         }
         let wi = sh.ctx.frame.to_world(bs.wi);
-        let eta_path = if bs.wi.z * wo.z < 0.0 { 1.0 / bs.eta } else { 1.0 };
-        rd = spawn_differentials(hit.p, sh.dpdx, sh.dpdy, ray.d, &rd, sh.ctx.frame.n, wi, true, eta_path);
+        let eta_path = if bs.wi.z * wo.z < 0.0 {
+            1.0 / bs.eta
+        } else {
+            1.0
+        };
+        rd = spawn_differentials(
+            hit.p,
+            sh.dpdx,
+            sh.dpdy,
+            ray.d,
+            &rd,
+            sh.ctx.frame.n,
+            wi,
+            true,
+            eta_path,
+        );
         ray = Ray::new(offset_origin(hit.p, hit.ng, wi), wi);
     }
     out
@@ -235,12 +273,26 @@ fn render_pixel(scene: &Scene, x: u32, y: u32, counters: &mut Counters) -> Rgb {
 }
 
 /// Radiance arriving at the camera along `ray` (one path sample).
-fn radiance(scene: &Scene, mut ray: Ray, mut rd: RayDifferential, sampler: &mut PixelSampler, counters: &mut Counters) -> Rgb {
+fn radiance(
+    scene: &Scene,
+    mut ray: Ray,
+    mut rd: RayDifferential,
+    sampler: &mut PixelSampler,
+    counters: &mut Counters,
+) -> Rgb {
     let settings = &scene.settings;
     let shapes = scene.geometry.shapes();
     let n_lights = scene.lights.len();
-    let light_select_pdf = if n_lights > 0 { 1.0 / n_lights as f32 } else { 0.0 };
-    let max_depth = if settings.max_depth == 0 { u32::MAX } else { settings.max_depth };
+    let light_select_pdf = if n_lights > 0 {
+        1.0 / n_lights as f32
+    } else {
+        0.0
+    };
+    let max_depth = if settings.max_depth == 0 {
+        u32::MAX
+    } else {
+        settings.max_depth
+    };
 
     let mut l = Rgb::ZERO;
     let mut beta = Rgb::ONE;
@@ -256,7 +308,11 @@ fn radiance(scene: &Scene, mut ray: Ray, mut rd: RayDifferential, sampler: &mut 
         let Some(hit) = scene.geometry.intersect(&ray) else {
             if let Some(env) = scene.environment() {
                 let le = env.eval(ray.d);
-                let w = if specular { 1.0 } else { power_heuristic(prev_pdf, light_select_pdf * env.pdf(ray.d)) };
+                let w = if specular {
+                    1.0
+                } else {
+                    power_heuristic(prev_pdf, light_select_pdf * env.pdf(ray.d))
+                };
                 l += beta * le * w;
             }
             break;
@@ -272,7 +328,10 @@ fn radiance(scene: &Scene, mut ray: Ray, mut rd: RayDifferential, sampler: &mut 
                 let w = if specular {
                     1.0
                 } else {
-                    power_heuristic(prev_pdf, light_select_pdf * light.area_pdf(shapes, hit.t, ray.d, hit.ng))
+                    power_heuristic(
+                        prev_pdf,
+                        light_select_pdf * light.area_pdf(shapes, ray.o, hit.t, ray.d, hit.ng),
+                    )
                 };
                 l += beta * le * w;
             }
@@ -286,7 +345,12 @@ fn radiance(scene: &Scene, mut ray: Ray, mut rd: RayDifferential, sampler: &mut 
         // Shading frame and the material's BSDF.
         let u_layer = sampler.next_1d();
         let material = &scene.materials[shape.material as usize];
-        let Shaded { ctx, bsdf, dpdx, dpdy } = shade(material, &hit, &rd, wo_world, u_layer);
+        let Shaded {
+            ctx,
+            bsdf,
+            dpdx,
+            dpdy,
+        } = shade(material, &hit, &rd, wo_world, u_layer);
         let frame = ctx.frame;
         let wo = frame.to_local(wo_world);
 
@@ -301,12 +365,24 @@ fn radiance(scene: &Scene, mut ray: Ray, mut rd: RayDifferential, sampler: &mut 
                 let f = bsdf.eval(wo, wi) * wi.z.abs();
                 if f != Rgb::ZERO {
                     let origin = offset_origin(hit.p, hit.ng, ls.wi);
-                    let t_max = if ls.dist.is_finite() { (ls.dist - (origin - hit.p).length()) * (1.0 - 1e-3) } else { f32::INFINITY };
+                    let t_max = if ls.dist.is_finite() {
+                        (ls.dist - (origin - hit.p).length()) * (1.0 - 1e-3)
+                    } else {
+                        f32::INFINITY
+                    };
                     counters.rays += 1;
-                    let shadow = Ray { o: origin, d: ls.wi, t_max };
+                    let shadow = Ray {
+                        o: origin,
+                        d: ls.wi,
+                        t_max,
+                    };
                     if !scene.geometry.occluded(&shadow) {
                         let pdf_light = light_select_pdf * ls.pdf;
-                        let w = if ls.delta { 1.0 } else { power_heuristic(pdf_light, bsdf.pdf(wo, wi)) };
+                        let w = if ls.delta {
+                            1.0
+                        } else {
+                            power_heuristic(pdf_light, bsdf.pdf(wo, wi))
+                        };
                         l += beta * f * ls.radiance * (w / pdf_light);
                     }
                 }
@@ -317,7 +393,9 @@ fn radiance(scene: &Scene, mut ray: Ray, mut rd: RayDifferential, sampler: &mut 
         sampler.seek(depth, 4);
         let u_lobe = sampler.next_1d();
         let u_dir = sampler.next_2d();
-        let Some(bs) = bsdf.sample(wo, u_lobe, u_dir) else { break };
+        let Some(bs) = bsdf.sample(wo, u_lobe, u_dir) else {
+            break;
+        };
         if !(bs.pdf > 0.0) || bs.weight == Rgb::ZERO {
             break;
         }
@@ -328,7 +406,9 @@ fn radiance(scene: &Scene, mut ray: Ray, mut rd: RayDifferential, sampler: &mut 
         prev_pdf = bs.pdf;
         let transmitted = bs.wi.z * wo.z < 0.0;
         let eta_path = if transmitted { 1.0 / bs.eta } else { 1.0 };
-        rd = spawn_differentials(hit.p, dpdx, dpdy, ray.d, &rd, frame.n, wi_world, bs.delta, eta_path);
+        rd = spawn_differentials(
+            hit.p, dpdx, dpdy, ray.d, &rd, frame.n, wi_world, bs.delta, eta_path,
+        );
         ray = Ray::new(offset_origin(hit.p, hit.ng, wi_world), wi_world);
 
         // Russian roulette.

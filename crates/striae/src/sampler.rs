@@ -41,7 +41,11 @@ impl PixelSampler {
     /// The stream of sample `sample_index` (< [`MAX_SPP`]) of pixel `pixel_index` under `seed`.
     pub fn new(pixel_index: u64, sample_index: u32, seed: u64) -> Self {
         let seed = mix64(mix64(seed) ^ pixel_index) as u32;
-        PixelSampler { seed, sample_index: sample_index.min(MAX_SPP - 1), dimension: 0 }
+        PixelSampler {
+            seed,
+            sample_index: sample_index.min(MAX_SPP - 1),
+            dimension: 0,
+        }
     }
 
     /// Jump to the dimension block of bounce `depth` (0 = the first hit).
@@ -62,7 +66,11 @@ impl PixelSampler {
         let d = self.dimension;
         self.dimension += 1;
         let n = sobol_burley::NUM_DIMENSIONS;
-        let seed = if d < n { self.seed } else { mix64(self.seed as u64 ^ ((d / n) as u64) << 32) as u32 };
+        let seed = if d < n {
+            self.seed
+        } else {
+            mix64(self.seed as u64 ^ ((d / n) as u64) << 32) as u32
+        };
         sobol_burley::sample(self.sample_index, d % n, seed)
     }
 

@@ -16,6 +16,9 @@
 //!   (a footprint-preserving approximation; pbrt-v3 drops differentials there, pbrt-v4
 //!   re-derives them from the camera).
 
+// `!(x > 0.0)` is meant: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::geometry::SurfaceHit;
 use crate::math::{Frame, RayDifferential, Vec2, Vec3};
 
@@ -78,7 +81,13 @@ pub fn footprint(hit: &SurfaceHit, rd: &RayDifferential) -> (Vec3, Vec3, Vec2, V
         let (ra, rb) = (a.dot(dp), b.dot(dp));
         let du = (bb * ra - ab * rb) / det;
         let dv = (aa * rb - ab * ra) / det;
-        let clamp = |x: f32| if x.is_finite() { x.clamp(-1e8, 1e8) } else { 0.0 };
+        let clamp = |x: f32| {
+            if x.is_finite() {
+                x.clamp(-1e8, 1e8)
+            } else {
+                0.0
+            }
+        };
         Vec2::new(clamp(du), clamp(dv))
     };
     (dpdx, dpdy, solve(dpdx), solve(dpdy))
@@ -102,6 +111,7 @@ pub fn refract_dir(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
 /// a ray with direction `d_in` and differentials `rd` (see the module notes). `delta` selects
 /// the specular rule, `ns` is the shading normal of the bounce and, for refraction,
 /// `eta = n_incident / n_transmitted` along the path's direction of travel.
+#[allow(clippy::too_many_arguments)]
 pub fn spawn_differentials(
     p: Vec3,
     dpdx: Vec3,
@@ -116,7 +126,12 @@ pub fn spawn_differentials(
     let rx_o = p + dpdx;
     let ry_o = p + dpdy;
     if !delta {
-        return RayDifferential { rx_o, rx_d: wi, ry_o, ry_d: wi };
+        return RayDifferential {
+            rx_o,
+            rx_d: wi,
+            ry_o,
+            ry_d: wi,
+        };
     }
     let reflection = (wi.dot(ns) > 0.0) == ((-d_in).dot(ns) > 0.0);
     let n = if d_in.dot(ns) < 0.0 { ns } else { -ns };
@@ -125,10 +140,17 @@ pub fn spawn_differentials(
         if reflection {
             mirror
         } else {
-            refract_dir(d, n, eta).map(|t| t.normalize_or(wi)).unwrap_or(mirror)
+            refract_dir(d, n, eta)
+                .map(|t| t.normalize_or(wi))
+                .unwrap_or(mirror)
         }
     };
-    RayDifferential { rx_o, rx_d: bend(rd.rx_d), ry_o, ry_d: bend(rd.ry_d) }
+    RayDifferential {
+        rx_o,
+        rx_d: bend(rd.rx_d),
+        ry_o,
+        ry_d: bend(rd.ry_d),
+    }
 }
 
 #[cfg(test)]
@@ -171,23 +193,66 @@ mod tests {
         let d = Vec3::new(0.6, 0.0, -0.8);
         let t = refract_dir(d, Vec3::Z, 1.0 / 1.5).unwrap();
         assert!((t.length() - 1.0).abs() < 1e-5);
-        assert!((t.x - 0.6 / 1.5).abs() < 1e-5, "sin theta_t = sin theta_i / 1.5");
+        assert!(
+            (t.x - 0.6 / 1.5).abs() < 1e-5,
+            "sin theta_t = sin theta_i / 1.5"
+        );
         // Total internal reflection from inside at a grazing angle.
         assert!(refract_dir(Vec3::new(0.9, 0.0, -0.435_889_9), Vec3::Z, 1.5).is_none());
         // Differentials of a refracted parallel beam stay parallel to the refracted ray.
-        let rd = RayDifferential { rx_o: Vec3::X, rx_d: d, ry_o: Vec3::Y, ry_d: d };
-        let out = spawn_differentials(Vec3::ZERO, Vec3::X * 0.1, Vec3::Y * 0.1, d, &rd, Vec3::Z, t, true, 1.0 / 1.5);
+        let rd = RayDifferential {
+            rx_o: Vec3::X,
+            rx_d: d,
+            ry_o: Vec3::Y,
+            ry_d: d,
+        };
+        let out = spawn_differentials(
+            Vec3::ZERO,
+            Vec3::X * 0.1,
+            Vec3::Y * 0.1,
+            d,
+            &rd,
+            Vec3::Z,
+            t,
+            true,
+            1.0 / 1.5,
+        );
         assert!((out.rx_d - t).length() < 1e-5);
         // A diverging beam keeps diverging after refraction, less than before (entering glass).
         let dx = (d + Vec3::new(0.01, 0.0, 0.0)).normalize();
-        let rd = RayDifferential { rx_o: Vec3::ZERO, rx_d: dx, ry_o: Vec3::ZERO, ry_d: d };
-        let out = spawn_differentials(Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, d, &rd, Vec3::Z, t, true, 1.0 / 1.5);
+        let rd = RayDifferential {
+            rx_o: Vec3::ZERO,
+            rx_d: dx,
+            ry_o: Vec3::ZERO,
+            ry_d: d,
+        };
+        let out = spawn_differentials(
+            Vec3::ZERO,
+            Vec3::ZERO,
+            Vec3::ZERO,
+            d,
+            &rd,
+            Vec3::Z,
+            t,
+            true,
+            1.0 / 1.5,
+        );
         let before = (dx - d).length();
         let after = (out.rx_d - t).length();
         assert!(after > 0.0 && after < before, "{before} {after}");
         // Reflection mirrors the offset directions.
         let r = Vec3::new(0.6, 0.0, 0.8);
-        let out = spawn_differentials(Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, d, &rd, Vec3::Z, r, true, 1.0);
+        let out = spawn_differentials(
+            Vec3::ZERO,
+            Vec3::ZERO,
+            Vec3::ZERO,
+            d,
+            &rd,
+            Vec3::Z,
+            r,
+            true,
+            1.0,
+        );
         assert!((out.rx_d - Vec3::new(dx.x, dx.y, -dx.z)).length() < 1e-6);
     }
 }

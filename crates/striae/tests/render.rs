@@ -9,11 +9,21 @@ use striae::scene::{Overrides, Scene, SceneError};
 use striae::testing::MeanEstimate;
 
 fn scene(text: &str) -> Scene {
-    Scene::parse(text, Path::new("test.toml"), Path::new("."), &Overrides::default()).unwrap_or_else(|e| panic!("{e}"))
+    Scene::parse(
+        text,
+        Path::new("test.toml"),
+        Path::new("."),
+        &Overrides::default(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn render_with_threads(scene: &Scene, threads: usize) -> (Image, RenderStats) {
-    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| render(scene, &|_| {}))
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(|| render(scene, &|_| {}))
 }
 
 /// Mean over the pixels inside a centred square of side `frac` of the image (each pixel is an
@@ -63,7 +73,12 @@ fn assert_furnace(s: &Scene, what: &str) {
     for c in 0..3 {
         let m = centre_mean(&img, 0.5, c);
         assert!(m.count() > 100);
-        assert!(m.agrees_with(1.0, 4.0, 1e-3), "{what}: channel {c} mean {} +- {}", m.mean(), m.std_error());
+        assert!(
+            m.agrees_with(1.0, 4.0, 1e-3),
+            "{what}: channel {c} mean {} +- {}",
+            m.mean(),
+            m.std_error()
+        );
     }
 }
 
@@ -75,7 +90,10 @@ fn white_furnace_glass_sphere() {
 #[test]
 fn white_furnace_perfect_conductor_sphere() {
     // A purely imaginary index (eta = 0, k > 0) reflects everything: F = 1 at every angle.
-    assert_furnace(&furnace("type = \"conductor\"\neta = [0, 0, 0]\nk = [1, 1, 1]"), "F = 1 conductor");
+    assert_furnace(
+        &furnace("type = \"conductor\"\neta = [0, 0, 0]\nk = [1, 1, 1]"),
+        "F = 1 conductor",
+    );
 }
 
 #[test]
@@ -118,7 +136,12 @@ radiance = [2, 2, 1]
     assert_eq!(stats.samples, 32 * 32 * 16);
     for (c, expected) in [(0, 1.0), (1, 0.5), (2, 0.8)] {
         let m = centre_mean(&img, 1.0, c);
-        assert!(m.agrees_with(expected, 4.0, 1e-3), "channel {c}: {} +- {} vs {expected}", m.mean(), m.std_error());
+        assert!(
+            m.agrees_with(expected, 4.0, 1e-3),
+            "channel {c}: {} +- {} vs {expected}",
+            m.mean(),
+            m.std_error()
+        );
         assert!(m.std_error() < 0.01);
     }
 }
@@ -158,7 +181,12 @@ emission = {le}
     let expected = a * le * (r / d).powi(2);
     let m = centre_mean(&img, 1.0, 1);
     // The patch is ~0.06 wide: the irradiance varies by well under 0.5% across it.
-    assert!(m.agrees_with(expected, 4.0, 0.005 * expected), "{} +- {} vs {expected}", m.mean(), m.std_error());
+    assert!(
+        m.agrees_with(expected, 4.0, 0.005 * expected),
+        "{} +- {} vs {expected}",
+        m.mean(),
+        m.std_error()
+    );
 }
 
 #[test]
@@ -187,11 +215,20 @@ emission = [1, 2, 3]
 #[test]
 fn image_is_bit_identical_across_thread_counts() {
     let text = striae::scene::DEFAULT_SCENE;
-    let o = Overrides { spp: Some(4), resolution: Some((40, 30)), seed: Some(7), max_depth: None };
+    let o = Overrides {
+        spp: Some(4),
+        resolution: Some((40, 30)),
+        seed: Some(7),
+        max_depth: None,
+    };
     let s = Scene::parse(text, Path::new("default.toml"), Path::new("."), &o).unwrap();
     let (a, sa) = render_with_threads(&s, 1);
     let (b, sb) = render_with_threads(&s, 3);
-    assert!(a.pixels.iter().zip(&b.pixels).all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits)));
+    assert!(a
+        .pixels
+        .iter()
+        .zip(&b.pixels)
+        .all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits)));
     assert_eq!(sa.rays, sb.rays);
     // And the seed matters.
     let o2 = Overrides { seed: Some(8), ..o };
@@ -201,11 +238,19 @@ fn image_is_bit_identical_across_thread_counts() {
 }
 
 fn parse_err(text: &str) -> String {
-    match Scene::parse(text, Path::new("scenes/broken.toml"), Path::new("."), &Overrides::default()) {
+    match Scene::parse(
+        text,
+        Path::new("scenes/broken.toml"),
+        Path::new("."),
+        &Overrides::default(),
+    ) {
         Ok(_) => panic!("scene accepted:\n{text}"),
         Err(e) => {
             let msg = e.to_string();
-            assert!(msg.contains("scenes/broken.toml"), "message does not name the file: {msg}");
+            assert!(
+                msg.contains("scenes/broken.toml"),
+                "message does not name the file: {msg}"
+            );
             msg
         }
     }
@@ -225,32 +270,59 @@ fn bad_scene_files_give_clear_errors() {
     let msg = parse_err(&format!("{CAMERA}[render]\nspp = 0\n"));
     assert!(msg.contains("render.spp") && msg.contains('0'), "{msg}");
     // Unknown shape type.
-    let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"torus\"\nemission = 1\n"));
+    let msg = parse_err(&format!(
+        "{CAMERA}[[shapes]]\ntype = \"torus\"\nemission = 1\n"
+    ));
     assert!(msg.contains("torus") && msg.contains("type"), "{msg}");
     // Missing mesh file, with the key path.
     let msg = parse_err(&format!("{CAMERA}[materials.m]\ntype = \"dielectric\"\nior = 1.5\n[[shapes]]\ntype = \"mesh\"\npath = \"nowhere.obj\"\nmaterial = \"m\"\n"));
-    assert!(msg.contains("shapes[0].path") && msg.contains("nowhere.obj"), "{msg}");
+    assert!(
+        msg.contains("shapes[0].path") && msg.contains("nowhere.obj"),
+        "{msg}"
+    );
     // Unknown material name.
-    let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"sphere\"\nmaterial = \"glas\"\n"));
-    assert!(msg.contains("shapes[0].material") && msg.contains("glas"), "{msg}");
+    let msg = parse_err(&format!(
+        "{CAMERA}[[shapes]]\ntype = \"sphere\"\nmaterial = \"glas\"\n"
+    ));
+    assert!(
+        msg.contains("shapes[0].material") && msg.contains("glas"),
+        "{msg}"
+    );
     // Degenerate camera.
     let msg = parse_err("[camera]\nposition = [0, 0, 0]\nlook_at = [0, 0, 0]\nfov = 40\n");
     assert!(msg.contains("camera"), "{msg}");
     // Negative emission.
-    let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"rectangle\"\nemission = -1\n"));
-    assert!(msg.contains("shapes[0].emission") && msg.contains("-1"), "{msg}");
+    let msg = parse_err(&format!(
+        "{CAMERA}[[shapes]]\ntype = \"rectangle\"\nemission = -1\n"
+    ));
+    assert!(
+        msg.contains("shapes[0].emission") && msg.contains("-1"),
+        "{msg}"
+    );
     // Bad value inside a shape: the message names the key.
-    let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"sphere\"\nradius = \"big\"\nemission = 1\n"));
+    let msg = parse_err(&format!(
+        "{CAMERA}[[shapes]]\ntype = \"sphere\"\nradius = \"big\"\nemission = 1\n"
+    ));
     assert!(msg.contains("radius") && msg.contains("big"), "{msg}");
     // An index of refraction below 1, named with its material.
-    let msg = parse_err(&format!("{CAMERA}[materials.glass]\ntype = \"dielectric\"\nior = 0.9\n"));
-    assert!(msg.contains("materials.glass") && msg.contains("ior") && msg.contains("0.9"), "{msg}");
+    let msg = parse_err(&format!(
+        "{CAMERA}[materials.glass]\ntype = \"dielectric\"\nior = 0.9\n"
+    ));
+    assert!(
+        msg.contains("materials.glass") && msg.contains("ior") && msg.contains("0.9"),
+        "{msg}"
+    );
     // A key that does not belong to the shape's type.
-    let msg = parse_err(&format!("{CAMERA}[[shapes]]\ntype = \"rectangle\"\nradius = 2\nemission = 1\n"));
+    let msg = parse_err(&format!(
+        "{CAMERA}[[shapes]]\ntype = \"rectangle\"\nradius = 2\nemission = 1\n"
+    ));
     assert!(msg.contains("shapes[0].radius"), "{msg}");
     // Missing file.
     let err = Scene::load(Path::new("no/such/scene.toml"), &Overrides::default()).unwrap_err();
-    assert!(matches!(err, SceneError::Read { .. }) && err.to_string().contains("no/such/scene.toml"), "{err}");
+    assert!(
+        matches!(err, SceneError::Read { .. }) && err.to_string().contains("no/such/scene.toml"),
+        "{err}"
+    );
 }
 
 /// The footprint a pixel of a `height`-pixel image with vertical fov `fov_deg` has on a plane
@@ -264,10 +336,18 @@ const FOOTPRINT_CAMERA: &str = "[render]\nwidth = 64\nheight = 64\n[camera]\npos
 fn assert_footprint(ctx: &striae::shading::ShadingContext, expected_du: f64, what: &str) {
     for (name, d) in [("duvdx", ctx.duvdx), ("duvdy", ctx.duvdy)] {
         let got = d.length() as f64;
-        assert!((got / expected_du - 1.0).abs() < 0.01, "{what}: |{name}| = {got}, expected {expected_du}");
+        assert!(
+            (got / expected_du - 1.0).abs() < 0.01,
+            "{what}: |{name}| = {got}, expected {expected_du}"
+        );
     }
     let cos = ctx.duvdx.dot(ctx.duvdy) / (ctx.duvdx.length() * ctx.duvdy.length());
-    assert!(cos.abs() < 0.01, "{what}: square pixels stay square ({:?}, {:?})", ctx.duvdx, ctx.duvdy);
+    assert!(
+        cos.abs() < 0.01,
+        "{what}: square pixels stay square ({:?}, {:?})",
+        ctx.duvdx,
+        ctx.duvdy
+    );
 }
 
 #[test]
@@ -291,7 +371,11 @@ fn footprint_after_a_mirror_grows_with_the_unfolded_distance() {
     ));
     let ctx = striae::integrator::trace_contexts(&s, striae::math::Vec2::new(32.0, 32.0), 4);
     assert_eq!(ctx.len(), 2, "mirror, then the plane");
-    assert_footprint(&ctx[1], pixel_width(7.0, 30.0, 64.0) / 4.0, "plane seen in a mirror");
+    assert_footprint(
+        &ctx[1],
+        pixel_width(7.0, 30.0, 64.0) / 4.0,
+        "plane seen in a mirror",
+    );
 }
 
 #[test]
@@ -305,5 +389,201 @@ fn footprint_behind_a_glass_slab_uses_the_reduced_distance() {
     ));
     let ctx = striae::integrator::trace_contexts(&s, striae::math::Vec2::new(32.0, 32.0), 4);
     assert_eq!(ctx.len(), 3, "front face, back face, plane");
-    assert_footprint(&ctx[2], pixel_width(3.5 + 1.0 / 1.5 + 1.5, 30.0, 64.0) / 4.0, "plane behind glass");
+    assert_footprint(
+        &ctx[2],
+        pixel_width(3.5 + 1.0 / 1.5 + 1.5, 30.0, 64.0) / 4.0,
+        "plane behind glass",
+    );
+}
+
+#[test]
+fn diffuse_plane_under_a_half_sky_map() {
+    // An equirectangular EXR bright (2) over the upper hemisphere and black below (65 rows:
+    // row 32 is the horizon). A Lambertian plane facing up sees only the bright half:
+    // pixel = a * 2. Exercises the map's importance sampling under MIS with the BSDF.
+    let dir = std::env::temp_dir().join(format!("striae-envtest-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (w, h) = (32u32, 65u32);
+    let mut sky = Image::new(w, h);
+    for y in 0..=32 {
+        for x in 0..w {
+            sky.pixels[(y * w + x) as usize] = striae::math::Rgb::new(2.0, 2.0, 2.0);
+        }
+    }
+    sky.write_exr(&dir.join("sky.exr")).unwrap();
+    let text = r#"
+[render]
+width = 16
+height = 16
+spp = 64
+max_depth = 2
+[camera]
+position = [0, 3, 1]
+look_at = [0, 0, 0]
+fov = 20
+[materials.plane]
+type = "diffuse"
+reflectance = 0.5
+[[shapes]]
+type = "rectangle"
+material = "plane"
+transform = [{ scale = 50 }, { rotate = { axis = [1, 0, 0], angle = -90 } }]
+[environment]
+type = "map"
+path = "sky.exr"
+transform = { rotate = { axis = [0, 1, 0], angle = 30 } }
+"#;
+    let s = Scene::parse(text, Path::new("env.toml"), &dir, &Overrides::default()).unwrap();
+    let (img, _) = render_with_threads(&s, 2);
+    let m = centre_mean(&img, 1.0, 0);
+    assert!(
+        m.agrees_with(1.0, 4.0, 2e-3),
+        "{} +- {}",
+        m.mean(),
+        m.std_error()
+    );
+    // A non-rotation transform and a missing file are rejected with the key named.
+    let bad = text.replace(
+        "transform = { rotate = { axis = [0, 1, 0], angle = 30 } }",
+        "transform = { scale = 2 }",
+    );
+    let err = Scene::parse(&bad, Path::new("env.toml"), &dir, &Overrides::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("environment") && err.contains("rotation"),
+        "{err}"
+    );
+    let err = Scene::parse(
+        &text.replace("sky.exr", "nosky.exr"),
+        Path::new("env.toml"),
+        &dir,
+        &Overrides::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("environment.path") && err.contains("nosky.exr"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn diffuse_plane_under_a_sun_is_albedo_times_irradiance_cosine_over_pi() {
+    // A sun at 60 degrees from the zenith with irradiance E: pixel = a E cos(60) / pi.
+    let s = scene(
+        r#"
+[render]
+width = 8
+height = 8
+spp = 4
+[camera]
+position = [0, 3, 1]
+look_at = [0, 0, 0]
+fov = 20
+[materials.plane]
+type = "diffuse"
+reflectance = 0.5
+[[shapes]]
+type = "rectangle"
+material = "plane"
+transform = [{ scale = 50 }, { rotate = { axis = [1, 0, 0], angle = -90 } }]
+[[lights]]
+type = "sun"
+direction = [0.8660254, 0.5, 0]
+irradiance = 4
+"#,
+    );
+    let (img, _) = render_with_threads(&s, 1);
+    let expected = 0.5 * 4.0 * 0.5 / std::f32::consts::PI;
+    for p in &img.pixels {
+        assert!(
+            (p.x - expected).abs() < 1e-4 * expected,
+            "{p} vs {expected}"
+        );
+    }
+}
+
+#[test]
+fn shading_frame_always_faces_the_viewer_on_a_coarse_smooth_mesh() {
+    // A teapot of 2 x 2 quads per patch: interpolated normals differ a lot from the facets, so
+    // near silhouettes the viewer falls behind the interpolated normal, and an opaque BSDF
+    // would return black there. The integrator's guard bends the shading normal so the
+    // viewer is always in front of it (checked at every pixel centre of a 160 x 120 view).
+    let s = scene(
+        r#"
+[render]
+width = 160
+height = 120
+[camera]
+position = [0, 2, 9]
+look_at = [0, 1.3, 0]
+fov = 30
+[materials.d]
+type = "diffuse"
+reflectance = 0.8
+[[shapes]]
+type = "teapot"
+subdivisions = 2
+material = "d"
+"#,
+    );
+    let eye = striae::math::Vec3::new(0.0, 2.0, 9.0);
+    let mut hits = 0;
+    for y in 0..120 {
+        for x in 0..160 {
+            let film = striae::math::Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            let Some(ctx) = striae::integrator::trace_contexts(&s, film, 1).pop() else {
+                continue;
+            };
+            let wo = (eye - ctx.p).normalize();
+            hits += 1;
+            assert!(
+                ctx.frame.n.dot(wo) > 0.0,
+                "viewer behind the shading normal at pixel ({x}, {y})"
+            );
+        }
+    }
+    assert!(hits > 3000, "{hits}");
+}
+
+#[test]
+fn obj_mesh_path_is_relative_to_the_scene_file() {
+    // An OBJ written next to the scene file and referenced by a relative path, with a
+    // transform, renders like the built-in rectangle under the same transform.
+    let dir = std::env::temp_dir().join(format!("striae-objtest-{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("meshes")).unwrap();
+    striae::geometry::TriangleMesh::rectangle()
+        .write_obj(dir.join("meshes/quad.obj"))
+        .unwrap();
+    let make = |shape: &str| {
+        format!(
+            "[render]\nwidth = 16\nheight = 16\nspp = 4\n[camera]\nposition = [0, 0, 4]\nlook_at = [0, 0, 0]\nfov = 40\n\
+             [materials.d]\ntype = \"diffuse\"\nreflectance = 0.5\n[[shapes]]\n{shape}\nmaterial = \"d\"\n\
+             transform = [{{ rotate = {{ axis = [0, 1, 0], angle = 20 }} }}]\n[environment]\ntype = \"constant\"\nradiance = 1\n"
+        )
+    };
+    let from_obj = Scene::parse(
+        &make("type = \"mesh\"\npath = \"meshes/quad.obj\""),
+        &dir.join("s.toml"),
+        &dir,
+        &Overrides::default(),
+    )
+    .unwrap();
+    let built_in = Scene::parse(
+        &make("type = \"rectangle\""),
+        &dir.join("s.toml"),
+        &dir,
+        &Overrides::default(),
+    )
+    .unwrap();
+    let (a, _) = render_with_threads(&from_obj, 1);
+    let (b, _) = render_with_threads(&built_in, 1);
+    assert_eq!(a.pixels, b.pixels);
+    assert!(
+        a.pixels.iter().any(|p| (p.x - 0.5).abs() < 1e-3),
+        "the quad is in view"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -34,15 +34,28 @@ pub struct Args {
     /// Default: `striae` for the built-in scene, the scene file's name otherwise.
     #[arg(short = 'o', long)]
     pub output: Option<PathBuf>,
+    /// Instead of rendering, write every mesh shape of the scene (teapot, rectangle, box, OBJ;
+    /// in world space, transforms applied) to DIR/shape-<index>.obj, e.g. to describe the
+    /// same geometry to Mitsuba 3. Spheres are analytic and are skipped.
+    #[arg(long, value_name = "DIR")]
+    pub export_meshes: Option<PathBuf>,
     /// No progress bar.
     #[arg(long, short = 'q')]
     pub quiet: bool,
 }
 
 pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("`{s}` is not WIDTHxHEIGHT (e.g. 512x384)"))?;
-    let w: u32 = w.trim().parse().map_err(|_| format!("bad width in `{s}`"))?;
-    let h: u32 = h.trim().parse().map_err(|_| format!("bad height in `{s}`"))?;
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{s}` is not WIDTHxHEIGHT (e.g. 512x384)"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad width in `{s}`"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad height in `{s}`"))?;
     if w == 0 || h == 0 {
         return Err(format!("`{s}`: width and height must be at least 1"));
     }
@@ -53,7 +66,9 @@ pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
 fn output_paths(output: Option<&Path>, scene: Option<&Path>) -> (PathBuf, PathBuf) {
     let stem = match output {
         Some(o) => match o.extension().and_then(|e| e.to_str()) {
-            Some(e) if e.eq_ignore_ascii_case("exr") || e.eq_ignore_ascii_case("png") => o.with_extension(""),
+            Some(e) if e.eq_ignore_ascii_case("exr") || e.eq_ignore_ascii_case("png") => {
+                o.with_extension("")
+            }
             _ => o.to_path_buf(),
         },
         None => match scene.and_then(|s| s.file_stem()) {
@@ -69,7 +84,12 @@ fn output_paths(output: Option<&Path>, scene: Option<&Path>) -> (PathBuf, PathBu
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let overrides = Overrides { spp: args.spp, resolution: args.res, seed: args.seed, max_depth: args.max_depth };
+    let overrides = Overrides {
+        spp: args.spp,
+        resolution: args.res,
+        seed: args.seed,
+        max_depth: args.max_depth,
+    };
     let mut scene = match &args.scene {
         Some(path) => Scene::load(path, &overrides).context("cannot load the scene")?,
         None => Scene::default_scene(&overrides).context("building the built-in default scene")?,
@@ -80,6 +100,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         scene.settings.exposure = e;
     }
+    if let Some(dir) = &args.export_meshes {
+        return export_meshes(&scene, dir);
+    }
     let (exr_path, png_path) = output_paths(args.output.as_deref(), args.scene.as_deref());
     let s = &scene.settings;
     let total = s.width as u64 * s.height as u64 * s.spp as u64;
@@ -89,7 +112,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     eprintln!(
         "rendering {} at {}x{}, {} spp, max depth {}, seed {}, {} thread(s)",
-        args.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "the built-in scratched glass teapot (setting 1)".into()),
+        args.scene
+            .as_ref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_else(|| "the built-in scratched glass teapot (setting 1)".into()),
         s.width,
         s.height,
         s.spp,
@@ -97,27 +123,71 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         s.seed,
         threads
     );
-    let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new(total) };
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(total)
+    };
     bar.set_style(
-        ProgressStyle::with_template("{bar:40.cyan/blue} {percent:>3}%  {human_pos}/{human_len} samples  {per_sec}  elapsed {elapsed}  left {eta}")
-            .expect("valid template")
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "{bar:40.cyan/blue} {percent:>3}%  {human_pos}/{human_len} samples  {rate}  elapsed {elapsed}  left {eta}",
+        )
+        .expect("valid template")
+        .with_key("rate", |state: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+            let _ = write!(w, "{:.3} M samples/s", state.per_sec() / 1e6);
+        })
+        .progress_chars("=> "),
     );
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("starting the thread pool")?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("starting the thread pool")?;
     let (image, stats) = pool.install(|| striae::integrator::render(&scene, &|n| bar.inc(n)));
     bar.finish_and_clear();
 
-    image.write_exr(&exr_path).with_context(|| format!("writing {}", exr_path.display()))?;
-    image.write_png(&png_path, scene.settings.exposure).with_context(|| format!("writing {}", png_path.display()))?;
+    image
+        .write_exr(&exr_path)
+        .with_context(|| format!("writing {}", exr_path.display()))?;
+    image
+        .write_png(&png_path, scene.settings.exposure)
+        .with_context(|| format!("writing {}", png_path.display()))?;
     eprintln!(
         "done in {:.2} s: {:.3} M samples/s, {:.2} M rays/s ({} rays){}",
         stats.seconds,
         stats.samples_per_second() / 1e6,
         stats.rays_per_second() / 1e6,
         stats.rays,
-        if stats.nonfinite > 0 { format!(", {} non-finite samples dropped", stats.nonfinite) } else { String::new() }
+        if stats.nonfinite > 0 {
+            format!(", {} non-finite samples dropped", stats.nonfinite)
+        } else {
+            String::new()
+        }
     );
     eprintln!("wrote {} and {}", exr_path.display(), png_path.display());
+    Ok(())
+}
+
+fn export_meshes(scene: &Scene, dir: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    for (i, shape) in scene.geometry.shapes().iter().enumerate() {
+        match &shape.geometry {
+            striae::geometry::ShapeGeometry::Mesh(mesh) => {
+                let path = dir.join(format!("shape-{i}.obj"));
+                mesh.write_obj(&path)
+                    .with_context(|| format!("writing {}", path.display()))?;
+                eprintln!(
+                    "wrote {} ({} triangles)",
+                    path.display(),
+                    mesh.triangle_count()
+                );
+            }
+            striae::geometry::ShapeGeometry::Sphere { centre, radius } => {
+                eprintln!(
+                    "shape {i}: analytic sphere, centre {centre}, radius {radius} (not exported)"
+                );
+            }
+        }
+    }
     Ok(())
 }
 
@@ -130,8 +200,17 @@ mod tests {
         assert_eq!(parse_resolution("512x384"), Ok((512, 384)));
         assert!(parse_resolution("512").is_err());
         assert!(parse_resolution("0x4").is_err());
-        assert_eq!(output_paths(None, None), (PathBuf::from("striae.exr"), PathBuf::from("striae.png")));
-        assert_eq!(output_paths(Some(Path::new("out/a.png")), None).0, PathBuf::from("out/a.exr"));
-        assert_eq!(output_paths(None, Some(Path::new("scenes/glass-plate.toml"))).1, PathBuf::from("glass-plate.png"));
+        assert_eq!(
+            output_paths(None, None),
+            (PathBuf::from("striae.exr"), PathBuf::from("striae.png"))
+        );
+        assert_eq!(
+            output_paths(Some(Path::new("out/a.png")), None).0,
+            PathBuf::from("out/a.exr")
+        );
+        assert_eq!(
+            output_paths(None, Some(Path::new("scenes/glass-plate.toml"))).1,
+            PathBuf::from("glass-plate.png")
+        );
     }
 }

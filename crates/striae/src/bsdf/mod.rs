@@ -110,6 +110,7 @@ impl Bsdf<'_> {
             Bsdf::Dielectric(_) | Bsdf::Conductor(_) => (Rgb::ZERO, 0.0),
             Bsdf::RoughDielectric(b) => b.eval_pdf(wo, wi),
             Bsdf::RoughConductor(b) => b.eval_pdf(wo, wi),
+            Bsdf::Scratched(b) => b.eval_pdf(wo, wi),
         }
     }
 

@@ -280,6 +280,25 @@ impl<'a> ScratchedBsdf<'a> {
         p as f32
     }
 
+    /// `(eval, pdf)` in one pass over the lobes (shared scratch-frame transforms and albedo).
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        if self.table.is_delta() || wo.z <= 0.0 || wi.z <= 0.0 {
+            return (Rgb::ZERO, 0.0);
+        }
+        let (mut f, mut p) = (0.0f64, 0.0f64);
+        for l in self.lobes() {
+            let (wo_s, wi_s) = (l.to_scratch(wo), l.to_scratch(wi));
+            let (a, scale) = self.table.scaled_albedo(wo_s);
+            f += (l.coverage * scale) as f64 * self.table.brdf().eval(wo_s, wi_s);
+            let pk = if self.is_glass() { l.coverage * a } else { l.coverage };
+            if pk > 0.0 {
+                p += pk as f64 * self.table.brdf().pdf(wo_s, wi_s);
+            }
+        }
+        (self.tint * f as f32, p as f32)
+    }
+
     /// See the module notes for the component probabilities. `u_lobe` picks the component,
     /// `u` drives the scratch lobe's sampler.
     #[inline]

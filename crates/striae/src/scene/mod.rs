@@ -7,14 +7,17 @@
 //! caret under the offending key; semantic errors (an unknown material name, a missing mesh,
 //! a degenerate camera) name the key path such as `shapes[2].path`.
 
-pub mod file;
-pub mod interim;
+// `!(x > 0.0)` is meant: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod file;
+
+use crate::bsdf::Bsdf;
 use crate::camera::PerspectiveCamera;
+use crate::envmap::EnvMap;
 use crate::geometry::{Geometry, Shape, ShapeGeometry, TriangleMesh};
 use crate::lights::{Environment, Light};
 use crate::material::Material;
-use crate::bsdf::Bsdf;
 use crate::math::Vec3;
 use crate::shading::ShadingContext;
 use file::{EnvironmentType, LightType, SceneFile, ShapeSection, ShapeType};
@@ -62,7 +65,12 @@ pub enum SceneError {
     #[error("scene file {file}: {message}")]
     Parse { file: PathBuf, message: String },
     #[error("scene file {file}: key `{key}` = {value}: {reason}")]
-    Invalid { file: PathBuf, key: String, value: String, reason: String },
+    Invalid {
+        file: PathBuf,
+        key: String,
+        value: String,
+        reason: String,
+    },
 }
 
 /// A scene ready to render.
@@ -89,19 +97,35 @@ impl Scene {
 
     /// Load a scene file; relative paths inside it are resolved against its folder.
     pub fn load(path: &Path, overrides: &Overrides) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|e| SceneError::Read { file: path.to_path_buf(), message: e.to_string() })?;
+        let text = std::fs::read_to_string(path).map_err(|e| SceneError::Read {
+            file: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
         let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
         Scene::parse(&text, path, &base, overrides)
     }
 
     /// The built-in default scene.
     pub fn default_scene(overrides: &Overrides) -> Result<Scene, SceneError> {
-        Scene::parse(DEFAULT_SCENE, Path::new(DEFAULT_SCENE_NAME), Path::new("."), overrides)
+        Scene::parse(
+            DEFAULT_SCENE,
+            Path::new(DEFAULT_SCENE_NAME),
+            Path::new("."),
+            overrides,
+        )
     }
 
     /// Parse scene text. `file` names it in messages, `base` resolves relative paths.
-    pub fn parse(text: &str, file: &Path, base: &Path, overrides: &Overrides) -> Result<Scene, SceneError> {
-        let parsed: SceneFile = toml::from_str(text).map_err(|e| SceneError::Parse { file: file.to_path_buf(), message: e.to_string() })?;
+    pub fn parse(
+        text: &str,
+        file: &Path,
+        base: &Path,
+        overrides: &Overrides,
+    ) -> Result<Scene, SceneError> {
+        let parsed: SceneFile = toml::from_str(text).map_err(|e| SceneError::Parse {
+            file: file.to_path_buf(),
+            message: e.to_string(),
+        })?;
         build(parsed, file, base, overrides)
     }
 }
@@ -116,8 +140,18 @@ pub fn material_bsdf<'a>(material: &'a Material, ctx: &ShadingContext) -> Bsdf<'
     }
 }
 
-fn invalid(file: &Path, key: impl Into<String>, value: impl std::fmt::Debug, reason: impl std::fmt::Display) -> SceneError {
-    SceneError::Invalid { file: file.to_path_buf(), key: key.into(), value: format!("{value:?}"), reason: reason.to_string() }
+fn invalid(
+    file: &Path,
+    key: impl Into<String>,
+    value: impl std::fmt::Debug,
+    reason: impl std::fmt::Display,
+) -> SceneError {
+    SceneError::Invalid {
+        file: file.to_path_buf(),
+        key: key.into(),
+        value: format!("{value:?}"),
+        reason: reason.to_string(),
+    }
 }
 
 fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene, SceneError> {
@@ -133,28 +167,53 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
         exposure: r.exposure,
     };
     if settings.spp == 0 || settings.spp > crate::sampler::MAX_SPP {
-        return Err(invalid(file, "render.spp", settings.spp, format!("must lie in 1..={}", crate::sampler::MAX_SPP)));
+        return Err(invalid(
+            file,
+            "render.spp",
+            settings.spp,
+            format!("must lie in 1..={}", crate::sampler::MAX_SPP),
+        ));
     }
     if width == 0 || height == 0 || width > 1 << 15 || height > 1 << 15 {
-        return Err(invalid(file, "render.width/height", (width, height), "each must lie in 1..=32768"));
+        return Err(invalid(
+            file,
+            "render.width/height",
+            (width, height),
+            "each must lie in 1..=32768",
+        ));
     }
     if !r.exposure.is_finite() {
-        return Err(invalid(file, "render.exposure", r.exposure, "must be finite"));
+        return Err(invalid(
+            file,
+            "render.exposure",
+            r.exposure,
+            "must be finite",
+        ));
     }
 
     let c = &f.camera;
     let position = Vec3::from_array(c.position);
     let look_at = Vec3::from_array(c.look_at);
     let focus = c.focus_distance.unwrap_or((look_at - position).length());
-    let camera = PerspectiveCamera::new(position, look_at, Vec3::from_array(c.up), c.fov, width, height, c.aperture_radius, focus)
-        .map_err(|e| invalid(file, "camera", c, e))?;
+    let camera = PerspectiveCamera::new(
+        position,
+        look_at,
+        Vec3::from_array(c.up),
+        c.fov,
+        width,
+        height,
+        c.aperture_radius,
+        focus,
+    )
+    .map_err(|e| invalid(file, "camera", c, e))?;
 
     // Materials by name, in file order of the table (sorted keys: BTreeMap).
     let names: Vec<&String> = f.materials.keys().collect();
     let mut materials: Vec<Material> = Vec::with_capacity(names.len());
     for (name, m) in &f.materials {
         let mut m = m.clone();
-        m.prepare(base).map_err(|e| invalid(file, format!("materials.{name}"), m.clone(), e))?;
+        m.prepare(base)
+            .map_err(|e| invalid(file, format!("materials.{name}"), m.clone(), e))?;
         materials.push(m);
     }
 
@@ -162,36 +221,71 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
     let mut lights = Vec::new();
     for (i, s) in f.shapes.iter().enumerate() {
         if let Some(key) = s.foreign_keys().first() {
-            return Err(invalid(file, format!("shapes[{i}].{key}"), s.kind, format!("`{key}` does not apply to this type of shape")));
+            return Err(invalid(
+                file,
+                format!("shapes[{i}].{key}"),
+                s.kind,
+                format!("`{key}` does not apply to this type of shape"),
+            ));
         }
         let material = match &s.material {
-            Some(name) => names
-                .iter()
-                .position(|n| *n == name)
-                .ok_or_else(|| invalid(file, format!("shapes[{i}].material"), name, format!("no such material (defined: {names:?})")))? as u32,
+            Some(name) => names.iter().position(|n| *n == name).ok_or_else(|| {
+                invalid(
+                    file,
+                    format!("shapes[{i}].material"),
+                    name,
+                    format!("no such material (defined: {names:?})"),
+                )
+            })? as u32,
             None if s.emission.is_some() => NO_MATERIAL,
-            None => return Err(invalid(file, format!("shapes[{i}].material"), "(missing)", "a shape needs a material unless it has an emission")),
+            None => {
+                return Err(invalid(
+                    file,
+                    format!("shapes[{i}].material"),
+                    "(missing)",
+                    "a shape needs a material unless it has an emission",
+                ))
+            }
         };
         let geometry = shape_geometry(s, i, file, base)?;
         let geometry = if s.transform.is_identity() {
             geometry
         } else {
-            geometry.transformed(&s.transform).map_err(|e| invalid(file, format!("shapes[{i}].transform"), s.transform, e))?
+            geometry
+                .transformed(&s.transform)
+                .map_err(|e| invalid(file, format!("shapes[{i}].transform"), s.transform, e))?
         };
         let area_light = match s.emission {
             Some(e) => {
                 let radiance = e.rgb();
                 if !(radiance.is_finite() && radiance.min_element() >= 0.0) {
-                    return Err(invalid(file, format!("shapes[{i}].emission"), e, "radiance must be finite and >= 0"));
+                    return Err(invalid(
+                        file,
+                        format!("shapes[{i}].emission"),
+                        e,
+                        "radiance must be finite and >= 0",
+                    ));
                 }
-                lights.push(Light::Area { shape: i as u32, radiance });
+                lights.push(Light::Area {
+                    shape: i as u32,
+                    radiance,
+                });
                 Some(lights.len() as u32 - 1)
             }
             None => None,
         };
-        let shape = Shape { geometry, material, area_light };
+        let shape = Shape {
+            geometry,
+            material,
+            area_light,
+        };
         if shape.area_light.is_some() && !(shape.area() > 0.0) {
-            return Err(invalid(file, format!("shapes[{i}]"), s.kind, "an emitting shape must have a positive area"));
+            return Err(invalid(
+                file,
+                format!("shapes[{i}]"),
+                s.kind,
+                "an emitting shape must have a positive area",
+            ));
         }
         shapes.push(shape);
     }
@@ -201,25 +295,60 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
         let e = match env.kind {
             EnvironmentType::Constant => {
                 if env.path.is_some() || env.scale.is_some() || !env.transform.is_identity() {
-                    return Err(invalid(file, "environment", env.kind, "a constant environment takes only `radiance`"));
+                    return Err(invalid(
+                        file,
+                        "environment",
+                        env.kind,
+                        "a constant environment takes only `radiance`",
+                    ));
                 }
-                let radiance = env.radiance.ok_or_else(|| invalid(file, "environment.radiance", "(missing)", "a constant environment needs `radiance`"))?;
+                let radiance = env.radiance.ok_or_else(|| {
+                    invalid(
+                        file,
+                        "environment.radiance",
+                        "(missing)",
+                        "a constant environment needs `radiance`",
+                    )
+                })?;
                 let rgb = radiance.rgb();
                 if !(rgb.is_finite() && rgb.min_element() >= 0.0) {
-                    return Err(invalid(file, "environment.radiance", radiance, "radiance must be finite and >= 0"));
+                    return Err(invalid(
+                        file,
+                        "environment.radiance",
+                        radiance,
+                        "radiance must be finite and >= 0",
+                    ));
                 }
                 Environment::Constant { radiance: rgb }
             }
             EnvironmentType::Map => {
                 if env.radiance.is_some() {
-                    return Err(invalid(file, "environment.radiance", env.radiance, "a map environment takes `path`, `scale` and `transform`"));
+                    return Err(invalid(
+                        file,
+                        "environment.radiance",
+                        env.radiance,
+                        "a map environment takes `path`, `scale` and `transform`",
+                    ));
                 }
-                let path = env.path.as_ref().ok_or_else(|| invalid(file, "environment.path", "(missing)", "a map environment needs `path`"))?;
+                let path = env.path.as_ref().ok_or_else(|| {
+                    invalid(
+                        file,
+                        "environment.path",
+                        "(missing)",
+                        "a map environment needs `path`",
+                    )
+                })?;
                 let scale = env.scale.unwrap_or(1.0);
                 if !(scale.is_finite() && scale >= 0.0) {
-                    return Err(invalid(file, "environment.scale", scale, "must be finite and >= 0"));
+                    return Err(invalid(
+                        file,
+                        "environment.scale",
+                        scale,
+                        "must be finite and >= 0",
+                    ));
                 }
-                let map = load_envmap(&base.join(path), scale, &env.transform).map_err(|e| invalid(file, "environment.path", path, e))?;
+                let map = load_envmap(&base.join(path), scale, &env.transform)
+                    .map_err(|e| invalid(file, "environment.path", path, e))?;
                 Environment::Map(Box::new(map))
             }
         };
@@ -231,45 +360,98 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
             LightType::Sun => {
                 let d = Vec3::from_array(l.direction);
                 if !(d.length_squared() > 0.0 && d.is_finite()) {
-                    return Err(invalid(file, format!("lights[{i}].direction"), l.direction, "must be a non-zero vector"));
+                    return Err(invalid(
+                        file,
+                        format!("lights[{i}].direction"),
+                        l.direction,
+                        "must be a non-zero vector",
+                    ));
                 }
                 let e = l.irradiance.rgb();
                 if !(e.is_finite() && e.min_element() >= 0.0) {
-                    return Err(invalid(file, format!("lights[{i}].irradiance"), l.irradiance, "must be finite and >= 0"));
+                    return Err(invalid(
+                        file,
+                        format!("lights[{i}].irradiance"),
+                        l.irradiance,
+                        "must be finite and >= 0",
+                    ));
                 }
-                lights.push(Light::Sun { direction: d.normalize(), irradiance: e });
+                lights.push(Light::Sun {
+                    direction: d.normalize(),
+                    irradiance: e,
+                });
             }
         }
     }
 
-    Ok(Scene { camera, geometry: Geometry::new(shapes), materials, lights, environment, settings })
+    Ok(Scene {
+        camera,
+        geometry: Geometry::new(shapes),
+        materials,
+        lights,
+        environment,
+        settings,
+    })
 }
 
-fn load_envmap(path: &Path, scale: f32, transform: &crate::geometry::Transform) -> Result<interim::EnvMap, String> {
-    interim::EnvMap::load(path, scale, transform)
+/// Load an environment map and orient it: `transform` must be a rotation (directions only).
+fn load_envmap(
+    path: &Path,
+    scale: f32,
+    transform: &crate::geometry::Transform,
+) -> Result<EnvMap, String> {
+    let m = glam::Mat3::from_mat4(transform.matrix());
+    let orthonormal =
+        (m.transpose() * m).abs_diff_eq(glam::Mat3::IDENTITY, 1e-4) && m.determinant() > 0.0;
+    if !orthonormal {
+        return Err("the environment's transform must be a rotation".into());
+    }
+    let map = EnvMap::load(path).map_err(|e| e.to_string())?;
+    let map = map.with_scale(scale).map_err(|e| e.to_string())?;
+    Ok(map.with_rotation(m))
 }
 
-fn shape_geometry(s: &ShapeSection, i: usize, file: &Path, base: &Path) -> Result<ShapeGeometry, SceneError> {
+fn shape_geometry(
+    s: &ShapeSection,
+    i: usize,
+    file: &Path,
+    base: &Path,
+) -> Result<ShapeGeometry, SceneError> {
     Ok(match s.kind {
         ShapeType::Mesh => {
-            let path = s.path.as_ref().ok_or_else(|| invalid(file, format!("shapes[{i}].path"), "(missing)", "a mesh needs the path of an OBJ file"))?;
-            let mesh = TriangleMesh::from_obj(base.join(path)).map_err(|e| invalid(file, format!("shapes[{i}].path"), path, e))?;
+            let path = s.path.as_ref().ok_or_else(|| {
+                invalid(
+                    file,
+                    format!("shapes[{i}].path"),
+                    "(missing)",
+                    "a mesh needs the path of an OBJ file",
+                )
+            })?;
+            let mesh = TriangleMesh::from_obj(base.join(path))
+                .map_err(|e| invalid(file, format!("shapes[{i}].path"), path, e))?;
             ShapeGeometry::Mesh(mesh)
         }
         ShapeType::Teapot => {
             let n = s.subdivisions.unwrap_or(8);
             if !(1..=64).contains(&n) {
-                return Err(invalid(file, format!("shapes[{i}].subdivisions"), n, "must lie in 1..=64"));
+                return Err(invalid(
+                    file,
+                    format!("shapes[{i}].subdivisions"),
+                    n,
+                    "must lie in 1..=64",
+                ));
             }
             // Newell's teapot is z-up with its base at z = 0; scenes are y-up.
-            let z_up_to_y_up = crate::geometry::Transform::rotate(Vec3::X, -90.0).expect("valid rotation");
+            let z_up_to_y_up =
+                crate::geometry::Transform::rotate(Vec3::X, -90.0).expect("valid rotation");
             ShapeGeometry::Mesh(TriangleMesh::teapot(n).transformed(&z_up_to_y_up))
         }
         ShapeType::Rectangle => ShapeGeometry::Mesh(TriangleMesh::rectangle()),
         ShapeType::Box => ShapeGeometry::Mesh(TriangleMesh::cuboid()),
         ShapeType::Sphere => {
             let radius = s.radius.unwrap_or(1.0);
-            ShapeGeometry::sphere(Vec3::from_array(s.center.unwrap_or([0.0; 3])), radius).map_err(|e| invalid(file, format!("shapes[{i}].radius"), radius, e))?
+            ShapeGeometry::sphere(Vec3::from_array(s.center.unwrap_or([0.0; 3])), radius)
+                .map_err(|e| invalid(file, format!("shapes[{i}].radius"), radius, e))?
         }
     })
 }

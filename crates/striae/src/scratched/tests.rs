@@ -169,6 +169,8 @@ fn nondelta_sampler_chi2_pdf_and_weight() {
                         return None;
                     }
                     let p = b.pdf(wo, s.wi);
+                    let (fe, pe) = b.eval_pdf(wo, s.wi);
+                    assert!((pe - p).abs() <= 1e-6 * p && (fe - b.eval(wo, s.wi)).abs().max_element() <= 1e-6 * fe.max_element());
                     if (p - s.pdf).abs() > 1e-3 * p {
                         mismatch += 1;
                     }

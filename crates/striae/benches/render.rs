@@ -1,0 +1,53 @@
+//! End-to-end path tracing throughput on the built-in glass teapot scene (camera samples per
+//! second; the CLI prints the same figure plus rays/s for a full 512 x 384 render). Also the
+//! cost of one pixel sample's random numbers. Run: `cargo bench -p striae --bench render`.
+
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use std::path::Path;
+use striae::integrator::render;
+use striae::sampler::PixelSampler;
+use striae::scene::{Overrides, Scene};
+
+fn bench_render(c: &mut Criterion) {
+    let mut g = c.benchmark_group("render");
+    g.sample_size(10);
+    for (w, h, spp) in [(128u32, 96u32, 4u32), (512, 384, 1)] {
+        let o = Overrides {
+            spp: Some(spp),
+            resolution: Some((w, h)),
+            seed: Some(0),
+            max_depth: None,
+        };
+        let scene = Scene::parse(
+            striae::scene::DEFAULT_SCENE,
+            Path::new("glass-teapot.toml"),
+            Path::new("."),
+            &o,
+        )
+        .unwrap();
+        g.throughput(Throughput::Elements(w as u64 * h as u64 * spp as u64));
+        g.bench_function(format!("glass_teapot_{w}x{h}_{spp}spp"), |b| {
+            b.iter(|| render(&scene, &|_| {}))
+        });
+    }
+    g.finish();
+
+    let mut g = c.benchmark_group("sampler");
+    g.throughput(Throughput::Elements(32));
+    g.bench_function("32_dimensions", |b| {
+        let mut i = 0u32;
+        b.iter(|| {
+            i = i.wrapping_add(1);
+            let mut s = PixelSampler::new(i as u64, i & 1023, 1);
+            let mut acc = 0.0f32;
+            for _ in 0..32 {
+                acc += s.next_1d();
+            }
+            acc
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench_render);
+criterion_main!(benches);
