@@ -291,7 +291,11 @@ impl<'a> ScratchedBsdf<'a> {
             let (wo_s, wi_s) = (l.to_scratch(wo), l.to_scratch(wi));
             let (a, scale) = self.table.scaled_albedo(wo_s);
             f += (l.coverage * scale) as f64 * self.table.brdf().eval(wo_s, wi_s);
-            let pk = if self.is_glass() { l.coverage * a } else { l.coverage };
+            let pk = if self.is_glass() {
+                l.coverage * a
+            } else {
+                l.coverage
+            };
             if pk > 0.0 {
                 p += pk as f64 * self.table.brdf().pdf(wo_s, wi_s);
             }

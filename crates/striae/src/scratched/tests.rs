@@ -170,7 +170,11 @@ fn nondelta_sampler_chi2_pdf_and_weight() {
                     }
                     let p = b.pdf(wo, s.wi);
                     let (fe, pe) = b.eval_pdf(wo, s.wi);
-                    assert!((pe - p).abs() <= 1e-6 * p && (fe - b.eval(wo, s.wi)).abs().max_element() <= 1e-6 * fe.max_element());
+                    assert!(
+                        (pe - p).abs() <= 1e-6 * p
+                            && (fe - b.eval(wo, s.wi)).abs().max_element()
+                                <= 1e-6 * fe.max_element()
+                    );
                     if (p - s.pdf).abs() > 1e-3 * p {
                         mismatch += 1;
                     }
@@ -555,7 +559,10 @@ fn keys_are_validated() {
             ..LayerParams::setting(2).unwrap()
         }
     );
-    assert_eq!((r.mix, r.coverage), (LayerMix::Sum, CoverageMode::Footprint));
+    assert_eq!(
+        (r.mix, r.coverage),
+        (LayerMix::Sum, CoverageMode::Footprint)
+    );
     let TableSource::Compute(p) = r.table else {
         panic!()
     };
