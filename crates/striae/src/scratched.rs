@@ -184,7 +184,7 @@ impl std::fmt::Debug for Prepared {
 }
 
 /// `type = "scratched"` in a scene file.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScratchedMaterial {
     pub base: BaseKind,
@@ -199,6 +199,17 @@ pub struct ScratchedMaterial {
     /// Built by [`ScratchedMaterial::prepare`].
     #[serde(skip)]
     prepared: Option<Arc<Prepared>>,
+}
+
+impl std::fmt::Debug for ScratchedMaterial {
+    /// Short: scene errors quote the material, and the key they name says the rest.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{{ type = \"scratched\", base = \"{}\", .. }}",
+            format!("{:?}", self.base).to_lowercase()
+        )
+    }
 }
 
 impl PartialEq for ScratchedMaterial {
