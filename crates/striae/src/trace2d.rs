@@ -14,9 +14,18 @@
 //! for each theta slice, a weight multiplied at every wall hit by `F(cos theta * cos a)`, the
 //! Fresnel factor at the true 3D incidence cosine (exact for mirror walls of an extruded groove).
 //!
-//! Geometry is `f64`. Work items are `(phi_i, block of entry points)`; the random stream of
-//! each entry point is seeded from `(seed, phi_i index, entry index)` and the per-item
-//! histograms are summed in item order, so the output is bit-identical for any thread count.
+//! Geometry is `f64`. Work items are `(phi_i, block of entry points)`; random numbers are
+//! counter-based (SplitMix64 of `(seed, phi_i index, entry index)` and `(walk, bounce)`), and
+//! the per-item histograms are summed in item order, so the output is bit-identical for any
+//! thread count.
+//!
+//! Diffuse walls in a convex groove (V, round, trapezoid, flat) take a fast path that traces
+//! the same walks with the same random numbers: the first hit is shared by an entry's `N_r`
+//! walks, so their first bounce is classified (escape or not) by comparing the random integer
+//! with the precomputed interval of the opening's corners and binned without building the
+//! direction; walks that stay inside advance breadth-first. An optional kernel estimator
+//! ([`Estimator::Kernel`], a departure from the seed documented in `docs/table-format.md`)
+//! tabulates the exit distribution per wall position instead of walking from every entry.
 
 use crate::fresnel::FresnelLaw;
 use crate::profile::Profile;
@@ -997,8 +1006,8 @@ fn trace_block_convex<const WALLS_MODE: bool>(
                 // Only at round-off of a corner: treat as the generic tracer does.
                 if dir[1] > 0.0 {
                     let j = binner.bin(dir[0]);
-                    for c in 0..channels {
-                        part.hist[c * m + j] += w[c];
+                    for (c, wc) in w.iter().enumerate().take(channels) {
+                        part.hist[c * m + j] += wc;
                     }
                 } else {
                     part.lost += w[0];
@@ -1370,6 +1379,7 @@ mod tests {
     ///   `x = xh + (xh + 1/2) cot phi`, which is `<= 1/2` (escape after one bounce, out at
     ///   `phi_o = pi/2 - phi`, another bin) iff `x0 + 1/2 <= tan phi`; otherwise it hits R and
     ///   leaves retroreflected (steep, moving away from both walls).
+    ///
     /// Retroreflected fraction: `(1/2 - tan(phi)/2) + (tan(phi)/2 - (tan(phi) - 1/2)) =
     /// 1 - tan(phi)`; for `phi >= pi/4` both ranges are empty: 0. By symmetry, for any phi:
     /// `max(0, 1 - tan |phi|)`.
@@ -1422,12 +1432,9 @@ mod tests {
             // One walk's weight in rho units is at most M / (pi N N_r cos(phi_o)).
             let one_walk = s.m as f64 / (PI * (s.n * s.nr) as f64 * bin_centre(0, s.m).cos());
             let mut walks_moved = 0.0;
-            let pairs = [(&fast.rho_m, &slow.rho_m)].into_iter().chain(
-                fast.rho_walls
-                    .iter()
-                    .zip(slow.rho_walls.iter())
-                    .map(|(a, b)| (a, b)),
-            );
+            let pairs = [(&fast.rho_m, &slow.rho_m)]
+                .into_iter()
+                .chain(fast.rho_walls.iter().zip(slow.rho_walls.iter()));
             for (a, b) in pairs {
                 assert_eq!(a.len(), b.len());
                 for (x, y) in a.iter().zip(b) {

@@ -45,9 +45,10 @@ pub struct Args {
     seed: u64,
     /// Diffuse-wall estimator. `walks`: the seed's N_r scheme (METHOD.md 3.1). `kernel`: a
     /// departure from the seed, same expectation, lower variance and much faster: the exit
-    /// distribution from each wall position is tabulated once (256 nodes per wall, N*N_r/256
-    /// walks each) and every entry point adds the interpolated row of its first hit. Only for
-    /// diffuse walls, --fresnel seed and convex profiles (see docs/table-format.md).
+    /// distribution from each wall position is tabulated once (256 nodes per wall, walks per
+    /// node sized so that no row is noisier than with the N_r scheme) and every entry point
+    /// adds the interpolated row of its first hit. Only for diffuse walls, --fresnel seed and
+    /// convex profiles (see docs/table-format.md).
     #[arg(long, value_enum, default_value_t = EstimatorArg::Walks)]
     estimator: EstimatorArg,
     /// Worker threads (default: all cores).
