@@ -58,7 +58,8 @@ pub const FIGURE_SCENES: [(&str, &str, &str, &str); 5] = [
 pub const FIG2_PHI_I_DEG: f64 = 30.0;
 
 /// The table of Fig. 2: the glass scenes' profile (a 90-degree V groove, diffuse walls) at the
-/// seed's sizes `M = 256, N = 10000, N_r = 100` (about 30 s on 2 cores, then cached).
+/// seed's sizes `M = 256, N = 10000, N_r = 100` (about 3 s on 2 cores, then cached;
+/// the same table as the glass scenes).
 pub fn fig2_table_params() -> crate::table::TableParams {
     let profile = crate::profile::Profile::parse(crate::scratched::DEFAULT_PROFILE)
         .expect("valid built-in profile");
