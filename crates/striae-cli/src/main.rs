@@ -25,6 +25,8 @@ enum Command {
     Layers(commands::layers::Args),
     /// Render a scene file (or the built-in default scene) to EXR and PNG.
     Render(commands::render::Args),
+    /// Regenerate the seed's figures (Fig. 2, 4, 6, 7, 8a) as PNGs plus an index.html.
+    Figures(commands::figures::Args),
 }
 
 fn main() {
@@ -34,6 +36,7 @@ fn main() {
         Command::Plot(a) => commands::plot::run(a),
         Command::Layers(a) => commands::layers::run(a),
         Command::Render(a) => commands::render::run(a),
+        Command::Figures(a) => commands::figures::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -121,15 +121,47 @@ pub enum FresnelLaw {
     Dielectric { n: f64 },
     /// A conductor with complex index `eta + i k`.
     Conductor { eta: f64, k: f64 },
+    /// No Fresnel attenuation: `F = 1` at every angle (issue 5's white-furnace tests of
+    /// scratched metal; Mitsuba's perfect mirror).
+    None,
 }
 
 impl FresnelLaw {
+    /// Parse `schlick`, `dielectric` (both with index `ior`), `conductor:ETA,K` or `none` (the
+    /// syntax of `striae precompute --fresnel-law` and of the scene files' `fresnel_law`).
+    pub fn parse(s: &str, ior: f64) -> Result<FresnelLaw, String> {
+        Ok(match s.trim() {
+            "schlick" => FresnelLaw::Schlick { n: ior },
+            "dielectric" => FresnelLaw::Dielectric { n: ior },
+            "none" => FresnelLaw::None,
+            t => {
+                let Some(rest) = t.strip_prefix("conductor:") else {
+                    return Err(format!("unknown Fresnel law `{s}` (expected schlick, dielectric, conductor:ETA,K or none)"));
+                };
+                let parts: Vec<&str> = rest.split(',').collect();
+                let [eta, k] = parts[..] else {
+                    return Err(format!("`{s}`: expected conductor:ETA,K"));
+                };
+                let eta: f64 = eta
+                    .trim()
+                    .parse()
+                    .map_err(|_| format!("`{s}`: ETA `{eta}` is not a number"))?;
+                let k: f64 = k
+                    .trim()
+                    .parse()
+                    .map_err(|_| format!("`{s}`: K `{k}` is not a number"))?;
+                FresnelLaw::Conductor { eta, k }
+            }
+        })
+    }
+
     /// Reflectance for light arriving from outside at cosine `c` in `[0, 1]`.
     pub fn reflectance(&self, c: f64) -> f64 {
         match *self {
             FresnelLaw::Schlick { n } => schlick(n, c),
             FresnelLaw::Dielectric { n } => dielectric(c.clamp(0.0, 1.0), n).r,
             FresnelLaw::Conductor { eta, k } => conductor(c, eta, k),
+            FresnelLaw::None => 1.0,
         }
     }
 }

@@ -97,9 +97,9 @@ pub fn guard_shading_normal(ns: Vec3, ng: Vec3, wo: Vec3) -> Vec3 {
 }
 
 /// The material's view of a hit and the BSDF it presents there.
-pub struct Shaded {
+pub struct Shaded<'a> {
     pub ctx: ShadingContext,
-    pub bsdf: Bsdf,
+    pub bsdf: Bsdf<'a>,
     /// Position derivatives per pixel step (for the spawned ray's differentials).
     pub dpdx: Vec3,
     pub dpdy: Vec3,
@@ -109,13 +109,13 @@ pub struct Shaded {
 /// The frame handed to the material is the final one: flipped to `wo`'s side for opaque
 /// BSDFs and guarded against `wo` falling behind the shading normal (the material is asked
 /// again in those rare cases, so its BSDF always lives in `ctx.frame`).
-pub fn shade(
-    material: &Material,
+pub fn shade<'a>(
+    material: &'a Material,
     hit: &SurfaceHit,
     rd: &RayDifferential,
     wo_world: Vec3,
     u_layer: f32,
-) -> Shaded {
+) -> Shaded<'a> {
     let (dpdx, dpdy, duvdx, duvdy) = footprint(hit, rd);
     let mut ctx = ShadingContext {
         p: hit.p,
@@ -127,6 +127,7 @@ pub fn shade(
         frame: Frame::from_normal_tangent(hit.ns, hit.dpdu),
         ng: hit.ng,
         u_layer,
+        wo: wo_world,
     };
     let mut bsdf = material_bsdf(material, &ctx);
     let (mut ng, mut ns) = (hit.ng, hit.ns);

@@ -53,5 +53,9 @@ pub mod scene;
 pub mod shading;
 pub mod texture;
 
+// Issue 5: scratched glass and metal, and the seed's figures.
+pub mod figures;
+pub mod scratched;
+
 /// The crate version, stored in every table and image the crate writes.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

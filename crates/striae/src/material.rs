@@ -13,6 +13,9 @@
 //! type = "conductor"
 //! preset = "gold"                        # or eta = [r, g, b] and k = [r, g, b]
 //! roughness = 0.0                        # GGX alpha; > 0 makes it a rough conductor
+//!
+//! type = "scratched"                     # issue 5: glass or metal with scratches, see
+//! base = "glass"                         # `crate::scratched` and docs/scratched.md
 //! ```
 //!
 //! `roughness` is the GGX `alpha` (Mitsuba's `alpha`, not squared). Mitsuba's dielectric
@@ -22,8 +25,8 @@
 //! Conductor presets and their sources are listed in [`CONDUCTOR_PRESETS`]. `preset = "none"`
 //! is Mitsuba 3's perfect mirror (`eta = 0, k = 1`: `F = 1` at every angle) for furnace tests.
 //!
-//! Issue 5 adds a `Scratched` variant (a smooth dielectric or conductor base plus scratch
-//! layers): add it to [`Material`] and to the three `match`es below.
+//! The `scratched` variant holds its prepared table and layers; at a hit the scene asks it
+//! for its BSDF with the whole shading context (`scene::material_bsdf`).
 
 use crate::bsdf::{Bsdf, Conductor, Dielectric, Diffuse, RoughConductor, RoughDielectric};
 use crate::math::{Rgb, Vec2};
@@ -49,6 +52,12 @@ pub enum MaterialError {
     Texture {
         key: &'static str,
         source: TextureError,
+    },
+    /// The scratched material's table could not be obtained (issue 5).
+    #[error("`{key}`: {source}")]
+    ScratchTable {
+        key: &'static str,
+        source: Box<crate::table::TableError>,
     },
 }
 
@@ -145,6 +154,8 @@ pub enum Material {
         #[serde(default)]
         roughness: f32,
     },
+    /// A smooth glass or metal base with scratches (issue 5, [`crate::scratched`]).
+    Scratched(crate::scratched::ScratchedMaterial),
 }
 
 fn check_roughness(roughness: f32) -> Result<(), MaterialError> {
@@ -219,11 +230,16 @@ impl Material {
                 self.conductor_ior()?;
                 check_roughness(*roughness)
             }
+            Material::Scratched(m) => m.validate(),
         }
     }
 
     /// Validate and load image textures (paths relative to `base_dir`, the scene file's folder).
+    /// A scratched material also obtains its table (cache or computation) and layers here.
     pub fn prepare(&mut self, base_dir: &Path) -> Result<(), MaterialError> {
+        if let Material::Scratched(m) = self {
+            return m.prepare(base_dir);
+        }
         if let Material::Diffuse { reflectance } = self {
             reflectance
                 .load_images(base_dir)
@@ -284,7 +300,9 @@ impl Material {
 
     /// The BSDF at texture coordinates `uv`. Call on a validated material (an invalid
     /// conductor falls back to the perfect mirror).
-    pub fn bsdf_at(&self, uv: Vec2) -> Bsdf {
+    /// A scratched material gives its smooth base here (its scratches need the whole
+    /// shading context: `scene::material_bsdf`).
+    pub fn bsdf_at(&self, uv: Vec2) -> Bsdf<'_> {
         match self {
             Material::Diffuse { reflectance } => Bsdf::Diffuse(Diffuse::new(reflectance.eval(uv))),
             Material::Dielectric {
@@ -307,6 +325,7 @@ impl Material {
                     Bsdf::Conductor(Conductor::new(eta, k))
                 }
             }
+            Material::Scratched(m) => m.base_bsdf(),
         }
     }
 }

@@ -45,6 +45,9 @@ pub struct ShadingContext {
     /// A uniform random number in `[0, 1)` from the pixel's sample stream, for stochastic
     /// choices a material makes once per hit (e.g. which scratch layer where several cross).
     pub u_layer: f32,
+    /// The direction toward the viewer (`-ray.d`, world, unit). The scratched glass of issue 5
+    /// skips its layer queries for rays arriving from inside.
+    pub wo: Vec3,
 }
 
 /// `dP/dx`, `dP/dy`, `du/dx`, `dv/dx`, `du/dy`, `dv/dy` at a hit from the ray's differentials

@@ -49,6 +49,7 @@ impl TableParams {
         let ior = match self.trace.fresnel_law {
             FresnelLaw::Schlick { n } | FresnelLaw::Dielectric { n } => n,
             FresnelLaw::Conductor { eta, .. } => eta,
+            FresnelLaw::None => 1.0,
         };
         o.insert("ior".into(), ior.into());
         o.insert("format_version".into(), FORMAT_VERSION.into());

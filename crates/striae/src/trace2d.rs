@@ -194,6 +194,7 @@ impl TraceSettings {
             FresnelLaw::Conductor { eta, k } => {
                 eta.is_finite() && k.is_finite() && eta > 0.0 && k >= 0.0
             }
+            FresnelLaw::None => true,
         };
         if !law_ok {
             return bad(

@@ -1,3 +1,4 @@
+pub mod figures;
 pub mod layers;
 pub mod plot;
 pub mod precompute;

@@ -1,6 +1,6 @@
 //! `striae precompute`: trace a scratch profile and write its BRDF table (METHOD.md 2-4).
 
-use anyhow::{bail, Context};
+use anyhow::Context;
 use std::path::PathBuf;
 use std::time::Instant;
 use striae::fresnel::FresnelLaw;
@@ -32,7 +32,7 @@ pub struct Args {
     /// Where Fresnel is applied.
     #[arg(long, value_enum, default_value_t = ModeArg::Seed)]
     fresnel: ModeArg,
-    /// Fresnel law: schlick, dielectric or conductor:ETA,K.
+    /// Fresnel law: schlick, dielectric, conductor:ETA,K or none (F = 1).
     #[arg(long, default_value = "schlick")]
     fresnel_law: String,
     /// Facet albedo per bounce.
@@ -77,32 +77,9 @@ enum ModeArg {
     Walls,
 }
 
-/// Parse `--fresnel-law`.
+/// Parse `--fresnel-law` (the syntax is shared with the scene files' `fresnel_law`).
 fn parse_law(s: &str, ior: f64) -> anyhow::Result<FresnelLaw> {
-    Ok(match s {
-        "schlick" => FresnelLaw::Schlick { n: ior },
-        "dielectric" => FresnelLaw::Dielectric { n: ior },
-        _ => {
-            let Some(rest) = s.strip_prefix("conductor:") else {
-                bail!(
-                    "unknown --fresnel-law `{s}` (expected schlick, dielectric or conductor:ETA,K)"
-                )
-            };
-            let parts: Vec<&str> = rest.split(',').collect();
-            let [eta, k] = parts[..] else {
-                bail!("--fresnel-law `{s}`: expected conductor:ETA,K")
-            };
-            let eta: f64 = eta
-                .trim()
-                .parse()
-                .with_context(|| format!("--fresnel-law `{s}`: ETA `{eta}`"))?;
-            let k: f64 = k
-                .trim()
-                .parse()
-                .with_context(|| format!("--fresnel-law `{s}`: K `{k}`"))?;
-            FresnelLaw::Conductor { eta, k }
-        }
-    })
+    FresnelLaw::parse(s, ior).map_err(|e| anyhow::anyhow!("--fresnel-law: {e}"))
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {

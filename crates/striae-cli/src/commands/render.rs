@@ -1,6 +1,7 @@
-//! `striae render [SCENE.toml]`: render a scene file, or the built-in default scene (a smooth
-//! glass teapot on a checkerboard), to a linear EXR and an sRGB PNG preview, with a progress
-//! bar (samples/s, time left) and a summary (wall time, samples/s, rays/s).
+//! `striae render [SCENE.toml]`: render a scene file, or the built-in default scene (the glass
+//! teapot with the seed's setting-1 scratches, `scenes/glass-teapot-setting1.toml`), to a
+//! linear EXR and an sRGB PNG preview, with a progress bar (samples/s, time left) and a
+//! summary (wall time, samples/s, rays/s).
 
 use anyhow::{bail, Context};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -43,7 +44,7 @@ pub struct Args {
     pub quiet: bool,
 }
 
-fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
+pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("`{s}` is not WIDTHxHEIGHT (e.g. 512x384)"))?;
@@ -114,7 +115,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.scene
             .as_ref()
             .map(|p| p.display().to_string())
-            .unwrap_or_else(|| "the built-in glass teapot".into()),
+            .unwrap_or_else(|| "the built-in scratched glass teapot (setting 1)".into()),
         s.width,
         s.height,
         s.spp,

@@ -27,8 +27,8 @@
 //!   Mitsuba 3's `dielectric` in radiance mode). [`BsdfSample::eta`] reports that relative
 //!   index so Russian roulette can undo the scaling.
 //!
-//! Issue 5 adds a `Scratched` variant: add it to [`Bsdf`] and to the `match`es of the five
-//! methods in this file; nothing else depends on the list of variants.
+//! Issue 5 adds the [`Scratched`](ScratchedBsdf) variant (`scratched.rs`): it borrows the
+//! scene's scratch table, so [`Bsdf`] carries the lifetime of the material it came from.
 
 // `!(x > 0.0)` is used on purpose: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -38,10 +38,12 @@ mod dielectric;
 mod diffuse;
 mod fresnel_f32;
 pub mod microfacet;
+pub mod scratched;
 
 pub use conductor::{Conductor, ConductorIor, RoughConductor};
 pub use dielectric::{Dielectric, RoughDielectric};
 pub use diffuse::Diffuse;
+pub use scratched::{ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf};
 
 use crate::math::{Rgb, Vec2, Vec3};
 
@@ -63,15 +65,17 @@ pub struct BsdfSample {
 
 /// A BSDF evaluated at one surface point (textures already looked up).
 #[derive(Clone, Copy, Debug)]
-pub enum Bsdf {
+pub enum Bsdf<'a> {
     Diffuse(Diffuse),
     Dielectric(Dielectric),
     Conductor(Conductor),
     RoughDielectric(RoughDielectric),
     RoughConductor(RoughConductor),
+    /// A smooth dielectric or conductor with scratches (issue 5).
+    Scratched(ScratchedBsdf<'a>),
 }
 
-impl Bsdf {
+impl Bsdf<'_> {
     /// `f(wo, wi)` without the cosine (0 for delta lobes).
     #[inline]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
@@ -80,6 +84,7 @@ impl Bsdf {
             Bsdf::Dielectric(_) | Bsdf::Conductor(_) => Rgb::ZERO,
             Bsdf::RoughDielectric(b) => b.eval(wo, wi),
             Bsdf::RoughConductor(b) => b.eval(wo, wi),
+            Bsdf::Scratched(b) => b.eval(wo, wi),
         }
     }
 
@@ -91,6 +96,7 @@ impl Bsdf {
             Bsdf::Dielectric(_) | Bsdf::Conductor(_) => 0.0,
             Bsdf::RoughDielectric(b) => b.pdf(wo, wi),
             Bsdf::RoughConductor(b) => b.pdf(wo, wi),
+            Bsdf::Scratched(b) => b.pdf(wo, wi),
         }
     }
 
@@ -104,6 +110,7 @@ impl Bsdf {
             Bsdf::Dielectric(_) | Bsdf::Conductor(_) => (Rgb::ZERO, 0.0),
             Bsdf::RoughDielectric(b) => b.eval_pdf(wo, wi),
             Bsdf::RoughConductor(b) => b.eval_pdf(wo, wi),
+            Bsdf::Scratched(b) => b.eval_pdf(wo, wi),
         }
     }
 
@@ -118,6 +125,7 @@ impl Bsdf {
             Bsdf::Conductor(b) => b.sample(wo),
             Bsdf::RoughDielectric(b) => b.sample(wo, u_lobe, u),
             Bsdf::RoughConductor(b) => b.sample(wo, u),
+            Bsdf::Scratched(b) => b.sample(wo, u_lobe, u),
         }
     }
 
@@ -125,13 +133,21 @@ impl Bsdf {
     /// instead of flipping the frame).
     #[inline]
     pub fn has_transmission(&self) -> bool {
-        matches!(self, Bsdf::Dielectric(_) | Bsdf::RoughDielectric(_))
+        match self {
+            Bsdf::Dielectric(_) | Bsdf::RoughDielectric(_) => true,
+            Bsdf::Scratched(b) => b.has_transmission(),
+            _ => false,
+        }
     }
 
     /// Whether every lobe is a delta: light sampling cannot contribute and is skipped.
     #[inline]
     pub fn is_delta(&self) -> bool {
-        matches!(self, Bsdf::Dielectric(_) | Bsdf::Conductor(_))
+        match self {
+            Bsdf::Dielectric(_) | Bsdf::Conductor(_) => true,
+            Bsdf::Scratched(b) => b.is_delta(),
+            _ => false,
+        }
     }
 }
 

@@ -1,0 +1,62 @@
+//! `striae figures -o DIR [--spp N] [--res WxH]`: regenerate the seed's figures (Fig. 2, 4 a-c,
+//! 6 a-b, 7 a-b, 8 a) as PNGs plus an `index.html` showing them side by side with their
+//! parameters and render times (`striae::figures`).
+
+use anyhow::{bail, Context};
+use std::path::PathBuf;
+use std::time::Instant;
+use striae::figures::{generate, FigureOptions};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Output folder (created if missing).
+    #[arg(short = 'o', long = "out")]
+    pub out: PathBuf,
+    /// Samples per pixel of the renders (Figs. 6-8).
+    #[arg(long, default_value_t = FigureOptions::default().spp)]
+    pub spp: u32,
+    /// Render size as WIDTHxHEIGHT.
+    #[arg(long, value_parser = super::render::parse_resolution, default_value = "384x288")]
+    pub res: (u32, u32),
+    /// Side of the Fig. 4 layer images in pixels.
+    #[arg(long, default_value_t = FigureOptions::default().layer_resolution)]
+    pub layer_res: usize,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.out.exists() && !args.out.is_dir() {
+        bail!("output {} exists and is not a folder", args.out.display());
+    }
+    if args.spp == 0 {
+        bail!("--spp must be at least 1");
+    }
+    let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
+    if threads == 0 {
+        bail!("--threads must be at least 1");
+    }
+    let opts = FigureOptions {
+        spp: args.spp,
+        resolution: args.res,
+        layer_resolution: args.layer_res,
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("starting the thread pool")?;
+    let start = Instant::now();
+    let figures = pool
+        .install(|| generate(&args.out, &opts, &|line| eprintln!("{line}")))
+        .with_context(|| format!("generating the figures in {}", args.out.display()))?;
+    eprintln!(
+        "{} figures in {} ({:.1} s wall, {} thread(s)); open {}",
+        figures.len(),
+        args.out.display(),
+        start.elapsed().as_secs_f64(),
+        threads,
+        args.out.join("index.html").display()
+    );
+    Ok(())
+}

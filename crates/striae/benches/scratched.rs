@@ -1,0 +1,71 @@
+//! Cost per camera sample of scratched glass against smooth glass on the same scene (issue 5;
+//! target: at most 1.3x): the setting-1 glass teapot (Fig. 7 a, mostly background) and the
+//! setting-1 plate close-up (Fig. 8 a, glass fills the frame), each rendered with the smooth
+//! dielectric, the scratched material with footprint coverage (the default, METHOD.md section
+//! 6) and with point coverage. Single-threaded, 128 x 96 pixels, 4 spp.
+//!
+//! `cargo bench -p striae --bench scratched`; results in BENCHMARKS.md, section "Scratched".
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use std::path::Path;
+use striae::scene::{Overrides, Scene};
+
+const SCENES: [(&str, &str); 2] = [
+    (
+        "teapot-s1",
+        include_str!("../../../scenes/glass-teapot-setting1.toml"),
+    ),
+    (
+        "closeup-s1",
+        include_str!("../../../scenes/glass-plate-closeup.toml"),
+    ),
+];
+
+/// The scene text with its glass material replaced: `smooth`, or scratched with a coverage mode.
+fn variant(text: &str, kind: &str) -> String {
+    let start = text.find("[materials.glass]").expect("glass material");
+    let end = text.find("[[shapes]]").expect("shapes");
+    let material = match kind {
+        "smooth" => "[materials.glass]\ntype = \"dielectric\"\nior = 1.5\n\n".to_string(),
+        "point" => text[start..end].replace(
+            "layer_mix = \"max\"",
+            "layer_mix = \"max\"\ncoverage = \"point\"",
+        ),
+        _ => text[start..end].to_string(),
+    };
+    format!("{}{}{}", &text[..start], material, &text[end..])
+}
+
+fn bench(c: &mut Criterion) {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let o = Overrides {
+        spp: Some(4),
+        resolution: Some((128, 96)),
+        seed: Some(1),
+        max_depth: None,
+    };
+    let mut g = c.benchmark_group("scratched");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(128 * 96 * 4));
+    for (name, text) in SCENES {
+        for kind in ["smooth", "footprint", "point"] {
+            let scene =
+                Scene::parse(&variant(text, kind), Path::new(name), Path::new("."), &o).unwrap();
+            g.bench_with_input(BenchmarkId::new(name, kind), &scene, |b, s| {
+                b.iter(|| pool.install(|| striae::integrator::render(s, &|_| {})))
+            });
+        }
+    }
+    g.finish();
+}
+
+criterion_group! {
+    name = benches;
+    // No plots: criterion's plotters backend needs a system font this machine may lack.
+    config = Criterion::default().without_plots();
+    targets = bench
+}
+criterion_main!(benches);

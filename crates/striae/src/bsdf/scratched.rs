@@ -1,0 +1,429 @@
+//! The scratched BSDF (issue 5; `docs/METHOD.md` section 6, `docs/scratched.md`): a smooth
+//! dielectric (glass) or smooth conductor (metal) base mixed with the precomputed scratch BRDF
+//! of sections 3-4 by the footprint coverage of the scratch layers,
+//! `f = (1 - c) f_base + c f_scratch` ([Raymond16]'s linear combination over a footprint).
+//!
+//! * Each scratch lobe lives in its own scratch frame, a rotation of the shading frame about
+//!   the normal: `x = b = t x n` across the scratch, `y = t` along it, `z = n` (section 1). The
+//!   rotation is stored as `(cos beta, sin beta)` of the angle from the shading frame's `s` axis
+//!   to `t`, so the BSDF still works in the integrator's shading frame.
+//! * **Glass** (seen from outside, `wo.z > 0`): the scratch lobe replaces the specular
+//!   reflection; its directional albedo `a(wo) = integral f_s cos dwi` is reflected and
+//!   `1 - a(wo)` is transmitted as the smooth refraction (a delta lobe with the `1/eta^2`
+//!   radiance factor). That conserves energy exactly (up to the linear interpolation of the
+//!   albedo table in `theta_o`, [`ScratchLobeTable::albedo`]). Seen from inside (`wo.z < 0`)
+//!   the point is the base smooth dielectric: the scratches are on the outer side only, a
+//!   departure from a two-sided scratch model (the seed does not say what happens inside).
+//! * **Metal**: the same mixture with no transmission; the energy `1 - a(wo)` is absorbed by
+//!   the walls and their Fresnel factors. The scratch value is scalar (the table's Fresnel law)
+//!   times an RGB `tint` chosen by the material (see `scratched`).
+//! * Mirror-wall tables give the delta-in-theta lobe of section 6 ([`ScratchBrdf::is_delta`]):
+//!   then every lobe is a delta, light sampling is skipped and `eval`/`pdf` return 0.
+//!
+//! Sampling picks one component with probability proportional to its energy where that is
+//! known exactly, so the delta components all carry weight 1 (glass) or their Fresnel factor
+//! (metal): for glass from outside, base reflection `(1 - C) F`, transmission
+//! `(1 - C)(1 - F) + sum_k c_k (1 - a_k)`, scratch lobe `k` `c_k a_k`; for metal, base mirror
+//! `1 - C`, scratch lobe `k` `c_k` (`C = sum_k c_k`). A non-delta sample's weight is
+//! `eval cos / pdf` with `pdf(wi) = sum_k P_k pdf_k(wi)` the probability of its lobe times its
+//! density, the same value `pdf` returns, so MIS with light sampling is consistent.
+
+use super::BsdfSample;
+use crate::fresnel;
+use crate::math::{reflect_z, Rgb, Vec2, Vec3};
+use crate::table::{ScratchBrdf, ScratchTable};
+use crate::trace2d::bin_of;
+use std::f64::consts::{FRAC_PI_2, PI};
+
+/// Most scratch lobes one hit combines (`layer_mix = "sum"` keeps the largest coverages).
+pub const MAX_SCRATCH_LOBES: usize = 8;
+
+/// `theta_o` grid points of the albedo table over `[0, pi/2]`.
+pub const ALBEDO_THETA_POINTS: usize = 65;
+
+/// A scratch BRDF table ready for rendering: [`ScratchBrdf`] (eq. 3 evaluation and the section 6
+/// sampler) plus its directional albedo `a(theta_o, phi_o)` tabulated per `phi_o` bin on
+/// [`ALBEDO_THETA_POINTS`] values of `|theta_o|`.
+#[derive(Debug)]
+pub struct ScratchLobeTable {
+    brdf: ScratchBrdf,
+    /// `[phi_o bin][theta point]`.
+    albedo: Vec<f32>,
+    hash: String,
+}
+
+impl ScratchLobeTable {
+    /// Precompute the albedo table: `a(theta_o, phi_o bin o) = sum_j rho_s(theta_o, o, j) w_j`
+    /// with `w_j = integral over bin j of cos(phi) dphi = 2 sin(pi / 2M) cos(phi_j)`. This is
+    /// `integral f_s cos dwi` exactly for the smooth lobe (`f_s = (2/pi) rho_s`, and
+    /// `integral (2/pi) cos^2(theta_i) dtheta_i = 1`) and for the delta lobe (its expected
+    /// sample weight, `table::ScratchBrdf::sample`).
+    pub fn new(table: ScratchTable) -> Self {
+        let hash = table.params.hash();
+        let m = table.m;
+        let half = (PI / (2.0 * m as f64)).sin();
+        let w: Vec<f64> = table.phi.iter().map(|p| 2.0 * half * p.cos()).collect();
+        let mut albedo = vec![0.0f32; m * ALBEDO_THETA_POINTS];
+        for o in 0..m {
+            for t in 0..ALBEDO_THETA_POINTS {
+                let theta = FRAC_PI_2 * t as f64 / (ALBEDO_THETA_POINTS - 1) as f64;
+                let a: f64 = (0..m).map(|j| table.rho(theta, j, o) * w[j]).sum();
+                albedo[o * ALBEDO_THETA_POINTS + t] = a.max(0.0) as f32;
+            }
+        }
+        ScratchLobeTable {
+            brdf: ScratchBrdf::new(table),
+            albedo,
+            hash,
+        }
+    }
+
+    pub fn brdf(&self) -> &ScratchBrdf {
+        &self.brdf
+    }
+
+    pub fn table(&self) -> &ScratchTable {
+        self.brdf.table()
+    }
+
+    /// The table's parameter hash (`TableParams::hash`).
+    pub fn hash(&self) -> &str {
+        &self.hash
+    }
+
+    pub fn is_delta(&self) -> bool {
+        self.brdf.is_delta()
+    }
+
+    /// `a(wo)` for `wo` in the scratch frame (0 below the surface): the nearest `phi_o` bin
+    /// (the BRDF is piecewise constant in `phi_o`) and linear interpolation in `|theta_o|`.
+    ///
+    /// This sums a table *column* (fixed `phi_o`, over `phi_i`), while eq. (1') bounds the
+    /// *rows* (fixed `phi_i`) by 1: a lossless diffuse table is reciprocal only up to its Monte
+    /// Carlo noise, so `a` may exceed 1 by that noise (a few per cent for small tables). The
+    /// BSDF then scales the lobe by `1 / a` ([`ScratchLobeTable::scaled_albedo`]).
+    #[inline]
+    pub fn albedo(&self, wo: Vec3) -> f32 {
+        if wo.z <= 0.0 {
+            return 0.0;
+        }
+        let m = self.brdf.table().m;
+        let phi_o = (wo.x as f64).atan2(wo.z as f64);
+        let o = bin_of(phi_o, m);
+        let theta = (wo.y.clamp(-1.0, 1.0)).asin().abs();
+        let x = theta * ((ALBEDO_THETA_POINTS - 1) as f32 / std::f32::consts::FRAC_PI_2);
+        let i = (x as usize).min(ALBEDO_THETA_POINTS - 2);
+        let f = (x - i as f32).clamp(0.0, 1.0);
+        let row = &self.albedo[o * ALBEDO_THETA_POINTS..(o + 1) * ALBEDO_THETA_POINTS];
+        row[i] * (1.0 - f) + row[i + 1] * f
+    }
+
+    /// `(min(a, 1), s)` with `s = min(1, 1 / a)` the factor applied to the lobe at `wo` so that
+    /// it never reflects more than it receives (departure: noise of the table, see `albedo`).
+    #[inline]
+    pub fn scaled_albedo(&self, wo: Vec3) -> (f32, f32) {
+        let a = self.albedo(wo);
+        if a > 1.0 {
+            (1.0, 1.0 / a)
+        } else {
+            (a, 1.0)
+        }
+    }
+}
+
+/// The smooth base under the scratches.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ScratchedBase {
+    /// A smooth dielectric with relative index `eta = n_inside / n_outside`.
+    Glass { eta: f32 },
+    /// A smooth conductor.
+    Metal { ior: super::ConductorIor },
+}
+
+/// One scratch lobe at a hit: its coverage `c` of the footprint and the rotation of its scratch
+/// frame, `(cos beta, sin beta)` with `t = cos beta s + sin beta t_shading`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ScratchLobe {
+    pub coverage: f32,
+    pub cos: f32,
+    pub sin: f32,
+}
+
+impl ScratchLobe {
+    /// Shading frame to scratch frame: `x = w . b`, `b = t x n = (sin beta, -cos beta, 0)`;
+    /// `y = w . t`.
+    #[inline]
+    pub fn to_scratch(&self, w: Vec3) -> Vec3 {
+        Vec3::new(
+            self.sin * w.x - self.cos * w.y,
+            self.cos * w.x + self.sin * w.y,
+            w.z,
+        )
+    }
+
+    #[inline]
+    pub fn from_scratch(&self, v: Vec3) -> Vec3 {
+        Vec3::new(
+            self.sin * v.x + self.cos * v.y,
+            -self.cos * v.x + self.sin * v.y,
+            v.z,
+        )
+    }
+}
+
+/// The scratched BSDF at one hit (see the module notes). Built by the `scratched` material.
+#[derive(Clone, Copy, Debug)]
+pub struct ScratchedBsdf<'a> {
+    pub base: ScratchedBase,
+    pub table: &'a ScratchLobeTable,
+    /// RGB factor on the scratch lobe (metal: the base's colour; glass: 1).
+    pub tint: Rgb,
+    lobes: [ScratchLobe; MAX_SCRATCH_LOBES],
+    count: u8,
+    /// `C = sum_k c_k <= 1`.
+    total: f32,
+}
+
+impl<'a> ScratchedBsdf<'a> {
+    /// `lobes` with coverages `c_k >= 0`; at most [`MAX_SCRATCH_LOBES`] (extra ones are
+    /// ignored), rescaled so that `sum c_k <= 1` (the `sum` mode's normalisation).
+    pub fn new(
+        base: ScratchedBase,
+        table: &'a ScratchLobeTable,
+        tint: Rgb,
+        lobes: &[ScratchLobe],
+    ) -> Self {
+        let mut out = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
+        let mut count = 0;
+        let mut total = 0.0f32;
+        for l in lobes
+            .iter()
+            .filter(|l| l.coverage > 0.0)
+            .take(MAX_SCRATCH_LOBES)
+        {
+            out[count] = *l;
+            total += l.coverage.min(1.0);
+            out[count].coverage = l.coverage.min(1.0);
+            count += 1;
+        }
+        if total > 1.0 {
+            for l in &mut out[..count] {
+                l.coverage /= total;
+            }
+            total = 1.0;
+        }
+        ScratchedBsdf {
+            base,
+            table,
+            tint,
+            lobes: out,
+            count: count as u8,
+            total,
+        }
+    }
+
+    pub fn lobes(&self) -> &[ScratchLobe] {
+        &self.lobes[..self.count as usize]
+    }
+
+    /// `C = sum_k c_k`.
+    pub fn total_coverage(&self) -> f32 {
+        self.total
+    }
+
+    #[inline]
+    fn is_glass(&self) -> bool {
+        matches!(self.base, ScratchedBase::Glass { .. })
+    }
+
+    /// Probability of choosing the scratch lobe `l` (before its own sampling): `c a(wo)` for
+    /// glass, `c` for metal.
+    #[inline]
+    fn lobe_probability(&self, l: &ScratchLobe, wo_s: Vec3) -> f32 {
+        if self.is_glass() {
+            l.coverage * self.table.scaled_albedo(wo_s).0
+        } else {
+            l.coverage
+        }
+    }
+
+    /// `sum_k c_k f_s,k(wo, wi)` times the tint (0 for delta tables, for `wo` inside glass and
+    /// for any pair not both above the surface).
+    #[inline]
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
+        if self.table.is_delta() || wo.z <= 0.0 || wi.z <= 0.0 {
+            return Rgb::ZERO;
+        }
+        let mut f = 0.0f64;
+        for l in self.lobes() {
+            let wo_s = l.to_scratch(wo);
+            let scale = self.table.scaled_albedo(wo_s).1;
+            f += (l.coverage * scale) as f64 * self.table.brdf().eval(wo_s, l.to_scratch(wi));
+        }
+        self.tint * f as f32
+    }
+
+    /// `sum_k P_k pdf_k(wi)`: the probability of each lobe times its solid-angle density.
+    #[inline]
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        if self.table.is_delta() || wo.z <= 0.0 || wi.z <= 0.0 {
+            return 0.0;
+        }
+        let mut p = 0.0f64;
+        for l in self.lobes() {
+            let wo_s = l.to_scratch(wo);
+            let pk = self.lobe_probability(l, wo_s);
+            if pk > 0.0 {
+                p += pk as f64 * self.table.brdf().pdf(wo_s, l.to_scratch(wi));
+            }
+        }
+        p as f32
+    }
+
+    /// `(eval, pdf)` in one pass over the lobes (shared scratch-frame transforms and albedo).
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        if self.table.is_delta() || wo.z <= 0.0 || wi.z <= 0.0 {
+            return (Rgb::ZERO, 0.0);
+        }
+        let (mut f, mut p) = (0.0f64, 0.0f64);
+        for l in self.lobes() {
+            let (wo_s, wi_s) = (l.to_scratch(wo), l.to_scratch(wi));
+            let (a, scale) = self.table.scaled_albedo(wo_s);
+            f += (l.coverage * scale) as f64 * self.table.brdf().eval(wo_s, wi_s);
+            let pk = if self.is_glass() {
+                l.coverage * a
+            } else {
+                l.coverage
+            };
+            if pk > 0.0 {
+                p += pk as f64 * self.table.brdf().pdf(wo_s, wi_s);
+            }
+        }
+        (self.tint * f as f32, p as f32)
+    }
+
+    /// See the module notes for the component probabilities. `u_lobe` picks the component,
+    /// `u` drives the scratch lobe's sampler.
+    #[inline]
+    pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+        match self.base {
+            ScratchedBase::Glass { eta } => {
+                if wo.z <= 0.0 {
+                    return super::Dielectric::new(eta).sample(wo, u_lobe);
+                }
+                let fr = fresnel::dielectric(wo.z as f64, eta as f64);
+                let base = 1.0 - self.total;
+                let p_reflect = base * fr.r as f32;
+                if u_lobe < p_reflect {
+                    return Some(BsdfSample {
+                        wi: reflect_z(wo),
+                        weight: Rgb::ONE,
+                        pdf: p_reflect,
+                        delta: true,
+                        eta: 1.0,
+                    });
+                }
+                let mut p_scatter = [0.0f32; MAX_SCRATCH_LOBES];
+                let mut p_transmit = base * (1.0 - fr.r as f32);
+                for (k, l) in self.lobes().iter().enumerate() {
+                    let pk = self.lobe_probability(l, l.to_scratch(wo));
+                    p_scatter[k] = pk;
+                    p_transmit += l.coverage - pk;
+                }
+                let mut acc = p_reflect + p_transmit;
+                if u_lobe < acc || self.count == 0 {
+                    let eta_it = fr.eta_it as f32;
+                    let eta_ti = 1.0 / eta_it;
+                    let wi = Vec3::new(-eta_ti * wo.x, -eta_ti * wo.y, fr.cos_theta_t as f32);
+                    return Some(BsdfSample {
+                        wi,
+                        weight: Rgb::splat(eta_ti * eta_ti),
+                        pdf: p_transmit,
+                        delta: true,
+                        eta: eta_it,
+                    });
+                }
+                let count = self.count as usize;
+                for (k, &pk) in p_scatter[..count].iter().enumerate() {
+                    acc += pk;
+                    if u_lobe < acc || k + 1 == count {
+                        return self.sample_lobe(k, wo, pk, u);
+                    }
+                }
+                None
+            }
+            ScratchedBase::Metal { ior } => {
+                if wo.z <= 0.0 {
+                    return None;
+                }
+                let base = 1.0 - self.total;
+                if u_lobe < base || self.count == 0 {
+                    return Some(BsdfSample {
+                        wi: reflect_z(wo),
+                        weight: ior.fresnel(wo.z),
+                        pdf: base,
+                        delta: true,
+                        eta: 1.0,
+                    });
+                }
+                let mut acc = base;
+                for k in 0..self.count as usize {
+                    let pk = self.lobes[k].coverage;
+                    acc += pk;
+                    if u_lobe < acc || k + 1 == self.count as usize {
+                        return self.sample_lobe(k, wo, pk, u);
+                    }
+                }
+                None
+            }
+        }
+    }
+
+    /// Sample scratch lobe `k`, chosen with probability `pk`.
+    #[inline]
+    fn sample_lobe(&self, k: usize, wo: Vec3, pk: f32, u: Vec2) -> Option<BsdfSample> {
+        if !(pk > 0.0) {
+            return None;
+        }
+        let l = &self.lobes[k];
+        let wo_s = l.to_scratch(wo);
+        let s = self.table.brdf().sample(wo_s, [u.x as f64, u.y as f64])?;
+        let wi = l.from_scratch(s.wi);
+        if s.delta {
+            // Coefficient c_k s value / (P_k pmf): glass P_k = c_k a_k, metal P_k = c_k.
+            let scale = self.table.scaled_albedo(wo_s).1;
+            let w = (s.weight * (l.coverage * scale / pk) as f64) as f32;
+            return Some(BsdfSample {
+                wi,
+                weight: self.tint * w,
+                pdf: pk * s.pdf as f32,
+                delta: true,
+                eta: 1.0,
+            });
+        }
+        let pdf = self.pdf(wo, wi);
+        if !(pdf > 0.0) || wi.z <= 0.0 {
+            return None;
+        }
+        let f = self.eval(wo, wi);
+        Some(BsdfSample {
+            wi,
+            weight: f * (wi.z / pdf),
+            pdf,
+            delta: false,
+            eta: 1.0,
+        })
+    }
+
+    #[inline]
+    pub fn has_transmission(&self) -> bool {
+        self.is_glass()
+    }
+
+    /// Every lobe is a delta when the table is a mirror-wall one.
+    #[inline]
+    pub fn is_delta(&self) -> bool {
+        self.table.is_delta()
+    }
+}

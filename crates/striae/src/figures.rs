@@ -1,0 +1,446 @@
+//! The seed's figures, regenerated (issue 5; `docs/METHOD.md` section 7): Fig. 2 (the polar
+//! lobe of the averaged 2D scratch BRDF for one incident angle), Fig. 4 (a, b, c: cell noise,
+//! after rotation and stretch, after the threshold), Fig. 6 (a, b: the scratched glass plate at
+//! settings 1 and 2), Fig. 7 (a, b: the scratched glass teapot) and Fig. 8 (a: a close-up of the
+//! setting-1 plate), as PNGs plus an `index.html` that shows them side by side with their
+//! parameters and render times. `striae figures -o DIR` is the command.
+//!
+//! The renders use the shipped scene files (embedded here, so the figures do not depend on the
+//! working directory) at the caller's resolution and samples per pixel. Fig. 2 plots the
+//! profile the glass scenes use (a 90-degree V groove with diffuse walls) at `phi_i = 30`
+//! degrees, traced at the seed's sizes (`M 256, N 10000, N_r 100`; cached after the first run);
+//! Fig. 4 shows layer 0 of a setting-2 layer set (setting 1's scratches, 0.0002 wide, are
+//! thinner than a texel of a 512-pixel image and would barely show).
+
+use crate::film::FilmError;
+use crate::layers::{raster, LayerError, LayerParams, LayerSet};
+use crate::material::Material;
+use crate::plot::PlotError;
+use crate::scene::{Overrides, Scene, SceneError};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// The scenes of Figs. 6-8: `(id, caption, file name, text)`.
+pub const FIGURE_SCENES: [(&str, &str, &str, &str); 5] = [
+    (
+        "fig6a",
+        "Fig. 6 (a): glass plate, setting 1",
+        "glass-plate-setting1.toml",
+        include_str!("../../../scenes/glass-plate-setting1.toml"),
+    ),
+    (
+        "fig6b",
+        "Fig. 6 (b): glass plate, setting 2",
+        "glass-plate-setting2.toml",
+        include_str!("../../../scenes/glass-plate-setting2.toml"),
+    ),
+    (
+        "fig7a",
+        "Fig. 7 (a): glass teapot, setting 1",
+        "glass-teapot-setting1.toml",
+        include_str!("../../../scenes/glass-teapot-setting1.toml"),
+    ),
+    (
+        "fig7b",
+        "Fig. 7 (b): glass teapot, setting 2",
+        "glass-teapot-setting2.toml",
+        include_str!("../../../scenes/glass-teapot-setting2.toml"),
+    ),
+    (
+        "fig8a",
+        "Fig. 8 (a): close-up of the setting-1 plate",
+        "glass-plate-closeup.toml",
+        include_str!("../../../scenes/glass-plate-closeup.toml"),
+    ),
+];
+
+/// Incident angle of Fig. 2 (degrees).
+pub const FIG2_PHI_I_DEG: f64 = 30.0;
+
+/// The table of Fig. 2: the glass scenes' profile (a 90-degree V groove, diffuse walls) at the
+/// seed's sizes `M = 256, N = 10000, N_r = 100` (about 3 s on 2 cores, then cached;
+/// the same table as the glass scenes).
+pub fn fig2_table_params() -> crate::table::TableParams {
+    let profile = crate::profile::Profile::parse(crate::scratched::DEFAULT_PROFILE)
+        .expect("valid built-in profile");
+    crate::table::TableParams::new(profile, crate::trace2d::TraceSettings::default())
+}
+
+/// What to generate.
+#[derive(Clone, Debug)]
+pub struct FigureOptions {
+    /// Samples per pixel of the renders.
+    pub spp: u32,
+    /// Render resolution.
+    pub resolution: (u32, u32),
+    /// Side of the Fig. 4 images.
+    pub layer_resolution: usize,
+}
+
+impl Default for FigureOptions {
+    /// Sized to finish in a few minutes on 2 cores (`BENCHMARKS.md`).
+    fn default() -> Self {
+        FigureOptions {
+            spp: 32,
+            resolution: (384, 288),
+            layer_resolution: 512,
+        }
+    }
+}
+
+/// One generated figure.
+#[derive(Clone, Debug)]
+pub struct Figure {
+    pub id: String,
+    pub caption: String,
+    /// PNG file name inside the output folder.
+    pub file: String,
+    /// Parameters, one `key: value` per entry.
+    pub params: Vec<(String, String)>,
+    /// Wall time to make it (render, plot or raster), seconds.
+    pub seconds: f64,
+}
+
+/// Why the figures could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum FigureError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Plot(#[from] PlotError),
+    #[error(transparent)]
+    Layer(#[from] LayerError),
+    #[error(transparent)]
+    Film(#[from] FilmError),
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error(transparent)]
+    Table(Box<crate::table::TableError>),
+    #[error("scene {0} has no scratched material")]
+    NoScratches(String),
+}
+
+fn io(path: &Path) -> impl Fn(std::io::Error) -> FigureError + '_ {
+    move |source| FigureError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// The parameters of a scene's scratched material, for the captions.
+fn scratch_params(scene: &Scene, name: &str) -> Result<Vec<(String, String)>, FigureError> {
+    let m = scene
+        .materials
+        .iter()
+        .find_map(|m| match m {
+            Material::Scratched(s) => s.prepared(),
+            _ => None,
+        })
+        .ok_or_else(|| FigureError::NoScratches(name.to_string()))?;
+    let t = &m.table.table().params;
+    let l = m.layers.params();
+    Ok(vec![
+        ("base".into(), format!("{:?}", m.base)),
+        (
+            "scratch length L / width W / threshold tau".into(),
+            format!("{} / {} / {}", l.length, l.width, l.threshold),
+        ),
+        (
+            "layers".into(),
+            format!("{} (seed {}, mix {:?})", l.layers, m.layers.seed(), m.mix),
+        ),
+        ("profile".into(), t.profile.spec.clone()),
+        (
+            "table".into(),
+            format!(
+                "{:?} walls, Fresnel {:?} ({:?}), M {} N {} N_r {}",
+                t.trace.walls,
+                t.trace.fresnel_mode,
+                t.trace.fresnel_law,
+                t.trace.m,
+                t.trace.n,
+                t.trace.nr
+            ),
+        ),
+    ])
+}
+
+/// Generate every figure into `dir` (created if missing) and write `index.html`. `log`
+/// receives one line per step.
+pub fn generate(
+    dir: &Path,
+    opts: &FigureOptions,
+    log: &dyn Fn(&str),
+) -> Result<Vec<Figure>, FigureError> {
+    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    let overrides = Overrides {
+        spp: Some(opts.spp),
+        resolution: Some(opts.resolution),
+        seed: None,
+        max_depth: None,
+    };
+    let mut figures = Vec::new();
+
+    // Fig. 2: the lobe of the glass scenes' profile at the seed's table size.
+    let start = Instant::now();
+    let params = fig2_table_params();
+    let table =
+        crate::scratched::obtain_table(&params).map_err(|e| FigureError::Table(Box::new(e)))?;
+    let file = "fig2-lobe.png".to_string();
+    crate::plot::plot_lobe(table.table(), FIG2_PHI_I_DEG, &dir.join(&file))?;
+    let t = &params.trace;
+    let params = vec![
+        ("profile".to_string(), params.profile.spec.clone()),
+        (
+            "table".to_string(),
+            format!(
+                "{:?} walls, M {} N {} N_r {} (the seed's sizes)",
+                t.walls, t.m, t.n, t.nr
+            ),
+        ),
+        (
+            "phi_i".to_string(),
+            format!("{FIG2_PHI_I_DEG} degrees (the nearest bin centre)"),
+        ),
+    ];
+    let seconds = start.elapsed().as_secs_f64();
+    log(&format!("fig2: lobe at phi_i = {FIG2_PHI_I_DEG} deg ({seconds:.2} s, table computed or read from the cache)"));
+    figures.push(Figure {
+        id: "fig2".into(),
+        caption: "Fig. 2: the 2D scratch BRDF rho_m(phi_o, phi_i), polar plot".into(),
+        file,
+        params,
+        seconds,
+    });
+
+    // Fig. 4: the stages of layer 0 of a setting-2 set.
+    let lp = LayerParams::setting(2)?;
+    let set = LayerSet::new(lp, 1)?;
+    let layer = &set.layers()[0];
+    let res = opts.layer_resolution;
+    let lparams = vec![
+        (
+            "setting".to_string(),
+            format!("2 (L {} W {} tau {})", lp.length, lp.width, lp.threshold),
+        ),
+        (
+            "layer".to_string(),
+            format!(
+                "0 of seed 1, alpha = {:.1} degrees",
+                layer.angle().to_degrees()
+            ),
+        ),
+        ("resolution".to_string(), format!("{res} x {res}")),
+    ];
+    let stages: [(&str, &str, &str); 3] = [
+        (
+            "fig4a",
+            "Fig. 4 (a): Worley cell noise (1 - F1)",
+            "fig4a-noise.png",
+        ),
+        (
+            "fig4b",
+            "Fig. 4 (b): rotated by alpha, stretched by (L, W)",
+            "fig4b-stretched.png",
+        ),
+        (
+            "fig4c",
+            "Fig. 4 (c): thresholded, F1 < tau (scratch coverage)",
+            "fig4c-threshold.png",
+        ),
+    ];
+    for (i, (id, caption, file)) in stages.iter().enumerate() {
+        let start = Instant::now();
+        let png = match i {
+            0 => raster::encode_png(
+                res,
+                &raster::to_u8(&raster::stage_noise(layer, res)?),
+                1,
+                "Fig. 4 a",
+            )?,
+            1 => raster::encode_png(
+                res,
+                &raster::to_u8(&raster::stage_stretched(layer, res)?),
+                1,
+                "Fig. 4 b",
+            )?,
+            _ => set.rasterize(0, res)?.to_png()?,
+        };
+        let path = dir.join(file);
+        crate::io::write_atomically(&path, |tmp| std::fs::write(tmp, &png)).map_err(io(&path))?;
+        let seconds = start.elapsed().as_secs_f64();
+        log(&format!("{id}: {file} ({seconds:.2} s)"));
+        figures.push(Figure {
+            id: id.to_string(),
+            caption: caption.to_string(),
+            file: file.to_string(),
+            params: lparams.clone(),
+            seconds,
+        });
+    }
+
+    // Figs. 6-8: renders.
+    for (id, caption, name, text) in FIGURE_SCENES {
+        let start = Instant::now();
+        let scene = Scene::parse(text, Path::new(name), Path::new("."), &overrides)?;
+        let mut params = scratch_params(&scene, name)?;
+        let load = start.elapsed().as_secs_f64();
+        let (image, stats) = crate::integrator::render(&scene, &|_| {});
+        let file = format!("{id}.png");
+        image.write_png(&dir.join(&file), scene.settings.exposure)?;
+        let seconds = start.elapsed().as_secs_f64();
+        let s = &scene.settings;
+        params.insert(0, ("scene".into(), format!("scenes/{name}")));
+        params.push((
+            "render".into(),
+            format!(
+                "{} x {}, {} spp, max depth {}, seed {}",
+                s.width, s.height, s.spp, s.max_depth, s.seed
+            ),
+        ));
+        params.push((
+            "time".into(),
+            format!(
+                "{:.2} s render ({:.3} M samples/s, {:.2} M rays/s) + {:.2} s scene and table",
+                stats.seconds,
+                stats.samples_per_second() / 1e6,
+                stats.rays_per_second() / 1e6,
+                load
+            ),
+        ));
+        log(&format!(
+            "{id}: {name} at {}x{}, {} spp in {seconds:.2} s",
+            s.width, s.height, s.spp
+        ));
+        figures.push(Figure {
+            id: id.into(),
+            caption: caption.into(),
+            file,
+            params,
+            seconds,
+        });
+    }
+
+    let html = index_html(&figures, opts);
+    let path = dir.join("index.html");
+    crate::io::write_atomically(&path, |tmp| std::fs::write(tmp, html.as_bytes()))
+        .map_err(io(&path))?;
+    log(&format!("wrote {}", path.display()));
+    Ok(figures)
+}
+
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// The page: one row per figure group, images side by side, each with its caption, parameters
+/// and time.
+pub fn index_html(figures: &[Figure], opts: &FigureOptions) -> String {
+    let groups: [(&str, &[&str]); 5] = [
+        ("Fig. 2: the scratch BRDF lobe", &["fig2"]),
+        (
+            "Fig. 4: scratch layer from cell noise",
+            &["fig4a", "fig4b", "fig4c"],
+        ),
+        ("Fig. 6: scratched glass plate", &["fig6a", "fig6b"]),
+        ("Fig. 7: scratched glass teapot", &["fig7a", "fig7b"]),
+        ("Fig. 8: close-up", &["fig8a"]),
+    ];
+    let total: f64 = figures.iter().map(|f| f.seconds).sum();
+    let mut h = String::new();
+    h.push_str("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>striae: the seed's figures</title>\n<style>\n");
+    h.push_str(
+        "body { background: #1b1c1f; color: #ddd; font-family: sans-serif; margin: 2em; }\n",
+    );
+    h.push_str(".row { display: flex; flex-wrap: wrap; gap: 1.5em; margin-bottom: 2em; }\n");
+    h.push_str("figure { margin: 0; max-width: 520px; } img { max-width: 100%; border: 1px solid #444; }\n");
+    h.push_str("figcaption { font-size: 0.85em; } dt { color: #9ab; } dd { margin: 0 0 0.3em 1em; }\n</style>\n</head>\n<body>\n");
+    h.push_str(&format!(
+        "<h1>Rendering scratches on transparent objects: the seed's figures</h1>\n<p>Generated by striae {} (<code>striae figures</code>), renders at {} x {}, {} spp; {:.1} s in all. Method: docs/METHOD.md; scratched material: docs/scratched.md.</p>\n",
+        crate::VERSION,
+        opts.resolution.0,
+        opts.resolution.1,
+        opts.spp,
+        total
+    ));
+    for (title, ids) in groups {
+        h.push_str(&format!(
+            "<h2>{}</h2>\n<div class=\"row\">\n",
+            escape(title)
+        ));
+        for id in ids {
+            let Some(f) = figures.iter().find(|f| f.id == *id) else {
+                continue;
+            };
+            h.push_str(&format!(
+                "<figure><img src=\"{}\" alt=\"{}\"><figcaption><b>{}</b><dl>\n",
+                escape(&f.file),
+                escape(&f.caption),
+                escape(&f.caption)
+            ));
+            for (k, v) in &f.params {
+                h.push_str(&format!("<dt>{}</dt><dd>{}</dd>\n", escape(k), escape(v)));
+            }
+            h.push_str(&format!(
+                "<dt>made in</dt><dd>{:.2} s</dd>\n</dl></figcaption></figure>\n",
+                f.seconds
+            ));
+        }
+        h.push_str("</div>\n");
+    }
+    h.push_str("</body>\n</html>\n");
+    h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn figure_scenes_parse_and_have_scratches() {
+        // Every embedded scene is valid and scratched (tables are cached on disk after the
+        // first run; the default sizes compute in about a second).
+        for (_, _, name, text) in FIGURE_SCENES {
+            let o = Overrides {
+                spp: Some(1),
+                resolution: Some((8, 6)),
+                seed: None,
+                max_depth: None,
+            };
+            let scene = Scene::parse(text, Path::new(name), Path::new("."), &o)
+                .unwrap_or_else(|e| panic!("{name}: {e}"));
+            let p = scratch_params(&scene, name).unwrap();
+            assert!(p.iter().any(|(k, _)| k == "layers"));
+        }
+    }
+
+    #[test]
+    fn index_lists_every_figure_with_escaped_text() {
+        let figs = vec![
+            Figure {
+                id: "fig2".into(),
+                caption: "a <b>".into(),
+                file: "fig2-lobe.png".into(),
+                params: vec![("k".into(), "v & w".into())],
+                seconds: 1.5,
+            },
+            Figure {
+                id: "fig6a".into(),
+                caption: "plate".into(),
+                file: "fig6a.png".into(),
+                params: vec![],
+                seconds: 2.0,
+            },
+        ];
+        let h = index_html(&figs, &FigureOptions::default());
+        assert!(h.contains("src=\"fig2-lobe.png\"") && h.contains("src=\"fig6a.png\""));
+        assert!(h.contains("a &lt;b&gt;") && h.contains("v &amp; w"));
+        assert!(h.contains("3.5 s in all"));
+    }
+}
