@@ -76,10 +76,12 @@ impl TableParams {
     }
 
     /// A stable SHA-256 (hex) of what determines the table's values: the format version, the
-    /// profile's vertices (not its spec or file name) and the trace settings. For on-disk caches.
+    /// tracer version ([`crate::trace2d::TRACER_VERSION`]), the profile's vertices (not its spec
+    /// or file name) and the trace settings. For on-disk caches.
     pub fn hash(&self) -> String {
         let key = serde_json::json!({
             "format_version": FORMAT_VERSION,
+            "tracer_version": crate::trace2d::TRACER_VERSION,
             "profile_points": self.profile.points,
             "trace": self.trace,
         });
