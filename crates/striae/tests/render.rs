@@ -4,27 +4,11 @@
 
 use std::path::Path;
 use striae::film::Image;
-use striae::integrator::{render, RenderStats};
 use striae::scene::{Overrides, Scene, SceneError};
 use striae::testing::MeanEstimate;
 
-fn scene(text: &str) -> Scene {
-    Scene::parse(
-        text,
-        Path::new("test.toml"),
-        Path::new("."),
-        &Overrides::default(),
-    )
-    .unwrap_or_else(|e| panic!("{e}"))
-}
-
-fn render_with_threads(scene: &Scene, threads: usize) -> (Image, RenderStats) {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap()
-        .install(|| render(scene, &|_| {}))
-}
+mod common;
+use common::{render_with_threads, scene};
 
 /// Mean over the pixels inside a centred square of side `frac` of the image (each pixel is an
 /// independent estimate), per channel.

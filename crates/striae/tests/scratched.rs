@@ -5,30 +5,14 @@
 
 use std::path::Path;
 use striae::bsdf::Bsdf;
-use striae::film::Image;
-use striae::integrator::{render, trace_contexts, RenderStats};
+use striae::integrator::trace_contexts;
 use striae::material::Material;
 use striae::math::Vec2;
 use striae::scene::{material_bsdf, Overrides, Scene};
 use striae::testing::MeanEstimate;
 
-fn scene(text: &str) -> Scene {
-    Scene::parse(
-        text,
-        Path::new("test.toml"),
-        Path::new("."),
-        &Overrides::default(),
-    )
-    .unwrap_or_else(|e| panic!("{e}"))
-}
-
-fn render_with_threads(scene: &Scene, threads: usize) -> (Image, RenderStats) {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap()
-        .install(|| render(scene, &|_| {}))
-}
+mod common;
+use common::{render_with_threads, scene};
 
 /// A unit sphere of `material` (TOML body of `[materials.m]`, then `scratches`) filling the
 /// view in a uniform white environment.
