@@ -19,6 +19,7 @@ use obvhs::cwbvh::builder::build_cwbvh;
 use obvhs::cwbvh::CwBvh;
 use obvhs::BvhBuildParams;
 
+use super::bvh4::Bvh4;
 use super::sphere::{intersect_sphere, sphere_surface};
 use super::{Shape, ShapeGeometry, SurfaceHit};
 use crate::math::{Ray, Vec3};
@@ -134,8 +135,10 @@ impl WatertightRay {
 /// measurement behind the default).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum BvhKind {
-    /// Compressed 8-wide BVH (Ylitie et al. 2017), SIMD node tests.
+    /// 4-wide BVH with SSE box tests collapsed from obvhs' binary BVH ([`super::bvh4`]).
     #[default]
+    Bvh4,
+    /// Compressed 8-wide BVH (Ylitie et al. 2017), SIMD node tests.
     Cwbvh,
     /// Binary BVH with collapsed leaves.
     Bvh2,
@@ -145,6 +148,7 @@ enum Accel {
     None,
     Cwbvh(CwBvh),
     Bvh2(Bvh2),
+    Bvh4(Bvh4),
 }
 
 /// obvhs' CWBVH node test clamps a box's entry distance to at least `1e-4`
@@ -152,6 +156,9 @@ enum Accel {
 /// skipped. Traversal therefore starts the ray `CWBVH_SHIFT` (in units of `t`) behind its origin
 /// and reports `t + CWBVH_SHIFT` to obvhs; the primitive tests use the true origin.
 const CWBVH_SHIFT: f32 = 2e-4;
+
+/// Most primitives per leaf of the binary BVH that [`BvhKind::Bvh4`] collapses.
+const BVH4_LEAF_PRIMS: u32 = 4;
 
 /// Shapes with the BVH over their primitives.
 pub struct Geometry {
@@ -233,6 +240,19 @@ impl Geometry {
                 let order = bvh.primitive_indices.clone();
                 (Accel::Bvh2(bvh), order)
             }
+            BvhKind::Bvh4 => {
+                let params = BvhBuildParams {
+                    max_prims_per_leaf: BVH4_LEAF_PRIMS,
+                    ..params
+                };
+                let bvh = build_bvh2(&aabbs, params, &mut Duration::default());
+                let order = bvh.primitive_indices.clone();
+                match Bvh4::from_bvh2(&bvh) {
+                    Some(bvh4) => (Accel::Bvh4(bvh4), order),
+                    // Too deep for the BVH4's fixed stack: keep the binary BVH.
+                    None => (Accel::Bvh2(bvh), order),
+                }
+            }
         };
         // Primitives in BVH order: traversal indexes them directly.
         let prims = order.iter().map(|&i| prims[i as usize]).collect();
@@ -298,6 +318,16 @@ impl Geometry {
                     },
                 );
             }
+            Accel::Bvh4(bvh) => {
+                bvh.closest(ray.o, ray.d, ray.t_max, |first, count, t_max| {
+                    for id in first..first + count {
+                        if let Some((t, b1, b2)) = self.hit_prim(&wray, ray, id, *t_max) {
+                            best = Some((id, t, b1, b2));
+                            *t_max = t;
+                        }
+                    }
+                });
+            }
             Accel::Bvh2(bvh) => {
                 bvh.ray_traverse(Self::obvhs_ray(ray, 0.0), &mut hit, |_, id| {
                     match self.hit_prim(&wray, ray, id, t_max) {
@@ -331,6 +361,9 @@ impl Geometry {
                 !bvh.ray_traverse_miss(Self::obvhs_ray(ray, CWBVH_SHIFT), |_, id| test(id))
             }
             Accel::Bvh2(bvh) => !bvh.ray_traverse_miss(Self::obvhs_ray(ray, 0.0), |_, id| test(id)),
+            Accel::Bvh4(bvh) => bvh.any(ray.o, ray.d, ray.t_max, |first, count| {
+                (first..first + count).any(|id| test(id).is_finite())
+            }),
         }
     }
 

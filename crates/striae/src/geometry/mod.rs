@@ -13,6 +13,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod bvh;
+mod bvh4;
 pub mod mesh;
 pub mod obj;
 pub mod sphere;
