@@ -16,6 +16,8 @@
 //!   `(node, entry distance)` pairs culled against the current closest `t`); any-hit with an
 //!   early exit. Leaves are contiguous ranges of primitives, tested by the caller's closure.
 
+use std::mem::MaybeUninit;
+
 use glam::Vec4;
 use obvhs::bvh2::Bvh2;
 
@@ -195,7 +197,7 @@ impl Bvh4 {
         mut leaf: impl FnMut(usize, usize, &mut f32),
     ) {
         let ray = BoxRay::new(o, d);
-        let mut stack = [(0u32, 0.0f32); STACK];
+        let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
         let mut sp = 0usize;
         let mut cur = 0u32;
         loop {
@@ -220,7 +222,7 @@ impl Bvh4 {
                         n += 1;
                     }
                     for &h in hits[1..n].iter().rev() {
-                        stack[sp] = h;
+                        stack[sp].write(h);
                         sp += 1;
                     }
                     cur = hits[0].0;
@@ -237,7 +239,8 @@ impl Bvh4 {
                     return;
                 }
                 sp -= 1;
-                let (c, t) = stack[sp];
+                // SAFETY: entries below `sp` were written (pushes write before incrementing).
+                let (c, t) = unsafe { stack[sp].assume_init() };
                 if t <= t_max {
                     cur = c;
                     break;
@@ -257,7 +260,7 @@ impl Bvh4 {
         mut leaf: impl FnMut(usize, usize) -> bool,
     ) -> bool {
         let ray = BoxRay::new(o, d);
-        let mut stack = [0u32; STACK];
+        let mut stack = [MaybeUninit::<u32>::uninit(); STACK];
         let mut sp = 0usize;
         let mut cur = 0u32;
         loop {
@@ -271,7 +274,7 @@ impl Bvh4 {
                     while mask != 0 {
                         let l = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
-                        stack[sp] = node.child[l];
+                        stack[sp].write(node.child[l]);
                         sp += 1;
                     }
                     continue;
@@ -287,7 +290,8 @@ impl Bvh4 {
                 return false;
             }
             sp -= 1;
-            cur = stack[sp];
+            // SAFETY: entries below `sp` were written (pushes write before incrementing).
+            cur = unsafe { stack[sp].assume_init() };
         }
     }
 }
