@@ -205,10 +205,28 @@ impl Bvh4 {
                 let node = &self.nodes[cur as usize];
                 let (t_near, mut mask) = ray.test(node, t_max);
                 if mask != 0 {
-                    // Hit children sorted by entry distance, nearest first.
+                    // Usually one child is hit (visit it), sometimes two (push the farther):
+                    // only three or four hits take the general sort.
+                    let lane0 = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    if mask == 0 {
+                        cur = node.child[lane0];
+                        continue;
+                    }
                     let t = t_near.to_array();
-                    let mut hits = [(0u32, 0.0f32); 4];
-                    let mut n = 0;
+                    let lane1 = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    let (h0, h1) = ((node.child[lane0], t[lane0]), (node.child[lane1], t[lane1]));
+                    let (near, far) = if h1.1 < h0.1 { (h1, h0) } else { (h0, h1) };
+                    if mask == 0 {
+                        stack[sp].write(far);
+                        sp += 1;
+                        cur = near.0;
+                        continue;
+                    }
+                    // Three or four: insertion sort, nearest first.
+                    let mut hits = [near, far, (0, 0.0), (0, 0.0)];
+                    let mut n = 2;
                     while mask != 0 {
                         let lane = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
