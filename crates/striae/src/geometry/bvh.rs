@@ -1,6 +1,8 @@
-//! The scene's acceleration structure: every triangle and sphere of every shape in one
-//! compressed wide BVH (obvhs' CWBVH, Ylitie et al. 2017, built by PLOC with reinsertion),
-//! traversed for the closest hit and for any hit (shadow rays, early exit).
+//! The scene's acceleration structure: every triangle and sphere of every shape in one BVH,
+//! traversed for the closest hit and for any hit (shadow rays, early exit). The default
+//! ([`BvhKind::Bvh4`]) is a 4-wide BVH with SSE box tests ([`super::bvh4`]) collapsed from obvhs'
+//! binary BVH (PLOC with reinsertion); obvhs' compressed wide BVH (CWBVH, Ylitie et al. 2017) and
+//! its binary BVH remain selectable for comparison (`BENCHMARKS.md`, "BVH" and "Renderer").
 //!
 //! Triangles are intersected with the watertight test of Woop, Benthin and Wald (2013, "Watertight
 //! Ray/Triangle Intersection", JCGT 2(1)), in the form of pbrt-v4's `Triangle::Intersect`: the
