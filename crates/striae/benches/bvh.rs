@@ -134,7 +134,7 @@ fn bench(c: &mut Criterion<ThreadCpuTime>) {
         _ => unreachable!(),
     };
     let mut geometries = Vec::new();
-    for kind in [BvhKind::Cwbvh, BvhKind::Bvh2] {
+    for kind in [BvhKind::Bvh4, BvhKind::Cwbvh, BvhKind::Bvh2] {
         // Single-threaded build, so the thread's CPU time is the build's.
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(1)

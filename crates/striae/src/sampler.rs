@@ -35,6 +35,11 @@ pub struct PixelSampler {
     seed: u32,
     sample_index: u32,
     dimension: u32,
+    /// The last 4-dimension set drawn (`dimension / 4`, `u32::MAX` for none) and its values:
+    /// `sobol_burley::sample_4d` computes four dimensions for about the cost of one, and gives
+    /// exactly what four calls of `sample` would.
+    cached_set: u32,
+    cached: [f32; 4],
 }
 
 impl PixelSampler {
@@ -45,6 +50,8 @@ impl PixelSampler {
             seed,
             sample_index: sample_index.min(MAX_SPP - 1),
             dimension: 0,
+            cached_set: u32::MAX,
+            cached: [0.0; 4],
         }
     }
 
@@ -65,13 +72,19 @@ impl PixelSampler {
     pub fn next_1d(&mut self) -> f32 {
         let d = self.dimension;
         self.dimension += 1;
-        let n = sobol_burley::NUM_DIMENSIONS;
-        let seed = if d < n {
-            self.seed
-        } else {
-            mix64(self.seed as u64 ^ ((d / n) as u64) << 32) as u32
-        };
-        sobol_burley::sample(self.sample_index, d % n, seed)
+        let set = d / 4;
+        if set != self.cached_set {
+            // `NUM_DIMENSIONS` is a multiple of 4, so a set never straddles the wrap.
+            let n = sobol_burley::NUM_DIMENSIONS;
+            let seed = if d < n {
+                self.seed
+            } else {
+                mix64(self.seed as u64 ^ ((d / n) as u64) << 32) as u32
+            };
+            self.cached = sobol_burley::sample_4d(self.sample_index, (d % n) / 4, seed);
+            self.cached_set = set;
+        }
+        self.cached[(d % 4) as usize]
     }
 
     /// The next two numbers in `[0, 1)^2`.
@@ -110,5 +123,30 @@ mod tests {
         let mut a = PixelSampler::new(5, 9, 1);
         let mut b = PixelSampler::new(5, 9, 1);
         assert_eq!(a.next_2d(), b.next_2d());
+    }
+
+    #[test]
+    fn cached_4d_sets_equal_single_dimensions() {
+        // The 4-dimension cache returns exactly `sobol_burley::sample` of each dimension, in any
+        // access order (seeks back and forth), also past the wrap at NUM_DIMENSIONS.
+        let n = sobol_burley::NUM_DIMENSIONS;
+        for i in [0u32, 1, 17, 1000] {
+            let mut s = PixelSampler::new(123, i, 9);
+            let seed = s.seed;
+            for &d in &[0u32, 1, 2, 3, 4, 9, 5, 6, 2, 255, 256, 257, 300, 4, 1000] {
+                s.dimension = d;
+                let got = s.next_1d();
+                let seed_d = if d < n {
+                    seed
+                } else {
+                    mix64(seed as u64 ^ ((d / n) as u64) << 32) as u32
+                };
+                assert_eq!(
+                    got,
+                    sobol_burley::sample(i, d % n, seed_d),
+                    "sample {i} dim {d}"
+                );
+            }
+        }
     }
 }

@@ -1,6 +1,8 @@
-//! The scene's acceleration structure: every triangle and sphere of every shape in one
-//! compressed wide BVH (obvhs' CWBVH, Ylitie et al. 2017, built by PLOC with reinsertion),
-//! traversed for the closest hit and for any hit (shadow rays, early exit).
+//! The scene's acceleration structure: every triangle and sphere of every shape in one BVH,
+//! traversed for the closest hit and for any hit (shadow rays, early exit). The default
+//! ([`BvhKind::Bvh4`]) is a 4-wide BVH with SSE box tests ([`super::bvh4`]) collapsed from obvhs'
+//! binary BVH (PLOC with reinsertion); obvhs' compressed wide BVH (CWBVH, Ylitie et al. 2017) and
+//! its binary BVH remain selectable for comparison (`BENCHMARKS.md`, "BVH" and "Renderer").
 //!
 //! Triangles are intersected with the watertight test of Woop, Benthin and Wald (2013, "Watertight
 //! Ray/Triangle Intersection", JCGT 2(1)), in the form of pbrt-v4's `Triangle::Intersect`: the
@@ -19,6 +21,7 @@ use obvhs::cwbvh::builder::build_cwbvh;
 use obvhs::cwbvh::CwBvh;
 use obvhs::BvhBuildParams;
 
+use super::bvh4::Bvh4;
 use super::sphere::{intersect_sphere, sphere_surface};
 use super::{Shape, ShapeGeometry, SurfaceHit};
 use crate::math::{Ray, Vec3};
@@ -35,12 +38,17 @@ struct Prim {
 
 const SPHERE: u32 = u32::MAX;
 
-/// Per-ray constants of the watertight test: axis permutation and shear.
+/// Per-ray constants of the watertight test: the ray's dominant axis `kz` (with `kx`, `ky`
+/// the next two axes cyclically) and the shear.
+///
+/// Departure from pbrt-v4: pbrt swaps `kx` and `ky` when `d[kz] < 0` to keep the determinant's
+/// sign; the test is two-sided, and swapping only negates every edge function, `det` and the
+/// scaled `t` exactly (IEEE negation is exact), so `t`, `b1`, `b2` and every accept/reject
+/// decision are bit-for-bit the same without it. Without the swap the permutation is one of
+/// three cyclic ones, which [`WatertightRay::intersect_axis`] takes as a constant.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct WatertightRay {
     o: Vec3,
-    kx: usize,
-    ky: usize,
     kz: usize,
     sx: f32,
     sy: f32,
@@ -52,16 +60,10 @@ impl WatertightRay {
     pub(crate) fn new(ray: &Ray) -> Self {
         let d = ray.d;
         let kz = d.abs().max_position();
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
-        if d[kz] < 0.0 {
-            // Keep the winding (and hence the sign of the determinant) consistent.
-            std::mem::swap(&mut kx, &mut ky);
-        }
+        let kx = (kz + 1) % 3;
+        let ky = (kx + 1) % 3;
         WatertightRay {
             o: ray.o,
-            kx,
-            ky,
             kz,
             sx: -d[kx] / d[kz],
             sy: -d[ky] / d[kz],
@@ -79,19 +81,31 @@ impl WatertightRay {
         p2: Vec3,
         t_max: f32,
     ) -> Option<(f32, f32, f32)> {
-        // Arrays indexed by the permutation (a `Vec3` index is a `match`).
-        let (a, b, c) = (
-            (p0 - self.o).to_array(),
-            (p1 - self.o).to_array(),
-            (p2 - self.o).to_array(),
-        );
-        let (kx, ky, kz) = (self.kx, self.ky, self.kz);
-        let ax = a[kx] + self.sx * a[kz];
-        let ay = a[ky] + self.sy * a[kz];
-        let bx = b[kx] + self.sx * b[kz];
-        let by = b[ky] + self.sy * b[kz];
-        let cx = c[kx] + self.sx * c[kz];
-        let cy = c[ky] + self.sy * c[kz];
+        match self.kz {
+            0 => self.intersect_axis::<0>(p0, p1, p2, t_max),
+            1 => self.intersect_axis::<1>(p0, p1, p2, t_max),
+            _ => self.intersect_axis::<2>(p0, p1, p2, t_max),
+        }
+    }
+
+    /// [`WatertightRay::intersect`] for a ray whose dominant axis is `KZ` (`== self.kz`).
+    #[inline(always)]
+    pub(crate) fn intersect_axis<const KZ: usize>(
+        &self,
+        p0: Vec3,
+        p1: Vec3,
+        p2: Vec3,
+        t_max: f32,
+    ) -> Option<(f32, f32, f32)> {
+        debug_assert_eq!(KZ, self.kz);
+        let (kx, ky) = ((KZ + 1) % 3, (KZ + 2) % 3);
+        let (a, b, c) = (p0 - self.o, p1 - self.o, p2 - self.o);
+        let ax = a[kx] + self.sx * a[KZ];
+        let ay = a[ky] + self.sy * a[KZ];
+        let bx = b[kx] + self.sx * b[KZ];
+        let by = b[ky] + self.sy * b[KZ];
+        let cx = c[kx] + self.sx * c[KZ];
+        let cy = c[ky] + self.sy * c[KZ];
         let mut e0 = bx * cy - by * cx;
         let mut e1 = cx * ay - cy * ax;
         let mut e2 = ax * by - ay * bx;
@@ -111,9 +125,9 @@ impl WatertightRay {
         if det == 0.0 {
             return None;
         }
-        let az = self.sz * a[kz];
-        let bz = self.sz * b[kz];
-        let cz = self.sz * c[kz];
+        let az = self.sz * a[KZ];
+        let bz = self.sz * b[KZ];
+        let cz = self.sz * c[KZ];
         let t_scaled = e0 * az + e1 * bz + e2 * cz;
         if det < 0.0 && (t_scaled >= 0.0 || t_scaled < t_max * det) {
             return None;
@@ -134,8 +148,10 @@ impl WatertightRay {
 /// measurement behind the default).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum BvhKind {
-    /// Compressed 8-wide BVH (Ylitie et al. 2017), SIMD node tests.
+    /// 4-wide BVH with SSE box tests collapsed from obvhs' binary BVH ([`super::bvh4`]).
     #[default]
+    Bvh4,
+    /// Compressed 8-wide BVH (Ylitie et al. 2017), SIMD node tests.
     Cwbvh,
     /// Binary BVH with collapsed leaves.
     Bvh2,
@@ -145,6 +161,7 @@ enum Accel {
     None,
     Cwbvh(CwBvh),
     Bvh2(Bvh2),
+    Bvh4(Bvh4),
 }
 
 /// obvhs' CWBVH node test clamps a box's entry distance to at least `1e-4`
@@ -152,6 +169,9 @@ enum Accel {
 /// skipped. Traversal therefore starts the ray `CWBVH_SHIFT` (in units of `t`) behind its origin
 /// and reports `t + CWBVH_SHIFT` to obvhs; the primitive tests use the true origin.
 const CWBVH_SHIFT: f32 = 2e-4;
+
+/// Most primitives per leaf of the binary BVH that [`BvhKind::Bvh4`] collapses.
+const BVH4_LEAF_PRIMS: u32 = 2;
 
 /// Shapes with the BVH over their primitives.
 pub struct Geometry {
@@ -233,6 +253,19 @@ impl Geometry {
                 let order = bvh.primitive_indices.clone();
                 (Accel::Bvh2(bvh), order)
             }
+            BvhKind::Bvh4 => {
+                let params = BvhBuildParams {
+                    max_prims_per_leaf: BVH4_LEAF_PRIMS,
+                    ..params
+                };
+                let bvh = build_bvh2(&aabbs, params, &mut Duration::default());
+                let order = bvh.primitive_indices.clone();
+                match Bvh4::from_bvh2(&bvh) {
+                    Some(bvh4) => (Accel::Bvh4(bvh4), order),
+                    // Too deep for the BVH4's fixed stack: keep the binary BVH.
+                    None => (Accel::Bvh2(bvh), order),
+                }
+            }
         };
         // Primitives in BVH order: traversal indexes them directly.
         let prims = order.iter().map(|&i| prims[i as usize]).collect();
@@ -276,6 +309,50 @@ impl Geometry {
         }
     }
 
+    /// Primitive `id` for a ray of dominant axis `KZ`.
+    #[inline(always)]
+    fn hit_prim_axis<const KZ: usize>(
+        &self,
+        wray: &WatertightRay,
+        ray: &Ray,
+        id: usize,
+        t_max: f32,
+    ) -> Option<(f32, f32, f32)> {
+        let p = &self.prims[id];
+        if p.prim == SPHERE {
+            intersect_sphere(p.v[0], p.v[1].x, ray, t_max).map(|t| (t, 0.0, 0.0))
+        } else {
+            wray.intersect_axis::<KZ>(p.v[0], p.v[1], p.v[2], t_max)
+        }
+    }
+
+    /// Closest hit in the [`Bvh4`]: `(primitive, t, b1, b2)`.
+    fn closest_bvh4<const KZ: usize>(
+        &self,
+        bvh: &Bvh4,
+        wray: &WatertightRay,
+        ray: &Ray,
+    ) -> Option<(usize, f32, f32, f32)> {
+        let mut best = None;
+        bvh.closest(ray.o, ray.d, ray.t_max, |first, count, t_max| {
+            for id in first..first + count {
+                if let Some((t, b1, b2)) = self.hit_prim_axis::<KZ>(wray, ray, id, *t_max) {
+                    best = Some((id, t, b1, b2));
+                    *t_max = t;
+                }
+            }
+        });
+        best
+    }
+
+    /// Any hit in the [`Bvh4`].
+    fn occluded_bvh4<const KZ: usize>(&self, bvh: &Bvh4, wray: &WatertightRay, ray: &Ray) -> bool {
+        bvh.any(ray.o, ray.d, ray.t_max, |first, count| {
+            (first..first + count)
+                .any(|id| self.hit_prim_axis::<KZ>(wray, ray, id, ray.t_max).is_some())
+        })
+    }
+
     /// Closest hit with `t` in `(0, ray.t_max)`.
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceHit> {
         let wray = WatertightRay::new(ray);
@@ -297,6 +374,13 @@ impl Geometry {
                         None => f32::INFINITY,
                     },
                 );
+            }
+            Accel::Bvh4(bvh) => {
+                best = match wray.kz {
+                    0 => self.closest_bvh4::<0>(bvh, &wray, ray),
+                    1 => self.closest_bvh4::<1>(bvh, &wray, ray),
+                    _ => self.closest_bvh4::<2>(bvh, &wray, ray),
+                };
             }
             Accel::Bvh2(bvh) => {
                 bvh.ray_traverse(Self::obvhs_ray(ray, 0.0), &mut hit, |_, id| {
@@ -331,6 +415,11 @@ impl Geometry {
                 !bvh.ray_traverse_miss(Self::obvhs_ray(ray, CWBVH_SHIFT), |_, id| test(id))
             }
             Accel::Bvh2(bvh) => !bvh.ray_traverse_miss(Self::obvhs_ray(ray, 0.0), |_, id| test(id)),
+            Accel::Bvh4(bvh) => match wray.kz {
+                0 => self.occluded_bvh4::<0>(bvh, &wray, ray),
+                1 => self.occluded_bvh4::<1>(bvh, &wray, ray),
+                _ => self.occluded_bvh4::<2>(bvh, &wray, ray),
+            },
         }
     }
 

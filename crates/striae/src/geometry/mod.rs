@@ -6,13 +6,15 @@
 //! * [`mesh`]: [`TriangleMesh`] with the rectangle and box; [`obj`] loads OBJ files (tobj);
 //!   [`teapot`] tessellates Newell's 32 Bezier patches with per-vertex uv and tangents.
 //! * [`sphere`]: the analytic sphere.
-//! * [`bvh`]: [`Geometry`], the CWBVH with the watertight ray-triangle test.
+//! * [`bvh`]: [`Geometry`], the BVH (a 4-wide SSE BVH, `bvh4`, by default) with the watertight
+//!   ray-triangle test.
 //! * [`uv_footprint`]: texture-space footprint of a pixel from ray differentials (pbrt-v4).
 
 // `!(x > y)` is used on purpose: it is also true for NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod bvh;
+mod bvh4;
 pub mod mesh;
 pub mod obj;
 pub mod sphere;

@@ -182,7 +182,7 @@ fn test_scene() -> Vec<Shape> {
 /// Compares `intersect` and `occluded` of both BVH kinds with brute force over `rays`.
 fn check_against_brute_force(shapes: &[Shape], rays: &[Ray]) -> usize {
     let mut hits = 0;
-    for kind in [BvhKind::Cwbvh, BvhKind::Bvh2] {
+    for kind in [BvhKind::Bvh4, BvhKind::Cwbvh, BvhKind::Bvh2] {
         let geometry = Geometry::with_bvh(shapes.to_vec(), kind);
         hits = 0;
         for ray in rays {
@@ -298,7 +298,7 @@ fn hits_very_close_to_the_origin_are_found() {
     let tri = TriangleMesh::new(positions, indices, None, None, None).unwrap();
     let far =
         TriangleMesh::rectangle().transformed(&Transform::translate(Vec3::new(0.0, 0.0, 5.0)));
-    for kind in [BvhKind::Cwbvh, BvhKind::Bvh2] {
+    for kind in [BvhKind::Bvh4, BvhKind::Cwbvh, BvhKind::Bvh2] {
         let g = Geometry::with_bvh(
             vec![
                 shape(ShapeGeometry::Mesh(tri.clone())),
