@@ -17,8 +17,9 @@ with smooth normals (striae's built-in teapot; Mitsuba loads the exported OBJ wi
     python3 validation/compare_mitsuba.py [--out validation/out] [--spp 64] [--k 4] [--res 256x192]
 
 Writes, per scene, PNG previews of both means, a figure `NAME-compare.png` (both images, the
-t map, histograms of both t statistics) and a table `summary.tsv` (numpy.loadtxt-readable with
-`dtype=None, encoding=None`) whose numbers docs/validation.md quotes.
+t map, histograms of both t statistics) and a table `summary.tsv` whose numbers
+docs/validation.md quotes: `numpy.genfromtxt(path, names=True, dtype=None, encoding=None,
+delimiter="\t")` reads it.
 """
 import argparse
 import os
