@@ -3,7 +3,7 @@
 //! what fraction of a footprint do the scratches cover.
 
 use super::footprint::{union_discs_polygon_area, MAX_DISCS};
-use super::worley::{Worley, WorleySample};
+use super::worley::{floor_i64, Worley, WorleySample};
 use super::{LayerError, LayerParams, LAYER_NOISE_PERIOD};
 use crate::math::Vec2;
 use glam::DVec2;
@@ -142,7 +142,93 @@ impl ScratchLayer {
     /// The exact coverage of the footprint `{p + s a + t b : s, t in [-1/2, 1/2]}`, or `None`
     /// when its noise-space bounding box spans more than `max_cells` cells or it touches more
     /// than `MAX_DISCS` scratches.
+    ///
+    /// The fast path of [`Self::footprint_coverage_reference`] (same value up to rounding):
+    /// * cells are enumerated row by row over the parallelogram's extent in that row (widened
+    ///   by tau), not over its bounding box: a long thin footprint (W = 0.001 stretches a pixel
+    ///   to a needle across many cells) visits about its length in cells, one hash each;
+    /// * discs that no other candidate disc overlaps (the common case: one layer covers about
+    ///   pi tau^2) are summed one by one: a disc entirely inside is `pi tau^2`; a disc cut only
+    ///   by one pair of parallel edges is `pi tau^2` less two circular segments (closed form);
+    ///   otherwise the single-disc exact kernel. Only overlapping discs go to the exact union.
     pub fn footprint_coverage(
+        &self,
+        p: DVec2,
+        a: DVec2,
+        b: DVec2,
+        max_cells: usize,
+    ) -> Option<f64> {
+        let q0 = self.to_noise(p);
+        let (qa, qb) = (self.vector_to_noise(a), self.vector_to_noise(b));
+        let cr = cross(qa, qb);
+        if !(q0.is_finite() && cr.is_finite()) {
+            return Some(0.0);
+        }
+        let tau = self.tau;
+        if cr.abs() < 1e-12 {
+            return Some(self.noise.any_within(q0, tau) as u8 as f64);
+        }
+        let (qa, qb) = if cr > 0.0 { (qa, qb) } else { (qb, qa) };
+        let poly = [
+            (-qa - qb) * 0.5,
+            (qa - qb) * 0.5,
+            (qa + qb) * 0.5,
+            (qb - qa) * 0.5,
+        ];
+        let ext = (qa.abs() + qb.abs()) * 0.5 + DVec2::splat(tau);
+        let (i0, i1) = ((q0.x - ext.x).floor(), (q0.x + ext.x).floor());
+        let (j0, j1) = ((q0.y - ext.y).floor(), (q0.y + ext.y).floor());
+        let cells = (i1 - i0 + 1.0) * (j1 - j0 + 1.0);
+        if cells > max_cells as f64 {
+            return None;
+        }
+        let mut planes = [(DVec2::ZERO, 0.0f64); 4];
+        for e in 0..4 {
+            let d = poly[(e + 1) % 4] - poly[e];
+            let n = DVec2::new(d.y, -d.x).normalize_or_zero();
+            planes[e] = (n, n.dot(poly[e]));
+        }
+        let mut centres = [DVec2::ZERO; MAX_DISCS];
+        let mut n = 0;
+        let (j0, j1) = (j0 as i64, j1 as i64);
+        for j in j0..=j1 {
+            // Feature points of row j have y in [j, j + 1): a disc around one touches the
+            // parallelogram only if the parallelogram meets the band [j - tau, j + 1 + tau].
+            let (ylo, yhi) = (j as f64 - q0.y - tau, (j + 1) as f64 - q0.y + tau);
+            let Some((xlo, xhi)) = x_extent_in_band(&poly, ylo, yhi) else {
+                continue;
+            };
+            let (i0, i1) = (floor_i64(q0.x + xlo - tau), floor_i64(q0.x + xhi + tau));
+            for i in i0..=i1 {
+                let o = self.noise.offset(i, j);
+                let f = DVec2::new((i as f64 - q0.x) + o.x, (j as f64 - q0.y) + o.y);
+                if planes.iter().any(|&(nrm, d)| nrm.dot(f) - d >= tau) {
+                    continue;
+                }
+                if n == MAX_DISCS {
+                    return None;
+                }
+                centres[n] = f;
+                n += 1;
+            }
+        }
+        if n == 0 {
+            return Some(0.0);
+        }
+        let area = if any_overlap(&centres[..n], tau) {
+            union_discs_polygon_area(&centres[..n], tau, &poly)
+        } else {
+            centres[..n]
+                .iter()
+                .map(|&c| disc_parallelogram_area(c, tau, &poly, &planes))
+                .sum()
+        };
+        Some((area / cr.abs()).clamp(0.0, 1.0))
+    }
+
+    /// The reference for [`Self::footprint_coverage`]: every cell of the noise-space bounding
+    /// box, and the exact union area of all candidate discs (kept for the tests).
+    pub fn footprint_coverage_reference(
         &self,
         p: DVec2,
         a: DVec2,
@@ -201,5 +287,94 @@ impl ScratchLayer {
             return Some(0.0);
         }
         Some((union_discs_polygon_area(&centres[..n], tau, &poly) / cr.abs()).clamp(0.0, 1.0))
+    }
+}
+
+/// Whether two of the discs of radius `r` around `centres` overlap.
+#[inline]
+fn any_overlap(centres: &[DVec2], r: f64) -> bool {
+    let d2 = 4.0 * r * r;
+    for (k, &c) in centres.iter().enumerate() {
+        for &o in &centres[k + 1..] {
+            if (o - c).length_squared() < d2 {
+                return true;
+            }
+        }
+    }
+    false
+}
+
+/// The x extent of the convex polygon `poly` within the band `ylo <= y <= yhi`, or `None` when
+/// they do not meet. The extremes of a convex polygon cut by a band lie on its clipped edges.
+#[inline]
+fn x_extent_in_band(poly: &[DVec2; 4], ylo: f64, yhi: f64) -> Option<(f64, f64)> {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for e in 0..4 {
+        let (u, v) = (poly[e], poly[(e + 1) % 4]);
+        let dy = v.y - u.y;
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        if dy == 0.0 {
+            if u.y < ylo || u.y > yhi {
+                continue;
+            }
+        } else {
+            let (ta, tb) = ((ylo - u.y) / dy, (yhi - u.y) / dy);
+            let (ta, tb) = if ta < tb { (ta, tb) } else { (tb, ta) };
+            t0 = t0.max(ta);
+            t1 = t1.min(tb);
+            if t0 > t1 {
+                continue;
+            }
+        }
+        let dx = v.x - u.x;
+        let (x0, x1) = (u.x + dx * t0, u.x + dx * t1);
+        lo = lo.min(x0.min(x1));
+        hi = hi.max(x0.max(x1));
+    }
+    (lo <= hi).then_some((lo, hi))
+}
+
+/// Area of a disc of radius `r` outside a line at signed distance `s` (positive: the centre is
+/// on the inner side) from its centre: the circular segment `r^2 acos(s/r) - s sqrt(r^2 - s^2)`.
+#[inline]
+fn segment_outside(s: f64, r: f64) -> f64 {
+    let x = (s / r).clamp(-1.0, 1.0);
+    r * r * x.acos() - s * (r * r - s * s).max(0.0).sqrt()
+}
+
+/// Area of `disc(c, r) ∩ parallelogram` (`poly` counter-clockwise, `planes` its outward unit
+/// normals and offsets, edges 0 and 2 parallel, 1 and 3 parallel). Closed form when the circle
+/// crosses at most one pair of parallel edge lines (the two segments cut off are disjoint);
+/// otherwise the exact kernel of [`super::footprint`].
+#[inline]
+pub(crate) fn disc_parallelogram_area(
+    c: DVec2,
+    r: f64,
+    poly: &[DVec2; 4],
+    planes: &[(DVec2, f64); 4],
+) -> f64 {
+    let mut s = [0.0f64; 4];
+    let mut active = 0u32;
+    for e in 0..4 {
+        let (nrm, d) = planes[e];
+        s[e] = d - nrm.dot(c);
+        if s[e] <= -r {
+            return 0.0;
+        }
+        if s[e] < r {
+            active |= 1 << e;
+        }
+    }
+    let full = std::f64::consts::PI * r * r;
+    if active & 0b1010 == 0 || active & 0b0101 == 0 {
+        let mut area = full;
+        for (e, &se) in s.iter().enumerate() {
+            if active & (1 << e) != 0 {
+                area -= segment_outside(se, r);
+            }
+        }
+        area.max(0.0)
+    } else {
+        union_discs_polygon_area(&[c], r, poly)
     }
 }
