@@ -3,7 +3,7 @@
 //! what fraction of a footprint do the scratches cover.
 
 use super::footprint::{union_discs_polygon_area, MAX_DISCS};
-use super::worley::{floor_i64, Worley, WorleySample};
+use super::worley::{Worley, WorleySample};
 use super::{LayerError, LayerParams, LAYER_NOISE_PERIOD};
 use crate::math::Vec2;
 use glam::DVec2;
@@ -144,13 +144,14 @@ impl ScratchLayer {
     /// than `MAX_DISCS` scratches.
     ///
     /// The fast path of [`Self::footprint_coverage_reference`] (same value up to rounding):
-    /// * cells are enumerated row by row over the parallelogram's extent in that row (widened
-    ///   by tau), not over its bounding box: a long thin footprint (W = 0.001 stretches a pixel
-    ///   to a needle across many cells) visits about its length in cells, one hash each;
-    /// * discs that no other candidate disc overlaps (the common case: one layer covers about
-    ///   pi tau^2) are summed one by one: a disc entirely inside is `pi tau^2`; a disc cut only
-    ///   by one pair of parallel edges is `pi tau^2` less two circular segments (closed form);
-    ///   otherwise the single-disc exact kernel. Only overlapping discs go to the exact union.
+    /// when no two candidate discs overlap (the common case: a layer covers about pi tau^2),
+    /// the discs' areas are summed one by one, each in closed form: `pi tau^2` for a disc
+    /// entirely inside; `pi tau^2` less two circular segments for a disc cut by one pair of
+    /// parallel edges only; otherwise [`disc_convex_polygon_area`] (triangle decomposition,
+    /// one `atan2`). Only footprints with overlapping discs pay for the exact union
+    /// ([`union_discs_polygon_area`]). Cells are enumerated over the noise-space bounding box
+    /// as in the reference (a row-by-row enumeration over the parallelogram's extent was tried
+    /// and measured slower: footprints span few cells per row).
     pub fn footprint_coverage(
         &self,
         p: DVec2,
@@ -190,15 +191,8 @@ impl ScratchLayer {
         }
         let mut centres = [DVec2::ZERO; MAX_DISCS];
         let mut n = 0;
-        let (j0, j1) = (j0 as i64, j1 as i64);
+        let (i0, i1, j0, j1) = (i0 as i64, i1 as i64, j0 as i64, j1 as i64);
         for j in j0..=j1 {
-            // Feature points of row j have y in [j, j + 1): a disc around one touches the
-            // parallelogram only if the parallelogram meets the band [j - tau, j + 1 + tau].
-            let (ylo, yhi) = (j as f64 - q0.y - tau, (j + 1) as f64 - q0.y + tau);
-            let Some((xlo, xhi)) = x_extent_in_band(&poly, ylo, yhi) else {
-                continue;
-            };
-            let (i0, i1) = (floor_i64(q0.x + xlo - tau), floor_i64(q0.x + xhi + tau));
             for i in i0..=i1 {
                 let o = self.noise.offset(i, j);
                 let f = DVec2::new((i as f64 - q0.x) + o.x, (j as f64 - q0.y) + o.y);
@@ -304,36 +298,6 @@ fn any_overlap(centres: &[DVec2], r: f64) -> bool {
     false
 }
 
-/// The x extent of the convex polygon `poly` within the band `ylo <= y <= yhi`, or `None` when
-/// they do not meet. The extremes of a convex polygon cut by a band lie on its clipped edges.
-#[inline]
-fn x_extent_in_band(poly: &[DVec2; 4], ylo: f64, yhi: f64) -> Option<(f64, f64)> {
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for e in 0..4 {
-        let (u, v) = (poly[e], poly[(e + 1) % 4]);
-        let dy = v.y - u.y;
-        let (mut t0, mut t1) = (0.0f64, 1.0f64);
-        if dy == 0.0 {
-            if u.y < ylo || u.y > yhi {
-                continue;
-            }
-        } else {
-            let (ta, tb) = ((ylo - u.y) / dy, (yhi - u.y) / dy);
-            let (ta, tb) = if ta < tb { (ta, tb) } else { (tb, ta) };
-            t0 = t0.max(ta);
-            t1 = t1.min(tb);
-            if t0 > t1 {
-                continue;
-            }
-        }
-        let dx = v.x - u.x;
-        let (x0, x1) = (u.x + dx * t0, u.x + dx * t1);
-        lo = lo.min(x0.min(x1));
-        hi = hi.max(x0.max(x1));
-    }
-    (lo <= hi).then_some((lo, hi))
-}
-
 /// Area of a disc of radius `r` outside a line at signed distance `s` (positive: the centre is
 /// on the inner side) from its centre: the circular segment `r^2 acos(s/r) - s sqrt(r^2 - s^2)`.
 #[inline]
@@ -345,7 +309,7 @@ fn segment_outside(s: f64, r: f64) -> f64 {
 /// Area of `disc(c, r) ∩ parallelogram` (`poly` counter-clockwise, `planes` its outward unit
 /// normals and offsets, edges 0 and 2 parallel, 1 and 3 parallel). Closed form when the circle
 /// crosses at most one pair of parallel edge lines (the two segments cut off are disjoint);
-/// otherwise the exact kernel of [`super::footprint`].
+/// otherwise [`disc_convex_polygon_area`].
 #[inline]
 pub(crate) fn disc_parallelogram_area(
     c: DVec2,
@@ -375,6 +339,70 @@ pub(crate) fn disc_parallelogram_area(
         }
         area.max(0.0)
     } else {
-        union_discs_polygon_area(&[c], r, poly)
+        disc_convex_polygon_area(c, r, poly)
     }
+}
+
+/// Area of `disc(c, r) ∩ polygon` for a convex counter-clockwise polygon, as the sum over its
+/// edges of the signed areas of `disc ∩ triangle(c, a, b)`: triangle parts plus circular
+/// sectors whose angles add up to the measure `theta` in `[0, 2 pi]` of the circle inside the
+/// polygon (Green's theorem). The sector rotations are composed as complex numbers and `theta`
+/// taken with one `atan2` per disc; where `theta` is within 1e-6 of 0 or 2 pi (ambiguous
+/// modulo 2 pi) the angles are summed edge by edge instead.
+#[inline]
+pub(crate) fn disc_convex_polygon_area(c: DVec2, r: f64, poly: &[DVec2; 4]) -> f64 {
+    let r2 = r * r;
+    let mut twice = 0.0;
+    let mut z = DVec2::X; // product of the unit-free sector rotations
+    let mut rot = [DVec2::X; 4];
+    #[inline]
+    fn mul(p: DVec2, q: DVec2) -> DVec2 {
+        DVec2::new(p.x * q.x - p.y * q.y, p.x * q.y + p.y * q.x)
+    }
+    for e in 0..4 {
+        let (a, b) = (poly[e] - c, poly[(e + 1) % 4] - c);
+        let (da, db) = (a.length_squared(), b.length_squared());
+        if da <= r2 && db <= r2 {
+            twice += cross(a, b);
+            continue;
+        }
+        let d = b - a;
+        let dd = d.length_squared();
+        if dd == 0.0 {
+            continue;
+        }
+        let hb = a.dot(d) / dd;
+        let disc = hb * hb - (da - r2) / dd;
+        let (t0, t1) = if disc > 0.0 {
+            let s = disc.sqrt();
+            (-hb - s, -hb + s)
+        } else {
+            (1.0, 0.0)
+        };
+        let w = if disc <= 0.0 || t1 <= 0.0 || t0 >= 1.0 {
+            // The edge stays outside the circle: a sector from a to b.
+            DVec2::new(a.dot(b), cross(a, b))
+        } else {
+            let p0 = if t0 > 0.0 { a + d * t0 } else { a };
+            let p1 = if t1 < 1.0 { a + d * t1 } else { b };
+            twice += cross(p0, p1);
+            // Sectors from a to p0 and from p1 to b.
+            mul(
+                DVec2::new(a.dot(p0), cross(a, p0)),
+                DVec2::new(p1.dot(b), cross(p1, b)),
+            )
+        };
+        // Keep the product in range: only the direction matters.
+        let w = w / w.x.abs().max(w.y.abs()).max(f64::MIN_POSITIVE);
+        rot[e] = w;
+        z = mul(z, w);
+        z /= z.x.abs().max(z.y.abs()).max(f64::MIN_POSITIVE);
+    }
+    let mut theta = z.y.atan2(z.x);
+    if theta.abs() < 1e-6 || !theta.is_finite() {
+        theta = rot.iter().map(|w| w.y.atan2(w.x)).sum();
+    } else if theta < 0.0 {
+        theta += std::f64::consts::TAU;
+    }
+    (0.5 * (twice + r2 * theta)).max(0.0)
 }
