@@ -226,7 +226,10 @@ impl ScratchLayer {
                 .map(|&c| disc_parallelogram_area(c, tau, &poly, &planes))
                 .sum()
         };
-        Some((area / cr.abs()).clamp(0.0, 1.0))
+        // Below 1e-12 the closed forms' value is rounding noise (a disc grazing the footprint:
+        // pi tau^2 less segments that nearly cancel): report no coverage, as the union does.
+        let c = area / cr.abs();
+        Some(if c < 1e-12 { 0.0 } else { c.min(1.0) })
     }
 
     /// The reference for [`Self::footprint_coverage`]: every cell of the noise-space bounding
