@@ -188,7 +188,7 @@ impl ScratchLayer {
         let (i0, i1) = (floor_i64(q0.x - ext.x), floor_i64(q0.x + ext.x));
         let (j0, j1) = (floor_i64(q0.y - ext.y), floor_i64(q0.y + ext.y));
         let cells = (i1 - i0 + 1) as f64 * (j1 - j0 + 1) as f64;
-        if !(cells <= max_cells as f64) {
+        if cells > max_cells as f64 {
             return None;
         }
         let mut planes = [(DVec2::ZERO, 0.0f64); 4];
