@@ -191,12 +191,13 @@ impl ScratchLayer {
         if cells > max_cells as f64 {
             return None;
         }
-        let mut planes = [(DVec2::ZERO, 0.0f64); 4];
-        for e in 0..4 {
-            let d = poly[(e + 1) % 4] - poly[e];
-            let n = DVec2::new(d.y, -d.x).normalize_or_zero();
-            planes[e] = (n, n.dot(poly[e]));
-        }
+        // Edges qa, qb, -qa, -qb: two outward unit normals, offsets |cr| / (2 |q|) (the
+        // half-widths of the parallelogram across each pair of edges).
+        let cr = cr.abs();
+        let (la, lb) = (qa.length(), qb.length());
+        let (na, nb) = (DVec2::new(qa.y, -qa.x) / la, DVec2::new(qb.y, -qb.x) / lb);
+        let (ha, hb) = (0.5 * cr / la, 0.5 * cr / lb);
+        let planes = [(na, ha), (nb, hb), (-na, ha), (-nb, hb)];
         // A small array (zeroing MAX_DISCS entries per query showed in profiles); footprints
         // touching more discs take the reference path.
         let mut centres = [DVec2::ZERO; FAST_DISCS];
@@ -205,7 +206,7 @@ impl ScratchLayer {
             for i in i0..=i1 {
                 let o = self.noise.offset(i, j);
                 let f = DVec2::new((i as f64 - q0.x) + o.x, (j as f64 - q0.y) + o.y);
-                if planes.iter().any(|&(nrm, d)| nrm.dot(f) - d >= tau) {
+                if na.dot(f).abs() - ha >= tau || nb.dot(f).abs() - hb >= tau {
                     continue;
                 }
                 if n == FAST_DISCS {
@@ -228,7 +229,7 @@ impl ScratchLayer {
         };
         // Below 1e-12 the closed forms' value is rounding noise (a disc grazing the footprint:
         // pi tau^2 less segments that nearly cancel): report no coverage, as the union does.
-        let c = area / cr.abs();
+        let c = area / cr;
         Some(if c < 1e-12 { 0.0 } else { c.min(1.0) })
     }
 
