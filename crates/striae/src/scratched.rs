@@ -571,7 +571,9 @@ impl ScratchedMaterial {
                     return self.base_bsdf();
                 }
                 // Ties (several scratches crossing the footprint equally): one at random.
-                let tie = |c: f32| c >= best - 1e-6;
+                // `c > 0`: with a tiny best (a disc grazing the footprint) an uncovered layer
+                // must not count as a tie.
+                let tie = |c: f32| c > 0.0 && c >= best - 1e-6;
                 let ties = cov[..k].iter().filter(|&&c| tie(c)).count();
                 let pick = ((ctx.u_layer * ties as f32) as usize).min(ties - 1);
                 let layer = (0..k).filter(|&i| tie(cov[i])).nth(pick).unwrap_or(0);
