@@ -1,8 +1,8 @@
 //! The seed's figures, regenerated (issue 5; `docs/METHOD.md` section 7): Fig. 2 (the polar
 //! lobe of the averaged 2D scratch BRDF for one incident angle), Fig. 4 (a, b, c: cell noise,
-//! after rotation and stretch, after the threshold), Fig. 6 (a, b: the scratched glass plate at
-//! settings 1 and 2), Fig. 7 (a, b: the scratched glass teapot) and Fig. 8 (a: a close-up of the
-//! setting-1 plate), as PNGs plus an `index.html` that shows them side by side with their
+//! after rotation and stretch, after the threshold), Fig. 6 (setting 1: (a) the scratched glass
+//! plate, (b) the scratched glass teapot), Fig. 7 (the same at setting 2) and Fig. 8 (a: a
+//! close-up of the setting-1 plate), as PNGs plus an `index.html` that shows them side by side with their
 //! parameters and render times. `striae figures -o DIR` is the command.
 //!
 //! The renders use the shipped scene files (embedded here, so the figures do not depend on the
@@ -30,15 +30,15 @@ pub const FIGURE_SCENES: [(&str, &str, &str, &str); 5] = [
     ),
     (
         "fig6b",
-        "Fig. 6 (b): glass plate, setting 2",
-        "glass-plate-setting2.toml",
-        include_str!("../../../scenes/glass-plate-setting2.toml"),
+        "Fig. 6 (b): glass teapot, setting 1",
+        "glass-teapot-setting1.toml",
+        include_str!("../../../scenes/glass-teapot-setting1.toml"),
     ),
     (
         "fig7a",
-        "Fig. 7 (a): glass teapot, setting 1",
-        "glass-teapot-setting1.toml",
-        include_str!("../../../scenes/glass-teapot-setting1.toml"),
+        "Fig. 7 (a): glass plate, setting 2",
+        "glass-plate-setting2.toml",
+        include_str!("../../../scenes/glass-plate-setting2.toml"),
     ),
     (
         "fig7b",
@@ -348,8 +348,8 @@ pub fn index_html(figures: &[Figure], opts: &FigureOptions) -> String {
             "Fig. 4: scratch layer from cell noise",
             &["fig4a", "fig4b", "fig4c"],
         ),
-        ("Fig. 6: scratched glass plate", &["fig6a", "fig6b"]),
-        ("Fig. 7: scratched glass teapot", &["fig7a", "fig7b"]),
+        ("Fig. 6: setting 1 (plate, teapot)", &["fig6a", "fig6b"]),
+        ("Fig. 7: setting 2 (plate, teapot)", &["fig7a", "fig7b"]),
         ("Fig. 8: close-up", &["fig8a"]),
     ];
     let total: f64 = figures.iter().map(|f| f.seconds).sum();
