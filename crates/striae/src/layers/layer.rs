@@ -142,6 +142,36 @@ impl ScratchLayer {
             .unwrap_or(expected)
     }
 
+    /// The footprint `{p + s a + t b : s, t in [-1/2, 1/2]}` carried to noise space, shared by
+    /// [`Self::footprint_coverage`] and its reference; `Err(coverage)` when no area work is
+    /// needed (non-finite input: 0; a degenerate footprint: the point query at its centre).
+    fn noise_footprint(&self, p: DVec2, a: DVec2, b: DVec2) -> Result<NoiseFootprint, f64> {
+        let q0 = self.to_noise(p);
+        let (qa, qb) = (self.vector_to_noise(a), self.vector_to_noise(b));
+        let cr = cross(qa, qb);
+        if !(q0.is_finite() && cr.is_finite()) {
+            return Err(0.0);
+        }
+        if cr.abs() < 1e-12 {
+            return Err(self.noise.any_within(q0, self.tau) as u8 as f64);
+        }
+        // Counter-clockwise edges, so the corners below run counter-clockwise too.
+        let (qa, qb) = if cr > 0.0 { (qa, qb) } else { (qb, qa) };
+        Ok(NoiseFootprint {
+            q0,
+            qa,
+            qb,
+            cr: cr.abs(),
+            poly: [
+                (-qa - qb) * 0.5,
+                (qa - qb) * 0.5,
+                (qa + qb) * 0.5,
+                (qb - qa) * 0.5,
+            ],
+            ext: (qa.abs() + qb.abs()) * 0.5 + DVec2::splat(self.tau),
+        })
+    }
+
     /// The exact coverage of the footprint `{p + s a + t b : s, t in [-1/2, 1/2]}`, or `None`
     /// when its noise-space bounding box spans more than `max_cells` cells or it touches more
     /// than `MAX_DISCS` scratches.
@@ -162,24 +192,18 @@ impl ScratchLayer {
         b: DVec2,
         max_cells: usize,
     ) -> Option<f64> {
-        let q0 = self.to_noise(p);
-        let (qa, qb) = (self.vector_to_noise(a), self.vector_to_noise(b));
-        let cr = cross(qa, qb);
-        if !(q0.is_finite() && cr.is_finite()) {
-            return Some(0.0);
-        }
+        let NoiseFootprint {
+            q0,
+            qa,
+            qb,
+            cr,
+            poly,
+            ext,
+        } = match self.noise_footprint(p, a, b) {
+            Ok(f) => f,
+            Err(c) => return Some(c),
+        };
         let tau = self.tau;
-        if cr.abs() < 1e-12 {
-            return Some(self.noise.any_within(q0, tau) as u8 as f64);
-        }
-        let (qa, qb) = if cr > 0.0 { (qa, qb) } else { (qb, qa) };
-        let poly = [
-            (-qa - qb) * 0.5,
-            (qa - qb) * 0.5,
-            (qa + qb) * 0.5,
-            (qb - qa) * 0.5,
-        ];
-        let ext = (qa.abs() + qb.abs()) * 0.5 + DVec2::splat(tau);
         // Far more than max_cells: leave before the integer conversion (floor_i64 needs
         // |x| < 2^62).
         if !(ext.x < 1e12 && ext.y < 1e12) {
@@ -193,7 +217,6 @@ impl ScratchLayer {
         }
         // Edges qa, qb, -qa, -qb: two outward unit normals, offsets |cr| / (2 |q|) (the
         // half-widths of the parallelogram across each pair of edges).
-        let cr = cr.abs();
         let (la, lb) = (qa.length(), qb.length());
         let (na, nb) = (DVec2::new(qa.y, -qa.x) / la, DVec2::new(qb.y, -qb.x) / lb);
         let (ha, hb) = (0.5 * cr / la, 0.5 * cr / lb);
@@ -242,24 +265,13 @@ impl ScratchLayer {
         b: DVec2,
         max_cells: usize,
     ) -> Option<f64> {
-        let q0 = self.to_noise(p);
-        let (qa, qb) = (self.vector_to_noise(a), self.vector_to_noise(b));
-        let cr = cross(qa, qb);
-        if !(q0.is_finite() && cr.is_finite()) {
-            return Some(0.0);
-        }
+        let NoiseFootprint {
+            q0, cr, poly, ext, ..
+        } = match self.noise_footprint(p, a, b) {
+            Ok(f) => f,
+            Err(c) => return Some(c),
+        };
         let tau = self.tau;
-        if cr.abs() < 1e-12 {
-            return Some(self.noise.any_within(q0, tau) as u8 as f64);
-        }
-        let (qa, qb) = if cr > 0.0 { (qa, qb) } else { (qb, qa) };
-        let poly = [
-            (-qa - qb) * 0.5,
-            (qa - qb) * 0.5,
-            (qa + qb) * 0.5,
-            (qb - qa) * 0.5,
-        ];
-        let ext = (qa.abs() + qb.abs()) * 0.5 + DVec2::splat(tau);
         let (i0, i1) = ((q0.x - ext.x).floor(), (q0.x + ext.x).floor());
         let (j0, j1) = ((q0.y - ext.y).floor(), (q0.y + ext.y).floor());
         let cells = (i1 - i0 + 1.0) * (j1 - j0 + 1.0);
@@ -293,7 +305,7 @@ impl ScratchLayer {
         if n == 0 {
             return Some(0.0);
         }
-        Some((union_discs_polygon_area(&centres[..n], tau, &poly) / cr.abs()).clamp(0.0, 1.0))
+        Some((union_discs_polygon_area(&centres[..n], tau, &poly) / cr).clamp(0.0, 1.0))
     }
 }
 
@@ -418,4 +430,19 @@ pub(crate) fn disc_convex_polygon_area(c: DVec2, r: f64, poly: &[DVec2; 4]) -> f
         theta += std::f64::consts::TAU;
     }
     (0.5 * (twice + r2 * theta)).max(0.0)
+}
+
+/// A pixel footprint in a layer's noise space (see [`ScratchLayer::footprint_coverage`]).
+struct NoiseFootprint {
+    /// Centre.
+    q0: DVec2,
+    /// Edge vectors, counter-clockwise (`cross(qa, qb) > 0`).
+    qa: DVec2,
+    qb: DVec2,
+    /// Area, `cross(qa, qb)`.
+    cr: f64,
+    /// Corners relative to `q0`, counter-clockwise.
+    poly: [DVec2; 4],
+    /// Half-extent of the bounding box, grown by the disc radius `tau`.
+    ext: DVec2,
 }
