@@ -8,7 +8,7 @@ use striae::scene::{Overrides, Scene, SceneError};
 use striae::testing::MeanEstimate;
 
 mod common;
-use common::{render_with_threads, scene};
+use common::{assert_bit_identical_across_thread_counts, render_with_threads, scene};
 
 /// Mean over the pixels inside a centred square of side `frac` of the image (each pixel is an
 /// independent estimate), per channel.
@@ -206,14 +206,7 @@ fn image_is_bit_identical_across_thread_counts() {
         max_depth: None,
     };
     let s = Scene::parse(text, Path::new("default.toml"), Path::new("."), &o).unwrap();
-    let (a, sa) = render_with_threads(&s, 1);
-    let (b, sb) = render_with_threads(&s, 3);
-    assert!(a
-        .pixels
-        .iter()
-        .zip(&b.pixels)
-        .all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits)));
-    assert_eq!(sa.rays, sb.rays);
+    let a = assert_bit_identical_across_thread_counts(&s);
     // And the seed matters.
     let o2 = Overrides { seed: Some(8), ..o };
     let s2 = Scene::parse(text, Path::new("default.toml"), Path::new("."), &o2).unwrap();

@@ -12,7 +12,7 @@ use striae::scene::{material_bsdf, Overrides, Scene};
 use striae::testing::MeanEstimate;
 
 mod common;
-use common::{render_with_threads, scene};
+use common::{assert_bit_identical_across_thread_counts, render_with_threads, scene};
 
 /// A unit sphere of `material` (TOML body of `[materials.m]`, then `scratches`) filling the
 /// view in a uniform white environment.
@@ -246,24 +246,11 @@ fn scratched_renders_are_bit_identical_across_thread_counts() {
         max_depth: None,
     };
     let s = Scene::parse(PLATE, Path::new("plate.toml"), Path::new("."), &o).unwrap();
-    let (a, sa) = render_with_threads(&s, 1);
-    let (b, sb) = render_with_threads(&s, 3);
-    assert!(a
-        .pixels
-        .iter()
-        .zip(&b.pixels)
-        .all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits)));
-    assert_eq!(sa.rays, sb.rays);
+    let a = assert_bit_identical_across_thread_counts(&s);
     assert!(a.pixels.iter().any(|p| p.y > 0.0));
     let g = furnace(
         "type = \"scratched\"\nbase = \"glass\"\nior = 1.5",
         &format!("{WIDE}m = 16\nn = 600\nnr = 8\nlayer_mix = \"sum\"\n"),
     );
-    let (c, _) = render_with_threads(&g, 1);
-    let (d, _) = render_with_threads(&g, 2);
-    assert!(c
-        .pixels
-        .iter()
-        .zip(&d.pixels)
-        .all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits)));
+    assert_bit_identical_across_thread_counts(&g);
 }

@@ -25,3 +25,17 @@ pub fn render_with_threads(scene: &Scene, threads: usize) -> (Image, RenderStats
         .unwrap()
         .install(|| render(scene, &|_| {}))
 }
+
+/// Render `scene` with 1 and with 3 worker threads, assert the images are bit-identical and
+/// trace the same number of rays, and return the image.
+pub fn assert_bit_identical_across_thread_counts(scene: &Scene) -> Image {
+    let (a, sa) = render_with_threads(scene, 1);
+    let (b, sb) = render_with_threads(scene, 3);
+    assert!(a
+        .pixels
+        .iter()
+        .zip(&b.pixels)
+        .all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits)));
+    assert_eq!(sa.rays, sb.rays);
+    a
+}
