@@ -43,6 +43,7 @@ use crate::bsdf::{
     ScratchedBsdf,
 };
 use crate::fresnel::FresnelLaw;
+use crate::layers::lattice::TileQuery;
 use crate::layers::{LayerError, LayerParams, LayerSet, MAX_LAYERS};
 use crate::material::{Material, MaterialError};
 use crate::math::{Rgb, Vec3};
@@ -82,13 +83,18 @@ pub enum LayerMix {
 #[serde(rename_all = "lowercase")]
 pub enum CoverageMode {
     /// The exact share of the pixel footprint (`uv`, `duvdx`, `duvdy`) each layer's scratches
-    /// cover (METHOD.md section 6, [Raymond16]).
+    /// cover (METHOD.md section 6, [Raymond16]), with the footprint snapped to the
+    /// footprint-shaped tile that holds the hit and cached per tile
+    /// ([`crate::layers::lattice`]): a pixel's samples share a few tiles' exact coverage.
     #[default]
     Footprint,
+    /// The same exact coverage, of the footprint centred on each sample: no snapping, no
+    /// reuse (several microseconds per hit where a pixel spans many scratches).
+    Sample,
     /// The scratch test at the hit point only (`c` is 0 or 1 per layer). The camera ray's hit
     /// is uniformly distributed over the pixel's footprint, so averaging a pixel's samples
-    /// estimates the same coverage without bias, at a fraction of the cost (the footprint
-    /// query enumerates every noise cell the footprint touches; see BENCHMARKS.md).
+    /// estimates the same coverage without bias in `sum` mode (in `max` mode a footprint
+    /// covered by several layers counts once per layer it picks, not the largest share).
     Point,
 }
 
@@ -550,9 +556,21 @@ impl ScratchedMaterial {
         let mut cov = [0.0f32; MAX_LAYERS];
         match p.coverage {
             CoverageMode::Footprint => {
+                let query = match p.mix {
+                    LayerMix::Max => TileQuery::Max,
+                    LayerMix::Sum => TileQuery::All,
+                };
                 p.layers
-                    .coverage_all(ctx.uv, ctx.duvdx, ctx.duvdy, &mut cov[..k])
+                    .coverage_tiled(ctx.uv, ctx.duvdx, ctx.duvdy, query, &mut cov[..k])
             }
+            CoverageMode::Sample => match p.mix {
+                LayerMix::Max => p
+                    .layers
+                    .coverage_max(ctx.uv, ctx.duvdx, ctx.duvdy, &mut cov[..k]),
+                LayerMix::Sum => p
+                    .layers
+                    .coverage_all(ctx.uv, ctx.duvdx, ctx.duvdy, &mut cov[..k]),
+            },
             CoverageMode::Point => {
                 let mask = p.layers.scratched_mask(ctx.uv);
                 if mask == 0 {

@@ -551,29 +551,35 @@ impl ScratchBrdf {
     /// `f(wo, wi)` of the smooth lobe, without the cosine: `(2/pi) rho_s(wo, wi)` by eq. (3)
     /// (section 4's unit factor). 0 for the delta lobe or either direction below the surface.
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> f64 {
-        if self.delta || wo.z <= 0.0 || wi.z <= 0.0 {
-            return 0.0;
-        }
-        let m = self.table.m;
-        let (theta_o, phi_o) = angles(wo);
-        let (_, phi_i) = angles(wi);
-        2.0 / PI * self.table.rho(theta_o, bin_of(phi_i, m), bin_of(phi_o, m))
+        self.eval_pdf(wo, wi).0
     }
 
     /// Solid-angle pdf of [`ScratchBrdf::sample`] (smooth lobe): `p(phi_i) (2/pi) cos(theta_i)`,
     /// from `p(phi_i, theta_i) = p(phi_i) (2/pi) cos^2(theta_i)` and `dw = cos(theta) dtheta dphi`.
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f64 {
+        self.eval_pdf(wo, wi).1
+    }
+
+    /// [`Self::eval`] and [`Self::pdf`] together, each angle computed once.
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (f64, f64) {
         if self.delta || wo.z <= 0.0 || wi.z <= 0.0 {
-            return 0.0;
+            return (0.0, 0.0);
         }
-        let (_, phi_o) = angles(wo);
-        let row = &self.rows[bin_of(phi_o, self.table.m)];
+        let m = self.table.m;
+        let (theta_o, phi_o) = angles(wo);
+        let (_, phi_i) = angles(wi);
+        let (o, i) = (bin_of(phi_o, m), bin_of(phi_i, m));
+        let f = 2.0 / PI * self.table.rho(theta_o, i, o);
+        let row = &self.rows[o];
         if row.integral() <= 0.0 {
-            return 0.0;
+            return (f, 0.0);
         }
-        let (theta_i, phi_i) = angles(wi);
+        // cos(theta_i) = sqrt(1 - y^2) for theta_i = asin(y) in [-pi/2, pi/2].
+        let y = (wi.y as f64).clamp(-1.0, 1.0);
+        let cos_theta_i = (1.0 - y * y).sqrt();
         let p_phi = row.pdf(((phi_i + FRAC_PI_2) / PI).clamp(0.0, 1.0)) / PI;
-        p_phi * 2.0 / PI * theta_i.cos()
+        (f, p_phi * 2.0 / PI * cos_theta_i)
     }
 
     /// Section 6: `phi_i` from the row CDF of `rho_s(pi/2, phi_o, .) cos(phi_i)`, then
@@ -610,12 +616,11 @@ impl ScratchBrdf {
         if wi.z <= 0.0 {
             return None;
         }
-        let pdf = self.pdf(wo, wi);
+        let _ = pdf_x;
+        let (f, pdf) = self.eval_pdf(wo, wi);
         if pdf <= 0.0 {
             return None;
         }
-        let _ = pdf_x;
-        let f = self.eval(wo, wi);
         Some(ScratchSample {
             wi,
             weight: f * wi.z as f64 / pdf,

@@ -290,14 +290,15 @@ impl<'a> ScratchedBsdf<'a> {
         for l in self.lobes() {
             let (wo_s, wi_s) = (l.to_scratch(wo), l.to_scratch(wi));
             let (a, scale) = self.table.scaled_albedo(wo_s);
-            f += (l.coverage * scale) as f64 * self.table.brdf().eval(wo_s, wi_s);
+            let (fk, pdf_k) = self.table.brdf().eval_pdf(wo_s, wi_s);
+            f += (l.coverage * scale) as f64 * fk;
             let pk = if self.is_glass() {
                 l.coverage * a
             } else {
                 l.coverage
             };
             if pk > 0.0 {
-                p += pk as f64 * self.table.brdf().pdf(wo_s, wi_s);
+                p += pk as f64 * pdf_k;
             }
         }
         (self.tint * f as f32, p as f32)
@@ -402,11 +403,23 @@ impl<'a> ScratchedBsdf<'a> {
                 eta: 1.0,
             });
         }
-        let pdf = self.pdf(wo, wi);
+        if self.count == 1 {
+            // One lobe (the `max` mode): the mixture's pdf is `pk` times the lobe's and its
+            // value `c s f`, so the weight is the lobe's own times `c s / pk`.
+            let scale = self.table.scaled_albedo(wo_s).1;
+            let w = (s.weight * (l.coverage * scale / pk) as f64) as f32;
+            return Some(BsdfSample {
+                wi,
+                weight: self.tint * w,
+                pdf: pk * s.pdf as f32,
+                delta: false,
+                eta: 1.0,
+            });
+        }
+        let (f, pdf) = self.eval_pdf(wo, wi);
         if !(pdf > 0.0) || wi.z <= 0.0 {
             return None;
         }
-        let f = self.eval(wo, wi);
         Some(BsdfSample {
             wi,
             weight: f * (wi.z / pdf),

@@ -12,9 +12,6 @@ use glam::DVec2;
 /// expected coverage (the prefiltered limit) instead of enumerating scratches.
 pub const MAX_FOOTPRINT_CELLS: usize = 256;
 
-/// Candidate discs the fast footprint query holds before it hands over to the reference.
-const FAST_DISCS: usize = 32;
-
 /// The texture centre `c` about which the noise is rotated.
 pub const CENTRE: DVec2 = DVec2::new(0.5, 0.5);
 
@@ -177,14 +174,8 @@ impl ScratchLayer {
     /// than `MAX_DISCS` scratches.
     ///
     /// The fast path of [`Self::footprint_coverage_reference`] (same value up to rounding):
-    /// when no two candidate discs overlap (the common case: a layer covers about pi tau^2),
-    /// the discs' areas are summed one by one, each in closed form: `pi tau^2` for a disc
-    /// entirely inside; `pi tau^2` less two circular segments for a disc cut by one pair of
-    /// parallel edges only; otherwise [`disc_convex_polygon_area`] (triangle decomposition,
-    /// one `atan2`). Only footprints with overlapping discs pay for the exact union
-    /// ([`union_discs_polygon_area`]). Cells are enumerated over the noise-space bounding box
-    /// as in the reference (a row-by-row enumeration over the parallelogram's extent was tried
-    /// and measured slower: footprints span few cells per row).
+    /// the candidate discs ([`Self::footprint_candidates`]) and their clipped area
+    /// ([`FootprintCandidates::area`]).
     pub fn footprint_coverage(
         &self,
         p: DVec2,
@@ -192,6 +183,30 @@ impl ScratchLayer {
         b: DVec2,
         max_cells: usize,
     ) -> Option<f64> {
+        let mut centres = [DVec2::ZERO; MAX_DISCS];
+        match self.footprint_candidates(p, a, b, max_cells, &mut centres) {
+            Candidates::Done(c) => c,
+            Candidates::Discs(f) => Some(f.coverage(&centres[..f.n])),
+        }
+    }
+
+    /// The scratch discs that may touch the footprint `{p + s a + t b : s, t in [-1/2, 1/2]}`
+    /// in noise space (their centres go to `centres`), or the answer itself where no area work
+    /// is needed (no disc, a degenerate or non-finite footprint, one too large: see
+    /// [`Self::footprint_coverage`]).
+    ///
+    /// Cells are enumerated over the noise-space bounding box as in the reference (a
+    /// row-by-row enumeration over the parallelogram's extent was tried and measured slower:
+    /// footprints span few cells per row); a disc is kept when its centre lies within `tau` of
+    /// both slabs of the parallelogram.
+    pub fn footprint_candidates(
+        &self,
+        p: DVec2,
+        a: DVec2,
+        b: DVec2,
+        max_cells: usize,
+        centres: &mut [DVec2; MAX_DISCS],
+    ) -> Candidates {
         let NoiseFootprint {
             q0,
             qa,
@@ -201,19 +216,19 @@ impl ScratchLayer {
             ext,
         } = match self.noise_footprint(p, a, b) {
             Ok(f) => f,
-            Err(c) => return Some(c),
+            Err(c) => return Candidates::Done(Some(c)),
         };
         let tau = self.tau;
         // Far more than max_cells: leave before the integer conversion (floor_i64 needs
         // |x| < 2^62).
         if !(ext.x < 1e12 && ext.y < 1e12) {
-            return None;
+            return Candidates::Done(None);
         }
         let (i0, i1) = (floor_i64(q0.x - ext.x), floor_i64(q0.x + ext.x));
         let (j0, j1) = (floor_i64(q0.y - ext.y), floor_i64(q0.y + ext.y));
         let cells = (i1 - i0 + 1) as f64 * (j1 - j0 + 1) as f64;
         if cells > max_cells as f64 {
-            return None;
+            return Candidates::Done(None);
         }
         // Edges qa, qb, -qa, -qb: two outward unit normals, offsets |cr| / (2 |q|) (the
         // half-widths of the parallelogram across each pair of edges).
@@ -221,9 +236,6 @@ impl ScratchLayer {
         let (na, nb) = (DVec2::new(qa.y, -qa.x) / la, DVec2::new(qb.y, -qb.x) / lb);
         let (ha, hb) = (0.5 * cr / la, 0.5 * cr / lb);
         let planes = [(na, ha), (nb, hb), (-na, ha), (-nb, hb)];
-        // A small array (zeroing MAX_DISCS entries per query showed in profiles); footprints
-        // touching more discs take the reference path.
-        let mut centres = [DVec2::ZERO; FAST_DISCS];
         let mut n = 0;
         for j in j0..=j1 {
             for i in i0..=i1 {
@@ -232,28 +244,23 @@ impl ScratchLayer {
                 if na.dot(f).abs() - ha >= tau || nb.dot(f).abs() - hb >= tau {
                     continue;
                 }
-                if n == FAST_DISCS {
-                    return self.footprint_coverage_reference(p, a, b, max_cells);
+                if n == MAX_DISCS {
+                    return Candidates::Done(None);
                 }
                 centres[n] = f;
                 n += 1;
             }
         }
         if n == 0 {
-            return Some(0.0);
+            return Candidates::Done(Some(0.0));
         }
-        let area = if any_overlap(&centres[..n], tau) {
-            union_discs_polygon_area(&centres[..n], tau, &poly)
-        } else {
-            centres[..n]
-                .iter()
-                .map(|&c| disc_parallelogram_area(c, tau, &poly, &planes))
-                .sum()
-        };
-        // Below 1e-12 the closed forms' value is rounding noise (a disc grazing the footprint:
-        // pi tau^2 less segments that nearly cancel): report no coverage, as the union does.
-        let c = area / cr;
-        Some(if c < 1e-12 { 0.0 } else { c.min(1.0) })
+        Candidates::Discs(FootprintCandidates {
+            n,
+            tau,
+            cr,
+            poly,
+            planes,
+        })
     }
 
     /// The reference for [`Self::footprint_coverage`]: every cell of the noise-space bounding
@@ -332,8 +339,9 @@ fn segment_outside(s: f64, r: f64) -> f64 {
 }
 
 /// Area of `disc(c, r) ∩ parallelogram` (`poly` counter-clockwise, `planes` its outward unit
-/// normals and offsets, edges 0 and 2 parallel, 1 and 3 parallel). Closed form when the circle
-/// crosses at most one pair of parallel edge lines (the two segments cut off are disjoint);
+/// normals and offsets, edges 0 and 2 parallel, 1 and 3 parallel; `area` its area). Closed
+/// form when the circle crosses at most one pair of parallel edge lines (the two segments cut
+/// off are disjoint) or holds all four corners (the whole parallelogram: small footprints);
 /// otherwise [`disc_convex_polygon_area`].
 #[inline]
 pub(crate) fn disc_parallelogram_area(
@@ -341,6 +349,7 @@ pub(crate) fn disc_parallelogram_area(
     r: f64,
     poly: &[DVec2; 4],
     planes: &[(DVec2, f64); 4],
+    area: f64,
 ) -> f64 {
     let mut s = [0.0f64; 4];
     let mut active = 0u32;
@@ -363,6 +372,8 @@ pub(crate) fn disc_parallelogram_area(
             }
         }
         area.max(0.0)
+    } else if poly.iter().all(|&v| (v - c).length_squared() <= r * r) {
+        area
     } else {
         disc_convex_polygon_area(c, r, poly)
     }
@@ -445,4 +456,77 @@ struct NoiseFootprint {
     poly: [DVec2; 4],
     /// Half-extent of the bounding box, grown by the disc radius `tau`.
     ext: DVec2,
+}
+
+/// What [`ScratchLayer::footprint_candidates`] found.
+pub enum Candidates {
+    /// The coverage needs no area work (`None`: too large a footprint, see
+    /// [`ScratchLayer::footprint_coverage`]).
+    Done(Option<f64>),
+    /// Discs to clip against the footprint.
+    Discs(FootprintCandidates),
+}
+
+/// How many scratch discs (radius `tau`, centres relative to the footprint's centre, in noise
+/// space, held by the caller) may touch a footprint parallelogram, with what the area needs.
+#[derive(Clone, Copy, Debug)]
+pub struct FootprintCandidates {
+    /// Number of candidate discs.
+    pub n: usize,
+    tau: f64,
+    /// The parallelogram's area.
+    cr: f64,
+    /// Corners, counter-clockwise.
+    poly: [DVec2; 4],
+    /// Outward unit normals and offsets of its edges (0 and 2 parallel, 1 and 3 parallel).
+    planes: [(DVec2, f64); 4],
+}
+
+impl FootprintCandidates {
+    /// The exact coverage: when no two candidate discs overlap (the common case: a layer covers
+    /// about pi tau^2), the discs' areas are summed one by one, each in closed form
+    /// ([`disc_parallelogram_area`]); only footprints with overlapping discs pay for the exact
+    /// union ([`union_discs_polygon_area`]). Below 1e-12 the closed forms' value is rounding
+    /// noise (a disc grazing the footprint: pi tau^2 less segments that nearly cancel), so it
+    /// reports no coverage, as the union does.
+    pub fn coverage(&self, centres: &[DVec2]) -> f64 {
+        let area = if any_overlap(centres, self.tau) {
+            union_discs_polygon_area(centres, self.tau, &self.poly)
+        } else {
+            centres
+                .iter()
+                .map(|&c| disc_parallelogram_area(c, self.tau, &self.poly, &self.planes, self.cr))
+                .sum()
+        };
+        let c = area / self.cr;
+        if c < 1e-12 {
+            0.0
+        } else {
+            c.min(1.0)
+        }
+    }
+
+    /// An upper bound on [`Self::coverage`] at a fraction of its cost: each disc's area within
+    /// the parallelogram is at most `pi tau^2`, the parallelogram's area, and for each pair of
+    /// parallel edges the slab's width times the longest chord of the disc inside the slab,
+    /// `2 h * 2 sqrt(tau^2 - d^2)` (`h` the slab's half-width, `d` the distance from the centre
+    /// to the slab). The sum bounds the union too. Padded by a relative 1e-9 so that rounding
+    /// in [`Self::coverage`] never exceeds it.
+    pub fn coverage_bound(&self, centres: &[DVec2]) -> f64 {
+        let (t2, full) = (
+            self.tau * self.tau,
+            std::f64::consts::PI * self.tau * self.tau,
+        );
+        let cap = full.min(self.cr);
+        let mut sum = 0.0;
+        for &c in centres {
+            let mut b = cap;
+            for &(nrm, h) in &self.planes[..2] {
+                let d = (nrm.dot(c).abs() - h).max(0.0);
+                b = b.min(4.0 * h * (t2 - d * d).max(0.0).sqrt());
+            }
+            sum += b;
+        }
+        (sum / self.cr * (1.0 + 1e-9) + 1e-12).min(1.0)
+    }
 }

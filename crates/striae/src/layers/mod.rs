@@ -22,6 +22,7 @@
 //! continues, it is not wrapped, outside it).
 
 pub mod footprint;
+pub mod lattice;
 pub mod layer;
 pub mod raster;
 pub mod worley;
@@ -131,7 +132,12 @@ pub struct LayerSet {
     seed: u64,
     layers: Vec<ScratchLayer>,
     expected_coverage: f64,
+    /// Names the set in per-thread caches ([`lattice`]); unique per process, from 1.
+    id: u64,
 }
+
+/// The next [`LayerSet`] id.
+static NEXT_SET_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
 impl LayerSet {
     /// Validate `params` and draw the layers: `alpha_k` uniform in `[0, 2 pi)` (a direction, not
@@ -156,7 +162,13 @@ impl LayerSet {
             seed,
             layers,
             expected_coverage,
+            id: NEXT_SET_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         })
+    }
+
+    /// A process-unique id (clones share it: they hold the same layers).
+    pub fn id(&self) -> u64 {
+        self.id
     }
 
     pub fn params(&self) -> &LayerParams {
@@ -233,6 +245,69 @@ impl LayerSet {
     pub fn coverage_all(&self, uv: Vec2, duvdx: Vec2, duvdy: Vec2, out: &mut [f32]) {
         for (layer, o) in self.layers.iter().zip(&mut out[..self.layers.len()]) {
             *o = layer.coverage(uv, duvdx, duvdy, self.expected_coverage);
+        }
+    }
+
+    /// The largest coverage of one footprint over the layers, with every layer that may tie
+    /// with it (METHOD.md section 6, `max` mode): `out[k]` is layer `k`'s exact coverage (as
+    /// [`Self::coverage_all`]) where it is within 2e-6 of the largest, and 0 where it is
+    /// smaller (its value is then not computed). So the largest value and the set of layers
+    /// within 1e-6 of it (the ties) are exactly those of [`Self::coverage_all`].
+    ///
+    /// Every layer first gathers its candidate discs and an upper bound on its coverage
+    /// ([`layer::FootprintCandidates::coverage_bound`]); the exact areas are then computed in
+    /// decreasing order of bound until the next bound falls below the best coverage so far.
+    /// # Panics
+    /// If `out.len() < len()`.
+    pub fn coverage_max(&self, uv: Vec2, duvdx: Vec2, duvdy: Vec2, out: &mut [f32]) {
+        const TIE: f64 = 2e-6;
+        let (p, a, b) = (uv.as_dvec2(), duvdx.as_dvec2(), duvdy.as_dvec2());
+        let n = self.layers.len();
+        let out = &mut out[..n];
+        // Pass 1: exact values that need no area work, bounds for the rest.
+        let mut bound = [0.0f64; MAX_LAYERS];
+        let mut order = [0u8; MAX_LAYERS];
+        let mut pending = 0;
+        let mut best = 0.0f64;
+        let mut centres = [glam::DVec2::ZERO; footprint::MAX_DISCS];
+        for (k, layer) in self.layers.iter().enumerate() {
+            out[k] = 0.0;
+            match layer.footprint_candidates(p, a, b, layer::MAX_FOOTPRINT_CELLS, &mut centres) {
+                layer::Candidates::Done(c) => {
+                    let c = c.unwrap_or(self.expected_coverage);
+                    out[k] = c as f32;
+                    best = best.max(c);
+                }
+                layer::Candidates::Discs(f) => {
+                    bound[k] = f.coverage_bound(&centres[..f.n]);
+                    order[pending] = k as u8;
+                    pending += 1;
+                }
+            }
+        }
+        // Pass 2: exact areas, largest bound first.
+        let order = &mut order[..pending];
+        order.sort_unstable_by(|&i, &j| bound[j as usize].total_cmp(&bound[i as usize]));
+        for &k in order.iter() {
+            let k = k as usize;
+            if bound[k] < best - TIE {
+                break;
+            }
+            let layer = &self.layers[k];
+            let c =
+                match layer.footprint_candidates(p, a, b, layer::MAX_FOOTPRINT_CELLS, &mut centres)
+                {
+                    layer::Candidates::Done(c) => c.unwrap_or(self.expected_coverage),
+                    layer::Candidates::Discs(f) => f.coverage(&centres[..f.n]),
+                };
+            out[k] = c as f32;
+            best = best.max(c);
+        }
+        // Values computed before `best` settled may lie below it: not ties, so cleared.
+        for c in out.iter_mut() {
+            if (*c as f64) < best - TIE {
+                *c = 0.0;
+            }
         }
     }
 

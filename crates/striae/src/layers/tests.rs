@@ -531,7 +531,8 @@ fn single_disc_closed_forms_match_the_union_kernel() {
         let c = poly[case % 4] * rng.random_range(0.0..1.5)
             + DVec2::new(rng.random_range(-r..r), rng.random_range(-r..r));
         let exact = footprint::union_discs_polygon_area(&[c], r, &poly);
-        let fast = layer::disc_parallelogram_area(c, r, &poly, &planes);
+        let fast =
+            layer::disc_parallelogram_area(c, r, &poly, &planes, (a.x * b.y - a.y * b.x).abs());
         let tri = layer::disc_convex_polygon_area(c, r, &poly);
         let tol = 1e-10 * (PI * r * r);
         assert!((fast - exact).abs() < tol, "case {case}: {fast} vs {exact}");
@@ -542,4 +543,162 @@ fn single_disc_closed_forms_match_the_union_kernel() {
         partial += (exact > 0.0 && exact < PI * r * r * 0.999) as usize;
     }
     assert!(partial > 5000, "{partial}");
+}
+
+/// Random footprints from a pixel's size to a few hundred noise cells, in both seed settings
+/// and a thick-scratch set where discs overlap (the union path).
+fn random_footprints(rng: &mut rand_pcg::Pcg64, n: usize, scale: f32) -> Vec<(Vec2, Vec2, Vec2)> {
+    (0..n)
+        .map(|_| {
+            let uv = Vec2::new(rng.random_range(0.05..0.95), rng.random_range(0.05..0.95));
+            let s = scale * 10f32.powf(rng.random_range(-1.5..0.0));
+            let a = Vec2::new(s, rng.random_range(-s..s));
+            let b = Vec2::new(rng.random_range(-s..s), -s * rng.random_range(0.05..1.0));
+            (uv, a, b)
+        })
+        .collect()
+}
+
+/// `coverage_max` (bounds, then exact areas in decreasing order of bound) gives the same
+/// largest coverage and the same layers within 1e-6 of it (the ties the renderer picks from)
+/// as the exact coverage of every layer, and each bound is above its exact coverage.
+#[test]
+fn coverage_max_keeps_the_largest_and_its_ties() {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(21);
+    let mut pruned = 0;
+    let mut compared = 0;
+    for (set_params, scale) in [
+        (LayerParams::setting(1).unwrap(), 0.03f32),
+        (LayerParams::setting(2).unwrap(), 0.05),
+        (params(0.05, 0.02, 0.45, 8), 0.2),
+    ] {
+        let set = LayerSet::new(set_params, 3).unwrap();
+        let n = set.len();
+        let (mut all, mut max) = (vec![0.0f32; n], vec![0.0f32; n]);
+        for (uv, a, b) in random_footprints(&mut rng, 400, scale) {
+            set.coverage_all(uv, a, b, &mut all);
+            set.coverage_max(uv, a, b, &mut max);
+            let best = all.iter().copied().fold(0.0f32, f32::max);
+            assert_eq!(max.iter().copied().fold(0.0f32, f32::max), best);
+            for k in 0..n {
+                let tie = |c: f32| c > 0.0 && c >= best - 1e-6;
+                assert_eq!(
+                    tie(all[k]),
+                    tie(max[k]),
+                    "layer {k}: {} vs {}",
+                    all[k],
+                    max[k]
+                );
+                if tie(all[k]) {
+                    assert_eq!(all[k], max[k]);
+                }
+                pruned += (all[k] > 0.0 && max[k] == 0.0) as usize;
+                // Bounds.
+                let mut centres = [DVec2::ZERO; footprint::MAX_DISCS];
+                let layer = &set.layers()[k];
+                let (p, da, db) = (uv.as_dvec2(), a.as_dvec2(), b.as_dvec2());
+                if let layer::Candidates::Discs(f) =
+                    layer.footprint_candidates(p, da, db, layer::MAX_FOOTPRINT_CELLS, &mut centres)
+                {
+                    let (exact, bound) = (
+                        f.coverage(&centres[..f.n]),
+                        f.coverage_bound(&centres[..f.n]),
+                    );
+                    assert!(exact <= bound, "coverage {exact} above its bound {bound}");
+                    compared += 1;
+                }
+            }
+        }
+    }
+    assert!(
+        compared > 2000 && pruned > 200,
+        "{compared} bounds, {pruned} pruned"
+    );
+}
+
+/// The rounding of a footprint's shape: edges within about 1/7 and area within 27 %, a rounded
+/// shape's key names it, a footprint along the texture axes stays along them, and degenerate or
+/// non-finite footprints have no shape.
+#[test]
+fn footprint_quantization_is_bounded() {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(22);
+    let cross = |a: Vec2, b: Vec2| a.perp_dot(b);
+    let mut same = 0;
+    for _ in 0..20000 {
+        let s = 10f32.powf(rng.random_range(-6.0..1.0));
+        let a = Vec2::new(
+            rng.random_range(-1.0f32..1.0),
+            rng.random_range(-1.0f32..1.0),
+        ) * s;
+        let thin = 10f32.powf(rng.random_range(-2.0..0.0));
+        let b = a.perp() * thin * rng.random_range(0.5..1.0) + a * rng.random_range(-2.0..2.0);
+        let Some((qa, qb, key)) = lattice::quantize(a, b) else {
+            panic!("{a:?} {b:?}");
+        };
+        let (la, lb) = (a.length(), b.length());
+        // Lengths to 3 significant bits (1/8), a's direction to 1/32 per component.
+        assert!((qa - a).length() <= 0.15 * la, "{a:?} -> {qa:?}");
+        assert!(
+            (qb - b).length() <= 0.15 * lb + 0.15 * cross(a, b).abs() / la,
+            "{b:?} -> {qb:?}"
+        );
+        let (area, qarea) = (cross(a, b), cross(qa, qb));
+        assert!((qarea / area - 1.0).abs() < 0.27, "area {area} -> {qarea}");
+        // A tiny perturbation rarely crosses a rounding boundary; with the same key, the same
+        // shape.
+        let (qa2, qb2, key2) = lattice::quantize(a * (1.0 + 1e-6), b).unwrap();
+        if key2 == key {
+            assert_eq!((qa2, qb2), (qa, qb));
+            same += 1;
+        }
+    }
+    assert!(same > 19000, "{same}");
+    let (qa, qb, _) = lattice::quantize(Vec2::new(1e-3, 2e-6), Vec2::new(-3e-6, 5e-4)).unwrap();
+    assert_eq!((qa.y, qb.x), (0.0, 0.0));
+    assert!(lattice::quantize(Vec2::ZERO, Vec2::Y).is_none());
+    assert!(lattice::quantize(Vec2::X, Vec2::X * 2.0).is_none());
+    assert!(lattice::quantize(Vec2::new(f32::NAN, 1.0), Vec2::Y).is_none());
+}
+
+/// The tile holding a hit contains it, hits in one tile share its key, and the tiled (cached)
+/// coverage is exactly the coverage of the tile, whether it came from the cache or not.
+#[test]
+fn footprint_tiles_contain_their_hits_and_cache_their_exact_coverage() {
+    let set = LayerSet::new(LayerParams::setting(1).unwrap(), 4).unwrap();
+    let n = set.len();
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(23);
+    let (mut tiled, mut direct) = (vec![0.0f32; n], vec![0.0f32; n]);
+    let mut shared = 0;
+    for (uv, a, b) in random_footprints(&mut rng, 300, 0.02) {
+        let tile = lattice::FootprintTile::containing(uv, a, b).unwrap();
+        // uv - centre = s a + t b with |s|, |t| <= 1/2.
+        let d = uv.as_dvec2() - tile.centre;
+        let det = tile.a.x * tile.b.y - tile.a.y * tile.b.x;
+        let s = (d.x * tile.b.y - d.y * tile.b.x) / det;
+        let t = (tile.a.x * d.y - tile.a.y * d.x) / det;
+        assert!(s.abs() <= 0.5 + 1e-6 && t.abs() <= 0.5 + 1e-6, "{s} {t}");
+        // A nearby point with the same footprint: same tile iff inside it.
+        let (ds, dt) = (
+            rng.random_range(-0.3f64..0.3),
+            rng.random_range(-0.3f64..0.3),
+        );
+        let q = (uv.as_dvec2() + tile.a * ds + tile.b * dt).as_vec2();
+        let other = lattice::FootprintTile::containing(q, a, b).unwrap();
+        if (s + ds).abs() < 0.49 && (t + dt).abs() < 0.49 {
+            assert_eq!(other, tile);
+            shared += 1;
+        }
+        for query in [lattice::TileQuery::Max, lattice::TileQuery::All] {
+            for _ in 0..2 {
+                set.coverage_tiled(uv, a, b, query, &mut tiled);
+                let (c, ta, tb) = (tile.centre.as_vec2(), tile.a.as_vec2(), tile.b.as_vec2());
+                match query {
+                    lattice::TileQuery::Max => set.coverage_max(c, ta, tb, &mut direct),
+                    lattice::TileQuery::All => set.coverage_all(c, ta, tb, &mut direct),
+                }
+                assert_eq!(tiled, direct);
+            }
+        }
+    }
+    assert!(shared > 50, "{shared}");
 }

@@ -484,11 +484,15 @@ fn layer_choice_frames_and_ties() {
             (a, b) => panic!("{a:?} vs {b:?}"),
         }
     }
-    // A footprint: the chosen coverage is the largest of the layers' exact coverages.
+    // A footprint: the chosen coverage is the largest of the layers' exact coverages of the
+    // footprint tile holding the hit (`layers::lattice`).
     for _ in 0..300 {
         let uv = Vec2::new(rng.random(), rng.random());
         let mut cov = [0.0f32; 4];
-        layers.coverage_all(uv, Vec2::new(0.02, 0.0), Vec2::new(0.0, 0.02), &mut cov);
+        let (dx, dy) = (Vec2::new(0.02, 0.0), Vec2::new(0.0, 0.02));
+        let tile = crate::layers::lattice::FootprintTile::containing(uv, dx, dy).unwrap();
+        let (c, a, b) = (tile.centre.as_vec2(), tile.a.as_vec2(), tile.b.as_vec2());
+        layers.coverage_all(c, a, b, &mut cov);
         let best = cov.iter().copied().fold(0.0, f32::max);
         match m.bsdf(&flat_ctx(uv, 0.02, Vec3::Z, 0.3)) {
             Bsdf::Scratched(b) => assert_eq!(b.lobes()[0].coverage, best),

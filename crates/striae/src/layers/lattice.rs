@@ -1,0 +1,206 @@
+//! Footprint tiles: the renderer's coverage queries snapped to a lattice of footprint-shaped
+//! tiles, and a per-thread cache of their exact coverage.
+//!
+//! A pixel's samples hit points spread over one pixel footprint, and each asks for the scratch
+//! coverage of a footprint of that same shape (METHOD.md section 6). Computing it exactly at
+//! every sample costs one noise-cell enumeration per cell the footprint spans, per layer: several
+//! microseconds where a pixel spans many scratches (`BENCHMARKS.md`). Here the footprint's edge
+//! vectors are rounded to one of a discrete set of shapes ([`quantize`]) and the hit point is snapped to the
+//! tile that contains it in the lattice those vectors span, the parallelograms
+//! `{(i + s) a + (j + t) b : s, t in [-1/2, 1/2]}`, which tile the texture plane. The coverage
+//! is then a function of the tile, `(i, j, a, b)`, like a texel of an anisotropic mip level,
+//! computed exactly once per thread and reused by every sample that lands in the tile.
+//!
+//! This is a departure from a footprint centred on each sample: the coverage a sample sees is
+//! that of a footprint displaced by at most half its size along each edge, with edges off by at
+//! most about 1/7 and the area by at most 27 % (the rounding). Over a pixel the tiles average to
+//! the same coverage; the pixel's estimate converges to the coverage of the tiles under it (a box filter of about twice the
+//! footprint's size) rather than of footprints centred on its points. `coverage = "sample"`
+//! keeps the per-sample footprint.
+//!
+//! Determinism: a tile's value depends only on its key, never on which sample or thread
+//! computed it first, so images stay bit-identical for any thread count.
+
+use super::LayerSet;
+use crate::math::Vec2;
+use glam::DVec2;
+use std::cell::RefCell;
+
+/// Layers a cached tile holds; larger sets are not cached.
+pub const CACHED_LAYERS: usize = 16;
+/// Entries of each thread's direct-mapped cache (a power of two). A 16 x 16 pixel tile of the
+/// renderer touches a few hundred footprint tiles per surface.
+const CACHE_ENTRIES: usize = 4096;
+
+/// `x` rounded to 3 significant bits (relative error at most 1/8); `None` unless normal.
+#[inline]
+fn round_3_bits(x: f32) -> Option<f32> {
+    if !x.is_normal() {
+        return None;
+    }
+    const DROP: u32 = 21; // of the 23 stored mantissa bits: 2 stay, with the implicit one
+    let r = f32::from_bits(x.to_bits().wrapping_add(1 << (DROP - 1)) & !((1 << DROP) - 1));
+    r.is_finite().then_some(r)
+}
+
+/// Directions of `a` are rounded to the grid of `1/DIRECTION_STEPS` on each component.
+const DIRECTION_STEPS: f32 = 32.0;
+
+/// The footprint's edge vectors `a`, `b` rounded so that nearby footprints share one shape,
+/// in `a`'s own frame, which keeps the area (thin, sheared footprints included): `a`'s
+/// direction to the grid of 1/32 on each component (then normalised, about 1.3 degrees), its
+/// length and `b`'s component across it to 3 significant bits, and `b`'s component along it to
+/// multiples of 1/8 of the leading power of two of the larger of the two. Each edge moves by
+/// at most about 1/7 of its length and the area by at most 27 %, like a mip level chosen
+/// among steps of 2^(1/4) in area. (The steps are coarse on
+/// purpose: a pixel's samples on a curved, non-uniformly parametrised surface such as the
+/// teapot see footprints that differ by several per cent, and finer steps split them between
+/// shapes, whose tiles are not shared.) Returns the rounded vectors and the integers that name them; `None` for a degenerate
+/// or non-finite footprint.
+pub fn quantize(a: Vec2, b: Vec2) -> Option<(Vec2, Vec2, [u64; 2])> {
+    let la = a.length();
+    let (cx, cy) = (
+        (a.x / la * DIRECTION_STEPS).round(),
+        (a.y / la * DIRECTION_STEPS).round(),
+    );
+    if !(cx.is_finite() && cy.is_finite()) {
+        return None;
+    }
+    // b's components across and along a, in a's exact frame (so the area is la * across).
+    let (across, along) = (a.perp_dot(b) / la, a.dot(b) / la);
+    let dir = Vec2::new(cx, cy).normalize();
+    let la = round_3_bits(la)?;
+    let across = round_3_bits(across)?;
+    // 2^e / 8, 2^e the leading power of two of the larger of |along| and |across|.
+    let lead = across.abs().max(along.abs()).to_bits() & 0x7f80_0000;
+    let step = f32::from_bits(lead.checked_sub(3 << 23)?);
+    let along = (along / step).round();
+    if !(along.abs() < 1e6) {
+        return None;
+    }
+    let (qa, qb) = (dir * la, dir * (along * step) + dir.perp() * across);
+    let key = [
+        ((cx as i32 as u32 as u64) << 32) | (cy as i32 as u32 as u64),
+        ((la.to_bits() >> 20) as u64) << 40
+            | ((across.to_bits() >> 20) as u64) << 28
+            | (along as i32 as u32 as u64 & 0x0fff_ffff),
+    ];
+    Some((qa, qb, key))
+}
+
+/// The footprint tile containing a hit: its centre and edge vectors in texture space, and the
+/// key that names it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FootprintTile {
+    pub centre: DVec2,
+    pub a: DVec2,
+    pub b: DVec2,
+    key: [u64; 4],
+}
+
+impl FootprintTile {
+    /// The tile of the lattice spanned by `duvdx`, `duvdy` rounded by [`quantize`] that contains `uv`;
+    /// `None` for a degenerate or non-finite footprint, or a hit too far from the origin for
+    /// the tile index (those are queried unsnapped).
+    pub fn containing(uv: Vec2, duvdx: Vec2, duvdy: Vec2) -> Option<FootprintTile> {
+        let (qa, qb, shape) = quantize(duvdx, duvdy)?;
+        let (a, b) = (qa.as_dvec2(), qb.as_dvec2());
+        let det = a.x * b.y - a.y * b.x;
+        let p = uv.as_dvec2();
+        // Lattice coordinates: p = s a + t b.
+        let s = (p.x * b.y - p.y * b.x) / det;
+        let t = (a.x * p.y - a.y * p.x) / det;
+        if !(det.abs() > 1e-30 && s.abs() < 1e15 && t.abs() < 1e15) {
+            return None;
+        }
+        let (i, j) = (s.round(), t.round());
+        let key = [shape[0], shape[1], i as i64 as u64, j as i64 as u64];
+        Some(FootprintTile {
+            centre: a * i + b * j,
+            a,
+            b,
+            key,
+        })
+    }
+}
+
+/// Which per-layer values a cache entry holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TileQuery {
+    /// [`LayerSet::coverage_all`].
+    All,
+    /// [`LayerSet::coverage_max`].
+    Max,
+}
+
+#[derive(Clone, Copy)]
+struct Entry {
+    /// Set id, query, tile key; all zero when empty (set ids start at 1).
+    key: [u64; 6],
+    values: [f32; CACHED_LAYERS],
+}
+
+thread_local! {
+    static CACHE: RefCell<Vec<Entry>> = const { RefCell::new(Vec::new()) };
+}
+
+impl LayerSet {
+    /// The per-layer coverage of the footprint tile containing `uv` ([`FootprintTile`]), into
+    /// `out[0..len()]`, as [`Self::coverage_all`] or [`Self::coverage_max`] of the tile; cached
+    /// per thread. Where there is no tile (see [`FootprintTile::containing`]) or the set has
+    /// more than [`CACHED_LAYERS`] layers, the footprint itself is queried, uncached.
+    /// # Panics
+    /// If `out.len() < len()`.
+    pub fn coverage_tiled(
+        &self,
+        uv: Vec2,
+        duvdx: Vec2,
+        duvdy: Vec2,
+        query: TileQuery,
+        out: &mut [f32],
+    ) {
+        let n = self.len();
+        let tile = FootprintTile::containing(uv, duvdx, duvdy).filter(|_| n <= CACHED_LAYERS);
+        let Some(tile) = tile else {
+            match query {
+                TileQuery::All => self.coverage_all(uv, duvdx, duvdy, out),
+                TileQuery::Max => self.coverage_max(uv, duvdx, duvdy, out),
+            }
+            return;
+        };
+        let key = [
+            self.id(),
+            query as u64,
+            tile.key[0],
+            tile.key[1],
+            tile.key[2],
+            tile.key[3],
+        ];
+        let h = key.iter().fold(0u64, |h, &k| super::worley::mix64(h ^ k)) as usize
+            & (CACHE_ENTRIES - 1);
+        CACHE.with(|cache| {
+            let mut cache = cache.borrow_mut();
+            if cache.is_empty() {
+                cache.resize(
+                    CACHE_ENTRIES,
+                    Entry {
+                        key: [0; 6],
+                        values: [0.0; CACHED_LAYERS],
+                    },
+                );
+            }
+            let entry = &mut cache[h];
+            // (Compared field by field: `!=` on the array compiled to a `memcmp` call.)
+            if !entry.key.iter().zip(&key).all(|(a, b)| a == b) {
+                let (c, a, b) = (tile.centre.as_vec2(), tile.a.as_vec2(), tile.b.as_vec2());
+                let values = &mut entry.values[..n];
+                match query {
+                    TileQuery::All => self.coverage_all(c, a, b, values),
+                    TileQuery::Max => self.coverage_max(c, a, b, values),
+                }
+                entry.key = key;
+            }
+            out[..n].copy_from_slice(&entry.values[..n]);
+        });
+    }
+}
