@@ -474,6 +474,30 @@ pub struct ScratchBrdf {
     delta: bool,
     /// Per `phi_o` bin: distribution over `phi_i` bins of `rho_s(pi/2, phi_o, phi_i) cos(phi_i)`.
     rows: Vec<Distribution1D>,
+    /// `tan` of the inner bin boundaries `-pi/2 + k pi/M`, `k = 1..M-1` (see [`Self::phi_bin`]).
+    tan_bounds: Vec<f64>,
+}
+
+/// `atan(r)` within 2e-5 rad (a minimax polynomial on `[-1, 1]`, reflected outside): only to
+/// guess a bin that [`ScratchBrdf::phi_bin`] then corrects exactly.
+#[inline]
+fn atan_approx(r: f64) -> f64 {
+    let (x, flip) = if r.abs() > 1.0 {
+        (1.0 / r, true)
+    } else {
+        (r, false)
+    };
+    let x2 = x * x;
+    let a = x
+        * (0.999_977_26
+            + x2 * (-0.332_623_47
+                + x2 * (0.193_543_46
+                    + x2 * (-0.116_432_87 + x2 * (0.052_653_32 - 0.011_721_20 * x2)))));
+    if flip {
+        FRAC_PI_2.copysign(x) - a
+    } else {
+        a
+    }
 }
 
 /// `(theta, phi)` of a unit direction (section 1).
@@ -535,7 +559,38 @@ impl ScratchBrdf {
                 Distribution1D::new(&w)
             })
             .collect();
-        ScratchBrdf { table, delta, rows }
+        let tan_bounds = (1..m)
+            .map(|k| (-FRAC_PI_2 + k as f64 * PI / m as f64).tan())
+            .collect();
+        ScratchBrdf {
+            table,
+            delta,
+            rows,
+            tan_bounds,
+        }
+    }
+
+    /// The `phi` bin of a direction above the surface (`z > 0`), `phi = atan2(x, z)`: the bin
+    /// `k` with `tan(phi_k) <= x/z < tan(phi_k+1)` at its boundaries, found from an approximate
+    /// `atan` and corrected by comparing against the boundaries' tangents (no `atan2`: the
+    /// lookups of eq. (3) and of the sampler run several times per scratched hit). Equal to
+    /// `bin_of(atan2(x, z), M)` but where `atan2` rounds across a boundary.
+    #[inline]
+    pub fn phi_bin(&self, x: f64, z: f64) -> usize {
+        let m = self.table.m;
+        let r = x / z;
+        if r.is_nan() {
+            return m / 2;
+        }
+        let b = &self.tan_bounds; // b[k - 1] = tan(phi_k)
+        let mut k = (((atan_approx(r) + FRAC_PI_2) * (m as f64 / PI)) as usize).min(m - 1);
+        while k > 0 && r < b[k - 1] {
+            k -= 1;
+        }
+        while k + 1 < m && r >= b[k] {
+            k += 1;
+        }
+        k
     }
 
     pub fn table(&self) -> &ScratchTable {
@@ -567,18 +622,19 @@ impl ScratchBrdf {
             return (0.0, 0.0);
         }
         let m = self.table.m;
-        let (theta_o, phi_o) = angles(wo);
-        let (_, phi_i) = angles(wi);
-        let (o, i) = (bin_of(phi_o, m), bin_of(phi_i, m));
+        let theta_o = (wo.y as f64).clamp(-1.0, 1.0).asin();
+        let o = self.phi_bin(wo.x as f64, wo.z as f64);
+        let i = self.phi_bin(wi.x as f64, wi.z as f64);
         let f = 2.0 / PI * self.table.rho(theta_o, i, o);
         let row = &self.rows[o];
         if row.integral() <= 0.0 {
             return (f, 0.0);
         }
-        // cos(theta_i) = sqrt(1 - y^2) for theta_i = asin(y) in [-pi/2, pi/2].
+        // cos(theta_i) = sqrt(1 - y^2) for theta_i = asin(y) in [-pi/2, pi/2]; the density of
+        // phi_i in its bin is the row's pmf times M / pi.
         let y = (wi.y as f64).clamp(-1.0, 1.0);
         let cos_theta_i = (1.0 - y * y).sqrt();
-        let p_phi = row.pdf(((phi_i + FRAC_PI_2) / PI).clamp(0.0, 1.0)) / PI;
+        let p_phi = row.pmf(i) * m as f64 / PI;
         (f, p_phi * 2.0 / PI * cos_theta_i)
     }
 
@@ -590,8 +646,8 @@ impl ScratchBrdf {
             return None;
         }
         let m = self.table.m;
-        let (theta_o, phi_o) = angles(wo);
-        let o = bin_of(phi_o, m);
+        let theta_o = (wo.y as f64).clamp(-1.0, 1.0).asin();
+        let o = self.phi_bin(wo.x as f64, wo.z as f64);
         let row = &self.rows[o];
         if row.integral() <= 0.0 {
             return None;
@@ -1024,6 +1080,41 @@ mod tests {
             assert_eq!(mismatch, 0, "wo {t},{p}");
             assert!(r.p_value > 1e-3, "wo ({t}, {p}): {r:?}");
             assert!((r.pdf_mass - 1.0).abs() < 0.01, "{r:?}");
+        }
+    }
+
+    /// The atan2-free `phi` bin equals `bin_of(atan2(x, z))` for random directions above the
+    /// surface, grazing ones included, except where the two sit within rounding of a boundary.
+    #[test]
+    fn phi_bin_matches_atan2_binning() {
+        let brdf = smooth_brdf();
+        let m = brdf.table().m;
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(31);
+        let mut differ = 0;
+        for case in 0..200_000 {
+            let z: f64 = if case % 10 == 0 {
+                rng.random_range(1e-7..1e-3)
+            } else {
+                rng.random()
+            };
+            let x: f64 = rng.random_range(-1.0..1.0);
+            let reference = bin_of(x.atan2(z), m);
+            let fast = brdf.phi_bin(x, z);
+            if fast != reference {
+                // Only at a boundary: both angles within 1e-12 of it.
+                let boundary = -FRAC_PI_2 + fast.max(reference) as f64 * PI / m as f64;
+                assert!(
+                    (x.atan2(z) - boundary).abs() < 1e-12,
+                    "case {case}: {fast} vs {reference}"
+                );
+                differ += 1;
+            }
+        }
+        assert!(differ < 5, "{differ}");
+        // The boundary bins themselves.
+        for k in 0..m {
+            let phi = -FRAC_PI_2 + (k as f64 + 0.5) * PI / m as f64;
+            assert_eq!(brdf.phi_bin(phi.sin(), phi.cos()), k);
         }
     }
 

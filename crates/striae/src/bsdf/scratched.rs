@@ -32,7 +32,6 @@ use super::BsdfSample;
 use crate::fresnel;
 use crate::math::{reflect_z, Rgb, Vec2, Vec3};
 use crate::table::{ScratchBrdf, ScratchTable};
-use crate::trace2d::bin_of;
 use std::f64::consts::{FRAC_PI_2, PI};
 
 /// Most scratch lobes one hit combines (`layer_mix = "sum"` keeps the largest coverages).
@@ -107,9 +106,7 @@ impl ScratchLobeTable {
         if wo.z <= 0.0 {
             return 0.0;
         }
-        let m = self.brdf.table().m;
-        let phi_o = (wo.x as f64).atan2(wo.z as f64);
-        let o = bin_of(phi_o, m);
+        let o = self.brdf.phi_bin(wo.x as f64, wo.z as f64);
         let theta = (wo.y.clamp(-1.0, 1.0)).asin().abs();
         let x = theta * ((ALBEDO_THETA_POINTS - 1) as f32 / std::f32::consts::FRAC_PI_2);
         let i = (x as usize).min(ALBEDO_THETA_POINTS - 2);

@@ -43,6 +43,21 @@ fn round_3_bits(x: f32) -> Option<f32> {
     r.is_finite().then_some(r)
 }
 
+/// Round to nearest (ties to even) without a libm call (baseline x86-64 has no `roundss`):
+/// exact for `|x| < 2^22`.
+#[inline]
+fn round_f32(x: f32) -> f32 {
+    const M: f32 = 12_582_912.0; // 1.5 * 2^23
+    (x + M) - M
+}
+
+/// [`round_f32`] for `f64`: exact for `|x| < 2^51`.
+#[inline]
+fn round_f64(x: f64) -> f64 {
+    const M: f64 = 6_755_399_441_055_744.0; // 1.5 * 2^52
+    (x + M) - M
+}
+
 /// Directions of `a` are rounded to the grid of `1/DIRECTION_STEPS` on each component.
 const DIRECTION_STEPS: f32 = 32.0;
 
@@ -60,8 +75,8 @@ const DIRECTION_STEPS: f32 = 32.0;
 pub fn quantize(a: Vec2, b: Vec2) -> Option<(Vec2, Vec2, [u64; 2])> {
     let la = a.length();
     let (cx, cy) = (
-        (a.x / la * DIRECTION_STEPS).round(),
-        (a.y / la * DIRECTION_STEPS).round(),
+        round_f32(a.x / la * DIRECTION_STEPS),
+        round_f32(a.y / la * DIRECTION_STEPS),
     );
     if !(cx.is_finite() && cy.is_finite()) {
         return None;
@@ -74,7 +89,7 @@ pub fn quantize(a: Vec2, b: Vec2) -> Option<(Vec2, Vec2, [u64; 2])> {
     // 2^e / 8, 2^e the leading power of two of the larger of |along| and |across|.
     let lead = across.abs().max(along.abs()).to_bits() & 0x7f80_0000;
     let step = f32::from_bits(lead.checked_sub(3 << 23)?);
-    let along = (along / step).round();
+    let along = round_f32(along / step); // |along / step| < 16
     if !(along.abs() < 1e6) {
         return None;
     }
@@ -113,7 +128,7 @@ impl FootprintTile {
         if !(det.abs() > 1e-30 && s.abs() < 1e15 && t.abs() < 1e15) {
             return None;
         }
-        let (i, j) = (s.round(), t.round());
+        let (i, j) = (round_f64(s), round_f64(t));
         let key = [shape[0], shape[1], i as i64 as u64, j as i64 as u64];
         Some(FootprintTile {
             centre: a * i + b * j,
