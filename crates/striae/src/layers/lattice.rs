@@ -26,6 +26,14 @@ use crate::math::Vec2;
 use glam::DVec2;
 use std::cell::RefCell;
 
+/// Tiles whose noise-space bounding box spans more cells than this take the layers' expected
+/// coverage (the prefiltered limit) instead of the exact one. Lower than the exact queries'
+/// [`super::layer::MAX_FOOTPRINT_CELLS`]: such tiles come from grazing views and from rays that
+/// went through curved glass, whose footprints change from sample to sample, so they are
+/// rarely shared and cost most (the setting-1 teapot: 1.69x smooth glass per sample with 256,
+/// 1.49x with 64; the images differ only along silhouettes, `BENCHMARKS.md`).
+pub const TILE_MAX_CELLS: usize = 64;
+
 /// Layers a cached tile holds; larger sets are not cached.
 pub const CACHED_LAYERS: usize = 16;
 /// Entries of each thread's direct-mapped cache (a power of two). A 16 x 16 pixel tile of the
@@ -161,8 +169,8 @@ thread_local! {
 
 impl LayerSet {
     /// The per-layer coverage of the footprint tile containing `uv` ([`FootprintTile`]), into
-    /// `out[0..len()]`, as [`Self::coverage_all`] or [`Self::coverage_max`] of the tile; cached
-    /// per thread. Where there is no tile (see [`FootprintTile::containing`]) or the set has
+    /// `out[0..len()]`, as [`Self::coverage_all`] or [`Self::coverage_max`] of the tile (up to
+    /// [`TILE_MAX_CELLS`]); cached per thread. Where there is no tile (see [`FootprintTile::containing`]) or the set has
     /// more than [`CACHED_LAYERS`] layers, the footprint itself is queried, uncached.
     /// # Panics
     /// If `out.len() < len()`.
@@ -210,8 +218,8 @@ impl LayerSet {
                 let (c, a, b) = (tile.centre.as_vec2(), tile.a.as_vec2(), tile.b.as_vec2());
                 let values = &mut entry.values[..n];
                 match query {
-                    TileQuery::All => self.coverage_all(c, a, b, values),
-                    TileQuery::Max => self.coverage_max(c, a, b, values),
+                    TileQuery::All => self.coverage_all_within(c, a, b, TILE_MAX_CELLS, values),
+                    TileQuery::Max => self.coverage_max_within(c, a, b, TILE_MAX_CELLS, values),
                 }
                 entry.key = key;
             }

@@ -243,8 +243,24 @@ impl LayerSet {
     /// # Panics
     /// If `out.len() < len()`.
     pub fn coverage_all(&self, uv: Vec2, duvdx: Vec2, duvdy: Vec2, out: &mut [f32]) {
+        self.coverage_all_within(uv, duvdx, duvdy, layer::MAX_FOOTPRINT_CELLS, out);
+    }
+
+    /// [`Self::coverage_all`], with footprints spanning more than `max_cells` noise cells
+    /// given the expected coverage.
+    pub fn coverage_all_within(
+        &self,
+        uv: Vec2,
+        duvdx: Vec2,
+        duvdy: Vec2,
+        max_cells: usize,
+        out: &mut [f32],
+    ) {
+        let (p, a, b) = (uv.as_dvec2(), duvdx.as_dvec2(), duvdy.as_dvec2());
         for (layer, o) in self.layers.iter().zip(&mut out[..self.layers.len()]) {
-            *o = layer.coverage(uv, duvdx, duvdy, self.expected_coverage);
+            *o = layer
+                .footprint_coverage(p, a, b, max_cells)
+                .unwrap_or(self.expected_coverage) as f32;
         }
     }
 
@@ -260,6 +276,19 @@ impl LayerSet {
     /// # Panics
     /// If `out.len() < len()`.
     pub fn coverage_max(&self, uv: Vec2, duvdx: Vec2, duvdy: Vec2, out: &mut [f32]) {
+        self.coverage_max_within(uv, duvdx, duvdy, layer::MAX_FOOTPRINT_CELLS, out);
+    }
+
+    /// [`Self::coverage_max`], with footprints spanning more than `max_cells` noise cells
+    /// given the expected coverage.
+    pub fn coverage_max_within(
+        &self,
+        uv: Vec2,
+        duvdx: Vec2,
+        duvdy: Vec2,
+        max_cells: usize,
+        out: &mut [f32],
+    ) {
         const TIE: f64 = 2e-6;
         let (p, a, b) = (uv.as_dvec2(), duvdx.as_dvec2(), duvdy.as_dvec2());
         let n = self.layers.len();
@@ -272,7 +301,7 @@ impl LayerSet {
         let mut centres = [glam::DVec2::ZERO; footprint::MAX_DISCS];
         for (k, layer) in self.layers.iter().enumerate() {
             out[k] = 0.0;
-            match layer.footprint_candidates(p, a, b, layer::MAX_FOOTPRINT_CELLS, &mut centres) {
+            match layer.footprint_candidates(p, a, b, max_cells, &mut centres) {
                 layer::Candidates::Done(c) => {
                     let c = c.unwrap_or(self.expected_coverage);
                     out[k] = c as f32;
@@ -294,12 +323,10 @@ impl LayerSet {
                 break;
             }
             let layer = &self.layers[k];
-            let c =
-                match layer.footprint_candidates(p, a, b, layer::MAX_FOOTPRINT_CELLS, &mut centres)
-                {
-                    layer::Candidates::Done(c) => c.unwrap_or(self.expected_coverage),
-                    layer::Candidates::Discs(f) => f.coverage(&centres[..f.n]),
-                };
+            let c = match layer.footprint_candidates(p, a, b, max_cells, &mut centres) {
+                layer::Candidates::Done(c) => c.unwrap_or(self.expected_coverage),
+                layer::Candidates::Discs(f) => f.coverage(&centres[..f.n]),
+            };
             out[k] = c as f32;
             best = best.max(c);
         }

@@ -692,9 +692,14 @@ fn footprint_tiles_contain_their_hits_and_cache_their_exact_coverage() {
             for _ in 0..2 {
                 set.coverage_tiled(uv, a, b, query, &mut tiled);
                 let (c, ta, tb) = (tile.centre.as_vec2(), tile.a.as_vec2(), tile.b.as_vec2());
+                let cells = lattice::TILE_MAX_CELLS;
                 match query {
-                    lattice::TileQuery::Max => set.coverage_max(c, ta, tb, &mut direct),
-                    lattice::TileQuery::All => set.coverage_all(c, ta, tb, &mut direct),
+                    lattice::TileQuery::Max => {
+                        set.coverage_max_within(c, ta, tb, cells, &mut direct)
+                    }
+                    lattice::TileQuery::All => {
+                        set.coverage_all_within(c, ta, tb, cells, &mut direct)
+                    }
                 }
                 assert_eq!(tiled, direct);
             }

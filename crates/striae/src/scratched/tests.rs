@@ -492,7 +492,7 @@ fn layer_choice_frames_and_ties() {
         let (dx, dy) = (Vec2::new(0.02, 0.0), Vec2::new(0.0, 0.02));
         let tile = crate::layers::lattice::FootprintTile::containing(uv, dx, dy).unwrap();
         let (c, a, b) = (tile.centre.as_vec2(), tile.a.as_vec2(), tile.b.as_vec2());
-        layers.coverage_all(c, a, b, &mut cov);
+        layers.coverage_all_within(c, a, b, crate::layers::lattice::TILE_MAX_CELLS, &mut cov);
         let best = cov.iter().copied().fold(0.0, f32::max);
         match m.bsdf(&flat_ctx(uv, 0.02, Vec3::Z, 0.3)) {
             Bsdf::Scratched(b) => assert_eq!(b.lobes()[0].coverage, best),
