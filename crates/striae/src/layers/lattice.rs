@@ -172,6 +172,12 @@ thread_local! {
     static CACHE: RefCell<Vec<Entry>> = const { RefCell::new(Vec::new()) };
 }
 
+/// Empty the calling thread's tile cache (for benchmarks that render one scene repeatedly:
+/// results never depend on it, only the time does).
+pub fn clear_cache() {
+    CACHE.with(|cache| cache.borrow_mut().clear());
+}
+
 impl LayerSet {
     /// The per-layer coverage of the footprint tile containing `uv` ([`FootprintTile`]), into
     /// `out[0..len()]`, as [`Self::coverage_all`] or [`Self::coverage_max`] of the tile (up to
