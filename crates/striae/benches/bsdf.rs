@@ -13,7 +13,7 @@ use striae::sampling::square_to_uniform_sphere;
 
 const BATCH: usize = 1024;
 
-fn bsdfs() -> Vec<(&'static str, Bsdf)> {
+fn bsdfs() -> Vec<(&'static str, Bsdf<'static>)> {
     let (eta, k) = conductor_preset("gold").unwrap();
     vec![
         ("diffuse", Bsdf::Diffuse(Diffuse::new(Rgb::splat(0.8)))),
