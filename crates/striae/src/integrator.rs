@@ -116,7 +116,24 @@ pub fn shade<'a>(
     wo_world: Vec3,
     u_layer: f32,
 ) -> Shaded<'a> {
-    let (dpdx, dpdy, duvdx, duvdy) = footprint(hit, rd);
+    shade_with(material, hit, Some(rd), wo_world, u_layer)
+}
+
+/// [`shade`], with the footprint computed only when `rd` is given: without differentials
+/// `duvdx`, `duvdy`, `dpdx` and `dpdy` are zero (the render loop passes `None` when no material
+/// of the scene reads the footprint, see [`Material::reads_footprint`]).
+#[inline(always)]
+pub fn shade_with<'a>(
+    material: &'a Material,
+    hit: &SurfaceHit,
+    rd: Option<&RayDifferential>,
+    wo_world: Vec3,
+    u_layer: f32,
+) -> Shaded<'a> {
+    let (dpdx, dpdy, duvdx, duvdy) = match rd {
+        Some(rd) => footprint(hit, rd),
+        None => (Vec3::ZERO, Vec3::ZERO, Vec2::ZERO, Vec2::ZERO),
+    };
     let mut ctx = ShadingContext {
         p: hit.p,
         uv: hit.uv,
@@ -212,6 +229,7 @@ pub fn render(scene: &Scene, progress: &(dyn Fn(u64) + Sync)) -> (Image, RenderS
     let rays = AtomicU64::new(0);
     let nonfinite = AtomicU64::new(0);
     let spp = scene.settings.spp;
+    let differentials = scene.materials.iter().any(Material::reads_footprint);
     let tiles: Vec<(u32, Vec<Rgb>)> = (0..tiles_x * tiles_y)
         .into_par_iter()
         .map(|tile| {
@@ -222,7 +240,7 @@ pub fn render(scene: &Scene, progress: &(dyn Fn(u64) + Sync)) -> (Image, RenderS
             let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
             for y in y0..y1 {
                 for x in x0..x1 {
-                    out.push(render_pixel(scene, x, y, &mut counters));
+                    out.push(render_pixel(scene, x, y, differentials, &mut counters));
                 }
             }
             rays.fetch_add(counters.rays, Ordering::Relaxed);
@@ -252,7 +270,14 @@ pub fn render(scene: &Scene, progress: &(dyn Fn(u64) + Sync)) -> (Image, RenderS
 }
 
 /// The mean of `spp` samples of pixel `(x, y)` (box filter: uniform positions in the pixel).
-fn render_pixel(scene: &Scene, x: u32, y: u32, counters: &mut Counters) -> Rgb {
+/// `differentials`: carry ray differentials (only needed when a material reads the footprint).
+fn render_pixel(
+    scene: &Scene,
+    x: u32,
+    y: u32,
+    differentials: bool,
+    counters: &mut Counters,
+) -> Rgb {
     let (w, _) = scene.camera.resolution();
     let pixel_index = y as u64 * w as u64 + x as u64;
     let spp = scene.settings.spp;
@@ -261,8 +286,19 @@ fn render_pixel(scene: &Scene, x: u32, y: u32, counters: &mut Counters) -> Rgb {
         let mut sampler = PixelSampler::new(pixel_index, s, scene.settings.seed);
         let film = Vec2::new(x as f32, y as f32) + sampler.next_2d();
         let u_lens = sampler.next_2d();
-        let (ray, rd) = scene.camera.generate_ray(film, u_lens);
-        let l = radiance(scene, ray, rd, &mut sampler, counters);
+        let l = if differentials {
+            let (ray, rd) = scene.camera.generate_ray(film, u_lens);
+            radiance::<true>(scene, ray, rd, &mut sampler, counters)
+        } else {
+            let ray = scene.camera.generate_ray_only(film, u_lens);
+            let rd = RayDifferential {
+                rx_o: ray.o,
+                rx_d: ray.d,
+                ry_o: ray.o,
+                ry_d: ray.d,
+            };
+            radiance::<false>(scene, ray, rd, &mut sampler, counters)
+        };
         if l.is_finite() {
             sum += l;
         } else {
@@ -272,8 +308,9 @@ fn render_pixel(scene: &Scene, x: u32, y: u32, counters: &mut Counters) -> Rgb {
     sum / spp as f32
 }
 
-/// Radiance arriving at the camera along `ray` (one path sample).
-fn radiance(
+/// Radiance arriving at the camera along `ray` (one path sample). With `DIFFERENTIALS` false
+/// the ray differentials are neither used nor updated (no material of the scene reads them).
+fn radiance<const DIFFERENTIALS: bool>(
     scene: &Scene,
     mut ray: Ray,
     mut rd: RayDifferential,
@@ -350,7 +387,13 @@ fn radiance(
             bsdf,
             dpdx,
             dpdy,
-        } = shade(material, &hit, &rd, wo_world, u_layer);
+        } = shade_with(
+            material,
+            &hit,
+            DIFFERENTIALS.then_some(&rd),
+            wo_world,
+            u_layer,
+        );
         let frame = ctx.frame;
         let wo = frame.to_local(wo_world);
 
@@ -406,9 +449,11 @@ fn radiance(
         prev_pdf = bs.pdf;
         let transmitted = bs.wi.z * wo.z < 0.0;
         let eta_path = if transmitted { 1.0 / bs.eta } else { 1.0 };
-        rd = spawn_differentials(
-            hit.p, dpdx, dpdy, ray.d, &rd, frame.n, wi_world, bs.delta, eta_path,
-        );
+        if DIFFERENTIALS {
+            rd = spawn_differentials(
+                hit.p, dpdx, dpdy, ray.d, &rd, frame.n, wi_world, bs.delta, eta_path,
+            );
+        }
         ray = Ray::new(offset_origin(hit.p, hit.ng, wi_world), wi_world);
 
         // Russian roulette.

@@ -174,6 +174,13 @@ fn fmt3(v: [f32; 3]) -> String {
 }
 
 impl Material {
+    /// Whether the material's BSDF reads the pixel footprint (`ShadingContext::duvdx`,
+    /// `duvdy`): only the scratched material filters over it. When no material of a scene
+    /// does, the integrator skips ray differentials altogether.
+    pub fn reads_footprint(&self) -> bool {
+        matches!(self, Material::Scratched(_))
+    }
+
     /// Check every value's range (IOR >= 1, roughness >= 0, albedo in `[0, 1]`, a known
     /// preset or a complete `eta`/`k`). Image textures are checked once loaded.
     pub fn validate(&self) -> Result<(), MaterialError> {
