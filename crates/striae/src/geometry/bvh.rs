@@ -13,7 +13,7 @@
 
 use std::time::Duration;
 
-use glam::Vec3A;
+use glam::{Vec3A, Vec4};
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
 use obvhs::bvh2::Bvh2;
@@ -21,7 +21,7 @@ use obvhs::cwbvh::builder::build_cwbvh;
 use obvhs::cwbvh::CwBvh;
 use obvhs::BvhBuildParams;
 
-use super::bvh4::Bvh4;
+use super::bvh4::{Bvh4, Leaf, BLOCK};
 use super::sphere::{intersect_sphere, sphere_surface};
 use super::{Shape, ShapeGeometry, SurfaceHit};
 use crate::math::{Ray, Vec3};
@@ -144,6 +144,148 @@ impl WatertightRay {
     }
 }
 
+/// Four triangles of a [`Bvh4`] leaf block as structure of arrays: `v[vertex][axis]` holds
+/// that coordinate of the four triangles, so [`WatertightRay::intersect4`] tests them at once.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(16))]
+struct Tri4 {
+    v: [[Vec4; 3]; 3],
+}
+
+impl WatertightRay {
+    /// [`WatertightRay::intersect_axis`] for the four triangles of `tri` at once (SSE): the
+    /// same operations lane by lane, so `t`, `b1` and `b2` are bit-for-bit the scalar ones.
+    /// Returns `(lane, t, b1, b2)` of the closest hit with `t` in `(0, t_max)`, the lowest lane
+    /// on a tie (as testing the lanes in order would). When an edge function is exactly zero
+    /// in some lane the block is retested lane by lane with the scalar test (its `f64` path).
+    #[inline(always)]
+    fn intersect4<const KZ: usize>(
+        &self,
+        tri: &Tri4,
+        t_max: f32,
+    ) -> Option<(usize, f32, f32, f32)> {
+        let mask = self.hits4::<KZ>(tri, t_max);
+        let (valid, t, e1, e2, inv_det) = match mask {
+            Hits4::None => return None,
+            Hits4::Exact => return self.intersect4_scalar::<KZ>(tri, t_max),
+            Hits4::Some {
+                valid,
+                t,
+                e1,
+                e2,
+                inv_det,
+            } => (valid, t, e1, e2, inv_det),
+        };
+        let tm = Vec4::select(valid, t, Vec4::INFINITY);
+        let t_min = tm.min_element();
+        let lane = tm.cmpeq(Vec4::splat(t_min)).bitmask().trailing_zeros() as usize;
+        Some((
+            lane,
+            t[lane],
+            e1[lane] * inv_det[lane],
+            e2[lane] * inv_det[lane],
+        ))
+    }
+
+    /// Whether any triangle of `tri` is hit with `t` in `(0, t_max)`.
+    #[inline(always)]
+    fn occluded4<const KZ: usize>(&self, tri: &Tri4, t_max: f32) -> bool {
+        match self.hits4::<KZ>(tri, t_max) {
+            Hits4::None => false,
+            Hits4::Exact => self.intersect4_scalar::<KZ>(tri, t_max).is_some(),
+            Hits4::Some { .. } => true,
+        }
+    }
+
+    /// The lanes of `tri` tested one by one with [`WatertightRay::intersect_axis`].
+    #[inline(never)]
+    fn intersect4_scalar<const KZ: usize>(
+        &self,
+        tri: &Tri4,
+        mut t_max: f32,
+    ) -> Option<(usize, f32, f32, f32)> {
+        let vertex = |k: usize, lane: usize| {
+            Vec3::new(tri.v[k][0][lane], tri.v[k][1][lane], tri.v[k][2][lane])
+        };
+        let mut best = None;
+        for lane in 0..BLOCK {
+            if let Some((t, b1, b2)) =
+                self.intersect_axis::<KZ>(vertex(0, lane), vertex(1, lane), vertex(2, lane), t_max)
+            {
+                t_max = t;
+                best = Some((lane, t, b1, b2));
+            }
+        }
+        best
+    }
+
+    /// The vectorised body of [`WatertightRay::intersect4`].
+    #[inline(always)]
+    fn hits4<const KZ: usize>(&self, tri: &Tri4, t_max: f32) -> Hits4 {
+        let (kx, ky) = ((KZ + 1) % 3, (KZ + 2) % 3);
+        let o = self.o;
+        let (ox, oy, oz) = (Vec4::splat(o[kx]), Vec4::splat(o[ky]), Vec4::splat(o[KZ]));
+        let (sx, sy, sz) = (
+            Vec4::splat(self.sx),
+            Vec4::splat(self.sy),
+            Vec4::splat(self.sz),
+        );
+        let v = &tri.v;
+        let (az, bz, cz) = (v[0][KZ] - oz, v[1][KZ] - oz, v[2][KZ] - oz);
+        let ax = (v[0][kx] - ox) + sx * az;
+        let ay = (v[0][ky] - oy) + sy * az;
+        let bx = (v[1][kx] - ox) + sx * bz;
+        let by = (v[1][ky] - oy) + sy * bz;
+        let cx = (v[2][kx] - ox) + sx * cz;
+        let cy = (v[2][ky] - oy) + sy * cz;
+        let e0 = bx * cy - by * cx;
+        let e1 = cx * ay - cy * ax;
+        let e2 = ax * by - ay * bx;
+        let zero = Vec4::ZERO;
+        if (e0.cmpeq(zero) | e1.cmpeq(zero) | e2.cmpeq(zero)).any() {
+            return Hits4::Exact;
+        }
+        let neg = e0.cmplt(zero) | e1.cmplt(zero) | e2.cmplt(zero);
+        let pos = e0.cmpgt(zero) | e1.cmpgt(zero) | e2.cmpgt(zero);
+        let det = e0 + e1 + e2;
+        let t_scaled = e0 * (sz * az) + e1 * (sz * bz) + e2 * (sz * cz);
+        let limit = Vec4::splat(t_max) * det;
+        let behind_neg = det.cmplt(zero) & (t_scaled.cmpge(zero) | t_scaled.cmplt(limit));
+        let behind_pos = det.cmpgt(zero) & (t_scaled.cmple(zero) | t_scaled.cmpgt(limit));
+        let mut valid = !((neg & pos) | det.cmpeq(zero) | behind_neg | behind_pos);
+        if !valid.any() {
+            return Hits4::None;
+        }
+        let inv_det = Vec4::ONE / det;
+        let t = t_scaled * inv_det;
+        valid &= t.cmpgt(zero) & t.cmplt(Vec4::splat(t_max));
+        if !valid.any() {
+            return Hits4::None;
+        }
+        Hits4::Some {
+            valid,
+            t,
+            e1,
+            e2,
+            inv_det,
+        }
+    }
+}
+
+/// What [`WatertightRay::hits4`] found.
+enum Hits4 {
+    None,
+    /// An edge function is exactly zero in some lane: decide with the scalar test.
+    Exact,
+    Some {
+        valid: glam::BVec4A,
+        t: Vec4,
+        e1: Vec4,
+        e2: Vec4,
+        inv_det: Vec4,
+    },
+}
+
 /// Which obvhs hierarchy [`Geometry`] traverses (see `BENCHMARKS.md`, "BVH", for the
 /// measurement behind the default).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -170,13 +312,19 @@ enum Accel {
 /// and reports `t + CWBVH_SHIFT` to obvhs; the primitive tests use the true origin.
 const CWBVH_SHIFT: f32 = 2e-4;
 
-/// Most primitives per leaf of the binary BVH that [`BvhKind::Bvh4`] collapses.
+/// Most primitives per leaf of the binary BVH that [`BvhKind::Bvh4`] collapses (its leaf
+/// blocks hold up to [`BLOCK`]).
 const BVH4_LEAF_PRIMS: u32 = 2;
 
 /// Shapes with the BVH over their primitives.
 pub struct Geometry {
     shapes: Vec<Shape>,
+    /// Primitives in BVH order; for [`BvhKind::Bvh4`] `BLOCK` per leaf block (padded).
     prims: Vec<Prim>,
+    /// The triangles of `prims` as blocks of four ([`BvhKind::Bvh4`] only).
+    tri4: Vec<Tri4>,
+    /// Number of distinct primitives.
+    prim_count: usize,
     accel: Accel,
 }
 
@@ -184,7 +332,7 @@ impl std::fmt::Debug for Geometry {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Geometry")
             .field("shapes", &self.shapes.len())
-            .field("primitives", &self.prims.len())
+            .field("primitives", &self.prim_count)
             .finish()
     }
 }
@@ -233,10 +381,13 @@ impl Geometry {
                 }
             }
         }
+        let prim_count = prims.len();
         if prims.is_empty() {
             return Geometry {
                 shapes,
                 prims,
+                tri4: Vec::new(),
+                prim_count,
                 accel: Accel::None,
             };
         }
@@ -260,18 +411,41 @@ impl Geometry {
                 };
                 let bvh = build_bvh2(&aabbs, params, &mut Duration::default());
                 let order = bvh.primitive_indices.clone();
-                match Bvh4::from_bvh2(&bvh) {
-                    Some(bvh4) => (Accel::Bvh4(bvh4), order),
+                match Bvh4::from_bvh2(&bvh, |i| prims[i as usize].prim == SPHERE) {
+                    Some((bvh4, order)) => (Accel::Bvh4(bvh4), order),
                     // Too deep for the BVH4's fixed stack: keep the binary BVH.
                     None => (Accel::Bvh2(bvh), order),
                 }
             }
         };
         // Primitives in BVH order: traversal indexes them directly.
-        let prims = order.iter().map(|&i| prims[i as usize]).collect();
+        let prims: Vec<Prim> = order.iter().map(|&i| prims[i as usize]).collect();
+        let tri4 = match accel {
+            Accel::Bvh4(_) => prims
+                .chunks(BLOCK)
+                .map(|block| {
+                    let mut tri = Tri4 {
+                        v: [[Vec4::ZERO; 3]; 3],
+                    };
+                    for (lane, p) in block.iter().enumerate() {
+                        if p.prim != SPHERE {
+                            for k in 0..3 {
+                                for a in 0..3 {
+                                    tri.v[k][a][lane] = p.v[k][a];
+                                }
+                            }
+                        }
+                    }
+                    tri
+                })
+                .collect(),
+            _ => Vec::new(),
+        };
         Geometry {
             shapes,
             prims,
+            tri4,
+            prim_count,
             accel,
         }
     }
@@ -282,7 +456,7 @@ impl Geometry {
 
     /// Number of BVH primitives (triangles plus spheres).
     pub fn primitive_count(&self) -> usize {
-        self.prims.len()
+        self.prim_count
     }
 
     #[inline]
@@ -334,12 +508,20 @@ impl Geometry {
         ray: &Ray,
     ) -> Option<(usize, f32, f32, f32)> {
         let mut best = None;
-        bvh.closest(ray.o, ray.d, ray.t_max, |first, count, t_max| {
-            for id in first..first + count {
-                if let Some((t, b1, b2)) = self.hit_prim_axis::<KZ>(wray, ray, id, *t_max) {
-                    best = Some((id, t, b1, b2));
-                    *t_max = t;
+        bvh.closest(ray.o, ray.d, ray.t_max, |leaf: Leaf, t_max| {
+            let first = BLOCK * leaf.block;
+            if leaf.scalar {
+                for id in first..first + leaf.count {
+                    if let Some((t, b1, b2)) = self.hit_prim_axis::<KZ>(wray, ray, id, *t_max) {
+                        best = Some((id, t, b1, b2));
+                        *t_max = t;
+                    }
                 }
+            } else if let Some((lane, t, b1, b2)) =
+                wray.intersect4::<KZ>(&self.tri4[leaf.block], *t_max)
+            {
+                best = Some((first + lane, t, b1, b2));
+                *t_max = t;
             }
         });
         best
@@ -347,9 +529,14 @@ impl Geometry {
 
     /// Any hit in the [`Bvh4`].
     fn occluded_bvh4<const KZ: usize>(&self, bvh: &Bvh4, wray: &WatertightRay, ray: &Ray) -> bool {
-        bvh.any(ray.o, ray.d, ray.t_max, |first, count| {
-            (first..first + count)
-                .any(|id| self.hit_prim_axis::<KZ>(wray, ray, id, ray.t_max).is_some())
+        bvh.any(ray.o, ray.d, ray.t_max, |leaf: Leaf| {
+            let first = BLOCK * leaf.block;
+            if leaf.scalar {
+                (first..first + leaf.count)
+                    .any(|id| self.hit_prim_axis::<KZ>(wray, ray, id, ray.t_max).is_some())
+            } else {
+                wray.occluded4::<KZ>(&self.tri4[leaf.block], ray.t_max)
+            }
         })
     }
 

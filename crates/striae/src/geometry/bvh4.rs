@@ -14,7 +14,11 @@
 //!   is found (the CWBVH of obvhs 0.4 needs a 2e-4 workaround for this).
 //! * **Traversal**: closest-hit front to back (children sorted by entry distance, a stack of
 //!   `(node, entry distance)` pairs culled against the current closest `t`); any-hit with an
-//!   early exit. Leaves are contiguous ranges of primitives, tested by the caller's closure.
+//!   early exit.
+//! * **Leaves**: every binary subtree of at most four primitives becomes one leaf block, whose
+//!   four triangles the caller stores as structure of arrays (`bvh::Tri4`) and tests at once
+//!   with SSE (Embree's `Triangle4` leaves, Wald et al. 2014); a leaf with a sphere is tested
+//!   primitive by primitive.
 
 use std::mem::MaybeUninit;
 
@@ -23,12 +27,39 @@ use obvhs::bvh2::Bvh2;
 
 use crate::math::Vec3;
 
-/// Leaf children have this bit set; the rest is `first << COUNT_BITS | count`.
+/// Leaf children have this bit set; the rest is `block << COUNT_BITS | count`, plus
+/// [`SCALAR`] for a block that holds a sphere.
 const LEAF: u32 = 1 << 31;
-const COUNT_BITS: u32 = 4;
-const MAX_LEAF_PRIMS: u32 = (1 << COUNT_BITS) - 1;
+/// A leaf block holding a non-triangle primitive (tested one primitive at a time).
+const SCALAR: u32 = 1 << 30;
+const COUNT_BITS: u32 = 3;
+const COUNT_MASK: u32 = (1 << COUNT_BITS) - 1;
+/// Primitives per leaf block: a leaf is one block of up to four primitives, tested at once with
+/// SSE (`bvh::Tri4`); a binary subtree of at most this many primitives becomes one leaf.
+pub(crate) const BLOCK: usize = 4;
 /// Traversal stack size; a tree that could overflow it is not built (see [`Bvh4::from_bvh2`]).
 const STACK: usize = 192;
+
+/// A leaf as the traversal hands it to the caller's test: block `block` holds primitives
+/// `BLOCK * block .. BLOCK * block + count` of the primitive order [`Bvh4::from_bvh2`] returns
+/// (padded lanes repeat the last primitive); `scalar` when one of them is not a triangle.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Leaf {
+    pub block: usize,
+    pub count: usize,
+    pub scalar: bool,
+}
+
+impl Leaf {
+    #[inline(always)]
+    fn decode(child: u32) -> Leaf {
+        Leaf {
+            block: ((child & !(LEAF | SCALAR)) >> COUNT_BITS) as usize,
+            count: (child & COUNT_MASK) as usize,
+            scalar: child & SCALAR != 0,
+        }
+    }
+}
 
 /// Four children: their boxes as `[min_x, min_y, min_z, max_x, max_y, max_z]` lanes, and what
 /// they are (interior node index, or [`LEAF`] with a primitive range).
@@ -111,33 +142,65 @@ impl BoxRay {
     }
 }
 
-impl Bvh4 {
-    /// Collapses `bvh` (whose leaves hold at most 15 primitives). `None` when the tree is too
-    /// deep for the fixed traversal stack (the caller then keeps another hierarchy).
-    pub(crate) fn from_bvh2(bvh: &Bvh2) -> Option<Bvh4> {
-        if bvh.nodes.is_empty() {
-            return None;
-        }
-        let mut out = Bvh4 { nodes: Vec::new() };
-        let depth = out.build(bvh, &[0])?;
-        // The stack holds at most 3 entries per level (the nearest child is visited directly).
-        (3 * depth + 4 <= STACK).then_some(out)
+/// State of [`Bvh4::from_bvh2`].
+struct Builder<'a, F: Fn(u32) -> bool> {
+    bvh: &'a Bvh2,
+    /// Primitive count of each binary subtree.
+    under: Vec<u32>,
+    is_scalar: &'a F,
+    out: Bvh4,
+    order: Vec<u32>,
+}
+
+impl<F: Fn(u32) -> bool> Builder<'_, F> {
+    /// Whether binary node `k` becomes a leaf block.
+    fn is_leaf(&self, k: usize) -> bool {
+        self.bvh.nodes[k].prim_count > 0 || self.under[k] as usize <= BLOCK
     }
 
-    /// Appends the node whose children are the binary nodes `start` (opened up to four);
-    /// returns the depth of the subtree.
-    fn build(&mut self, bvh: &Bvh2, start: &[usize]) -> Option<usize> {
-        let mut kids: Vec<usize> = start.to_vec();
-        if kids.len() == 1 && bvh.nodes[kids[0]].prim_count == 0 {
-            let n = &bvh.nodes[kids[0]];
-            kids = vec![n.first_index as usize, n.first_index as usize + 1];
+    /// Appends the primitives under binary node `k` to `out`.
+    fn gather(&self, k: usize, out: &mut Vec<u32>) {
+        let n = &self.bvh.nodes[k];
+        if n.prim_count > 0 {
+            let first = n.first_index as usize;
+            out.extend_from_slice(
+                &self.bvh.primitive_indices[first..first + n.prim_count as usize],
+            );
+        } else {
+            self.gather(n.first_index as usize, out);
+            self.gather(n.first_index as usize + 1, out);
         }
+    }
+
+    /// The child words of the leaf blocks holding the primitives under binary node `k` (more
+    /// than one only when a binary leaf holds more than [`BLOCK`] primitives).
+    fn leaf_blocks(&mut self, k: usize) -> Vec<u32> {
+        let mut prims = Vec::new();
+        self.gather(k, &mut prims);
+        prims
+            .chunks(BLOCK)
+            .map(|chunk| {
+                let block = (self.order.len() / BLOCK) as u32;
+                let scalar = chunk.iter().any(|&i| (self.is_scalar)(i));
+                for lane in 0..BLOCK {
+                    self.order.push(chunk[lane.min(chunk.len() - 1)]);
+                }
+                LEAF | if scalar { SCALAR } else { 0 } | block << COUNT_BITS | chunk.len() as u32
+            })
+            .collect()
+    }
+
+    /// Appends the 4-wide node for binary node `root` (opened up to four children) and its
+    /// subtree; returns the subtree's depth.
+    fn build(&mut self, root: usize) -> Option<usize> {
+        let bvh = self.bvh;
+        let mut kids: Vec<usize> = vec![root];
         while kids.len() < 4 {
             // Open the interior child of largest area.
             let best = kids
                 .iter()
                 .enumerate()
-                .filter(|(_, &k)| bvh.nodes[k].prim_count == 0)
+                .filter(|(_, &k)| !self.is_leaf(k))
                 .max_by(|a, b| {
                     let (ha, hb) = (
                         bvh.nodes[*a.1].aabb.half_area(),
@@ -147,12 +210,30 @@ impl Bvh4 {
                 })
                 .map(|(i, _)| i);
             let Some(i) = best else { break };
-            let n = &bvh.nodes[kids[i]];
-            let first = n.first_index as usize;
+            let first = bvh.nodes[kids[i]].first_index as usize;
             kids[i] = first;
             kids.push(first + 1);
         }
-        let index = self.nodes.len();
+        // Children as (binary node, child word, or `None` for an interior node to expand).
+        let mut lanes: Vec<(usize, Option<u32>)> = Vec::new();
+        for &k in &kids {
+            if self.is_leaf(k) {
+                for word in self.leaf_blocks(k) {
+                    lanes.push((k, Some(word)));
+                }
+            } else {
+                lanes.push((k, None));
+            }
+        }
+        if lanes.len() > 4 {
+            // A binary leaf of more than BLOCK primitives spilled over (`Geometry` builds the
+            // binary BVH with leaves of at most BLOCK primitives, so this does not happen).
+            return None;
+        }
+        if self.order.len() / BLOCK >= 1 << (30 - COUNT_BITS) {
+            return None;
+        }
+        let index = self.out.nodes.len();
         let mut node = Node4 {
             bounds: [
                 Vec4::splat(f32::INFINITY),
@@ -164,37 +245,75 @@ impl Bvh4 {
             ],
             child: [LEAF; 4],
         };
-        self.nodes.push(node);
+        self.out.nodes.push(node);
         let mut depth = 1;
-        for (lane, &k) in kids.iter().enumerate() {
+        for (lane, &(k, word)) in lanes.iter().enumerate() {
             let n = &bvh.nodes[k];
             for a in 0..3 {
                 node.bounds[a][lane] = n.aabb.min[a];
                 node.bounds[a + 3][lane] = n.aabb.max[a];
             }
-            if n.prim_count > 0 {
-                if n.prim_count > MAX_LEAF_PRIMS || n.first_index >= 1 << (31 - COUNT_BITS) {
-                    return None;
+            match word {
+                Some(w) => node.child[lane] = w,
+                None => {
+                    node.child[lane] = self.out.nodes.len() as u32;
+                    depth = depth.max(1 + self.build(k)?);
                 }
-                node.child[lane] = LEAF | n.first_index << COUNT_BITS | n.prim_count;
-            } else {
-                node.child[lane] = self.nodes.len() as u32;
-                depth = depth.max(1 + self.build(bvh, &[k])?);
             }
         }
-        self.nodes[index] = node;
+        self.out.nodes[index] = node;
         Some(depth)
     }
+}
 
-    /// Closest-hit traversal: `leaf(first, count, &mut t_max)` tests primitives
-    /// `first..first + count` and lowers `t_max` to any hit it finds.
+impl Bvh4 {
+    /// Collapses `bvh`; every binary subtree of at most [`BLOCK`] primitives becomes one leaf
+    /// block. Returns the tree and the primitive order its blocks index: `BLOCK` slots per
+    /// block, each an index into the primitives `bvh` was built over, a block's unused slots
+    /// repeating its last primitive. `is_scalar(i)` says that primitive `i` is no triangle.
+    /// `None` when the tree is too deep for the fixed traversal stack (the caller then keeps
+    /// another hierarchy).
+    pub(crate) fn from_bvh2(
+        bvh: &Bvh2,
+        is_scalar: impl Fn(u32) -> bool,
+    ) -> Option<(Bvh4, Vec<u32>)> {
+        if bvh.nodes.is_empty() {
+            return None;
+        }
+        // Primitives under each binary node.
+        fn count(bvh: &Bvh2, k: usize, under: &mut [u32]) -> u32 {
+            let n = &bvh.nodes[k];
+            under[k] = if n.prim_count > 0 {
+                n.prim_count
+            } else {
+                let first = n.first_index as usize;
+                count(bvh, first, under) + count(bvh, first + 1, under)
+            };
+            under[k]
+        }
+        let mut under = vec![0u32; bvh.nodes.len()];
+        count(bvh, 0, &mut under);
+        let mut b = Builder {
+            bvh,
+            under,
+            is_scalar: &is_scalar,
+            out: Bvh4 { nodes: Vec::new() },
+            order: Vec::new(),
+        };
+        let depth = b.build(0)?;
+        // The stack holds at most 3 entries per level (the nearest child is visited directly).
+        (3 * depth + 4 <= STACK).then_some((b.out, b.order))
+    }
+
+    /// Closest-hit traversal: `leaf(leaf, &mut t_max)` tests a leaf block and lowers `t_max`
+    /// to any hit it finds.
     #[inline(always)]
     pub(crate) fn closest(
         &self,
         o: Vec3,
         d: Vec3,
         mut t_max: f32,
-        mut leaf: impl FnMut(usize, usize, &mut f32),
+        mut leaf: impl FnMut(Leaf, &mut f32),
     ) {
         let ray = BoxRay::new(o, d);
         let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
@@ -247,9 +366,7 @@ impl Bvh4 {
                     continue;
                 }
             } else {
-                let first = ((cur & !LEAF) >> COUNT_BITS) as usize;
-                let count = (cur & MAX_LEAF_PRIMS) as usize;
-                leaf(first, count, &mut t_max);
+                leaf(Leaf::decode(cur), &mut t_max);
             }
             // Pop the next entry still in front of the closest hit.
             loop {
@@ -267,7 +384,7 @@ impl Bvh4 {
         }
     }
 
-    /// Any-hit traversal: `leaf(first, count)` returns whether a primitive of the range is hit;
+    /// Any-hit traversal: `leaf(leaf)` returns whether a primitive of the leaf block is hit;
     /// the first `true` ends the traversal.
     #[inline(always)]
     pub(crate) fn any(
@@ -275,7 +392,7 @@ impl Bvh4 {
         o: Vec3,
         d: Vec3,
         t_max: f32,
-        mut leaf: impl FnMut(usize, usize) -> bool,
+        mut leaf: impl FnMut(Leaf) -> bool,
     ) -> bool {
         let ray = BoxRay::new(o, d);
         let mut stack = [MaybeUninit::<u32>::uninit(); STACK];
@@ -298,9 +415,7 @@ impl Bvh4 {
                     continue;
                 }
             } else {
-                let first = ((cur & !LEAF) >> COUNT_BITS) as usize;
-                let count = (cur & MAX_LEAF_PRIMS) as usize;
-                if leaf(first, count) {
+                if leaf(Leaf::decode(cur)) {
                     return true;
                 }
             }
