@@ -237,12 +237,7 @@ pub fn render(scene: &Scene, progress: &(dyn Fn(u64) + Sync)) -> (Image, RenderS
             let (x0, y0) = (tx * TILE, ty * TILE);
             let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
             let mut counters = Counters::default();
-            let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
-            for y in y0..y1 {
-                for x in x0..x1 {
-                    out.push(render_pixel(scene, x, y, differentials, &mut counters));
-                }
-            }
+            let out = render_tile(scene, [x0, y0, x1, y1], differentials, &mut counters);
             rays.fetch_add(counters.rays, Ordering::Relaxed);
             nonfinite.fetch_add(counters.nonfinite, Ordering::Relaxed);
             progress(out.len() as u64 * spp as u64);
@@ -269,8 +264,55 @@ pub fn render(scene: &Scene, progress: &(dyn Fn(u64) + Sync)) -> (Image, RenderS
     (image, stats)
 }
 
+/// The pixels of the tile `[x0, y0, x1, y1)` (row by row). On x86-64 machines with AVX2 and
+/// FMA the whole render loop (traversal, shading, sampling, all inlined into it) runs as a copy
+/// compiled for them, chosen at run time; the portable copy runs elsewhere. The two give the
+/// same image bit for bit: Rust never fuses a multiply and an add on its own, so the wider
+/// instructions compute the same IEEE operations.
+fn render_tile(
+    scene: &Scene,
+    rect: [u32; 4],
+    differentials: bool,
+    counters: &mut Counters,
+) -> Vec<Rgb> {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU supports the features `render_tile_avx2` is compiled for.
+        return unsafe { render_tile_avx2(scene, rect, differentials, counters) };
+    }
+    render_tile_body(scene, rect, differentials, counters)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+unsafe fn render_tile_avx2(
+    scene: &Scene,
+    rect: [u32; 4],
+    differentials: bool,
+    counters: &mut Counters,
+) -> Vec<Rgb> {
+    render_tile_body(scene, rect, differentials, counters)
+}
+
+#[inline(always)]
+fn render_tile_body(
+    scene: &Scene,
+    [x0, y0, x1, y1]: [u32; 4],
+    differentials: bool,
+    counters: &mut Counters,
+) -> Vec<Rgb> {
+    let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            out.push(render_pixel(scene, x, y, differentials, counters));
+        }
+    }
+    out
+}
+
 /// The mean of `spp` samples of pixel `(x, y)` (box filter: uniform positions in the pixel).
 /// `differentials`: carry ray differentials (only needed when a material reads the footprint).
+#[inline(always)]
 fn render_pixel(
     scene: &Scene,
     x: u32,
@@ -310,6 +352,7 @@ fn render_pixel(
 
 /// Radiance arriving at the camera along `ray` (one path sample). With `DIFFERENTIALS` false
 /// the ray differentials are neither used nor updated (no material of the scene reads them).
+#[inline(always)]
 fn radiance<const DIFFERENTIALS: bool>(
     scene: &Scene,
     mut ray: Ray,

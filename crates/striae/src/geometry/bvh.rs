@@ -56,7 +56,7 @@ pub(crate) struct WatertightRay {
 }
 
 impl WatertightRay {
-    #[inline]
+    #[inline(always)]
     pub(crate) fn new(ray: &Ray) -> Self {
         let d = ray.d;
         let kz = d.abs().max_position();
@@ -501,6 +501,7 @@ impl Geometry {
     }
 
     /// Closest hit in the [`Bvh4`]: `(primitive, t, b1, b2)`.
+    #[inline(always)]
     fn closest_bvh4<const KZ: usize>(
         &self,
         bvh: &Bvh4,
@@ -528,6 +529,7 @@ impl Geometry {
     }
 
     /// Any hit in the [`Bvh4`].
+    #[inline(always)]
     fn occluded_bvh4<const KZ: usize>(&self, bvh: &Bvh4, wray: &WatertightRay, ray: &Ray) -> bool {
         bvh.any(ray.o, ray.d, ray.t_max, |leaf: Leaf| {
             let first = BLOCK * leaf.block;
@@ -540,8 +542,26 @@ impl Geometry {
         })
     }
 
-    /// Closest hit with `t` in `(0, ray.t_max)`.
+    /// Closest hit with `t` in `(0, ray.t_max)`. Inlined into the caller (the render loop is
+    /// compiled once per instruction set, `integrator::render`): the default BVH is traversed
+    /// inline, obvhs' hierarchies out of line.
+    #[inline(always)]
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceHit> {
+        let Accel::Bvh4(bvh) = &self.accel else {
+            return self.intersect_obvhs(ray);
+        };
+        let wray = WatertightRay::new(ray);
+        let (id, t, b1, b2) = match wray.kz {
+            0 => self.closest_bvh4::<0>(bvh, &wray, ray),
+            1 => self.closest_bvh4::<1>(bvh, &wray, ray),
+            _ => self.closest_bvh4::<2>(bvh, &wray, ray),
+        }?;
+        Some(self.surface_hit(ray, id, t, b1, b2))
+    }
+
+    /// [`Geometry::intersect`] for every kind of hierarchy.
+    #[inline(never)]
+    fn intersect_obvhs(&self, ray: &Ray) -> Option<SurfaceHit> {
         let wray = WatertightRay::new(ray);
         let mut best: Option<(usize, f32, f32, f32)> = None;
         let mut t_max = ray.t_max;
@@ -586,8 +606,24 @@ impl Geometry {
         Some(self.surface_hit(ray, id, t, b1, b2))
     }
 
-    /// Whether anything lies along the ray in `(0, ray.t_max)` (any hit, early exit).
+    /// Whether anything lies along the ray in `(0, ray.t_max)` (any hit, early exit). Inlined
+    /// like [`Geometry::intersect`].
+    #[inline(always)]
     pub fn occluded(&self, ray: &Ray) -> bool {
+        let Accel::Bvh4(bvh) = &self.accel else {
+            return self.occluded_obvhs(ray);
+        };
+        let wray = WatertightRay::new(ray);
+        match wray.kz {
+            0 => self.occluded_bvh4::<0>(bvh, &wray, ray),
+            1 => self.occluded_bvh4::<1>(bvh, &wray, ray),
+            _ => self.occluded_bvh4::<2>(bvh, &wray, ray),
+        }
+    }
+
+    /// [`Geometry::occluded`] for every kind of hierarchy.
+    #[inline(never)]
+    fn occluded_obvhs(&self, ray: &Ray) -> bool {
         let wray = WatertightRay::new(ray);
         let test = |id: usize| {
             if self.hit_prim(&wray, ray, id, ray.t_max).is_some() {
@@ -610,6 +646,7 @@ impl Geometry {
         }
     }
 
+    #[inline(always)]
     fn surface_hit(&self, ray: &Ray, id: usize, t: f32, b1: f32, b2: f32) -> SurfaceHit {
         let prim = &self.prims[id];
         let shape = &self.shapes[prim.shape as usize];
