@@ -21,7 +21,7 @@ use obvhs::cwbvh::builder::build_cwbvh;
 use obvhs::cwbvh::CwBvh;
 use obvhs::BvhBuildParams;
 
-use super::bvh4::{Bvh4, Leaf, BLOCK};
+use super::bvh4::{Bvh4, Leaf, LeafTest, BLOCK};
 use super::sphere::{intersect_sphere, sphere_surface};
 use super::{Shape, ShapeGeometry, SurfaceHit};
 use crate::math::{Ray, Vec3};
@@ -508,38 +508,26 @@ impl Geometry {
         wray: &WatertightRay,
         ray: &Ray,
     ) -> Option<(usize, f32, f32, f32)> {
-        let mut best = None;
-        bvh.closest(ray.o, ray.d, ray.t_max, |leaf: Leaf, t_max| {
-            let first = BLOCK * leaf.block;
-            if leaf.scalar {
-                for id in first..first + leaf.count {
-                    if let Some((t, b1, b2)) = self.hit_prim_axis::<KZ>(wray, ray, id, *t_max) {
-                        best = Some((id, t, b1, b2));
-                        *t_max = t;
-                    }
-                }
-            } else if let Some((lane, t, b1, b2)) =
-                wray.intersect4::<KZ>(&self.tri4[leaf.block], *t_max)
-            {
-                best = Some((first + lane, t, b1, b2));
-                *t_max = t;
-            }
-        });
-        best
+        let mut test = Bvh4Leaves::<KZ> {
+            geometry: self,
+            wray,
+            ray,
+            best: None,
+        };
+        bvh.closest(ray.o, ray.d, ray.t_max, &mut test);
+        test.best
     }
 
     /// Any hit in the [`Bvh4`].
     #[inline(always)]
     fn occluded_bvh4<const KZ: usize>(&self, bvh: &Bvh4, wray: &WatertightRay, ray: &Ray) -> bool {
-        bvh.any(ray.o, ray.d, ray.t_max, |leaf: Leaf| {
-            let first = BLOCK * leaf.block;
-            if leaf.scalar {
-                (first..first + leaf.count)
-                    .any(|id| self.hit_prim_axis::<KZ>(wray, ray, id, ray.t_max).is_some())
-            } else {
-                wray.occluded4::<KZ>(&self.tri4[leaf.block], ray.t_max)
-            }
-        })
+        let mut test = Bvh4Leaves::<KZ> {
+            geometry: self,
+            wray,
+            ray,
+            best: None,
+        };
+        bvh.any(ray.o, ray.d, ray.t_max, &mut test)
     }
 
     /// Closest hit with `t` in `(0, ray.t_max)`. Inlined into the caller (the render loop is
@@ -679,6 +667,54 @@ impl Geometry {
                     prim: 0,
                 }
             }
+        }
+    }
+}
+
+/// The primitive tests of [`Geometry`]'s [`Bvh4`] for a ray of dominant axis `KZ`, with the
+/// closest hit so far `(primitive, t, b1, b2)`.
+struct Bvh4Leaves<'a, const KZ: usize> {
+    geometry: &'a Geometry,
+    wray: &'a WatertightRay,
+    ray: &'a Ray,
+    best: Option<(usize, f32, f32, f32)>,
+}
+
+impl<const KZ: usize> LeafTest for Bvh4Leaves<'_, KZ> {
+    #[inline(always)]
+    fn closest(&mut self, leaf: Leaf, t_max: &mut f32) {
+        let first = BLOCK * leaf.block;
+        if leaf.scalar {
+            for id in first..first + leaf.count {
+                if let Some((t, b1, b2)) = self
+                    .geometry
+                    .hit_prim_axis::<KZ>(self.wray, self.ray, id, *t_max)
+                {
+                    self.best = Some((id, t, b1, b2));
+                    *t_max = t;
+                }
+            }
+        } else if let Some((lane, t, b1, b2)) = self
+            .wray
+            .intersect4::<KZ>(&self.geometry.tri4[leaf.block], *t_max)
+        {
+            self.best = Some((first + lane, t, b1, b2));
+            *t_max = t;
+        }
+    }
+
+    #[inline(always)]
+    fn any(&mut self, leaf: Leaf, t_max: f32) -> bool {
+        let first = BLOCK * leaf.block;
+        if leaf.scalar {
+            (first..first + leaf.count).any(|id| {
+                self.geometry
+                    .hit_prim_axis::<KZ>(self.wray, self.ray, id, t_max)
+                    .is_some()
+            })
+        } else {
+            self.wray
+                .occluded4::<KZ>(&self.geometry.tri4[leaf.block], t_max)
         }
     }
 }

@@ -50,6 +50,15 @@ pub(crate) struct Leaf {
     pub scalar: bool,
 }
 
+/// The caller's primitive tests (a trait rather than closures so that they can be forced
+/// inline into the traversal loop).
+pub(crate) trait LeafTest {
+    /// Test the leaf's primitives for the closest hit, lowering `t_max` to any hit found.
+    fn closest(&mut self, leaf: Leaf, t_max: &mut f32);
+    /// Whether any primitive of the leaf is hit before `t_max`.
+    fn any(&mut self, leaf: Leaf, t_max: f32) -> bool;
+}
+
 impl Leaf {
     #[inline(always)]
     fn decode(child: u32) -> Leaf {
@@ -305,16 +314,10 @@ impl Bvh4 {
         (3 * depth + 4 <= STACK).then_some((b.out, b.order))
     }
 
-    /// Closest-hit traversal: `leaf(leaf, &mut t_max)` tests a leaf block and lowers `t_max`
-    /// to any hit it finds.
+    /// Closest-hit traversal: `leaf.closest(leaf, &mut t_max)` tests a leaf block and lowers
+    /// `t_max` to any hit it finds.
     #[inline(always)]
-    pub(crate) fn closest(
-        &self,
-        o: Vec3,
-        d: Vec3,
-        mut t_max: f32,
-        mut leaf: impl FnMut(Leaf, &mut f32),
-    ) {
+    pub(crate) fn closest(&self, o: Vec3, d: Vec3, mut t_max: f32, leaf: &mut impl LeafTest) {
         let ray = BoxRay::new(o, d);
         let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
         let mut sp = 0usize;
@@ -366,7 +369,7 @@ impl Bvh4 {
                     continue;
                 }
             } else {
-                leaf(Leaf::decode(cur), &mut t_max);
+                leaf.closest(Leaf::decode(cur), &mut t_max);
             }
             // Pop the next entry still in front of the closest hit.
             loop {
@@ -384,16 +387,10 @@ impl Bvh4 {
         }
     }
 
-    /// Any-hit traversal: `leaf(leaf)` returns whether a primitive of the leaf block is hit;
-    /// the first `true` ends the traversal.
+    /// Any-hit traversal: `leaf.any(leaf, t_max)` returns whether a primitive of the leaf
+    /// block is hit; the first `true` ends the traversal.
     #[inline(always)]
-    pub(crate) fn any(
-        &self,
-        o: Vec3,
-        d: Vec3,
-        t_max: f32,
-        mut leaf: impl FnMut(Leaf) -> bool,
-    ) -> bool {
+    pub(crate) fn any(&self, o: Vec3, d: Vec3, t_max: f32, leaf: &mut impl LeafTest) -> bool {
         let ray = BoxRay::new(o, d);
         let mut stack = [MaybeUninit::<u32>::uninit(); STACK];
         let mut sp = 0usize;
@@ -415,7 +412,7 @@ impl Bvh4 {
                     continue;
                 }
             } else {
-                if leaf(Leaf::decode(cur)) {
+                if leaf.any(Leaf::decode(cur), t_max) {
                     return true;
                 }
             }
