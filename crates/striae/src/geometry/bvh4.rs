@@ -39,6 +39,9 @@ const COUNT_MASK: u32 = (1 << COUNT_BITS) - 1;
 pub(crate) const BLOCK: usize = 4;
 /// Traversal stack size; a tree that could overflow it is not built (see [`Bvh4::from_bvh2`]).
 const STACK: usize = 192;
+/// Children per node (a multiple of 4: each group of four is tested with one SSE op).
+const WIDTH: usize = 8;
+const GROUPS: usize = WIDTH / 4;
 
 /// A leaf as the traversal hands it to the caller's test: block `block` holds primitives
 /// `BLOCK * block .. BLOCK * block + count` of the primitive order [`Bvh4::from_bvh2`] returns
@@ -75,8 +78,8 @@ impl Leaf {
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 struct Node4 {
-    bounds: [Vec4; 6],
-    child: [u32; 4],
+    bounds: [[Vec4; GROUPS]; 6],
+    child: [u32; WIDTH],
 }
 
 /// The 4-wide BVH; primitive ranges index the caller's primitive array in BVH order (the order
@@ -132,22 +135,28 @@ impl BoxRay {
         }
     }
 
-    /// `(entry distances, hit mask)` of the four children for `t` in `[0, t_max]`.
+    /// `(entry distances, hit mask)` of the children for `t` in `[0, t_max]`.
     #[inline(always)]
-    fn test(&self, node: &Node4, t_max: f32) -> (Vec4, u32) {
-        let b = &node.bounds;
-        let tn0 = (b[self.near[0]] - self.o[0]) * self.inv_d[0];
-        let tn1 = (b[self.near[1]] - self.o[1]) * self.inv_d[1];
-        let tn2 = (b[self.near[2]] - self.o[2]) * self.inv_d[2];
-        let tf0 = (b[self.far[0]] - self.o[0]) * self.inv_d[0];
-        let tf1 = (b[self.far[1]] - self.o[1]) * self.inv_d[1];
-        let tf2 = (b[self.far[2]] - self.o[2]) * self.inv_d[2];
-        let t_near = tn0.max(tn1).max(tn2.max(Vec4::ZERO));
-        // 1 + 2 gamma(3) (pbrt-v4): rounding never shrinks the interval below the true one.
-        let t_far = tf0.min(tf1).min(tf2)
-            * (1.0 + 2.0 * 3.0 * f32::EPSILON * 0.5 / (1.0 - 1.5 * f32::EPSILON));
-        let t_far = t_far.min(Vec4::splat(t_max));
-        (t_near, t_near.cmple(t_far).bitmask())
+    fn test(&self, node: &Node4, t_max: f32) -> ([f32; WIDTH], u32) {
+        let mut t_out = [0.0; WIDTH];
+        let mut mask = 0;
+        for g in 0..GROUPS {
+            let b = |i: usize| node.bounds[i][g];
+            let tn0 = (b(self.near[0]) - self.o[0]) * self.inv_d[0];
+            let tn1 = (b(self.near[1]) - self.o[1]) * self.inv_d[1];
+            let tn2 = (b(self.near[2]) - self.o[2]) * self.inv_d[2];
+            let tf0 = (b(self.far[0]) - self.o[0]) * self.inv_d[0];
+            let tf1 = (b(self.far[1]) - self.o[1]) * self.inv_d[1];
+            let tf2 = (b(self.far[2]) - self.o[2]) * self.inv_d[2];
+            let t_near = tn0.max(tn1).max(tn2.max(Vec4::ZERO));
+            // 1 + 2 gamma(3) (pbrt-v4): rounding never shrinks the interval below the true one.
+            let t_far = tf0.min(tf1).min(tf2)
+                * (1.0 + 2.0 * 3.0 * f32::EPSILON * 0.5 / (1.0 - 1.5 * f32::EPSILON));
+            let t_far = t_far.min(Vec4::splat(t_max));
+            t_out[4 * g..4 * g + 4].copy_from_slice(&t_near.to_array());
+            mask |= t_near.cmple(t_far).bitmask() << (4 * g);
+        }
+        (t_out, mask)
     }
 }
 
@@ -204,7 +213,7 @@ impl<F: Fn(u32) -> bool> Builder<'_, F> {
     fn build(&mut self, root: usize) -> Option<usize> {
         let bvh = self.bvh;
         let mut kids: Vec<usize> = vec![root];
-        while kids.len() < 4 {
+        while kids.len() < WIDTH {
             // Open the interior child of largest area.
             let best = kids
                 .iter()
@@ -234,7 +243,7 @@ impl<F: Fn(u32) -> bool> Builder<'_, F> {
                 lanes.push((k, None));
             }
         }
-        if lanes.len() > 4 {
+        if lanes.len() > WIDTH {
             // A binary leaf of more than BLOCK primitives spilled over (`Geometry` builds the
             // binary BVH with leaves of at most BLOCK primitives, so this does not happen).
             return None;
@@ -243,24 +252,25 @@ impl<F: Fn(u32) -> bool> Builder<'_, F> {
             return None;
         }
         let index = self.out.nodes.len();
+        let (inf, neg) = (Vec4::INFINITY, Vec4::NEG_INFINITY);
         let mut node = Node4 {
             bounds: [
-                Vec4::splat(f32::INFINITY),
-                Vec4::splat(f32::INFINITY),
-                Vec4::splat(f32::INFINITY),
-                Vec4::splat(f32::NEG_INFINITY),
-                Vec4::splat(f32::NEG_INFINITY),
-                Vec4::splat(f32::NEG_INFINITY),
+                [inf; GROUPS],
+                [inf; GROUPS],
+                [inf; GROUPS],
+                [neg; GROUPS],
+                [neg; GROUPS],
+                [neg; GROUPS],
             ],
-            child: [LEAF; 4],
+            child: [LEAF; WIDTH],
         };
         self.out.nodes.push(node);
         let mut depth = 1;
         for (lane, &(k, word)) in lanes.iter().enumerate() {
             let n = &bvh.nodes[k];
             for a in 0..3 {
-                node.bounds[a][lane] = n.aabb.min[a];
-                node.bounds[a + 3][lane] = n.aabb.max[a];
+                node.bounds[a][lane / 4][lane % 4] = n.aabb.min[a];
+                node.bounds[a + 3][lane / 4][lane % 4] = n.aabb.max[a];
             }
             match word {
                 Some(w) => node.child[lane] = w,
@@ -311,7 +321,7 @@ impl Bvh4 {
         };
         let depth = b.build(0)?;
         // The stack holds at most 3 entries per level (the nearest child is visited directly).
-        (3 * depth + 4 <= STACK).then_some((b.out, b.order))
+        ((WIDTH - 1) * depth + WIDTH <= STACK).then_some((b.out, b.order))
     }
 
     /// Closest-hit traversal: `leaf.closest(leaf, &mut t_max)` tests a leaf block and lowers
@@ -335,7 +345,7 @@ impl Bvh4 {
                         cur = node.child[lane0];
                         continue;
                     }
-                    let t = t_near.to_array();
+                    let t = t_near;
                     let lane1 = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     let (h0, h1) = ((node.child[lane0], t[lane0]), (node.child[lane1], t[lane1]));
@@ -347,7 +357,9 @@ impl Bvh4 {
                         continue;
                     }
                     // Three or four: insertion sort, nearest first.
-                    let mut hits = [near, far, (0, 0.0), (0, 0.0)];
+                    let mut hits = [(0, 0.0); WIDTH];
+                    hits[0] = near;
+                    hits[1] = far;
                     let mut n = 2;
                     while mask != 0 {
                         let lane = mask.trailing_zeros() as usize;
