@@ -1,10 +1,12 @@
 //! End-to-end path tracing throughput on the built-in glass teapot scene (camera samples per
 //! second; the CLI prints the same figure plus rays/s for a full 512 x 384 render). Also the
-//! cost of one pixel sample's random numbers. Run: `cargo bench -p striae --bench render`.
+//! cost of one pixel sample's random numbers. The 128 x 96 render also runs the portable copy
+//! of the render loop (`Simd::Portable`: no AVX2, what a CPU without it runs) beside the
+//! default one. Run: `cargo bench -p striae --bench render`.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::path::Path;
-use striae::integrator::render;
+use striae::integrator::{render, render_with, Simd};
 use striae::sampler::PixelSampler;
 use striae::scene::{Overrides, Scene};
 
@@ -29,6 +31,11 @@ fn bench_render(c: &mut Criterion) {
         g.bench_function(format!("glass_teapot_{w}x{h}_{spp}spp"), |b| {
             b.iter(|| render(&scene, &|_| {}))
         });
+        if w == 128 {
+            g.bench_function(format!("glass_teapot_{w}x{h}_{spp}spp_portable"), |b| {
+                b.iter(|| render_with(&scene, &|_| {}, Simd::Portable))
+            });
+        }
     }
     g.finish();
 

@@ -222,6 +222,29 @@ pub fn trace_contexts(scene: &Scene, film: Vec2, max_hits: usize) -> Vec<Shading
 /// Render the whole image. `progress` is called (from worker threads) with the number of
 /// camera samples each finished tile traced.
 pub fn render(scene: &Scene, progress: &(dyn Fn(u64) + Sync)) -> (Image, RenderStats) {
+    render_with(scene, progress, Simd::Auto)
+}
+
+/// Which compiled copy of the render loop runs (see [`render_tile`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Simd {
+    /// The AVX2 + FMA copy where the CPU has them (unless the environment variable
+    /// `STRIAE_PORTABLE` is set), the portable one elsewhere.
+    Auto,
+    /// Always the portable copy (baseline x86-64 / any other target): for tests that check
+    /// both copies give the same image, and for benchmarks.
+    Portable,
+}
+
+/// [`render`] with a choice of compiled render loop; the image does not depend on it.
+pub fn render_with(
+    scene: &Scene,
+    progress: &(dyn Fn(u64) + Sync),
+    simd: Simd,
+) -> (Image, RenderStats) {
+    let wide = simd == Simd::Auto
+        && std::env::var_os("STRIAE_PORTABLE").is_none()
+        && wide_simd_available();
     let start = std::time::Instant::now();
     let (w, h) = scene.camera.resolution();
     let tiles_x = w.div_ceil(TILE);
@@ -237,7 +260,7 @@ pub fn render(scene: &Scene, progress: &(dyn Fn(u64) + Sync)) -> (Image, RenderS
             let (x0, y0) = (tx * TILE, ty * TILE);
             let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
             let mut counters = Counters::default();
-            let out = render_tile(scene, [x0, y0, x1, y1], differentials, &mut counters);
+            let out = render_tile(scene, [x0, y0, x1, y1], differentials, wide, &mut counters);
             rays.fetch_add(counters.rays, Ordering::Relaxed);
             nonfinite.fetch_add(counters.nonfinite, Ordering::Relaxed);
             progress(out.len() as u64 * spp as u64);
@@ -273,14 +296,33 @@ fn render_tile(
     scene: &Scene,
     rect: [u32; 4],
     differentials: bool,
+    wide: bool,
     counters: &mut Counters,
 ) -> Vec<Rgb> {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+    if wide && wide_simd_available() {
         // SAFETY: the CPU supports the features `render_tile_avx2` is compiled for.
         return unsafe { render_tile_avx2(scene, rect, differentials, counters) };
     }
+    let _ = wide;
     render_tile_body(scene, rect, differentials, counters)
+}
+
+/// Whether this CPU runs the AVX2 + FMA copy of the render loop.
+fn wide_simd_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+            && std::arch::is_x86_feature_detected!("bmi1")
+            && std::arch::is_x86_feature_detected!("bmi2")
+            && std::arch::is_x86_feature_detected!("lzcnt")
+            && std::arch::is_x86_feature_detected!("popcnt")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
