@@ -1,11 +1,15 @@
-//! A 4-wide BVH with SIMD box tests, collapsed from obvhs' binary BVH (PLOC + reinsertion),
-//! in the style of Embree's BVH4 (Wald et al. 2014, "Embree: A Kernel Framework for Efficient
-//! CPU Ray Tracing"): every node stores its four children's boxes as structure-of-arrays, so one
-//! node visit tests four boxes with `Vec4` (SSE) arithmetic.
+//! A wide BVH with SIMD box tests, collapsed from obvhs' binary BVH (PLOC + reinsertion), in
+//! the style of Embree's BVH4/BVH8 (Wald et al. 2014, "Embree: A Kernel Framework for Efficient
+//! CPU Ray Tracing"): every node stores its children's boxes as structure-of-arrays, so one
+//! node visit tests them with `Vec4` (SSE) arithmetic, four boxes per group. The type keeps
+//! its first name, `Bvh4`; nodes now have [`WIDTH`] = 8 children (two groups of four), which
+//! took ~7 % off the glass teapot's render time against four (`BENCHMARKS.md`, "Renderer speed,
+//! session 2"); the compiler merges the two groups into 256-bit operations in the AVX2 copy of
+//! the render loop.
 //!
 //! * **Collapse**: starting from a binary node's two children, the interior child of largest
-//!   surface area is replaced by its two children until there are four (the usual BVH2 to BVHN
-//!   conversion, e.g. Wald et al. 2008, "Getting Rid of Packets").
+//!   surface area is replaced by its two children until there are [`WIDTH`] (the usual BVH2 to
+//!   BVHN conversion, e.g. Wald et al. 2008, "Getting Rid of Packets").
 //! * **Box test**: the slab test with the near/far slab chosen by the sign of each direction
 //!   component, `t_far` scaled by `1 + 2 gamma(3)` so rounding never misses a box the ray
 //!   touches (pbrt-v4 `Bounds3::IntersectP`, Ize 2013 "Robust BVH Ray Traversal"). Zero
