@@ -225,7 +225,7 @@ pub fn render(scene: &Scene, progress: &(dyn Fn(u64) + Sync)) -> (Image, RenderS
     render_with(scene, progress, Simd::Auto)
 }
 
-/// Which compiled copy of the render loop runs (see [`render_tile`]).
+/// Which compiled copy of the render loop runs: the AVX2 one or the portable one.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Simd {
     /// The AVX2 + FMA copy where the CPU has them (unless the environment variable
@@ -465,8 +465,16 @@ fn radiance<const DIFFERENTIALS: bool>(
         }
 
         // Shading frame and the material's BSDF.
-        let u_layer = sampler.next_1d();
         let material = &scene.materials[shape.material as usize];
+        // Dimension 0 of the bounce's block; drawn only for a material that reads it, which
+        // spares computing the block's first four dimensions at delta bounces (the dimensions
+        // keep their places, so the image is the same).
+        let u_layer = if material.reads_layer_choice() {
+            sampler.next_1d()
+        } else {
+            sampler.seek(depth, 1);
+            0.5
+        };
         let Shaded {
             ctx,
             bsdf,

@@ -181,6 +181,13 @@ impl Material {
         matches!(self, Material::Scratched(_))
     }
 
+    /// Whether the material's BSDF reads `ShadingContext::u_layer` (only the scratched
+    /// material does): the integrator draws that random number only then.
+    #[inline]
+    pub fn reads_layer_choice(&self) -> bool {
+        matches!(self, Material::Scratched(_))
+    }
+
     /// Check every value's range (IOR >= 1, roughness >= 0, albedo in `[0, 1]`, a known
     /// preset or a complete `eta`/`k`). Image textures are checked once loaded.
     pub fn validate(&self) -> Result<(), MaterialError> {

@@ -2,7 +2,7 @@
 //! traversed for the closest hit and for any hit (shadow rays, early exit). The default
 //! ([`BvhKind::Bvh4`]) is an 8-wide BVH with SSE box tests ([`super::bvh4`]) collapsed from
 //! obvhs' binary BVH (PLOC with reinsertion), whose leaves are blocks of four triangles tested
-//! at once ([`Tri4`]); obvhs' compressed wide BVH (CWBVH, Ylitie et al. 2017) and its binary BVH
+//! at once (`Tri4`); obvhs' compressed wide BVH (CWBVH, Ylitie et al. 2017) and its binary BVH
 //! remain selectable for comparison (`BENCHMARKS.md`, "BVH" and "Renderer").
 //!
 //! Triangles are intersected with the watertight test of Woop, Benthin and Wald (2013, "Watertight
@@ -292,7 +292,7 @@ enum Hits4 {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum BvhKind {
     /// 8-wide BVH with SSE box tests and 4-triangle SIMD leaves, collapsed from obvhs' binary
-    /// BVH ([`super::bvh4`]; the name is from when it was 4-wide).
+    /// BVH (`geometry::bvh4`; the name is from when it was 4-wide).
     #[default]
     Bvh4,
     /// Compressed 8-wide BVH (Ylitie et al. 2017), SIMD node tests.
