@@ -747,3 +747,115 @@ pub fn intersect_brute_force(shapes: &[Shape], ray: &Ray) -> Option<(f32, u32, u
     }
     best
 }
+
+#[cfg(test)]
+mod tri4_tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_pcg::Pcg64;
+
+    /// The scalar test over the four lanes in order (a later lane must be strictly closer), as
+    /// the leaves were tested before `Tri4`.
+    fn scalar_lanes<const KZ: usize>(
+        w: &WatertightRay,
+        tris: &[[Vec3; 3]; 4],
+        mut t_max: f32,
+    ) -> Option<(usize, f32, f32, f32)> {
+        let mut best = None;
+        for (lane, [a, b, c]) in tris.iter().enumerate() {
+            if let Some((t, b1, b2)) = w.intersect_axis::<KZ>(*a, *b, *c, t_max) {
+                t_max = t;
+                best = Some((lane, t, b1, b2));
+            }
+        }
+        best
+    }
+
+    fn pack(tris: &[[Vec3; 3]; 4]) -> Tri4 {
+        let mut tri = Tri4 {
+            v: [[Vec4::ZERO; 3]; 3],
+        };
+        for (lane, t) in tris.iter().enumerate() {
+            for k in 0..3 {
+                for a in 0..3 {
+                    tri.v[k][a][lane] = t[k][a];
+                }
+            }
+        }
+        tri
+    }
+
+    fn check<const KZ: usize>(w: &WatertightRay, tris: &[[Vec3; 3]; 4], t_max: f32) -> bool {
+        let tri = pack(tris);
+        let simd = w.intersect4::<KZ>(&tri, t_max);
+        let scalar = scalar_lanes::<KZ>(w, tris, t_max);
+        let bits = |r: Option<(usize, f32, f32, f32)>| {
+            r.map(|(l, t, b1, b2)| (l, t.to_bits(), b1.to_bits(), b2.to_bits()))
+        };
+        assert_eq!(bits(simd), bits(scalar), "{tris:?} {w:?}");
+        assert_eq!(w.occluded4::<KZ>(&tri, t_max), scalar.is_some());
+        matches!(w.hits4::<KZ>(&tri, t_max), Hits4::Exact)
+    }
+
+    #[test]
+    fn four_triangle_test_equals_the_scalar_test_bit_for_bit() {
+        // Random triangles and rays, and triangles and rays on a small integer grid with
+        // axis-aligned or diagonal directions, where edge functions are often exactly zero (the
+        // scalar f64 fallback) and several lanes tie (shared vertices and edges, duplicates).
+        let mut rng = Pcg64::seed_from_u64(11);
+        let (mut exact, mut hits) = (0, 0);
+        for k in 0..20_000 {
+            let grid = k % 2 == 0;
+            let point = |rng: &mut Pcg64| {
+                if grid {
+                    Vec3::new(
+                        rng.random_range(-2..=2) as f32,
+                        rng.random_range(-2..=2) as f32,
+                        rng.random_range(-2..=2) as f32,
+                    )
+                } else {
+                    Vec3::new(rng.random(), rng.random(), rng.random()) * 4.0 - 2.0
+                }
+            };
+            let mut tris = [[Vec3::ZERO; 3]; 4];
+            for t in tris.iter_mut() {
+                *t = [point(&mut rng), point(&mut rng), point(&mut rng)];
+            }
+            if k % 3 == 0 {
+                tris[2] = tris[1]; // a duplicate (padding) lane ties exactly
+            }
+            let o = point(&mut rng) * 2.0;
+            let d = if grid {
+                let axis = [Vec3::X, Vec3::Y, Vec3::Z, Vec3::ONE][rng.random_range(0..4)];
+                if rng.random::<bool>() {
+                    axis
+                } else {
+                    -axis
+                }
+            } else {
+                point(&mut rng)
+            };
+            if d == Vec3::ZERO {
+                continue;
+            }
+            let ray = Ray::new(o, d.normalize());
+            let w = WatertightRay::new(&ray);
+            let t_max = if k % 5 == 0 { 3.0 } else { f32::INFINITY };
+            let was_exact = match w.kz {
+                0 => check::<0>(&w, &tris, t_max),
+                1 => check::<1>(&w, &tris, t_max),
+                _ => check::<2>(&w, &tris, t_max),
+            };
+            exact += was_exact as u32;
+            hits += match w.kz {
+                0 => scalar_lanes::<0>(&w, &tris, t_max),
+                1 => scalar_lanes::<1>(&w, &tris, t_max),
+                _ => scalar_lanes::<2>(&w, &tris, t_max),
+            }
+            .is_some() as u32;
+        }
+        // Both paths were exercised.
+        assert!(exact > 100, "{exact} blocks took the exact path");
+        assert!(hits > 500, "{hits} hits");
+    }
+}
