@@ -15,7 +15,12 @@
 //!   Mitsuba handle by flipping or by geometric-side checks).
 //! * **Ray differentials** start at the camera and are carried to every hit
 //!   (`shading::spawn_differentials`); their texture-space footprint reaches the material in
-//!   the [`ShadingContext`].
+//!   the [`ShadingContext`]. In a scene where no material reads the footprint
+//!   ([`Material::reads_footprint`]: only the scratched material does) they are skipped
+//!   altogether (the footprint fields are then zero), which changes no pixel.
+//! * **Speed**: the render loop is compiled twice, for AVX2 + FMA (chosen at run time) and
+//!   portable, with traversal and shading inlined into it; both give the same image bit for
+//!   bit ([`render_with`], `BENCHMARKS.md`, "Renderer speed, session 2").
 //! * **Determinism**: each pixel sample draws from its own Sobol stream
 //!   (`sampler::PixelSampler`), tiles are rendered in parallel by rayon and written to fixed
 //!   places, so the image does not depend on the thread count.
