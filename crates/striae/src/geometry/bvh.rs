@@ -1,6 +1,6 @@
 //! The scene's acceleration structure: every triangle and sphere of every shape in one BVH,
 //! traversed for the closest hit and for any hit (shadow rays, early exit). The default
-//! ([`BvhKind::Bvh4`]) is an 8-wide BVH with SSE box tests ([`super::bvh4`]) collapsed from
+//! ([`BvhKind::Bvh4`]) is an 8-wide BVH with SSE box tests (`geometry::bvh4`) collapsed from
 //! obvhs' binary BVH (PLOC with reinsertion), whose leaves are blocks of four triangles tested
 //! at once (`Tri4`); obvhs' compressed wide BVH (CWBVH, Ylitie et al. 2017) and its binary BVH
 //! remain selectable for comparison (`BENCHMARKS.md`, "BVH" and "Renderer").
