@@ -776,9 +776,9 @@ mod tri4_tests {
             v: [[Vec4::ZERO; 3]; 3],
         };
         for (lane, t) in tris.iter().enumerate() {
-            for k in 0..3 {
+            for (k, p) in t.iter().enumerate() {
                 for a in 0..3 {
-                    tri.v[k][a][lane] = t[k][a];
+                    tri.v[k][a][lane] = p[a];
                 }
             }
         }
