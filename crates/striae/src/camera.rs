@@ -154,6 +154,18 @@ impl PerspectiveCamera {
         )
     }
 
+    /// The primary ray of [`PerspectiveCamera::generate_ray`] without its differentials (the
+    /// same ray, bit for bit).
+    #[inline]
+    pub fn generate_ray_only(&self, film: Vec2, u_lens: Vec2) -> Ray {
+        let lens = if self.lens_radius > 0.0 {
+            self.lens_radius * square_to_concentric_disk(u_lens)
+        } else {
+            Vec2::ZERO
+        };
+        self.ray_through(film, lens)
+    }
+
     /// The film position a world direction from the camera centre projects to, if it is in
     /// front of the camera (used by tests to check the conventions).
     pub fn project(&self, dir: Vec3) -> Option<Vec2> {

@@ -15,7 +15,12 @@
 //!   Mitsuba handle by flipping or by geometric-side checks).
 //! * **Ray differentials** start at the camera and are carried to every hit
 //!   (`shading::spawn_differentials`); their texture-space footprint reaches the material in
-//!   the [`ShadingContext`].
+//!   the [`ShadingContext`]. In a scene where no material reads the footprint
+//!   ([`Material::reads_footprint`]: only the scratched material does) they are skipped
+//!   altogether (the footprint fields are then zero), which changes no pixel.
+//! * **Speed**: the render loop is compiled twice, for AVX2 + FMA (chosen at run time) and
+//!   portable, with traversal and shading inlined into it; both give the same image bit for
+//!   bit ([`render_with`], `BENCHMARKS.md`, "Renderer speed, session 2").
 //! * **Determinism**: each pixel sample draws from its own Sobol stream
 //!   (`sampler::PixelSampler`), tiles are rendered in parallel by rayon and written to fixed
 //!   places, so the image does not depend on the thread count.
@@ -116,7 +121,24 @@ pub fn shade<'a>(
     wo_world: Vec3,
     u_layer: f32,
 ) -> Shaded<'a> {
-    let (dpdx, dpdy, duvdx, duvdy) = footprint(hit, rd);
+    shade_with(material, hit, Some(rd), wo_world, u_layer)
+}
+
+/// [`shade`], with the footprint computed only when `rd` is given: without differentials
+/// `duvdx`, `duvdy`, `dpdx` and `dpdy` are zero (the render loop passes `None` when no material
+/// of the scene reads the footprint, see [`Material::reads_footprint`]).
+#[inline(always)]
+pub fn shade_with<'a>(
+    material: &'a Material,
+    hit: &SurfaceHit,
+    rd: Option<&RayDifferential>,
+    wo_world: Vec3,
+    u_layer: f32,
+) -> Shaded<'a> {
+    let (dpdx, dpdy, duvdx, duvdy) = match rd {
+        Some(rd) => footprint(hit, rd),
+        None => (Vec3::ZERO, Vec3::ZERO, Vec2::ZERO, Vec2::ZERO),
+    };
     let mut ctx = ShadingContext {
         p: hit.p,
         uv: hit.uv,
@@ -205,6 +227,29 @@ pub fn trace_contexts(scene: &Scene, film: Vec2, max_hits: usize) -> Vec<Shading
 /// Render the whole image. `progress` is called (from worker threads) with the number of
 /// camera samples each finished tile traced.
 pub fn render(scene: &Scene, progress: &(dyn Fn(u64) + Sync)) -> (Image, RenderStats) {
+    render_with(scene, progress, Simd::Auto)
+}
+
+/// Which compiled copy of the render loop runs: the AVX2 one or the portable one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Simd {
+    /// The AVX2 + FMA copy where the CPU has them (unless the environment variable
+    /// `STRIAE_PORTABLE` is set), the portable one elsewhere.
+    Auto,
+    /// Always the portable copy (baseline x86-64 / any other target): for tests that check
+    /// both copies give the same image, and for benchmarks.
+    Portable,
+}
+
+/// [`render`] with a choice of compiled render loop; the image does not depend on it.
+pub fn render_with(
+    scene: &Scene,
+    progress: &(dyn Fn(u64) + Sync),
+    simd: Simd,
+) -> (Image, RenderStats) {
+    let wide = simd == Simd::Auto
+        && std::env::var_os("STRIAE_PORTABLE").is_none()
+        && wide_simd_available();
     let start = std::time::Instant::now();
     let (w, h) = scene.camera.resolution();
     let tiles_x = w.div_ceil(TILE);
@@ -212,6 +257,7 @@ pub fn render(scene: &Scene, progress: &(dyn Fn(u64) + Sync)) -> (Image, RenderS
     let rays = AtomicU64::new(0);
     let nonfinite = AtomicU64::new(0);
     let spp = scene.settings.spp;
+    let differentials = scene.materials.iter().any(Material::reads_footprint);
     let tiles: Vec<(u32, Vec<Rgb>)> = (0..tiles_x * tiles_y)
         .into_par_iter()
         .map(|tile| {
@@ -219,12 +265,7 @@ pub fn render(scene: &Scene, progress: &(dyn Fn(u64) + Sync)) -> (Image, RenderS
             let (x0, y0) = (tx * TILE, ty * TILE);
             let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
             let mut counters = Counters::default();
-            let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
-            for y in y0..y1 {
-                for x in x0..x1 {
-                    out.push(render_pixel(scene, x, y, &mut counters));
-                }
-            }
+            let out = render_tile(scene, [x0, y0, x1, y1], differentials, wide, &mut counters);
             rays.fetch_add(counters.rays, Ordering::Relaxed);
             nonfinite.fetch_add(counters.nonfinite, Ordering::Relaxed);
             progress(out.len() as u64 * spp as u64);
@@ -251,8 +292,81 @@ pub fn render(scene: &Scene, progress: &(dyn Fn(u64) + Sync)) -> (Image, RenderS
     (image, stats)
 }
 
+/// The pixels of the tile `[x0, y0, x1, y1)` (row by row). On x86-64 machines with AVX2 and
+/// FMA the whole render loop (traversal, shading, sampling, all inlined into it) runs as a copy
+/// compiled for them, chosen at run time; the portable copy runs elsewhere. The two give the
+/// same image bit for bit: Rust never fuses a multiply and an add on its own, so the wider
+/// instructions compute the same IEEE operations.
+fn render_tile(
+    scene: &Scene,
+    rect: [u32; 4],
+    differentials: bool,
+    wide: bool,
+    counters: &mut Counters,
+) -> Vec<Rgb> {
+    #[cfg(target_arch = "x86_64")]
+    if wide && wide_simd_available() {
+        // SAFETY: the CPU supports the features `render_tile_avx2` is compiled for.
+        return unsafe { render_tile_avx2(scene, rect, differentials, counters) };
+    }
+    let _ = wide;
+    render_tile_body(scene, rect, differentials, counters)
+}
+
+/// Whether this CPU runs the AVX2 + FMA copy of the render loop.
+fn wide_simd_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+            && std::arch::is_x86_feature_detected!("bmi1")
+            && std::arch::is_x86_feature_detected!("bmi2")
+            && std::arch::is_x86_feature_detected!("lzcnt")
+            && std::arch::is_x86_feature_detected!("popcnt")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+unsafe fn render_tile_avx2(
+    scene: &Scene,
+    rect: [u32; 4],
+    differentials: bool,
+    counters: &mut Counters,
+) -> Vec<Rgb> {
+    render_tile_body(scene, rect, differentials, counters)
+}
+
+#[inline(always)]
+fn render_tile_body(
+    scene: &Scene,
+    [x0, y0, x1, y1]: [u32; 4],
+    differentials: bool,
+    counters: &mut Counters,
+) -> Vec<Rgb> {
+    let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            out.push(render_pixel(scene, x, y, differentials, counters));
+        }
+    }
+    out
+}
+
 /// The mean of `spp` samples of pixel `(x, y)` (box filter: uniform positions in the pixel).
-fn render_pixel(scene: &Scene, x: u32, y: u32, counters: &mut Counters) -> Rgb {
+/// `differentials`: carry ray differentials (only needed when a material reads the footprint).
+#[inline(always)]
+fn render_pixel(
+    scene: &Scene,
+    x: u32,
+    y: u32,
+    differentials: bool,
+    counters: &mut Counters,
+) -> Rgb {
     let (w, _) = scene.camera.resolution();
     let pixel_index = y as u64 * w as u64 + x as u64;
     let spp = scene.settings.spp;
@@ -261,8 +375,19 @@ fn render_pixel(scene: &Scene, x: u32, y: u32, counters: &mut Counters) -> Rgb {
         let mut sampler = PixelSampler::new(pixel_index, s, scene.settings.seed);
         let film = Vec2::new(x as f32, y as f32) + sampler.next_2d();
         let u_lens = sampler.next_2d();
-        let (ray, rd) = scene.camera.generate_ray(film, u_lens);
-        let l = radiance(scene, ray, rd, &mut sampler, counters);
+        let l = if differentials {
+            let (ray, rd) = scene.camera.generate_ray(film, u_lens);
+            radiance::<true>(scene, ray, rd, &mut sampler, counters)
+        } else {
+            let ray = scene.camera.generate_ray_only(film, u_lens);
+            let rd = RayDifferential {
+                rx_o: ray.o,
+                rx_d: ray.d,
+                ry_o: ray.o,
+                ry_d: ray.d,
+            };
+            radiance::<false>(scene, ray, rd, &mut sampler, counters)
+        };
         if l.is_finite() {
             sum += l;
         } else {
@@ -272,8 +397,10 @@ fn render_pixel(scene: &Scene, x: u32, y: u32, counters: &mut Counters) -> Rgb {
     sum / spp as f32
 }
 
-/// Radiance arriving at the camera along `ray` (one path sample).
-fn radiance(
+/// Radiance arriving at the camera along `ray` (one path sample). With `DIFFERENTIALS` false
+/// the ray differentials are neither used nor updated (no material of the scene reads them).
+#[inline(always)]
+fn radiance<const DIFFERENTIALS: bool>(
     scene: &Scene,
     mut ray: Ray,
     mut rd: RayDifferential,
@@ -343,14 +470,28 @@ fn radiance(
         }
 
         // Shading frame and the material's BSDF.
-        let u_layer = sampler.next_1d();
         let material = &scene.materials[shape.material as usize];
+        // Dimension 0 of the bounce's block; drawn only for a material that reads it, which
+        // spares computing the block's first four dimensions at delta bounces (the dimensions
+        // keep their places, so the image is the same).
+        let u_layer = if material.reads_layer_choice() {
+            sampler.next_1d()
+        } else {
+            sampler.seek(depth, 1);
+            0.5
+        };
         let Shaded {
             ctx,
             bsdf,
             dpdx,
             dpdy,
-        } = shade(material, &hit, &rd, wo_world, u_layer);
+        } = shade_with(
+            material,
+            &hit,
+            DIFFERENTIALS.then_some(&rd),
+            wo_world,
+            u_layer,
+        );
         let frame = ctx.frame;
         let wo = frame.to_local(wo_world);
 
@@ -406,9 +547,11 @@ fn radiance(
         prev_pdf = bs.pdf;
         let transmitted = bs.wi.z * wo.z < 0.0;
         let eta_path = if transmitted { 1.0 / bs.eta } else { 1.0 };
-        rd = spawn_differentials(
-            hit.p, dpdx, dpdy, ray.d, &rd, frame.n, wi_world, bs.delta, eta_path,
-        );
+        if DIFFERENTIALS {
+            rd = spawn_differentials(
+                hit.p, dpdx, dpdy, ray.d, &rd, frame.n, wi_world, bs.delta, eta_path,
+            );
+        }
         ray = Ray::new(offset_origin(hit.p, hit.ng, wi_world), wi_world);
 
         // Russian roulette.

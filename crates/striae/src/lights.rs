@@ -93,6 +93,7 @@ pub struct LightSample {
 impl Light {
     /// Sample light arriving at `p` with the random pair `u`. `None` when the sample carries
     /// nothing (back side of an area light, zero density).
+    #[inline(always)]
     pub fn sample_li(&self, p: Vec3, u: Vec2, shapes: &[Shape]) -> Option<LightSample> {
         match self {
             Light::Area { shape, radiance } => {

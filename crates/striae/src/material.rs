@@ -174,6 +174,20 @@ fn fmt3(v: [f32; 3]) -> String {
 }
 
 impl Material {
+    /// Whether the material's BSDF reads the pixel footprint (`ShadingContext::duvdx`,
+    /// `duvdy`): only the scratched material filters over it. When no material of a scene
+    /// does, the integrator skips ray differentials altogether.
+    pub fn reads_footprint(&self) -> bool {
+        matches!(self, Material::Scratched(_))
+    }
+
+    /// Whether the material's BSDF reads `ShadingContext::u_layer` (only the scratched
+    /// material does): the integrator draws that random number only then.
+    #[inline]
+    pub fn reads_layer_choice(&self) -> bool {
+        matches!(self, Material::Scratched(_))
+    }
+
     /// Check every value's range (IOR >= 1, roughness >= 0, albedo in `[0, 1]`, a known
     /// preset or a complete `eta`/`k`). Image textures are checked once loaded.
     pub fn validate(&self) -> Result<(), MaterialError> {
@@ -302,6 +316,7 @@ impl Material {
     /// conductor falls back to the perfect mirror).
     /// A scratched material gives its smooth base here (its scratches need the whole
     /// shading context: `scene::material_bsdf`).
+    #[inline]
     pub fn bsdf_at(&self, uv: Vec2) -> Bsdf<'_> {
         match self {
             Material::Diffuse { reflectance } => Bsdf::Diffuse(Diffuse::new(reflectance.eval(uv))),

@@ -77,7 +77,7 @@ pub enum Bsdf<'a> {
 
 impl Bsdf<'_> {
     /// `f(wo, wi)` without the cosine (0 for delta lobes).
-    #[inline]
+    #[inline(always)]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
         match self {
             Bsdf::Diffuse(b) => b.eval(wo, wi),
@@ -89,7 +89,7 @@ impl Bsdf<'_> {
     }
 
     /// Solid-angle density with which [`Bsdf::sample`] returns `wi` (0 for delta lobes).
-    #[inline]
+    #[inline(always)]
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         match self {
             Bsdf::Diffuse(b) => b.pdf(wo, wi),
@@ -117,7 +117,7 @@ impl Bsdf<'_> {
     /// Sample `wi` given `wo`: `u_lobe` chooses between lobes (reflection / transmission),
     /// `u` drives the direction. `None` when no direction is produced (wrong side, a
     /// microfacet sample below the surface): the path ends.
-    #[inline]
+    #[inline(always)]
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
         match self {
             Bsdf::Diffuse(b) => b.sample(wo, u),

@@ -1,8 +1,9 @@
 //! The scene's acceleration structure: every triangle and sphere of every shape in one BVH,
 //! traversed for the closest hit and for any hit (shadow rays, early exit). The default
-//! ([`BvhKind::Bvh4`]) is a 4-wide BVH with SSE box tests ([`super::bvh4`]) collapsed from obvhs'
-//! binary BVH (PLOC with reinsertion); obvhs' compressed wide BVH (CWBVH, Ylitie et al. 2017) and
-//! its binary BVH remain selectable for comparison (`BENCHMARKS.md`, "BVH" and "Renderer").
+//! ([`BvhKind::Bvh4`]) is an 8-wide BVH with SSE box tests (`geometry::bvh4`) collapsed from
+//! obvhs' binary BVH (PLOC with reinsertion), whose leaves are blocks of four triangles tested
+//! at once (`Tri4`); obvhs' compressed wide BVH (CWBVH, Ylitie et al. 2017) and its binary BVH
+//! remain selectable for comparison (`BENCHMARKS.md`, "BVH" and "Renderer").
 //!
 //! Triangles are intersected with the watertight test of Woop, Benthin and Wald (2013, "Watertight
 //! Ray/Triangle Intersection", JCGT 2(1)), in the form of pbrt-v4's `Triangle::Intersect`: the
@@ -13,7 +14,7 @@
 
 use std::time::Duration;
 
-use glam::Vec3A;
+use glam::{Vec3A, Vec4};
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
 use obvhs::bvh2::Bvh2;
@@ -21,7 +22,7 @@ use obvhs::cwbvh::builder::build_cwbvh;
 use obvhs::cwbvh::CwBvh;
 use obvhs::BvhBuildParams;
 
-use super::bvh4::Bvh4;
+use super::bvh4::{Bvh4, Leaf, LeafTest, BLOCK};
 use super::sphere::{intersect_sphere, sphere_surface};
 use super::{Shape, ShapeGeometry, SurfaceHit};
 use crate::math::{Ray, Vec3};
@@ -56,7 +57,7 @@ pub(crate) struct WatertightRay {
 }
 
 impl WatertightRay {
-    #[inline]
+    #[inline(always)]
     pub(crate) fn new(ray: &Ray) -> Self {
         let d = ray.d;
         let kz = d.abs().max_position();
@@ -144,11 +145,154 @@ impl WatertightRay {
     }
 }
 
+/// Four triangles of a [`Bvh4`] leaf block as structure of arrays: `v[vertex][axis]` holds
+/// that coordinate of the four triangles, so [`WatertightRay::intersect4`] tests them at once.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(16))]
+struct Tri4 {
+    v: [[Vec4; 3]; 3],
+}
+
+impl WatertightRay {
+    /// [`WatertightRay::intersect_axis`] for the four triangles of `tri` at once (SSE): the
+    /// same operations lane by lane, so `t`, `b1` and `b2` are bit-for-bit the scalar ones.
+    /// Returns `(lane, t, b1, b2)` of the closest hit with `t` in `(0, t_max)`, the lowest lane
+    /// on a tie (as testing the lanes in order would). When an edge function is exactly zero
+    /// in some lane the block is retested lane by lane with the scalar test (its `f64` path).
+    #[inline(always)]
+    fn intersect4<const KZ: usize>(
+        &self,
+        tri: &Tri4,
+        t_max: f32,
+    ) -> Option<(usize, f32, f32, f32)> {
+        let mask = self.hits4::<KZ>(tri, t_max);
+        let (valid, t, e1, e2, inv_det) = match mask {
+            Hits4::None => return None,
+            Hits4::Exact => return self.intersect4_scalar::<KZ>(tri, t_max),
+            Hits4::Some {
+                valid,
+                t,
+                e1,
+                e2,
+                inv_det,
+            } => (valid, t, e1, e2, inv_det),
+        };
+        let tm = Vec4::select(valid, t, Vec4::INFINITY);
+        let t_min = tm.min_element();
+        let lane = tm.cmpeq(Vec4::splat(t_min)).bitmask().trailing_zeros() as usize;
+        Some((
+            lane,
+            t[lane],
+            e1[lane] * inv_det[lane],
+            e2[lane] * inv_det[lane],
+        ))
+    }
+
+    /// Whether any triangle of `tri` is hit with `t` in `(0, t_max)`.
+    #[inline(always)]
+    fn occluded4<const KZ: usize>(&self, tri: &Tri4, t_max: f32) -> bool {
+        match self.hits4::<KZ>(tri, t_max) {
+            Hits4::None => false,
+            Hits4::Exact => self.intersect4_scalar::<KZ>(tri, t_max).is_some(),
+            Hits4::Some { .. } => true,
+        }
+    }
+
+    /// The lanes of `tri` tested one by one with [`WatertightRay::intersect_axis`].
+    #[inline(never)]
+    fn intersect4_scalar<const KZ: usize>(
+        &self,
+        tri: &Tri4,
+        mut t_max: f32,
+    ) -> Option<(usize, f32, f32, f32)> {
+        let vertex = |k: usize, lane: usize| {
+            Vec3::new(tri.v[k][0][lane], tri.v[k][1][lane], tri.v[k][2][lane])
+        };
+        let mut best = None;
+        for lane in 0..BLOCK {
+            if let Some((t, b1, b2)) =
+                self.intersect_axis::<KZ>(vertex(0, lane), vertex(1, lane), vertex(2, lane), t_max)
+            {
+                t_max = t;
+                best = Some((lane, t, b1, b2));
+            }
+        }
+        best
+    }
+
+    /// The vectorised body of [`WatertightRay::intersect4`].
+    #[inline(always)]
+    fn hits4<const KZ: usize>(&self, tri: &Tri4, t_max: f32) -> Hits4 {
+        let (kx, ky) = ((KZ + 1) % 3, (KZ + 2) % 3);
+        let o = self.o;
+        let (ox, oy, oz) = (Vec4::splat(o[kx]), Vec4::splat(o[ky]), Vec4::splat(o[KZ]));
+        let (sx, sy, sz) = (
+            Vec4::splat(self.sx),
+            Vec4::splat(self.sy),
+            Vec4::splat(self.sz),
+        );
+        let v = &tri.v;
+        let (az, bz, cz) = (v[0][KZ] - oz, v[1][KZ] - oz, v[2][KZ] - oz);
+        let ax = (v[0][kx] - ox) + sx * az;
+        let ay = (v[0][ky] - oy) + sy * az;
+        let bx = (v[1][kx] - ox) + sx * bz;
+        let by = (v[1][ky] - oy) + sy * bz;
+        let cx = (v[2][kx] - ox) + sx * cz;
+        let cy = (v[2][ky] - oy) + sy * cz;
+        let e0 = bx * cy - by * cx;
+        let e1 = cx * ay - cy * ax;
+        let e2 = ax * by - ay * bx;
+        let zero = Vec4::ZERO;
+        if (e0.cmpeq(zero) | e1.cmpeq(zero) | e2.cmpeq(zero)).any() {
+            return Hits4::Exact;
+        }
+        let neg = e0.cmplt(zero) | e1.cmplt(zero) | e2.cmplt(zero);
+        let pos = e0.cmpgt(zero) | e1.cmpgt(zero) | e2.cmpgt(zero);
+        let det = e0 + e1 + e2;
+        let t_scaled = e0 * (sz * az) + e1 * (sz * bz) + e2 * (sz * cz);
+        let limit = Vec4::splat(t_max) * det;
+        let behind_neg = det.cmplt(zero) & (t_scaled.cmpge(zero) | t_scaled.cmplt(limit));
+        let behind_pos = det.cmpgt(zero) & (t_scaled.cmple(zero) | t_scaled.cmpgt(limit));
+        let mut valid = !((neg & pos) | det.cmpeq(zero) | behind_neg | behind_pos);
+        if !valid.any() {
+            return Hits4::None;
+        }
+        let inv_det = Vec4::ONE / det;
+        let t = t_scaled * inv_det;
+        valid &= t.cmpgt(zero) & t.cmplt(Vec4::splat(t_max));
+        if !valid.any() {
+            return Hits4::None;
+        }
+        Hits4::Some {
+            valid,
+            t,
+            e1,
+            e2,
+            inv_det,
+        }
+    }
+}
+
+/// What [`WatertightRay::hits4`] found.
+enum Hits4 {
+    None,
+    /// An edge function is exactly zero in some lane: decide with the scalar test.
+    Exact,
+    Some {
+        valid: glam::BVec4A,
+        t: Vec4,
+        e1: Vec4,
+        e2: Vec4,
+        inv_det: Vec4,
+    },
+}
+
 /// Which obvhs hierarchy [`Geometry`] traverses (see `BENCHMARKS.md`, "BVH", for the
 /// measurement behind the default).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum BvhKind {
-    /// 4-wide BVH with SSE box tests collapsed from obvhs' binary BVH ([`super::bvh4`]).
+    /// 8-wide BVH with SSE box tests and 4-triangle SIMD leaves, collapsed from obvhs' binary
+    /// BVH (`geometry::bvh4`; the name is from when it was 4-wide).
     #[default]
     Bvh4,
     /// Compressed 8-wide BVH (Ylitie et al. 2017), SIMD node tests.
@@ -170,13 +314,19 @@ enum Accel {
 /// and reports `t + CWBVH_SHIFT` to obvhs; the primitive tests use the true origin.
 const CWBVH_SHIFT: f32 = 2e-4;
 
-/// Most primitives per leaf of the binary BVH that [`BvhKind::Bvh4`] collapses.
+/// Most primitives per leaf of the binary BVH that [`BvhKind::Bvh4`] collapses (its leaf
+/// blocks hold up to [`BLOCK`]).
 const BVH4_LEAF_PRIMS: u32 = 2;
 
 /// Shapes with the BVH over their primitives.
 pub struct Geometry {
     shapes: Vec<Shape>,
+    /// Primitives in BVH order; for [`BvhKind::Bvh4`] `BLOCK` per leaf block (padded).
     prims: Vec<Prim>,
+    /// The triangles of `prims` as blocks of four ([`BvhKind::Bvh4`] only).
+    tri4: Vec<Tri4>,
+    /// Number of distinct primitives.
+    prim_count: usize,
     accel: Accel,
 }
 
@@ -184,7 +334,7 @@ impl std::fmt::Debug for Geometry {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Geometry")
             .field("shapes", &self.shapes.len())
-            .field("primitives", &self.prims.len())
+            .field("primitives", &self.prim_count)
             .finish()
     }
 }
@@ -233,10 +383,13 @@ impl Geometry {
                 }
             }
         }
+        let prim_count = prims.len();
         if prims.is_empty() {
             return Geometry {
                 shapes,
                 prims,
+                tri4: Vec::new(),
+                prim_count,
                 accel: Accel::None,
             };
         }
@@ -260,18 +413,41 @@ impl Geometry {
                 };
                 let bvh = build_bvh2(&aabbs, params, &mut Duration::default());
                 let order = bvh.primitive_indices.clone();
-                match Bvh4::from_bvh2(&bvh) {
-                    Some(bvh4) => (Accel::Bvh4(bvh4), order),
+                match Bvh4::from_bvh2(&bvh, |i| prims[i as usize].prim == SPHERE) {
+                    Some((bvh4, order)) => (Accel::Bvh4(bvh4), order),
                     // Too deep for the BVH4's fixed stack: keep the binary BVH.
                     None => (Accel::Bvh2(bvh), order),
                 }
             }
         };
         // Primitives in BVH order: traversal indexes them directly.
-        let prims = order.iter().map(|&i| prims[i as usize]).collect();
+        let prims: Vec<Prim> = order.iter().map(|&i| prims[i as usize]).collect();
+        let tri4 = match accel {
+            Accel::Bvh4(_) => prims
+                .chunks(BLOCK)
+                .map(|block| {
+                    let mut tri = Tri4 {
+                        v: [[Vec4::ZERO; 3]; 3],
+                    };
+                    for (lane, p) in block.iter().enumerate() {
+                        if p.prim != SPHERE {
+                            for k in 0..3 {
+                                for a in 0..3 {
+                                    tri.v[k][a][lane] = p.v[k][a];
+                                }
+                            }
+                        }
+                    }
+                    tri
+                })
+                .collect(),
+            _ => Vec::new(),
+        };
         Geometry {
             shapes,
             prims,
+            tri4,
+            prim_count,
             accel,
         }
     }
@@ -282,7 +458,7 @@ impl Geometry {
 
     /// Number of BVH primitives (triangles plus spheres).
     pub fn primitive_count(&self) -> usize {
-        self.prims.len()
+        self.prim_count
     }
 
     #[inline]
@@ -327,34 +503,55 @@ impl Geometry {
     }
 
     /// Closest hit in the [`Bvh4`]: `(primitive, t, b1, b2)`.
+    #[inline(always)]
     fn closest_bvh4<const KZ: usize>(
         &self,
         bvh: &Bvh4,
         wray: &WatertightRay,
         ray: &Ray,
     ) -> Option<(usize, f32, f32, f32)> {
-        let mut best = None;
-        bvh.closest(ray.o, ray.d, ray.t_max, |first, count, t_max| {
-            for id in first..first + count {
-                if let Some((t, b1, b2)) = self.hit_prim_axis::<KZ>(wray, ray, id, *t_max) {
-                    best = Some((id, t, b1, b2));
-                    *t_max = t;
-                }
-            }
-        });
-        best
+        let mut test = Bvh4Leaves::<KZ> {
+            geometry: self,
+            wray,
+            ray,
+            best: None,
+        };
+        bvh.closest(ray.o, ray.d, ray.t_max, &mut test);
+        test.best
     }
 
     /// Any hit in the [`Bvh4`].
+    #[inline(always)]
     fn occluded_bvh4<const KZ: usize>(&self, bvh: &Bvh4, wray: &WatertightRay, ray: &Ray) -> bool {
-        bvh.any(ray.o, ray.d, ray.t_max, |first, count| {
-            (first..first + count)
-                .any(|id| self.hit_prim_axis::<KZ>(wray, ray, id, ray.t_max).is_some())
-        })
+        let mut test = Bvh4Leaves::<KZ> {
+            geometry: self,
+            wray,
+            ray,
+            best: None,
+        };
+        bvh.any(ray.o, ray.d, ray.t_max, &mut test)
     }
 
-    /// Closest hit with `t` in `(0, ray.t_max)`.
+    /// Closest hit with `t` in `(0, ray.t_max)`. Inlined into the caller (the render loop is
+    /// compiled once per instruction set, `integrator::render`): the default BVH is traversed
+    /// inline, obvhs' hierarchies out of line.
+    #[inline(always)]
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceHit> {
+        let Accel::Bvh4(bvh) = &self.accel else {
+            return self.intersect_obvhs(ray);
+        };
+        let wray = WatertightRay::new(ray);
+        let (id, t, b1, b2) = match wray.kz {
+            0 => self.closest_bvh4::<0>(bvh, &wray, ray),
+            1 => self.closest_bvh4::<1>(bvh, &wray, ray),
+            _ => self.closest_bvh4::<2>(bvh, &wray, ray),
+        }?;
+        Some(self.surface_hit(ray, id, t, b1, b2))
+    }
+
+    /// [`Geometry::intersect`] for every kind of hierarchy.
+    #[inline(never)]
+    fn intersect_obvhs(&self, ray: &Ray) -> Option<SurfaceHit> {
         let wray = WatertightRay::new(ray);
         let mut best: Option<(usize, f32, f32, f32)> = None;
         let mut t_max = ray.t_max;
@@ -399,8 +596,24 @@ impl Geometry {
         Some(self.surface_hit(ray, id, t, b1, b2))
     }
 
-    /// Whether anything lies along the ray in `(0, ray.t_max)` (any hit, early exit).
+    /// Whether anything lies along the ray in `(0, ray.t_max)` (any hit, early exit). Inlined
+    /// like [`Geometry::intersect`].
+    #[inline(always)]
     pub fn occluded(&self, ray: &Ray) -> bool {
+        let Accel::Bvh4(bvh) = &self.accel else {
+            return self.occluded_obvhs(ray);
+        };
+        let wray = WatertightRay::new(ray);
+        match wray.kz {
+            0 => self.occluded_bvh4::<0>(bvh, &wray, ray),
+            1 => self.occluded_bvh4::<1>(bvh, &wray, ray),
+            _ => self.occluded_bvh4::<2>(bvh, &wray, ray),
+        }
+    }
+
+    /// [`Geometry::occluded`] for every kind of hierarchy.
+    #[inline(never)]
+    fn occluded_obvhs(&self, ray: &Ray) -> bool {
         let wray = WatertightRay::new(ray);
         let test = |id: usize| {
             if self.hit_prim(&wray, ray, id, ray.t_max).is_some() {
@@ -423,6 +636,7 @@ impl Geometry {
         }
     }
 
+    #[inline(always)]
     fn surface_hit(&self, ray: &Ray, id: usize, t: f32, b1: f32, b2: f32) -> SurfaceHit {
         let prim = &self.prims[id];
         let shape = &self.shapes[prim.shape as usize];
@@ -459,6 +673,54 @@ impl Geometry {
     }
 }
 
+/// The primitive tests of [`Geometry`]'s [`Bvh4`] for a ray of dominant axis `KZ`, with the
+/// closest hit so far `(primitive, t, b1, b2)`.
+struct Bvh4Leaves<'a, const KZ: usize> {
+    geometry: &'a Geometry,
+    wray: &'a WatertightRay,
+    ray: &'a Ray,
+    best: Option<(usize, f32, f32, f32)>,
+}
+
+impl<const KZ: usize> LeafTest for Bvh4Leaves<'_, KZ> {
+    #[inline(always)]
+    fn closest(&mut self, leaf: Leaf, t_max: &mut f32) {
+        let first = BLOCK * leaf.block;
+        if leaf.scalar {
+            for id in first..first + leaf.count {
+                if let Some((t, b1, b2)) = self
+                    .geometry
+                    .hit_prim_axis::<KZ>(self.wray, self.ray, id, *t_max)
+                {
+                    self.best = Some((id, t, b1, b2));
+                    *t_max = t;
+                }
+            }
+        } else if let Some((lane, t, b1, b2)) = self
+            .wray
+            .intersect4::<KZ>(&self.geometry.tri4[leaf.block], *t_max)
+        {
+            self.best = Some((first + lane, t, b1, b2));
+            *t_max = t;
+        }
+    }
+
+    #[inline(always)]
+    fn any(&mut self, leaf: Leaf, t_max: f32) -> bool {
+        let first = BLOCK * leaf.block;
+        if leaf.scalar {
+            (first..first + leaf.count).any(|id| {
+                self.geometry
+                    .hit_prim_axis::<KZ>(self.wray, self.ray, id, t_max)
+                    .is_some()
+            })
+        } else {
+            self.wray
+                .occluded4::<KZ>(&self.geometry.tri4[leaf.block], t_max)
+        }
+    }
+}
+
 /// Brute-force closest hit over every primitive (the test oracle for the BVH).
 pub fn intersect_brute_force(shapes: &[Shape], ray: &Ray) -> Option<(f32, u32, u32)> {
     let wray = WatertightRay::new(ray);
@@ -484,4 +746,116 @@ pub fn intersect_brute_force(shapes: &[Shape], ray: &Ray) -> Option<(f32, u32, u
         }
     }
     best
+}
+
+#[cfg(test)]
+mod tri4_tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_pcg::Pcg64;
+
+    /// The scalar test over the four lanes in order (a later lane must be strictly closer), as
+    /// the leaves were tested before `Tri4`.
+    fn scalar_lanes<const KZ: usize>(
+        w: &WatertightRay,
+        tris: &[[Vec3; 3]; 4],
+        mut t_max: f32,
+    ) -> Option<(usize, f32, f32, f32)> {
+        let mut best = None;
+        for (lane, [a, b, c]) in tris.iter().enumerate() {
+            if let Some((t, b1, b2)) = w.intersect_axis::<KZ>(*a, *b, *c, t_max) {
+                t_max = t;
+                best = Some((lane, t, b1, b2));
+            }
+        }
+        best
+    }
+
+    fn pack(tris: &[[Vec3; 3]; 4]) -> Tri4 {
+        let mut tri = Tri4 {
+            v: [[Vec4::ZERO; 3]; 3],
+        };
+        for (lane, t) in tris.iter().enumerate() {
+            for (k, p) in t.iter().enumerate() {
+                for a in 0..3 {
+                    tri.v[k][a][lane] = p[a];
+                }
+            }
+        }
+        tri
+    }
+
+    fn check<const KZ: usize>(w: &WatertightRay, tris: &[[Vec3; 3]; 4], t_max: f32) -> bool {
+        let tri = pack(tris);
+        let simd = w.intersect4::<KZ>(&tri, t_max);
+        let scalar = scalar_lanes::<KZ>(w, tris, t_max);
+        let bits = |r: Option<(usize, f32, f32, f32)>| {
+            r.map(|(l, t, b1, b2)| (l, t.to_bits(), b1.to_bits(), b2.to_bits()))
+        };
+        assert_eq!(bits(simd), bits(scalar), "{tris:?} {w:?}");
+        assert_eq!(w.occluded4::<KZ>(&tri, t_max), scalar.is_some());
+        matches!(w.hits4::<KZ>(&tri, t_max), Hits4::Exact)
+    }
+
+    #[test]
+    fn four_triangle_test_equals_the_scalar_test_bit_for_bit() {
+        // Random triangles and rays, and triangles and rays on a small integer grid with
+        // axis-aligned or diagonal directions, where edge functions are often exactly zero (the
+        // scalar f64 fallback) and several lanes tie (shared vertices and edges, duplicates).
+        let mut rng = Pcg64::seed_from_u64(11);
+        let (mut exact, mut hits) = (0, 0);
+        for k in 0..20_000 {
+            let grid = k % 2 == 0;
+            let point = |rng: &mut Pcg64| {
+                if grid {
+                    Vec3::new(
+                        rng.random_range(-2..=2) as f32,
+                        rng.random_range(-2..=2) as f32,
+                        rng.random_range(-2..=2) as f32,
+                    )
+                } else {
+                    Vec3::new(rng.random(), rng.random(), rng.random()) * 4.0 - 2.0
+                }
+            };
+            let mut tris = [[Vec3::ZERO; 3]; 4];
+            for t in tris.iter_mut() {
+                *t = [point(&mut rng), point(&mut rng), point(&mut rng)];
+            }
+            if k % 3 == 0 {
+                tris[2] = tris[1]; // a duplicate (padding) lane ties exactly
+            }
+            let o = point(&mut rng) * 2.0;
+            let d = if grid {
+                let axis = [Vec3::X, Vec3::Y, Vec3::Z, Vec3::ONE][rng.random_range(0..4)];
+                if rng.random::<bool>() {
+                    axis
+                } else {
+                    -axis
+                }
+            } else {
+                point(&mut rng)
+            };
+            if d == Vec3::ZERO {
+                continue;
+            }
+            let ray = Ray::new(o, d.normalize());
+            let w = WatertightRay::new(&ray);
+            let t_max = if k % 5 == 0 { 3.0 } else { f32::INFINITY };
+            let was_exact = match w.kz {
+                0 => check::<0>(&w, &tris, t_max),
+                1 => check::<1>(&w, &tris, t_max),
+                _ => check::<2>(&w, &tris, t_max),
+            };
+            exact += was_exact as u32;
+            hits += match w.kz {
+                0 => scalar_lanes::<0>(&w, &tris, t_max),
+                1 => scalar_lanes::<1>(&w, &tris, t_max),
+                _ => scalar_lanes::<2>(&w, &tris, t_max),
+            }
+            .is_some() as u32;
+        }
+        // Both paths were exercised.
+        assert!(exact > 100, "{exact} blocks took the exact path");
+        assert!(hits > 500, "{hits} hits");
+    }
 }

@@ -1,11 +1,15 @@
-//! A 4-wide BVH with SIMD box tests, collapsed from obvhs' binary BVH (PLOC + reinsertion),
-//! in the style of Embree's BVH4 (Wald et al. 2014, "Embree: A Kernel Framework for Efficient
-//! CPU Ray Tracing"): every node stores its four children's boxes as structure-of-arrays, so one
-//! node visit tests four boxes with `Vec4` (SSE) arithmetic.
+//! A wide BVH with SIMD box tests, collapsed from obvhs' binary BVH (PLOC + reinsertion), in
+//! the style of Embree's BVH4/BVH8 (Wald et al. 2014, "Embree: A Kernel Framework for Efficient
+//! CPU Ray Tracing"): every node stores its children's boxes as structure-of-arrays, so one
+//! node visit tests them with `Vec4` (SSE) arithmetic, four boxes per group. The type keeps
+//! its first name, `Bvh4`; nodes now have [`WIDTH`] = 8 children (two groups of four), which
+//! took ~7 % off the glass teapot's render time against four (`BENCHMARKS.md`, "Renderer speed,
+//! session 2"); the compiler merges the two groups into 256-bit operations in the AVX2 copy of
+//! the render loop.
 //!
 //! * **Collapse**: starting from a binary node's two children, the interior child of largest
-//!   surface area is replaced by its two children until there are four (the usual BVH2 to BVHN
-//!   conversion, e.g. Wald et al. 2008, "Getting Rid of Packets").
+//!   surface area is replaced by its two children until there are [`WIDTH`] (the usual BVH2 to
+//!   BVHN conversion, e.g. Wald et al. 2008, "Getting Rid of Packets").
 //! * **Box test**: the slab test with the near/far slab chosen by the sign of each direction
 //!   component, `t_far` scaled by `1 + 2 gamma(3)` so rounding never misses a box the ray
 //!   touches (pbrt-v4 `Bounds3::IntersectP`, Ize 2013 "Robust BVH Ray Traversal"). Zero
@@ -14,7 +18,11 @@
 //!   is found (the CWBVH of obvhs 0.4 needs a 2e-4 workaround for this).
 //! * **Traversal**: closest-hit front to back (children sorted by entry distance, a stack of
 //!   `(node, entry distance)` pairs culled against the current closest `t`); any-hit with an
-//!   early exit. Leaves are contiguous ranges of primitives, tested by the caller's closure.
+//!   early exit.
+//! * **Leaves**: every binary subtree of at most four primitives becomes one leaf block, whose
+//!   four triangles the caller stores as structure of arrays (`bvh::Tri4`) and tests at once
+//!   with SSE (Embree's `Triangle4` leaves, Wald et al. 2014); a leaf with a sphere is tested
+//!   primitive by primitive.
 
 use std::mem::MaybeUninit;
 
@@ -23,20 +31,59 @@ use obvhs::bvh2::Bvh2;
 
 use crate::math::Vec3;
 
-/// Leaf children have this bit set; the rest is `first << COUNT_BITS | count`.
+/// Leaf children have this bit set; the rest is `block << COUNT_BITS | count`, plus
+/// [`SCALAR`] for a block that holds a sphere.
 const LEAF: u32 = 1 << 31;
-const COUNT_BITS: u32 = 4;
-const MAX_LEAF_PRIMS: u32 = (1 << COUNT_BITS) - 1;
+/// A leaf block holding a non-triangle primitive (tested one primitive at a time).
+const SCALAR: u32 = 1 << 30;
+const COUNT_BITS: u32 = 3;
+const COUNT_MASK: u32 = (1 << COUNT_BITS) - 1;
+/// Primitives per leaf block: a leaf is one block of up to four primitives, tested at once with
+/// SSE (`bvh::Tri4`); a binary subtree of at most this many primitives becomes one leaf.
+pub(crate) const BLOCK: usize = 4;
 /// Traversal stack size; a tree that could overflow it is not built (see [`Bvh4::from_bvh2`]).
 const STACK: usize = 192;
+/// Children per node (a multiple of 4: each group of four is tested with one SSE op).
+const WIDTH: usize = 8;
+const GROUPS: usize = WIDTH / 4;
+
+/// A leaf as the traversal hands it to the caller's test: block `block` holds primitives
+/// `BLOCK * block .. BLOCK * block + count` of the primitive order [`Bvh4::from_bvh2`] returns
+/// (padded lanes repeat the last primitive); `scalar` when one of them is not a triangle.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Leaf {
+    pub block: usize,
+    pub count: usize,
+    pub scalar: bool,
+}
+
+/// The caller's primitive tests (a trait rather than closures so that they can be forced
+/// inline into the traversal loop).
+pub(crate) trait LeafTest {
+    /// Test the leaf's primitives for the closest hit, lowering `t_max` to any hit found.
+    fn closest(&mut self, leaf: Leaf, t_max: &mut f32);
+    /// Whether any primitive of the leaf is hit before `t_max`.
+    fn any(&mut self, leaf: Leaf, t_max: f32) -> bool;
+}
+
+impl Leaf {
+    #[inline(always)]
+    fn decode(child: u32) -> Leaf {
+        Leaf {
+            block: ((child & !(LEAF | SCALAR)) >> COUNT_BITS) as usize,
+            count: (child & COUNT_MASK) as usize,
+            scalar: child & SCALAR != 0,
+        }
+    }
+}
 
 /// Four children: their boxes as `[min_x, min_y, min_z, max_x, max_y, max_z]` lanes, and what
 /// they are (interior node index, or [`LEAF`] with a primitive range).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 struct Node4 {
-    bounds: [Vec4; 6],
-    child: [u32; 4],
+    bounds: [[Vec4; GROUPS]; 6],
+    child: [u32; WIDTH],
 }
 
 /// The 4-wide BVH; primitive ranges index the caller's primitive array in BVH order (the order
@@ -92,52 +139,90 @@ impl BoxRay {
         }
     }
 
-    /// `(entry distances, hit mask)` of the four children for `t` in `[0, t_max]`.
+    /// `(entry distances, hit mask)` of the children for `t` in `[0, t_max]`.
     #[inline(always)]
-    fn test(&self, node: &Node4, t_max: f32) -> (Vec4, u32) {
-        let b = &node.bounds;
-        let tn0 = (b[self.near[0]] - self.o[0]) * self.inv_d[0];
-        let tn1 = (b[self.near[1]] - self.o[1]) * self.inv_d[1];
-        let tn2 = (b[self.near[2]] - self.o[2]) * self.inv_d[2];
-        let tf0 = (b[self.far[0]] - self.o[0]) * self.inv_d[0];
-        let tf1 = (b[self.far[1]] - self.o[1]) * self.inv_d[1];
-        let tf2 = (b[self.far[2]] - self.o[2]) * self.inv_d[2];
-        let t_near = tn0.max(tn1).max(tn2.max(Vec4::ZERO));
-        // 1 + 2 gamma(3) (pbrt-v4): rounding never shrinks the interval below the true one.
-        let t_far = tf0.min(tf1).min(tf2)
-            * (1.0 + 2.0 * 3.0 * f32::EPSILON * 0.5 / (1.0 - 1.5 * f32::EPSILON));
-        let t_far = t_far.min(Vec4::splat(t_max));
-        (t_near, t_near.cmple(t_far).bitmask())
+    fn test(&self, node: &Node4, t_max: f32) -> ([f32; WIDTH], u32) {
+        let mut t_out = [0.0; WIDTH];
+        let mut mask = 0;
+        for g in 0..GROUPS {
+            let b = |i: usize| node.bounds[i][g];
+            let tn0 = (b(self.near[0]) - self.o[0]) * self.inv_d[0];
+            let tn1 = (b(self.near[1]) - self.o[1]) * self.inv_d[1];
+            let tn2 = (b(self.near[2]) - self.o[2]) * self.inv_d[2];
+            let tf0 = (b(self.far[0]) - self.o[0]) * self.inv_d[0];
+            let tf1 = (b(self.far[1]) - self.o[1]) * self.inv_d[1];
+            let tf2 = (b(self.far[2]) - self.o[2]) * self.inv_d[2];
+            let t_near = tn0.max(tn1).max(tn2.max(Vec4::ZERO));
+            // 1 + 2 gamma(3) (pbrt-v4): rounding never shrinks the interval below the true one.
+            let t_far = tf0.min(tf1).min(tf2)
+                * (1.0 + 2.0 * 3.0 * f32::EPSILON * 0.5 / (1.0 - 1.5 * f32::EPSILON));
+            let t_far = t_far.min(Vec4::splat(t_max));
+            t_out[4 * g..4 * g + 4].copy_from_slice(&t_near.to_array());
+            mask |= t_near.cmple(t_far).bitmask() << (4 * g);
+        }
+        (t_out, mask)
     }
 }
 
-impl Bvh4 {
-    /// Collapses `bvh` (whose leaves hold at most 15 primitives). `None` when the tree is too
-    /// deep for the fixed traversal stack (the caller then keeps another hierarchy).
-    pub(crate) fn from_bvh2(bvh: &Bvh2) -> Option<Bvh4> {
-        if bvh.nodes.is_empty() {
-            return None;
-        }
-        let mut out = Bvh4 { nodes: Vec::new() };
-        let depth = out.build(bvh, &[0])?;
-        // The stack holds at most 3 entries per level (the nearest child is visited directly).
-        (3 * depth + 4 <= STACK).then_some(out)
+/// State of [`Bvh4::from_bvh2`].
+struct Builder<'a, F: Fn(u32) -> bool> {
+    bvh: &'a Bvh2,
+    /// Primitive count of each binary subtree.
+    under: Vec<u32>,
+    is_scalar: &'a F,
+    out: Bvh4,
+    order: Vec<u32>,
+}
+
+impl<F: Fn(u32) -> bool> Builder<'_, F> {
+    /// Whether binary node `k` becomes a leaf block.
+    fn is_leaf(&self, k: usize) -> bool {
+        self.bvh.nodes[k].prim_count > 0 || self.under[k] as usize <= BLOCK
     }
 
-    /// Appends the node whose children are the binary nodes `start` (opened up to four);
-    /// returns the depth of the subtree.
-    fn build(&mut self, bvh: &Bvh2, start: &[usize]) -> Option<usize> {
-        let mut kids: Vec<usize> = start.to_vec();
-        if kids.len() == 1 && bvh.nodes[kids[0]].prim_count == 0 {
-            let n = &bvh.nodes[kids[0]];
-            kids = vec![n.first_index as usize, n.first_index as usize + 1];
+    /// Appends the primitives under binary node `k` to `out`.
+    fn gather(&self, k: usize, out: &mut Vec<u32>) {
+        let n = &self.bvh.nodes[k];
+        if n.prim_count > 0 {
+            let first = n.first_index as usize;
+            out.extend_from_slice(
+                &self.bvh.primitive_indices[first..first + n.prim_count as usize],
+            );
+        } else {
+            self.gather(n.first_index as usize, out);
+            self.gather(n.first_index as usize + 1, out);
         }
-        while kids.len() < 4 {
+    }
+
+    /// The child words of the leaf blocks holding the primitives under binary node `k` (more
+    /// than one only when a binary leaf holds more than [`BLOCK`] primitives).
+    fn leaf_blocks(&mut self, k: usize) -> Vec<u32> {
+        let mut prims = Vec::new();
+        self.gather(k, &mut prims);
+        prims
+            .chunks(BLOCK)
+            .map(|chunk| {
+                let block = (self.order.len() / BLOCK) as u32;
+                let scalar = chunk.iter().any(|&i| (self.is_scalar)(i));
+                for lane in 0..BLOCK {
+                    self.order.push(chunk[lane.min(chunk.len() - 1)]);
+                }
+                LEAF | if scalar { SCALAR } else { 0 } | block << COUNT_BITS | chunk.len() as u32
+            })
+            .collect()
+    }
+
+    /// Appends the 4-wide node for binary node `root` (opened up to four children) and its
+    /// subtree; returns the subtree's depth.
+    fn build(&mut self, root: usize) -> Option<usize> {
+        let bvh = self.bvh;
+        let mut kids: Vec<usize> = vec![root];
+        while kids.len() < WIDTH {
             // Open the interior child of largest area.
             let best = kids
                 .iter()
                 .enumerate()
-                .filter(|(_, &k)| bvh.nodes[k].prim_count == 0)
+                .filter(|(_, &k)| !self.is_leaf(k))
                 .max_by(|a, b| {
                     let (ha, hb) = (
                         bvh.nodes[*a.1].aabb.half_area(),
@@ -147,55 +232,106 @@ impl Bvh4 {
                 })
                 .map(|(i, _)| i);
             let Some(i) = best else { break };
-            let n = &bvh.nodes[kids[i]];
-            let first = n.first_index as usize;
+            let first = bvh.nodes[kids[i]].first_index as usize;
             kids[i] = first;
             kids.push(first + 1);
         }
-        let index = self.nodes.len();
-        let mut node = Node4 {
-            bounds: [
-                Vec4::splat(f32::INFINITY),
-                Vec4::splat(f32::INFINITY),
-                Vec4::splat(f32::INFINITY),
-                Vec4::splat(f32::NEG_INFINITY),
-                Vec4::splat(f32::NEG_INFINITY),
-                Vec4::splat(f32::NEG_INFINITY),
-            ],
-            child: [LEAF; 4],
-        };
-        self.nodes.push(node);
-        let mut depth = 1;
-        for (lane, &k) in kids.iter().enumerate() {
-            let n = &bvh.nodes[k];
-            for a in 0..3 {
-                node.bounds[a][lane] = n.aabb.min[a];
-                node.bounds[a + 3][lane] = n.aabb.max[a];
-            }
-            if n.prim_count > 0 {
-                if n.prim_count > MAX_LEAF_PRIMS || n.first_index >= 1 << (31 - COUNT_BITS) {
-                    return None;
+        // Children as (binary node, child word, or `None` for an interior node to expand).
+        let mut lanes: Vec<(usize, Option<u32>)> = Vec::new();
+        for &k in &kids {
+            if self.is_leaf(k) {
+                for word in self.leaf_blocks(k) {
+                    lanes.push((k, Some(word)));
                 }
-                node.child[lane] = LEAF | n.first_index << COUNT_BITS | n.prim_count;
             } else {
-                node.child[lane] = self.nodes.len() as u32;
-                depth = depth.max(1 + self.build(bvh, &[k])?);
+                lanes.push((k, None));
             }
         }
-        self.nodes[index] = node;
+        if lanes.len() > WIDTH {
+            // A binary leaf of more than BLOCK primitives spilled over (`Geometry` builds the
+            // binary BVH with leaves of at most BLOCK primitives, so this does not happen).
+            return None;
+        }
+        if self.order.len() / BLOCK >= 1 << (30 - COUNT_BITS) {
+            return None;
+        }
+        let index = self.out.nodes.len();
+        let (inf, neg) = (Vec4::INFINITY, Vec4::NEG_INFINITY);
+        let mut node = Node4 {
+            bounds: [
+                [inf; GROUPS],
+                [inf; GROUPS],
+                [inf; GROUPS],
+                [neg; GROUPS],
+                [neg; GROUPS],
+                [neg; GROUPS],
+            ],
+            child: [LEAF; WIDTH],
+        };
+        self.out.nodes.push(node);
+        let mut depth = 1;
+        for (lane, &(k, word)) in lanes.iter().enumerate() {
+            let n = &bvh.nodes[k];
+            for a in 0..3 {
+                node.bounds[a][lane / 4][lane % 4] = n.aabb.min[a];
+                node.bounds[a + 3][lane / 4][lane % 4] = n.aabb.max[a];
+            }
+            match word {
+                Some(w) => node.child[lane] = w,
+                None => {
+                    node.child[lane] = self.out.nodes.len() as u32;
+                    depth = depth.max(1 + self.build(k)?);
+                }
+            }
+        }
+        self.out.nodes[index] = node;
         Some(depth)
     }
+}
 
-    /// Closest-hit traversal: `leaf(first, count, &mut t_max)` tests primitives
-    /// `first..first + count` and lowers `t_max` to any hit it finds.
+impl Bvh4 {
+    /// Collapses `bvh`; every binary subtree of at most [`BLOCK`] primitives becomes one leaf
+    /// block. Returns the tree and the primitive order its blocks index: `BLOCK` slots per
+    /// block, each an index into the primitives `bvh` was built over, a block's unused slots
+    /// repeating its last primitive. `is_scalar(i)` says that primitive `i` is no triangle.
+    /// `None` when the tree is too deep for the fixed traversal stack (the caller then keeps
+    /// another hierarchy).
+    pub(crate) fn from_bvh2(
+        bvh: &Bvh2,
+        is_scalar: impl Fn(u32) -> bool,
+    ) -> Option<(Bvh4, Vec<u32>)> {
+        if bvh.nodes.is_empty() {
+            return None;
+        }
+        // Primitives under each binary node.
+        fn count(bvh: &Bvh2, k: usize, under: &mut [u32]) -> u32 {
+            let n = &bvh.nodes[k];
+            under[k] = if n.prim_count > 0 {
+                n.prim_count
+            } else {
+                let first = n.first_index as usize;
+                count(bvh, first, under) + count(bvh, first + 1, under)
+            };
+            under[k]
+        }
+        let mut under = vec![0u32; bvh.nodes.len()];
+        count(bvh, 0, &mut under);
+        let mut b = Builder {
+            bvh,
+            under,
+            is_scalar: &is_scalar,
+            out: Bvh4 { nodes: Vec::new() },
+            order: Vec::new(),
+        };
+        let depth = b.build(0)?;
+        // The stack holds at most 3 entries per level (the nearest child is visited directly).
+        ((WIDTH - 1) * depth + WIDTH <= STACK).then_some((b.out, b.order))
+    }
+
+    /// Closest-hit traversal: `leaf.closest(leaf, &mut t_max)` tests a leaf block and lowers
+    /// `t_max` to any hit it finds.
     #[inline(always)]
-    pub(crate) fn closest(
-        &self,
-        o: Vec3,
-        d: Vec3,
-        mut t_max: f32,
-        mut leaf: impl FnMut(usize, usize, &mut f32),
-    ) {
+    pub(crate) fn closest(&self, o: Vec3, d: Vec3, mut t_max: f32, leaf: &mut impl LeafTest) {
         let ray = BoxRay::new(o, d);
         let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
         let mut sp = 0usize;
@@ -213,7 +349,7 @@ impl Bvh4 {
                         cur = node.child[lane0];
                         continue;
                     }
-                    let t = t_near.to_array();
+                    let t = t_near;
                     let lane1 = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     let (h0, h1) = ((node.child[lane0], t[lane0]), (node.child[lane1], t[lane1]));
@@ -225,7 +361,9 @@ impl Bvh4 {
                         continue;
                     }
                     // Three or four: insertion sort, nearest first.
-                    let mut hits = [near, far, (0, 0.0), (0, 0.0)];
+                    let mut hits = [(0, 0.0); WIDTH];
+                    hits[0] = near;
+                    hits[1] = far;
                     let mut n = 2;
                     while mask != 0 {
                         let lane = mask.trailing_zeros() as usize;
@@ -247,9 +385,7 @@ impl Bvh4 {
                     continue;
                 }
             } else {
-                let first = ((cur & !LEAF) >> COUNT_BITS) as usize;
-                let count = (cur & MAX_LEAF_PRIMS) as usize;
-                leaf(first, count, &mut t_max);
+                leaf.closest(Leaf::decode(cur), &mut t_max);
             }
             // Pop the next entry still in front of the closest hit.
             loop {
@@ -267,16 +403,10 @@ impl Bvh4 {
         }
     }
 
-    /// Any-hit traversal: `leaf(first, count)` returns whether a primitive of the range is hit;
-    /// the first `true` ends the traversal.
+    /// Any-hit traversal: `leaf.any(leaf, t_max)` returns whether a primitive of the leaf
+    /// block is hit; the first `true` ends the traversal.
     #[inline(always)]
-    pub(crate) fn any(
-        &self,
-        o: Vec3,
-        d: Vec3,
-        t_max: f32,
-        mut leaf: impl FnMut(usize, usize) -> bool,
-    ) -> bool {
+    pub(crate) fn any(&self, o: Vec3, d: Vec3, t_max: f32, leaf: &mut impl LeafTest) -> bool {
         let ray = BoxRay::new(o, d);
         let mut stack = [MaybeUninit::<u32>::uninit(); STACK];
         let mut sp = 0usize;
@@ -298,9 +428,7 @@ impl Bvh4 {
                     continue;
                 }
             } else {
-                let first = ((cur & !LEAF) >> COUNT_BITS) as usize;
-                let count = (cur & MAX_LEAF_PRIMS) as usize;
-                if leaf(first, count) {
+                if leaf.any(Leaf::decode(cur), t_max) {
                     return true;
                 }
             }

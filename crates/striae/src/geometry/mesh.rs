@@ -197,6 +197,7 @@ impl TriangleMesh {
 
     /// A point uniform in area over the mesh: a triangle chosen by area, then a uniform point in
     /// it. Returns `(p, geometric normal, pdf per unit area = 1 / area)`.
+    #[inline(always)]
     pub fn sample_area(&self, u: Vec2) -> (Vec3, Vec3, f32) {
         let (i, u0) = self.area_distribution.sample_discrete(u.x as f64);
         let b = crate::sampling::square_to_uniform_triangle(Vec2::new(
@@ -212,6 +213,7 @@ impl TriangleMesh {
     /// Shading data of triangle `prim` at barycentrics `(b1, b2)` (weights of vertices 1, 2):
     /// `(p, ng, ns, uv, dpdu, dpdv)`. `ns` is put on `ng`'s side; without uvs the uv is the
     /// barycentric pair and the tangents an arbitrary frame around `ng`.
+    #[inline(always)]
     pub fn surface(&self, prim: usize, b1: f32, b2: f32) -> (Vec3, Vec3, Vec3, Vec2, Vec3, Vec3) {
         let [i0, i1, i2] = self.indices[prim].map(|k| k as usize);
         let b0 = 1.0 - b1 - b2;

@@ -6,7 +6,7 @@
 //! * [`mesh`]: [`TriangleMesh`] with the rectangle and box; [`obj`] loads OBJ files (tobj);
 //!   [`teapot`] tessellates Newell's 32 Bezier patches with per-vertex uv and tangents.
 //! * [`sphere`]: the analytic sphere.
-//! * [`bvh`]: [`Geometry`], the BVH (a 4-wide SSE BVH, `bvh4`, by default) with the watertight
+//! * [`bvh`]: [`Geometry`], the BVH (an 8-wide SSE BVH, `bvh4`, by default) with the watertight
 //!   ray-triangle test.
 //! * [`uv_footprint`]: texture-space footprint of a pixel from ray differentials (pbrt-v4).
 
