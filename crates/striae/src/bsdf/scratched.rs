@@ -388,28 +388,17 @@ impl<'a> ScratchedBsdf<'a> {
         let wo_s = l.to_scratch(wo);
         let s = self.table.brdf().sample(wo_s, [u.x as f64, u.y as f64])?;
         let wi = l.from_scratch(s.wi);
-        if s.delta {
-            // Coefficient c_k s value / (P_k pmf): glass P_k = c_k a_k, metal P_k = c_k.
+        if s.delta || self.count == 1 {
+            // The delta lobe (coefficient c_k s value over P_k pmf), or one smooth lobe (the
+            // `max` mode: the mixture's pdf is P_k times the lobe's, its value c_k s f): the
+            // lobe's own weight times c_k s / P_k, with P_k = c_k a_k for glass, c_k for metal.
             let scale = self.table.scaled_albedo(wo_s).1;
             let w = (s.weight * (l.coverage * scale / pk) as f64) as f32;
             return Some(BsdfSample {
                 wi,
                 weight: self.tint * w,
                 pdf: pk * s.pdf as f32,
-                delta: true,
-                eta: 1.0,
-            });
-        }
-        if self.count == 1 {
-            // One lobe (the `max` mode): the mixture's pdf is `pk` times the lobe's and its
-            // value `c s f`, so the weight is the lobe's own times `c s / pk`.
-            let scale = self.table.scaled_albedo(wo_s).1;
-            let w = (s.weight * (l.coverage * scale / pk) as f64) as f32;
-            return Some(BsdfSample {
-                wi,
-                weight: self.tint * w,
-                pdf: pk * s.pdf as f32,
-                delta: false,
+                delta: s.delta,
                 eta: 1.0,
             });
         }
