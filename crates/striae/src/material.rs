@@ -175,10 +175,13 @@ fn fmt3(v: [f32; 3]) -> String {
 
 impl Material {
     /// Whether the material's BSDF reads the pixel footprint (`ShadingContext::duvdx`,
-    /// `duvdy`): only the scratched material filters over it. When no material of a scene
-    /// does, the integrator skips ray differentials altogether.
+    /// `duvdy`): only the scratched material filters over it (not with `coverage = "point"`).
+    /// When no material of a scene does, the integrator skips ray differentials altogether.
     pub fn reads_footprint(&self) -> bool {
-        matches!(self, Material::Scratched(_))
+        match self {
+            Material::Scratched(m) => m.reads_footprint(),
+            _ => false,
+        }
     }
 
     /// Whether the material's BSDF reads `ShadingContext::u_layer` (only the scratched

@@ -544,6 +544,15 @@ impl ScratchedMaterial {
         }
     }
 
+    /// Whether [`Self::bsdf`] reads the pixel footprint: every coverage mode but `point`.
+    pub fn reads_footprint(&self) -> bool {
+        let mode = match self.prepared() {
+            Some(p) => p.coverage,
+            None => self.scratches.coverage.unwrap_or_default(),
+        };
+        mode != CoverageMode::Point
+    }
+
     /// The BSDF at a hit (see the module notes).
     pub fn bsdf(&self, ctx: &ShadingContext) -> Bsdf<'_> {
         let Some(p) = self.prepared.as_deref() else {

@@ -719,3 +719,26 @@ fn tables_are_shared_by_hash() {
     let c = obtain_table(&other).unwrap();
     assert!(!Arc::ptr_eq(&a, &c));
 }
+
+/// Only the coverage modes that filter over the footprint ask the integrator for ray
+/// differentials (it skips them when no material reads them).
+#[test]
+fn point_coverage_needs_no_ray_differentials() {
+    let layers = LayerSet::new(LayerParams::setting(2).unwrap(), 1).unwrap();
+    for (mode, reads) in [
+        (CoverageMode::Footprint, true),
+        (CoverageMode::Sample, true),
+        (CoverageMode::Point, false),
+    ] {
+        let m = ScratchedMaterial::from_parts(
+            ScratchedBase::Glass { eta: 1.5 },
+            Rgb::ONE,
+            lossless_diffuse(),
+            layers.clone(),
+            LayerMix::Max,
+            mode,
+        );
+        assert_eq!(m.reads_footprint(), reads, "{mode:?}");
+        assert_eq!(Material::Scratched(m).reads_footprint(), reads, "{mode:?}");
+    }
+}
