@@ -127,9 +127,10 @@ pub struct FootprintTile {
 }
 
 impl FootprintTile {
-    /// The tile of the lattice spanned by `duvdx`, `duvdy` rounded by [`quantize`] that contains `uv`;
-    /// `None` for a degenerate or non-finite footprint, or a hit too far from the origin for
-    /// the tile index (those are queried unsnapped).
+    /// The tile of `uv`: the footprint `duvdx`, `duvdy` rounded by [`quantize`], centred on the
+    /// nearest point of the lattice of its edges over [`TILE_STEPS`]. `None` for a degenerate
+    /// or non-finite footprint, or a hit too far from the origin for the tile index (those are
+    /// queried unsnapped).
     pub fn containing(uv: Vec2, duvdx: Vec2, duvdy: Vec2) -> Option<FootprintTile> {
         let (qa, qb, shape) = quantize(duvdx, duvdy)?;
         let (a, b) = (qa.as_dvec2(), qb.as_dvec2());
@@ -181,8 +182,9 @@ pub fn clear_cache() {
 impl LayerSet {
     /// The per-layer coverage of the footprint tile containing `uv` ([`FootprintTile`]), into
     /// `out[0..len()]`, as [`Self::coverage_all`] or [`Self::coverage_max`] of the tile (up to
-    /// [`TILE_MAX_CELLS`]); cached per thread. Where there is no tile (see [`FootprintTile::containing`]) or the set has
-    /// more than [`CACHED_LAYERS`] layers, the footprint itself is queried, uncached.
+    /// [`TILE_MAX_CELLS`]); cached per thread. Where there is no tile
+    /// ([`FootprintTile::containing`]) or the set has more than [`CACHED_LAYERS`] layers, the
+    /// footprint itself is queried, uncached.
     /// # Panics
     /// If `out.len() < len()`.
     pub fn coverage_tiled(
