@@ -103,7 +103,7 @@ pub fn quantize(a: Vec2, b: Vec2) -> Option<(Vec2, Vec2, [u64; 2])> {
     let lead = across.abs().max(along.abs()).to_bits() & 0x7f80_0000;
     let step = f32::from_bits(lead.checked_sub(3 << 23)?);
     let along = round_f32(along / step); // |along / step| < 16
-    if !(along.abs() < 1e6) {
+    if !along.is_finite() || along.abs() >= 1e6 {
         return None;
     }
     let (qa, qb) = (dir * la, dir * (along * step) + dir.perp() * across);
