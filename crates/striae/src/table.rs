@@ -13,8 +13,7 @@ use crate::math::Vec3;
 use crate::profile::Profile;
 use crate::sampling::Distribution1D;
 use crate::trace2d::{
-    self, bin_centre, bin_of, FresnelMode, TraceError, TraceSettings, Walls, COS_THETA_SLICES,
-    THETA_SLICES,
+    self, bin_centre, FresnelMode, TraceError, TraceSettings, Walls, COS_THETA_SLICES, THETA_SLICES,
 };
 use ndarray::{Array1, Array2, Array3, ArrayD, IxDyn};
 use ndarray_npy::{NpzReader, NpzWriter};
@@ -500,11 +499,11 @@ fn atan_approx(r: f64) -> f64 {
     }
 }
 
-/// `(theta, phi)` of a unit direction (section 1).
+/// `theta = asin(y)` of a unit direction (section 1; its `phi` bin is
+/// [`ScratchBrdf::phi_bin`]).
 #[inline]
-fn angles(w: Vec3) -> (f64, f64) {
-    let (x, y, z) = (w.x as f64, w.y as f64, w.z as f64);
-    ((y.clamp(-1.0, 1.0)).asin(), x.atan2(z))
+fn theta_of(w: Vec3) -> f64 {
+    (w.y as f64).clamp(-1.0, 1.0).asin()
 }
 
 #[inline]
@@ -622,7 +621,7 @@ impl ScratchBrdf {
             return (0.0, 0.0);
         }
         let m = self.table.m;
-        let theta_o = (wo.y as f64).clamp(-1.0, 1.0).asin();
+        let theta_o = theta_of(wo);
         let o = self.phi_bin(wo.x as f64, wo.z as f64);
         let i = self.phi_bin(wi.x as f64, wi.z as f64);
         let f = 2.0 / PI * self.table.rho(theta_o, i, o);
@@ -646,7 +645,7 @@ impl ScratchBrdf {
             return None;
         }
         let m = self.table.m;
-        let theta_o = (wo.y as f64).clamp(-1.0, 1.0).asin();
+        let theta_o = theta_of(wo);
         let o = self.phi_bin(wo.x as f64, wo.z as f64);
         let row = &self.rows[o];
         if row.integral() <= 0.0 {
@@ -665,14 +664,13 @@ impl ScratchBrdf {
                 delta: true,
             });
         }
-        let (x, pdf_x, _) = row.sample_continuous(u[0]);
+        let (x, _, _) = row.sample_continuous(u[0]);
         let phi_i = -FRAC_PI_2 + x * PI;
         let theta_i = sample_cos2(u[1]);
         let wi = direction(theta_i, phi_i);
         if wi.z <= 0.0 {
             return None;
         }
-        let _ = pdf_x;
         let (f, pdf) = self.eval_pdf(wo, wi);
         if pdf <= 0.0 {
             return None;
@@ -687,8 +685,7 @@ impl ScratchBrdf {
 
     /// The delta lobe's probability of choosing `phi_i` bin `k` for `wo` (mirror walls).
     pub fn delta_pmf(&self, wo: Vec3, k: usize) -> f64 {
-        let (_, phi_o) = angles(wo);
-        let row = &self.rows[bin_of(phi_o, self.table.m)];
+        let row = &self.rows[self.phi_bin(wo.x as f64, wo.z as f64)];
         if row.integral() <= 0.0 {
             0.0
         } else {
@@ -703,8 +700,8 @@ impl ScratchBrdf {
             return Vec::new();
         }
         let m = self.table.m;
-        let (theta_o, phi_o) = angles(wo);
-        let o = bin_of(phi_o, m);
+        let theta_o = theta_of(wo);
+        let o = self.phi_bin(wo.x as f64, wo.z as f64);
         (0..m)
             .map(|k| {
                 let phi = self.table.phi[k];
@@ -721,6 +718,7 @@ impl ScratchBrdf {
 mod tests {
     use super::*;
     use crate::testing::{chi2_discrete, chi2_sphere, MeanEstimate, SphereGrid};
+    use crate::trace2d::bin_of;
     use rand::{Rng, SeedableRng};
 
     fn params(spec: &str, walls: Walls, mode: FresnelMode) -> TableParams {
@@ -1111,7 +1109,7 @@ mod tests {
             }
         }
         assert!(differ < 5, "{differ}");
-        // The boundary bins themselves.
+        // Every bin's centre direction lands in that bin.
         for k in 0..m {
             let phi = -FRAC_PI_2 + (k as f64 + 0.5) * PI / m as f64;
             assert_eq!(brdf.phi_bin(phi.sin(), phi.cos()), k);
@@ -1180,9 +1178,9 @@ mod tests {
             for _ in 0..n {
                 let s = brdf.sample(wo, [rng.random(), rng.random()]).unwrap();
                 assert!(s.delta);
-                let (th, ph) = angles(s.wi);
+                let th = theta_of(s.wi);
                 assert!((th + t.to_radians()).abs() < 1e-5, "theta_i = -theta_o");
-                let k = bin_of(ph, m);
+                let k = brdf.phi_bin(s.wi.x as f64, s.wi.z as f64);
                 counts[k] += 1;
                 assert!((s.pdf - brdf.delta_pmf(wo, k) * m as f64 / PI).abs() < 1e-9);
                 est.push(s.weight);

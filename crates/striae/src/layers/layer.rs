@@ -175,7 +175,7 @@ impl ScratchLayer {
     ///
     /// The fast path of [`Self::footprint_coverage_reference`] (same value up to rounding):
     /// the candidate discs ([`Self::footprint_candidates`]) and their clipped area
-    /// ([`FootprintCandidates::area`]).
+    /// ([`FootprintCandidates::coverage`]).
     pub fn footprint_coverage(
         &self,
         p: DVec2,
@@ -183,8 +183,21 @@ impl ScratchLayer {
         b: DVec2,
         max_cells: usize,
     ) -> Option<f64> {
-        let mut centres = [DVec2::ZERO; MAX_DISCS];
-        match self.footprint_candidates(p, a, b, max_cells, &mut centres) {
+        self.footprint_coverage_in(p, a, b, max_cells, &mut [DVec2::ZERO; MAX_DISCS])
+    }
+
+    /// [`Self::footprint_coverage`] with the caller's buffer for the candidate discs (so that a
+    /// query over several layers clears one buffer, not one per layer).
+    #[inline]
+    pub fn footprint_coverage_in(
+        &self,
+        p: DVec2,
+        a: DVec2,
+        b: DVec2,
+        max_cells: usize,
+        centres: &mut [DVec2; MAX_DISCS],
+    ) -> Option<f64> {
+        match self.footprint_candidates(p, a, b, max_cells, centres) {
             Candidates::Done(c) => c,
             Candidates::Discs(f) => Some(f.coverage(&centres[..f.n])),
         }

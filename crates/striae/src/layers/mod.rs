@@ -257,9 +257,10 @@ impl LayerSet {
         out: &mut [f32],
     ) {
         let (p, a, b) = (uv.as_dvec2(), duvdx.as_dvec2(), duvdy.as_dvec2());
+        let mut centres = [glam::DVec2::ZERO; footprint::MAX_DISCS];
         for (layer, o) in self.layers.iter().zip(&mut out[..self.layers.len()]) {
             *o = layer
-                .footprint_coverage(p, a, b, max_cells)
+                .footprint_coverage_in(p, a, b, max_cells, &mut centres)
                 .unwrap_or(self.expected_coverage) as f32;
         }
     }
@@ -322,11 +323,9 @@ impl LayerSet {
             if bound[k] < best - TIE {
                 break;
             }
-            let layer = &self.layers[k];
-            let c = match layer.footprint_candidates(p, a, b, max_cells, &mut centres) {
-                layer::Candidates::Done(c) => c.unwrap_or(self.expected_coverage),
-                layer::Candidates::Discs(f) => f.coverage(&centres[..f.n]),
-            };
+            let c = self.layers[k]
+                .footprint_coverage_in(p, a, b, max_cells, &mut centres)
+                .unwrap_or(self.expected_coverage);
             out[k] = c as f32;
             best = best.max(c);
         }
