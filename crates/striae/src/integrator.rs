@@ -37,12 +37,15 @@ use crate::math::{Frame, Ray, RayDifferential, Rgb, Vec2, Vec3};
 use crate::sampler::PixelSampler;
 use crate::sampling::power_heuristic;
 use crate::scene::{material_bsdf, Scene, NO_MATERIAL};
-use crate::shading::{footprint, spawn_differentials, ShadingContext};
+use crate::shading::{footprint, spawn_differentials, PrimaryHit, ShadingContext};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Side of a square tile of pixels, the unit of parallel work.
 pub const TILE: u32 = 16;
+
+/// The next render's id ([`PrimaryHit::render`]).
+static NEXT_RENDER: AtomicU64 = AtomicU64::new(1);
 
 /// Counters of one render.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -121,12 +124,13 @@ pub fn shade<'a>(
     wo_world: Vec3,
     u_layer: f32,
 ) -> Shaded<'a> {
-    shade_with(material, hit, Some(rd), wo_world, u_layer)
+    shade_with(material, hit, Some(rd), wo_world, u_layer, None)
 }
 
 /// [`shade`], with the footprint computed only when `rd` is given: without differentials
 /// `duvdx`, `duvdy`, `dpdx` and `dpdy` are zero (the render loop passes `None` when no material
-/// of the scene reads the footprint, see [`Material::reads_footprint`]).
+/// of the scene reads the footprint, see [`Material::reads_footprint`]). `primary` tells a
+/// camera ray's first hit ([`ShadingContext::primary`]); only meaningful with `rd`.
 #[inline(always)]
 pub fn shade_with<'a>(
     material: &'a Material,
@@ -134,6 +138,7 @@ pub fn shade_with<'a>(
     rd: Option<&RayDifferential>,
     wo_world: Vec3,
     u_layer: f32,
+    primary: Option<PrimaryHit>,
 ) -> Shaded<'a> {
     let (dpdx, dpdy, duvdx, duvdy) = match rd {
         Some(rd) => footprint(hit, rd),
@@ -150,6 +155,7 @@ pub fn shade_with<'a>(
         ng: hit.ng,
         u_layer,
         wo: wo_world,
+        primary: primary.filter(|_| rd.is_some()),
     };
     let mut bsdf = material_bsdf(material, &ctx);
     let (mut ng, mut ns) = (hit.ng, hit.ns);
@@ -258,6 +264,7 @@ pub fn render_with(
     let nonfinite = AtomicU64::new(0);
     let spp = scene.settings.spp;
     let differentials = scene.materials.iter().any(Material::reads_footprint);
+    let render_id = NEXT_RENDER.fetch_add(1, Ordering::Relaxed);
     let tiles: Vec<(u32, Vec<Rgb>)> = (0..tiles_x * tiles_y)
         .into_par_iter()
         .map(|tile| {
@@ -265,7 +272,13 @@ pub fn render_with(
             let (x0, y0) = (tx * TILE, ty * TILE);
             let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
             let mut counters = Counters::default();
-            let out = render_tile(scene, [x0, y0, x1, y1], differentials, wide, &mut counters);
+            let out = render_tile(
+                scene,
+                [x0, y0, x1, y1],
+                (render_id, differentials),
+                wide,
+                &mut counters,
+            );
             rays.fetch_add(counters.rays, Ordering::Relaxed);
             nonfinite.fetch_add(counters.nonfinite, Ordering::Relaxed);
             progress(out.len() as u64 * spp as u64);
@@ -300,7 +313,7 @@ pub fn render_with(
 fn render_tile(
     scene: &Scene,
     rect: [u32; 4],
-    differentials: bool,
+    differentials: (u64, bool),
     wide: bool,
     counters: &mut Counters,
 ) -> Vec<Rgb> {
@@ -335,7 +348,7 @@ fn wide_simd_available() -> bool {
 unsafe fn render_tile_avx2(
     scene: &Scene,
     rect: [u32; 4],
-    differentials: bool,
+    differentials: (u64, bool),
     counters: &mut Counters,
 ) -> Vec<Rgb> {
     render_tile_body(scene, rect, differentials, counters)
@@ -345,7 +358,7 @@ unsafe fn render_tile_avx2(
 fn render_tile_body(
     scene: &Scene,
     [x0, y0, x1, y1]: [u32; 4],
-    differentials: bool,
+    differentials: (u64, bool),
     counters: &mut Counters,
 ) -> Vec<Rgb> {
     let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
@@ -358,13 +371,14 @@ fn render_tile_body(
 }
 
 /// The mean of `spp` samples of pixel `(x, y)` (box filter: uniform positions in the pixel).
-/// `differentials`: carry ray differentials (only needed when a material reads the footprint).
+/// `(render, differentials)`: the render's id, and whether to carry ray differentials (only
+/// needed when a material reads the footprint).
 #[inline(always)]
 fn render_pixel(
     scene: &Scene,
     x: u32,
     y: u32,
-    differentials: bool,
+    (render, differentials): (u64, bool),
     counters: &mut Counters,
 ) -> Rgb {
     let (w, _) = scene.camera.resolution();
@@ -373,11 +387,13 @@ fn render_pixel(
     let mut sum = Rgb::ZERO;
     for s in 0..spp {
         let mut sampler = PixelSampler::new(pixel_index, s, scene.settings.seed);
-        let film = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+        let in_pixel = sampler.next_2d();
+        let film = Vec2::new(x as f32, y as f32) + in_pixel;
         let u_lens = sampler.next_2d();
         let l = if differentials {
             let (ray, rd) = scene.camera.generate_ray(film, u_lens);
-            radiance::<true>(scene, ray, rd, &mut sampler, counters)
+            let pixel = (render, pixel_index, in_pixel - Vec2::splat(0.5));
+            radiance::<true>(scene, ray, rd, pixel, &mut sampler, counters)
         } else {
             let ray = scene.camera.generate_ray_only(film, u_lens);
             let rd = RayDifferential {
@@ -386,7 +402,14 @@ fn render_pixel(
                 ry_o: ray.o,
                 ry_d: ray.d,
             };
-            radiance::<false>(scene, ray, rd, &mut sampler, counters)
+            radiance::<false>(
+                scene,
+                ray,
+                rd,
+                (render, pixel_index, Vec2::ZERO),
+                &mut sampler,
+                counters,
+            )
         };
         if l.is_finite() {
             sum += l;
@@ -397,13 +420,15 @@ fn render_pixel(
     sum / spp as f32
 }
 
-/// Radiance arriving at the camera along `ray` (one path sample). With `DIFFERENTIALS` false
-/// the ray differentials are neither used nor updated (no material of the scene reads them).
+/// Radiance arriving at the camera along `ray` (one path sample) through a pixel (the render's
+/// id, the pixel's index and the ray's offset from its centre, see [`PrimaryHit`]). With `DIFFERENTIALS` false the ray
+/// differentials are neither used nor updated (no material of the scene reads them).
 #[inline(always)]
 fn radiance<const DIFFERENTIALS: bool>(
     scene: &Scene,
     mut ray: Ray,
     mut rd: RayDifferential,
+    (render, pixel, offset): (u64, u64, Vec2),
     sampler: &mut PixelSampler,
     counters: &mut Counters,
 ) -> Rgb {
@@ -491,6 +516,12 @@ fn radiance<const DIFFERENTIALS: bool>(
             DIFFERENTIALS.then_some(&rd),
             wo_world,
             u_layer,
+            (DIFFERENTIALS && depth == 0).then_some(PrimaryHit {
+                render,
+                pixel,
+                shape: hit.shape,
+                offset,
+            }),
         );
         let frame = ctx.frame;
         let wo = frame.to_local(wo_world);

@@ -43,7 +43,7 @@ use crate::bsdf::{
     ScratchedBsdf,
 };
 use crate::fresnel::FresnelLaw;
-use crate::layers::lattice::TileQuery;
+use crate::layers::lattice::{PixelKey, TileQuery};
 use crate::layers::{LayerError, LayerParams, LayerSet, MAX_LAYERS};
 use crate::material::{Material, MaterialError};
 use crate::math::{Rgb, Vec3};
@@ -83,9 +83,11 @@ pub enum LayerMix {
 #[serde(rename_all = "lowercase")]
 pub enum CoverageMode {
     /// The exact share of the pixel footprint (`uv`, `duvdx`, `duvdy`) each layer's scratches
-    /// cover (METHOD.md section 6, [Raymond16]), with the footprint snapped to the
+    /// cover (METHOD.md section 6, [Raymond16]): at a camera ray's first hit, of the footprint
+    /// centred on the pixel's centre, computed once per pixel
+    /// ([`LayerSet::coverage_of_pixel`]); at other hits, with the footprint snapped to the
     /// footprint-shaped tile that holds the hit and cached per tile
-    /// ([`crate::layers::lattice`]): a pixel's samples share a few tiles' exact coverage.
+    /// ([`crate::layers::lattice`]).
     #[default]
     Footprint,
     /// The same exact coverage, of the footprint centred on each sample: no snapping, no
@@ -569,8 +571,25 @@ impl ScratchedMaterial {
                     LayerMix::Max => TileQuery::Max,
                     LayerMix::Sum => TileQuery::All,
                 };
-                p.layers
-                    .coverage_tiled(ctx.uv, ctx.duvdx, ctx.duvdy, query, &mut cov[..k])
+                match ctx.primary {
+                    Some(hit) => p.layers.coverage_of_pixel(
+                        ctx.uv,
+                        ctx.duvdx,
+                        ctx.duvdy,
+                        PixelKey {
+                            render: hit.render,
+                            pixel: hit.pixel,
+                            shape: hit.shape,
+                        },
+                        hit.offset,
+                        query,
+                        &mut cov[..k],
+                    ),
+                    None => {
+                        p.layers
+                            .coverage_tiled(ctx.uv, ctx.duvdx, ctx.duvdy, query, &mut cov[..k])
+                    }
+                }
             }
             CoverageMode::Sample => match p.mix {
                 LayerMix::Max => p

@@ -48,6 +48,26 @@ pub struct ShadingContext {
     /// The direction toward the viewer (`-ray.d`, world, unit). The scratched glass of issue 5
     /// skips its layer queries for rays arriving from inside.
     pub wo: Vec3,
+    /// For the first hit of a camera ray that carries differentials: which pixel and which
+    /// shape, and where in the pixel the ray went, so that a material can filter over the
+    /// footprint of the whole pixel once and share it among the pixel's samples.
+    pub primary: Option<PrimaryHit>,
+}
+
+/// The first hit of a camera ray ([`ShadingContext::primary`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PrimaryHit {
+    /// Names the render (unique per call of `integrator::render` in the process), so that
+    /// per-pixel state never outlives it.
+    pub render: u64,
+    /// Row-major pixel index.
+    pub pixel: u64,
+    /// The shape hit.
+    pub shape: u32,
+    /// The film position of the ray minus the pixel's centre, in pixels (each component in
+    /// `[-1/2, 1/2]`): the pixel centre's texture point is about
+    /// `uv - offset.x duvdx - offset.y duvdy`.
+    pub offset: Vec2,
 }
 
 /// `dP/dx`, `dP/dy`, `du/dx`, `dv/dx`, `du/dy`, `dv/dy` at a hit from the ray's differentials

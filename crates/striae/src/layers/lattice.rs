@@ -1,5 +1,7 @@
 //! Footprint tiles: the renderer's coverage queries snapped to a lattice of footprint-shaped
-//! tiles, and a per-thread cache of their exact coverage.
+//! tiles, and a per-thread cache of their exact coverage; and, for camera rays' first hits, the
+//! exact coverage of the whole pixel's footprint, computed once per pixel
+//! ([`LayerSet::coverage_of_pixel`]).
 //!
 //! A pixel's samples hit points spread over one pixel footprint, and each asks for the scratch
 //! coverage of a footprint of that same shape (METHOD.md section 6). Computing it exactly at
@@ -171,15 +173,130 @@ struct Entry {
 
 thread_local! {
     static CACHE: RefCell<Vec<Entry>> = const { RefCell::new(Vec::new()) };
+    static PIXEL: RefCell<Option<PixelEntry>> = const { RefCell::new(None) };
 }
+
+/// A pixel's footprint coverage ([`LayerSet::coverage_of_pixel`]): set id, query, render,
+/// pixel and shape; the footprint's centre and edges; the values.
+#[derive(Clone, Copy)]
+struct PixelEntry {
+    key: [u64; 5],
+    centre: Vec2,
+    a: Vec2,
+    b: Vec2,
+    values: [f32; CACHED_LAYERS],
+}
+
+/// Which pixel of which render a camera ray's first hit belongs to, and the shape it hit
+/// ([`LayerSet::coverage_of_pixel`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PixelKey {
+    pub render: u64,
+    pub pixel: u64,
+    pub shape: u32,
+}
+
+/// A sample shares its pixel's footprint coverage when its own estimate of the pixel centre's
+/// texture point lies within this fraction of the footprint's edges of the stored one.
+pub const PIXEL_TOLERANCE: f32 = 0.25;
 
 /// Empty the calling thread's tile cache (for benchmarks that render one scene repeatedly:
 /// results never depend on it, only the time does).
 pub fn clear_cache() {
     CACHE.with(|cache| cache.borrow_mut().clear());
+    PIXEL.with(|entry| *entry.borrow_mut() = None);
 }
 
 impl LayerSet {
+    /// The per-layer coverage of a whole pixel's footprint, for the first hit of a camera ray
+    /// through `pixel` (on its shape, in its render), `offset` (pixels) from the pixel's centre: the exact coverage
+    /// ([`Self::coverage_max`] or [`Self::coverage_all`] per `query`, up to
+    /// [`TILE_MAX_CELLS`]) of the footprint `duvdx`, `duvdy` centred on the pixel centre's
+    /// texture point, `uv - offset.x duvdx - offset.y duvdy`. It is computed at the first such
+    /// hit of the pixel and kept per thread; the pixel's later samples on the same shape reuse
+    /// it when their own estimate of the centre agrees within [`PIXEL_TOLERANCE`] of the
+    /// footprint (else, at silhouettes and texture seams, they take their tile,
+    /// [`Self::coverage_tiled`]).
+    ///
+    /// So every sample of a pixel sees the coverage of the pixel's own footprint, exactly, as
+    /// METHOD.md section 6 asks, for one exact query per pixel instead of one per tile.
+    /// Deterministic: a pixel's samples run in order on one thread, so which sample fills the
+    /// entry depends only on the pixel.
+    /// # Panics
+    /// If `out.len() < len()`.
+    pub fn coverage_of_pixel(
+        &self,
+        uv: Vec2,
+        duvdx: Vec2,
+        duvdy: Vec2,
+        pixel: PixelKey,
+        offset: Vec2,
+        query: TileQuery,
+        out: &mut [f32],
+    ) {
+        let n = self.len();
+        let centre = uv - offset.x * duvdx - offset.y * duvdy;
+        let det = duvdx.perp_dot(duvdy);
+        if n > CACHED_LAYERS || !(det.abs() > 0.0 && det.is_finite() && centre.is_finite()) {
+            self.coverage_tiled(uv, duvdx, duvdy, query, out);
+            return;
+        }
+        let key = [
+            self.id(),
+            query as u64,
+            pixel.render,
+            pixel.pixel,
+            pixel.shape as u64,
+        ];
+        let shared = PIXEL.with(|entry| {
+            let mut entry = entry.borrow_mut();
+            match &*entry {
+                Some(e) if e.key == key => {
+                    // This sample's centre in the stored footprint's edge coordinates.
+                    let d = centre - e.centre;
+                    let det = e.a.perp_dot(e.b);
+                    let (s, t) = (d.perp_dot(e.b) / det, e.a.perp_dot(d) / det);
+                    let near = s.abs() <= PIXEL_TOLERANCE && t.abs() <= PIXEL_TOLERANCE;
+                    if near {
+                        out[..n].copy_from_slice(&e.values[..n]);
+                    }
+                    near
+                }
+                _ => {
+                    let mut values = [0.0f32; CACHED_LAYERS];
+                    match query {
+                        TileQuery::All => self.coverage_all_within(
+                            centre,
+                            duvdx,
+                            duvdy,
+                            TILE_MAX_CELLS,
+                            &mut values[..n],
+                        ),
+                        TileQuery::Max => self.coverage_max_within(
+                            centre,
+                            duvdx,
+                            duvdy,
+                            TILE_MAX_CELLS,
+                            &mut values[..n],
+                        ),
+                    }
+                    out[..n].copy_from_slice(&values[..n]);
+                    *entry = Some(PixelEntry {
+                        key,
+                        centre,
+                        a: duvdx,
+                        b: duvdy,
+                        values,
+                    });
+                    true
+                }
+            }
+        });
+        if !shared {
+            self.coverage_tiled(uv, duvdx, duvdy, query, out);
+        }
+    }
+
     /// The per-layer coverage of the footprint tile containing `uv` ([`FootprintTile`]), into
     /// `out[0..len()]`, as [`Self::coverage_all`] or [`Self::coverage_max`] of the tile (up to
     /// [`TILE_MAX_CELLS`]); cached per thread. Where there is no tile

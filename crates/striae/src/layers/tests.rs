@@ -706,3 +706,55 @@ fn footprint_tiles_contain_their_hits_and_cache_their_exact_coverage() {
     }
     assert!(shared > 50, "{shared}");
 }
+
+/// A pixel's footprint coverage: the first camera hit of a pixel gets the exact coverage of
+/// the footprint centred on its estimate of the pixel centre; the pixel's later hits whose
+/// estimate agrees within the tolerance get the same values, farther ones (a silhouette, a
+/// seam) their own tile, another shape or pixel a fresh exact value.
+#[test]
+fn pixel_footprint_coverage_is_the_exact_coverage_of_the_pixel_centre() {
+    let set = LayerSet::new(LayerParams::setting(2).unwrap(), 9).unwrap();
+    let n = set.len();
+    let cells = lattice::TILE_MAX_CELLS;
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(41);
+    let (mut got, mut want) = (vec![0.0f32; n], vec![0.0f32; n]);
+    let mut nonzero = 0;
+    for (pixel, (uv, a, b)) in random_footprints(&mut rng, 200, 0.05)
+        .into_iter()
+        .enumerate()
+    {
+        let key = |shape| lattice::PixelKey {
+            render: 1,
+            pixel: pixel as u64,
+            shape,
+        };
+        for query in [lattice::TileQuery::Max, lattice::TileQuery::All] {
+            let exact = |set: &LayerSet, c: Vec2, out: &mut [f32]| match query {
+                lattice::TileQuery::Max => set.coverage_max_within(c, a, b, cells, out),
+                lattice::TileQuery::All => set.coverage_all_within(c, a, b, cells, out),
+            };
+            // The first hit, a quarter pixel right of the centre.
+            let offset = Vec2::new(0.25, -0.125);
+            let centre = uv - offset.x * a - offset.y * b;
+            set.coverage_of_pixel(uv, a, b, key(3), offset, query, &mut got);
+            exact(&set, centre, &mut want);
+            assert_eq!(got, want);
+            nonzero += want.iter().any(|&c| c > 0.0) as usize;
+            // A later hit of the pixel on the same surface: the same values.
+            let offset2 = Vec2::new(-0.4, 0.3);
+            let uv2 = centre + offset2.x * a + offset2.y * b;
+            set.coverage_of_pixel(uv2, a, b, key(3), offset2, query, &mut got);
+            assert_eq!(got, want);
+            // A hit whose centre estimate is half a footprint away: its own tile.
+            let far = uv2 + 0.5 * a;
+            set.coverage_of_pixel(far, a, b, key(3), offset2, query, &mut got);
+            set.coverage_tiled(far, a, b, query, &mut want);
+            assert_eq!(got, want);
+            // Another shape in the same pixel: exact again, about its own centre.
+            set.coverage_of_pixel(far, a, b, key(4), offset2, query, &mut got);
+            exact(&set, far - offset2.x * a - offset2.y * b, &mut want);
+            assert_eq!(got, want);
+        }
+    }
+    assert!(nonzero > 50, "{nonzero}");
+}
