@@ -254,3 +254,48 @@ fn scratched_renders_are_bit_identical_across_thread_counts() {
     );
     assert_bit_identical_across_thread_counts(&g);
 }
+
+/// Footprint coverage at a camera ray's first hit is the exact coverage of the pixel's own
+/// footprint, so with one layer (the BSDF is then linear in the coverage: no overlaps for the
+/// `sum` cap, no choice for `max`) a few samples per pixel must give what point coverage
+/// converges to when its hit points fill the pixel: the head-on plate against two
+/// point-coverage renders of many samples, whose difference measures their noise. (A pixel
+/// centre estimated on the wrong side, or a footprint of the wrong size, moves the scratches'
+/// edges by a fraction of a pixel and fails this by far.)
+#[test]
+fn pixel_footprint_coverage_equals_supersampled_point_coverage() {
+    let render = |coverage: &str, spp: u32, seed: u64| {
+        let text = PLATE.replace("layers = 3\n", "layers = 1\n").replace(
+            "[materials.m.scratches]\n",
+            &format!("[materials.m.scratches]\ncoverage = \"{coverage}\"\n"),
+        );
+        let o = Overrides {
+            spp: Some(spp),
+            resolution: Some((48, 48)),
+            seed: Some(seed),
+            max_depth: None,
+        };
+        let s = Scene::parse(&text, Path::new("plate.toml"), Path::new("."), &o).unwrap();
+        render_with_threads(&s, 2).0
+    };
+    let pixel = render("footprint", 4, 1);
+    let (a, b) = (render("point", 128, 2), render("point", 128, 3));
+    let rmse = |p: &striae::film::Image, q: &striae::film::Image| {
+        let n = p.pixels.len() as f64;
+        (p.pixels
+            .iter()
+            .zip(&q.pixels)
+            .map(|(x, y)| ((x.y - y.y) as f64).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt()
+    };
+    let mean = pixel.pixels.iter().map(|p| p.y as f64).sum::<f64>() / pixel.pixels.len() as f64;
+    let noise = rmse(&a, &b) / 2f64.sqrt();
+    let err = rmse(&pixel, &a);
+    assert!(mean > 0.0 && noise > 0.0);
+    assert!(
+        err < 1.25 * noise,
+        "footprint vs point: RMSE {err}, point noise {noise}, mean {mean}"
+    );
+}
