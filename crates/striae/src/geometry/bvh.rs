@@ -20,6 +20,7 @@ use obvhs::bvh2::builder::build_bvh2;
 use obvhs::bvh2::Bvh2;
 use obvhs::cwbvh::builder::build_cwbvh;
 use obvhs::cwbvh::CwBvh;
+use obvhs::ploc::PlocSearchDistance;
 use obvhs::BvhBuildParams;
 
 use super::bvh4::{Bvh4, Leaf, LeafTest, BLOCK};
@@ -63,12 +64,14 @@ impl WatertightRay {
         let kz = d.abs().max_position();
         let kx = (kz + 1) % 3;
         let ky = (kx + 1) % 3;
+        // The three quotients as one SSE division (the same IEEE quotient per lane).
+        let [sx, sy, sz, _] = (Vec4::new(-d[kx], -d[ky], 1.0, 1.0) / Vec4::splat(d[kz])).to_array();
         WatertightRay {
             o: ray.o,
             kz,
-            sx: -d[kx] / d[kz],
-            sy: -d[ky] / d[kz],
-            sz: 1.0 / d[kz],
+            sx,
+            sy,
+            sz,
         }
     }
 
@@ -407,9 +410,15 @@ impl Geometry {
                 (Accel::Bvh2(bvh), order)
             }
             BvhKind::Bvh4 => {
+                // obvhs' `very_slow_build` without its triangle pre-splitting (the BVH is built
+                // over boxes) and with the widest PLOC search: 2.6 % fewer instructions per
+                // render than `medium_build` for ~30 ms more build on the glass teapot
+                // (`BENCHMARKS.md`, "Renderer speed, session 3").
                 let params = BvhBuildParams {
                     max_prims_per_leaf: BVH4_LEAF_PRIMS,
-                    ..params
+                    pre_split: false,
+                    ploc_search_distance: PlocSearchDistance::VeryHigh,
+                    ..BvhBuildParams::very_slow_build()
                 };
                 let bvh = build_bvh2(&aabbs, params, &mut Duration::default());
                 let order = bvh.primitive_indices.clone();
