@@ -321,6 +321,10 @@ const CWBVH_SHIFT: f32 = 2e-4;
 /// blocks hold up to [`BLOCK`]).
 const BVH4_LEAF_PRIMS: u32 = 2;
 
+/// Scenes of at most this many primitives get the slower, better binary BVH build before the
+/// collapse to [`Bvh4`] (see [`Geometry::with_bvh`]).
+const SLOW_BUILD_PRIMS: usize = 1 << 17;
+
 /// Shapes with the BVH over their primitives.
 pub struct Geometry {
     shapes: Vec<Shape>,
@@ -410,15 +414,23 @@ impl Geometry {
                 (Accel::Bvh2(bvh), order)
             }
             BvhKind::Bvh4 => {
-                // obvhs' `very_slow_build` without its triangle pre-splitting (the BVH is built
-                // over boxes) and with the widest PLOC search: 2.6 % fewer instructions per
-                // render than `medium_build` for ~30 ms more build on the glass teapot
-                // (`BENCHMARKS.md`, "Renderer speed, session 3").
+                // Up to SLOW_BUILD_PRIMS primitives: obvhs' `very_slow_build` without its
+                // triangle pre-splitting (the BVH is built over boxes) and with the widest PLOC
+                // search: 2.6 % fewer instructions per render than `medium_build` on the glass
+                // teapot, for a build 6x as long (~30 ms for its 4096 triangles; `BENCHMARKS.md`,
+                // "Renderer speed, session 3"). Larger meshes keep `medium_build`.
+                let base = if prims.len() <= SLOW_BUILD_PRIMS {
+                    BvhBuildParams {
+                        pre_split: false,
+                        ploc_search_distance: PlocSearchDistance::VeryHigh,
+                        ..BvhBuildParams::very_slow_build()
+                    }
+                } else {
+                    params
+                };
                 let params = BvhBuildParams {
                     max_prims_per_leaf: BVH4_LEAF_PRIMS,
-                    pre_split: false,
-                    ploc_search_distance: PlocSearchDistance::VeryHigh,
-                    ..BvhBuildParams::very_slow_build()
+                    ..base
                 };
                 let bvh = build_bvh2(&aabbs, params, &mut Duration::default());
                 let order = bvh.primitive_indices.clone();
