@@ -20,6 +20,7 @@ use obvhs::bvh2::builder::build_bvh2;
 use obvhs::bvh2::Bvh2;
 use obvhs::cwbvh::builder::build_cwbvh;
 use obvhs::cwbvh::CwBvh;
+use obvhs::ploc::PlocSearchDistance;
 use obvhs::BvhBuildParams;
 
 use super::bvh4::{Bvh4, Leaf, LeafTest, BLOCK};
@@ -63,12 +64,14 @@ impl WatertightRay {
         let kz = d.abs().max_position();
         let kx = (kz + 1) % 3;
         let ky = (kx + 1) % 3;
+        // The three quotients as one SSE division (the same IEEE quotient per lane).
+        let [sx, sy, sz, _] = (Vec4::new(-d[kx], -d[ky], 1.0, 1.0) / Vec4::splat(d[kz])).to_array();
         WatertightRay {
             o: ray.o,
             kz,
-            sx: -d[kx] / d[kz],
-            sy: -d[ky] / d[kz],
-            sz: 1.0 / d[kz],
+            sx,
+            sy,
+            sz,
         }
     }
 
@@ -318,6 +321,10 @@ const CWBVH_SHIFT: f32 = 2e-4;
 /// blocks hold up to [`BLOCK`]).
 const BVH4_LEAF_PRIMS: u32 = 2;
 
+/// Scenes of at most this many primitives get the slower, better binary BVH build before the
+/// collapse to [`Bvh4`] (see [`Geometry::with_bvh`]).
+const SLOW_BUILD_PRIMS: usize = 1 << 17;
+
 /// Shapes with the BVH over their primitives.
 pub struct Geometry {
     shapes: Vec<Shape>,
@@ -407,9 +414,23 @@ impl Geometry {
                 (Accel::Bvh2(bvh), order)
             }
             BvhKind::Bvh4 => {
+                // Up to SLOW_BUILD_PRIMS primitives: obvhs' `very_slow_build` without its
+                // triangle pre-splitting (the BVH is built over boxes) and with the widest PLOC
+                // search: 2.6 % fewer instructions per render than `medium_build` on the glass
+                // teapot, for a build 6x as long (~30 ms for its 4096 triangles; `BENCHMARKS.md`,
+                // "Renderer speed, session 3"). Larger meshes keep `medium_build`.
+                let base = if prims.len() <= SLOW_BUILD_PRIMS {
+                    BvhBuildParams {
+                        pre_split: false,
+                        ploc_search_distance: PlocSearchDistance::VeryHigh,
+                        ..BvhBuildParams::very_slow_build()
+                    }
+                } else {
+                    params
+                };
                 let params = BvhBuildParams {
                     max_prims_per_leaf: BVH4_LEAF_PRIMS,
-                    ..params
+                    ..base
                 };
                 let bvh = build_bvh2(&aabbs, params, &mut Duration::default());
                 let order = bvh.primitive_indices.clone();

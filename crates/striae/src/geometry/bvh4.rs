@@ -1,11 +1,11 @@
 //! A wide BVH with SIMD box tests, collapsed from obvhs' binary BVH (PLOC + reinsertion), in
 //! the style of Embree's BVH4/BVH8 (Wald et al. 2014, "Embree: A Kernel Framework for Efficient
-//! CPU Ray Tracing"): every node stores its children's boxes as structure-of-arrays, so one
-//! node visit tests them with `Vec4` (SSE) arithmetic, four boxes per group. The type keeps
-//! its first name, `Bvh4`; nodes now have [`WIDTH`] = 8 children (two groups of four), which
-//! took ~7 % off the glass teapot's render time against four (`BENCHMARKS.md`, "Renderer speed,
-//! session 2"); the compiler merges the two groups into 256-bit operations in the AVX2 copy of
-//! the render loop.
+//! CPU Ray Tracing"): every node stores its children's boxes as structure-of-arrays, one row
+//! of [`WIDTH`] = 8 lanes per slab, so one node visit tests all children at once: the lane
+//! loops of the box test compile to 256-bit AVX instructions in the AVX2 copy of the render
+//! loop and to pairs of SSE instructions in the portable copy (`BENCHMARKS.md`, "Renderer
+//! speed, session 3"; session 2's version tested two `Vec4` groups, which LLVM did not merge).
+//! The type keeps its first name, `Bvh4`, from when nodes had four children.
 //!
 //! * **Collapse**: starting from a binary node's two children, the interior child of largest
 //!   surface area is replaced by its two children until there are [`WIDTH`] (the usual BVH2 to
@@ -27,6 +27,7 @@
 use std::mem::MaybeUninit;
 
 use glam::Vec4;
+
 use obvhs::bvh2::Bvh2;
 
 use crate::math::Vec3;
@@ -43,9 +44,9 @@ const COUNT_MASK: u32 = (1 << COUNT_BITS) - 1;
 pub(crate) const BLOCK: usize = 4;
 /// Traversal stack size; a tree that could overflow it is not built (see [`Bvh4::from_bvh2`]).
 const STACK: usize = 192;
-/// Children per node (a multiple of 4: each group of four is tested with one SSE op).
+/// Children per node: one 256-bit AVX2 register (two SSE registers in the portable copy) per
+/// slab.
 const WIDTH: usize = 8;
-const GROUPS: usize = WIDTH / 4;
 
 /// A leaf as the traversal hands it to the caller's test: block `block` holds primitives
 /// `BLOCK * block .. BLOCK * block + count` of the primitive order [`Bvh4::from_bvh2`] returns
@@ -77,12 +78,13 @@ impl Leaf {
     }
 }
 
-/// Four children: their boxes as `[min_x, min_y, min_z, max_x, max_y, max_z]` lanes, and what
-/// they are (interior node index, or [`LEAF`] with a primitive range).
+/// [`WIDTH`] children: their boxes as `[min_x, min_y, min_z, max_x, max_y, max_z]` rows of
+/// one lane per child, and what they are (interior node index, or [`LEAF`] with a primitive
+/// range).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 struct Node4 {
-    bounds: [[Vec4; GROUPS]; 6],
+    bounds: [[f32; WIDTH]; 6],
     child: [u32; WIDTH],
 }
 
@@ -95,21 +97,43 @@ pub(crate) struct Bvh4 {
 
 /// Per-ray constants of the box test.
 struct BoxRay {
-    o: [Vec4; 3],
-    inv_d: [Vec4; 3],
+    o: [f32; 3],
+    inv_d: [f32; 3],
     /// Index into `Node4::bounds` of the near and far slab per axis.
     near: [usize; 3],
     far: [usize; 3],
 }
 
+/// `maxps` / `minps` semantics (`a` when the comparison holds, else `b`), written so that the
+/// lane loops below vectorise to single `vmaxps` / `vminps` instructions.
+#[inline(always)]
+fn max_ps(a: f32, b: f32) -> f32 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+#[inline(always)]
+fn min_ps(a: f32, b: f32) -> f32 {
+    if a < b {
+        a
+    } else {
+        b
+    }
+}
+
+/// `1 + 2 gamma(3)` (pbrt-v4): scaling `t_far` by it keeps rounding from shrinking the
+/// interval below the true one.
+const T_FAR_SCALE: f32 = 1.0 + 2.0 * 3.0 * f32::EPSILON * 0.5 / (1.0 - 1.5 * f32::EPSILON);
+
 impl BoxRay {
     #[inline(always)]
     fn new(o: Vec3, d: Vec3) -> BoxRay {
-        let mut inv = [0.0f32; 3];
-        let mut near = [0usize; 3];
-        let mut far = [0usize; 3];
+        let mut da = [0.0f32; 4];
         for a in 0..3 {
-            let da = if d[a].abs() < 1e-30 {
+            da[a] = if d[a].abs() < 1e-30 {
                 if d[a].is_sign_negative() {
                     -1e-30
                 } else {
@@ -118,7 +142,14 @@ impl BoxRay {
             } else {
                 d[a]
             };
-            inv[a] = 1.0 / da;
+        }
+        da[3] = 1.0;
+        // One SSE division for the three reciprocals (the same IEEE quotient per lane).
+        let inv4 = (Vec4::ONE / Vec4::from_array(da)).to_array();
+        let inv = [inv4[0], inv4[1], inv4[2]];
+        let mut near = [0usize; 3];
+        let mut far = [0usize; 3];
+        for a in 0..3 {
             if inv[a] < 0.0 {
                 near[a] = a + 3;
                 far[a] = a;
@@ -128,39 +159,44 @@ impl BoxRay {
             }
         }
         BoxRay {
-            o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
-            inv_d: [
-                Vec4::splat(inv[0]),
-                Vec4::splat(inv[1]),
-                Vec4::splat(inv[2]),
-            ],
+            o: o.to_array(),
+            inv_d: inv,
             near,
             far,
         }
     }
 
-    /// `(entry distances, hit mask)` of the children for `t` in `[0, t_max]`.
+    /// `(entry distances, hit mask)` of the children for `t` in `[0, t_max]`. Written as loops
+    /// over the [`WIDTH`] lanes: the AVX2 copy of the render loop runs each step as one 256-bit
+    /// instruction, the portable copy as two SSE ones; both compute the same IEEE operations.
     #[inline(always)]
     fn test(&self, node: &Node4, t_max: f32) -> ([f32; WIDTH], u32) {
-        let mut t_out = [0.0; WIDTH];
-        let mut mask = 0;
-        for g in 0..GROUPS {
-            let b = |i: usize| node.bounds[i][g];
-            let tn0 = (b(self.near[0]) - self.o[0]) * self.inv_d[0];
-            let tn1 = (b(self.near[1]) - self.o[1]) * self.inv_d[1];
-            let tn2 = (b(self.near[2]) - self.o[2]) * self.inv_d[2];
-            let tf0 = (b(self.far[0]) - self.o[0]) * self.inv_d[0];
-            let tf1 = (b(self.far[1]) - self.o[1]) * self.inv_d[1];
-            let tf2 = (b(self.far[2]) - self.o[2]) * self.inv_d[2];
-            let t_near = tn0.max(tn1).max(tn2.max(Vec4::ZERO));
-            // 1 + 2 gamma(3) (pbrt-v4): rounding never shrinks the interval below the true one.
-            let t_far = tf0.min(tf1).min(tf2)
-                * (1.0 + 2.0 * 3.0 * f32::EPSILON * 0.5 / (1.0 - 1.5 * f32::EPSILON));
-            let t_far = t_far.min(Vec4::splat(t_max));
-            t_out[4 * g..4 * g + 4].copy_from_slice(&t_near.to_array());
-            mask |= t_near.cmple(t_far).bitmask() << (4 * g);
+        let b = &node.bounds;
+        let (bn0, bn1, bn2) = (&b[self.near[0]], &b[self.near[1]], &b[self.near[2]]);
+        let (bf0, bf1, bf2) = (&b[self.far[0]], &b[self.far[1]], &b[self.far[2]]);
+        let [o0, o1, o2] = self.o;
+        let [i0, i1, i2] = self.inv_d;
+        let mut t_near = [0.0f32; WIDTH];
+        let mut t_far = [0.0f32; WIDTH];
+        for k in 0..WIDTH {
+            let tn0 = (bn0[k] - o0) * i0;
+            let tn1 = (bn1[k] - o1) * i1;
+            let tn2 = (bn2[k] - o2) * i2;
+            let tf0 = (bf0[k] - o0) * i0;
+            let tf1 = (bf1[k] - o1) * i1;
+            let tf2 = (bf2[k] - o2) * i2;
+            let tn = max_ps(max_ps(tn0, tn1), max_ps(tn2, 0.0));
+            let tf = min_ps(min_ps(min_ps(tf0, tf1), tf2) * T_FAR_SCALE, t_max);
+            t_near[k] = tn;
+            t_far[k] = tf;
         }
-        (t_out, mask)
+        // `cmpleps` + `movmskps` per half (the lane loop would build the mask bit by bit).
+        let half = |k: usize| {
+            Vec4::from_slice(&t_near[k..k + 4])
+                .cmple(Vec4::from_slice(&t_far[k..k + 4]))
+                .bitmask()
+        };
+        (t_near, half(0) | half(4) << 4)
     }
 }
 
@@ -256,15 +292,15 @@ impl<F: Fn(u32) -> bool> Builder<'_, F> {
             return None;
         }
         let index = self.out.nodes.len();
-        let (inf, neg) = (Vec4::INFINITY, Vec4::NEG_INFINITY);
+        let (inf, neg) = (f32::INFINITY, f32::NEG_INFINITY);
         let mut node = Node4 {
             bounds: [
-                [inf; GROUPS],
-                [inf; GROUPS],
-                [inf; GROUPS],
-                [neg; GROUPS],
-                [neg; GROUPS],
-                [neg; GROUPS],
+                [inf; WIDTH],
+                [inf; WIDTH],
+                [inf; WIDTH],
+                [neg; WIDTH],
+                [neg; WIDTH],
+                [neg; WIDTH],
             ],
             child: [LEAF; WIDTH],
         };
@@ -273,8 +309,8 @@ impl<F: Fn(u32) -> bool> Builder<'_, F> {
         for (lane, &(k, word)) in lanes.iter().enumerate() {
             let n = &bvh.nodes[k];
             for a in 0..3 {
-                node.bounds[a][lane / 4][lane % 4] = n.aabb.min[a];
-                node.bounds[a + 3][lane / 4][lane % 4] = n.aabb.max[a];
+                node.bounds[a][lane] = n.aabb.min[a];
+                node.bounds[a + 3][lane] = n.aabb.max[a];
             }
             match word {
                 Some(w) => node.child[lane] = w,

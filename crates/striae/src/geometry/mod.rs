@@ -127,6 +127,7 @@ impl Shape {
 
     /// A point uniform in area: `(p, unit outward normal, pdf per unit area = 1 / area)`.
     /// Meshes choose a triangle by area (`sampling::Distribution1D`), then a uniform point in it.
+    #[inline(always)]
     pub fn sample_area(&self, u: Vec2) -> (Vec3, Vec3, f32) {
         match &self.geometry {
             ShapeGeometry::Mesh(m) => m.sample_area(u),
