@@ -135,14 +135,16 @@ pub fn spawn_differentials(
     }
     let reflection = (wi.dot(ns) > 0.0) == ((-d_in).dot(ns) > 0.0);
     let n = if d_in.dot(ns) < 0.0 { ns } else { -ns };
+    let mirror = |d: Vec3| (d - 2.0 * d.dot(n) * n).normalize_or(wi);
     let bend = |d: Vec3| -> Vec3 {
-        let mirror = (d - 2.0 * d.dot(n) * n).normalize_or(wi);
         if reflection {
-            mirror
+            mirror(d)
         } else {
-            refract_dir(d, n, eta)
-                .map(|t| t.normalize_or(wi))
-                .unwrap_or(mirror)
+            // The mirror only under total internal reflection (computed only then).
+            match refract_dir(d, n, eta) {
+                Some(t) => t.normalize_or(wi),
+                None => mirror(d),
+            }
         }
     };
     RayDifferential {
