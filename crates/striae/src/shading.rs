@@ -53,6 +53,14 @@ pub struct ShadingContext {
 /// `dP/dx`, `dP/dy`, `du/dx`, `dv/dx`, `du/dy`, `dv/dy` at a hit from the ray's differentials
 /// (pbrt-v4 `SurfaceInteraction::ComputeDifferentials`). Degenerate cases give zeros.
 pub fn footprint(hit: &SurfaceHit, rd: &RayDifferential) -> (Vec3, Vec3, Vec2, Vec2) {
+    let (dpdx, dpdy) = footprint_dp(hit, rd);
+    let (duvdx, duvdy) = footprint_uv(hit, dpdx, dpdy);
+    (dpdx, dpdy, duvdx, duvdy)
+}
+
+/// The `dP/dx`, `dP/dy` part of [`footprint`]: the offset rays met with the tangent plane.
+#[inline]
+pub fn footprint_dp(hit: &SurfaceHit, rd: &RayDifferential) -> (Vec3, Vec3) {
     let n = hit.ng;
     let plane = n.dot(hit.p);
     let offset = |o: Vec3, d: Vec3| -> Vec3 {
@@ -68,8 +76,12 @@ pub fn footprint(hit: &SurfaceHit, rd: &RayDifferential) -> (Vec3, Vec3, Vec2, V
             Vec3::ZERO
         }
     };
-    let dpdx = offset(rd.rx_o, rd.rx_d);
-    let dpdy = offset(rd.ry_o, rd.ry_d);
+    (offset(rd.rx_o, rd.rx_d), offset(rd.ry_o, rd.ry_d))
+}
+
+/// The `du/dx`, `dv/dx`, `du/dy`, `dv/dy` part of [`footprint`] from `dP/dx`, `dP/dy`.
+#[inline]
+pub fn footprint_uv(hit: &SurfaceHit, dpdx: Vec3, dpdy: Vec3) -> (Vec2, Vec2) {
     // Least squares for [dpdu dpdv] (du, dv)^T = dp.
     let (a, b) = (hit.dpdu, hit.dpdv);
     let (aa, ab, bb) = (a.dot(a), a.dot(b), b.dot(b));
@@ -90,7 +102,7 @@ pub fn footprint(hit: &SurfaceHit, rd: &RayDifferential) -> (Vec3, Vec3, Vec2, V
         };
         Vec2::new(clamp(du), clamp(dv))
     };
-    (dpdx, dpdy, solve(dpdx), solve(dpdy))
+    (solve(dpdx), solve(dpdy))
 }
 
 /// Refract unit direction `d` (travelling toward the surface) through the plane with unit
