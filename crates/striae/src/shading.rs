@@ -147,14 +147,18 @@ pub fn spawn_differentials(
     }
     let reflection = (wi.dot(ns) > 0.0) == ((-d_in).dot(ns) > 0.0);
     let n = if d_in.dot(ns) < 0.0 { ns } else { -ns };
-    let mirror = |d: Vec3| (d - 2.0 * d.dot(n) * n).normalize_or(wi);
+    // Mirroring and refracting a unit direction about a unit normal give a unit direction up
+    // to rounding (a relative 1e-7 per bounce, harmless to the footprint), so neither is
+    // normalised again; a non-finite result falls back to `wi`.
+    let finite_or_wi = |d: Vec3| if d.is_finite() { d } else { wi };
+    let mirror = |d: Vec3| finite_or_wi(d - 2.0 * d.dot(n) * n);
     let bend = |d: Vec3| -> Vec3 {
         if reflection {
             mirror(d)
         } else {
             // The mirror only under total internal reflection (computed only then).
             match refract_dir(d, n, eta) {
-                Some(t) => t.normalize_or(wi),
+                Some(t) => finite_or_wi(t),
                 None => mirror(d),
             }
         }
