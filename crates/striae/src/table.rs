@@ -732,6 +732,17 @@ impl ScratchBrdf {
         self.eval_pdf_at(&self.wo_terms(wo), wi)
     }
 
+    /// [`Self::eval`] with the `wo` terms of [`Self::wo_terms`] (`wo.z > 0`): the first half
+    /// of [`Self::eval_pdf_at`], for callers that need no density (light sampling of a delta
+    /// light).
+    #[inline]
+    pub fn eval_at(&self, wt: &WoTerms, wi: Vec3) -> f64 {
+        if self.delta || wi.z <= 0.0 {
+            return 0.0;
+        }
+        2.0 / PI * self.rho_at(wt, self.phi_bin(wi.x as f64, wi.z as f64))
+    }
+
     /// [`Self::eval_pdf`] with the `wo` terms of [`Self::wo_terms`] (`wo.z > 0`).
     #[inline]
     pub fn eval_pdf_at(&self, wt: &WoTerms, wi: Vec3) -> (f64, f64) {

@@ -335,7 +335,7 @@ impl<'a> ScratchedBsdf<'a> {
         let mut f = 0.0f64;
         for (k, l) in self.lobes().iter().enumerate() {
             let c = self.terms(k, wo);
-            let fk = self.table.brdf().eval_pdf_at(&c.terms, l.to_scratch(wi)).0;
+            let fk = self.table.brdf().eval_at(&c.terms, l.to_scratch(wi));
             f += (l.coverage * c.scale) as f64 * fk;
         }
         self.tint * f as f32
