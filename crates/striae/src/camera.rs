@@ -27,6 +27,10 @@ pub struct PerspectiveCamera {
     tan_half_x: f32,
     lens_radius: f32,
     focus_distance: f32,
+    /// World-space change of the unnormalised camera direction (`camera_dir`) for one pixel
+    /// step right and one pixel step down (pinhole ray differentials).
+    step_x_world: Vec3,
+    step_y_world: Vec3,
 }
 
 /// Why a camera could not be built.
@@ -80,6 +84,8 @@ impl PerspectiveCamera {
         let true_up = right.cross(forward);
         let tan_half_y = (0.5 * fov_y_deg.to_radians()).tan();
         let tan_half_x = tan_half_y * width as f32 / height as f32;
+        let step_x_world = right * (2.0 * tan_half_x / width as f32);
+        let step_y_world = true_up * (-2.0 * tan_half_y / height as f32);
         Ok(PerspectiveCamera {
             position,
             frame: Frame {
@@ -93,6 +99,8 @@ impl PerspectiveCamera {
             tan_half_x,
             lens_radius,
             focus_distance,
+            step_x_world,
+            step_y_world,
         })
     }
 
@@ -140,16 +148,34 @@ impl PerspectiveCamera {
         } else {
             Vec2::ZERO
         };
-        let ray = self.ray_through(film, lens);
-        let rx = self.ray_through(film + Vec2::X, lens);
-        let ry = self.ray_through(film + Vec2::Y, lens);
+        if self.lens_radius > 0.0 {
+            let ray = self.ray_through(film, lens);
+            let rx = self.ray_through(film + Vec2::X, lens);
+            let ry = self.ray_through(film + Vec2::Y, lens);
+            return (
+                ray,
+                RayDifferential {
+                    rx_o: rx.o,
+                    rx_d: rx.d,
+                    ry_o: ry.o,
+                    ry_d: ry.d,
+                },
+            );
+        }
+        // Pinhole: the offset directions are `d + step` for the one-pixel steps of
+        // `camera_dir`, carried to world space by linearity (`to_world(d) + to_world(step)`,
+        // the steps precomputed) and normalised; the central ray is `ray_through`'s, bit for
+        // bit. The offsets agree with `ray_through(film + 1, ..)` up to rounding.
+        let d = self.camera_dir(film);
+        let ray = Ray::new(self.position, self.frame.to_world(d.normalize()));
+        let dw = self.frame.to_world(d);
         (
             ray,
             RayDifferential {
-                rx_o: rx.o,
-                rx_d: rx.d,
-                ry_o: ry.o,
-                ry_d: ry.d,
+                rx_o: self.position,
+                rx_d: (dw + self.step_x_world).normalize(),
+                ry_o: self.position,
+                ry_d: (dw + self.step_y_world).normalize(),
             },
         )
     }
@@ -214,6 +240,33 @@ mod tests {
         // project() inverts generate_ray.
         let p = c.project(r.d).unwrap();
         assert!((p - Vec2::new(199.0, 50.0)).length() < 1e-3);
+    }
+
+    #[test]
+    fn pinhole_differentials_are_the_rays_one_pixel_over() {
+        // The pinhole's offset rays (world steps added by linearity) agree with the rays
+        // through the film positions one pixel right and one pixel down, and the central ray
+        // is exactly `ray_through`'s.
+        let c = cam(0.0);
+        for film in [
+            Vec2::new(0.0, 0.0),
+            Vec2::new(100.3, 50.7),
+            Vec2::new(199.9, 99.9),
+            Vec2::new(13.0, 77.5),
+        ] {
+            let (r, rd) = c.generate_ray(film, Vec2::splat(0.5));
+            assert_eq!(r.d, c.ray_through(film, Vec2::ZERO).d);
+            assert_eq!(r.d, c.generate_ray_only(film, Vec2::splat(0.5)).d);
+            let rx = c.ray_through(film + Vec2::X, Vec2::ZERO);
+            let ry = c.ray_through(film + Vec2::Y, Vec2::ZERO);
+            assert_eq!((rd.rx_o, rd.ry_o), (rx.o, ry.o));
+            assert!((rd.rx_d - rx.d).length() < 1e-6, "{film}");
+            assert!((rd.ry_d - ry.d).length() < 1e-6, "{film}");
+            assert!(
+                (rd.rx_d - r.d).length() > 1e-3,
+                "a pixel step moves the ray"
+            );
+        }
     }
 
     #[test]

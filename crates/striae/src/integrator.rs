@@ -37,7 +37,9 @@ use crate::math::{Frame, Ray, RayDifferential, Rgb, Vec2, Vec3};
 use crate::sampler::PixelSampler;
 use crate::sampling::power_heuristic;
 use crate::scene::{material_bsdf, Scene, NO_MATERIAL};
-use crate::shading::{footprint, spawn_differentials, PrimaryHit, ShadingContext};
+use crate::shading::{
+    footprint_dp, footprint_uv, spawn_differentials, PrimaryHit, ShadingContext,
+};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -124,13 +126,17 @@ pub fn shade<'a>(
     wo_world: Vec3,
     u_layer: f32,
 ) -> Shaded<'a> {
-    shade_with(material, hit, Some(rd), wo_world, u_layer, None)
+    shade_impl(material, hit, Some(rd), wo_world, u_layer, None, true)
 }
 
-/// [`shade`], with the footprint computed only when `rd` is given: without differentials
-/// `duvdx`, `duvdy`, `dpdx` and `dpdy` are zero (the render loop passes `None` when no material
-/// of the scene reads the footprint, see [`Material::reads_footprint`]). `primary` tells a
-/// camera ray's first hit ([`ShadingContext::primary`]); only meaningful with `rd`.
+/// [`shade`] for the render loop, with the footprint computed only when `rd` is given:
+/// without differentials `duvdx`, `duvdy`, `dpdx` and `dpdy` are zero (the render loop passes
+/// `None` when no material of the scene reads the footprint, see
+/// [`Material::reads_footprint`]). With them, `duvdx` and `duvdy` are zero too where the
+/// material does not read them at this hit ([`Material::reads_hit_context`]: any material but
+/// the scratched one, and scratched glass seen from inside); `dpdx`, `dpdy` are always there
+/// (the spawned ray's differentials need them). `primary` tells a camera ray's first hit
+/// ([`ShadingContext::primary`]); only meaningful with `rd`.
 #[inline(always)]
 pub fn shade_with<'a>(
     material: &'a Material,
@@ -140,8 +146,30 @@ pub fn shade_with<'a>(
     u_layer: f32,
     primary: Option<PrimaryHit>,
 ) -> Shaded<'a> {
+    shade_impl(material, hit, rd, wo_world, u_layer, primary, false)
+}
+
+/// [`shade`] (`full_footprint`: `duvdx`, `duvdy` at every hit) and [`shade_with`].
+#[inline(always)]
+fn shade_impl<'a>(
+    material: &'a Material,
+    hit: &SurfaceHit,
+    rd: Option<&RayDifferential>,
+    wo_world: Vec3,
+    u_layer: f32,
+    primary: Option<PrimaryHit>,
+    full_footprint: bool,
+) -> Shaded<'a> {
     let (dpdx, dpdy, duvdx, duvdy) = match rd {
-        Some(rd) => footprint(hit, rd),
+        Some(rd) => {
+            let (dpdx, dpdy) = footprint_dp(hit, rd);
+            let (duvdx, duvdy) = if full_footprint || material.reads_hit_context(wo_world, hit.ng) {
+                footprint_uv(hit, dpdx, dpdy)
+            } else {
+                (Vec2::ZERO, Vec2::ZERO)
+            };
+            (dpdx, dpdy, duvdx, duvdy)
+        }
         None => (Vec3::ZERO, Vec3::ZERO, Vec2::ZERO, Vec2::ZERO),
     };
     let mut ctx = ShadingContext {
@@ -496,10 +524,11 @@ fn radiance<const DIFFERENTIALS: bool>(
 
         // Shading frame and the material's BSDF.
         let material = &scene.materials[shape.material as usize];
-        // Dimension 0 of the bounce's block; drawn only for a material that reads it, which
-        // spares computing the block's first four dimensions at delta bounces (the dimensions
-        // keep their places, so the image is the same).
-        let u_layer = if material.reads_layer_choice() {
+        // Dimension 0 of the bounce's block; drawn only where the material reads it (the
+        // scratched material, not glass seen from inside), which spares computing the block's
+        // first four dimensions at delta bounces (the dimensions keep their places, so the
+        // image is the same).
+        let u_layer = if material.reads_hit_context(wo_world, hit.ng) {
             sampler.next_1d()
         } else {
             sampler.seek(depth, 1);
@@ -534,7 +563,8 @@ fn radiance<const DIFFERENTIALS: bool>(
             let light = &scene.lights[index];
             if let Some(ls) = light.sample_li(hit.p, u_light, shapes) {
                 let wi = frame.to_local(ls.wi);
-                let f = bsdf.eval(wo, wi) * wi.z.abs();
+                let (f, pdf_bsdf) = bsdf.eval_for_light(wo, wi, ls.delta);
+                let f = f * wi.z.abs();
                 if f != Rgb::ZERO {
                     let origin = offset_origin(hit.p, hit.ng, ls.wi);
                     let t_max = if ls.dist.is_finite() {
@@ -553,7 +583,8 @@ fn radiance<const DIFFERENTIALS: bool>(
                         let w = if ls.delta {
                             1.0
                         } else {
-                            power_heuristic(pdf_light, bsdf.pdf(wo, wi))
+                            let pdf_bsdf = pdf_bsdf.unwrap_or_else(|| bsdf.pdf(wo, wi));
+                            power_heuristic(pdf_light, pdf_bsdf)
                         };
                         l += beta * f * ls.radiance * (w / pdf_light);
                     }

@@ -29,7 +29,7 @@
 //! for its BSDF with the whole shading context (`scene::material_bsdf`).
 
 use crate::bsdf::{Bsdf, Conductor, Dielectric, Diffuse, RoughConductor, RoughDielectric};
-use crate::math::{Rgb, Vec2};
+use crate::math::{Rgb, Vec2, Vec3};
 use crate::texture::{Texture, TextureError};
 use serde::Deserialize;
 use std::path::Path;
@@ -189,6 +189,18 @@ impl Material {
     #[inline]
     pub fn reads_layer_choice(&self) -> bool {
         matches!(self, Material::Scratched(_))
+    }
+
+    /// Whether the BSDF at a hit seen from `wo` (world, toward the viewer) with geometric
+    /// normal `ng` reads the footprint's `duvdx`, `duvdy` and `u_layer`: the scratched
+    /// material's, except glass seen from inside (its smooth base). The integrator computes
+    /// neither where it does not (the image does not change).
+    #[inline]
+    pub fn reads_hit_context(&self, wo: Vec3, ng: Vec3) -> bool {
+        match self {
+            Material::Scratched(m) => m.reads_hit_context(wo, ng),
+            _ => false,
+        }
     }
 
     /// Check every value's range (IOR >= 1, roughness >= 0, albedo in `[0, 1]`, a known

@@ -555,12 +555,29 @@ impl ScratchedMaterial {
         mode != CoverageMode::Point
     }
 
+    /// Whether [`Self::bsdf`] reads the hit's footprint and `u_layer` for `wo` (world, toward
+    /// the viewer) and the geometric normal `ng`: not for glass seen from inside (its smooth
+    /// base), nor for an unprepared material.
+    #[inline]
+    pub fn reads_hit_context(&self, wo: Vec3, ng: Vec3) -> bool {
+        match self.prepared.as_deref() {
+            Some(p) => !Self::seen_from_inside(p, wo, ng),
+            None => false,
+        }
+    }
+
+    /// Glass seen from inside: the scratches are on the outer side only (`bsdf::scratched`).
+    #[inline]
+    fn seen_from_inside(p: &Prepared, wo: Vec3, ng: Vec3) -> bool {
+        matches!(p.base, ScratchedBase::Glass { .. }) && wo.dot(ng) <= 0.0
+    }
+
     /// The BSDF at a hit (see the module notes).
     pub fn bsdf(&self, ctx: &ShadingContext) -> Bsdf<'_> {
         let Some(p) = self.prepared.as_deref() else {
             return self.base_bsdf();
         };
-        if matches!(p.base, ScratchedBase::Glass { .. }) && ctx.wo.dot(ctx.ng) <= 0.0 {
+        if Self::seen_from_inside(p, ctx.wo, ctx.ng) {
             return self.base_bsdf();
         }
         let k = p.layers.len();
@@ -651,12 +668,12 @@ impl ScratchedMaterial {
                 n
             }
         };
-        Bsdf::Scratched(ScratchedBsdf::new(
-            p.base,
-            &p.table,
-            p.tint,
-            &lobes[..count],
-        ))
+        // The integrator evaluates and samples it with `wo` in this frame: precompute the
+        // lobes' `wo` terms once (`ScratchedBsdf::at_wo`; the same results bit for bit).
+        Bsdf::Scratched(
+            ScratchedBsdf::new(p.base, &p.table, p.tint, &lobes[..count])
+                .at_wo(ctx.frame.to_local(ctx.wo)),
+        )
     }
 }
 

@@ -73,6 +73,14 @@ pub struct PrimaryHit {
 /// `dP/dx`, `dP/dy`, `du/dx`, `dv/dx`, `du/dy`, `dv/dy` at a hit from the ray's differentials
 /// (pbrt-v4 `SurfaceInteraction::ComputeDifferentials`). Degenerate cases give zeros.
 pub fn footprint(hit: &SurfaceHit, rd: &RayDifferential) -> (Vec3, Vec3, Vec2, Vec2) {
+    let (dpdx, dpdy) = footprint_dp(hit, rd);
+    let (duvdx, duvdy) = footprint_uv(hit, dpdx, dpdy);
+    (dpdx, dpdy, duvdx, duvdy)
+}
+
+/// The `dP/dx`, `dP/dy` part of [`footprint`]: the offset rays met with the tangent plane.
+#[inline]
+pub fn footprint_dp(hit: &SurfaceHit, rd: &RayDifferential) -> (Vec3, Vec3) {
     let n = hit.ng;
     let plane = n.dot(hit.p);
     let offset = |o: Vec3, d: Vec3| -> Vec3 {
@@ -88,8 +96,12 @@ pub fn footprint(hit: &SurfaceHit, rd: &RayDifferential) -> (Vec3, Vec3, Vec2, V
             Vec3::ZERO
         }
     };
-    let dpdx = offset(rd.rx_o, rd.rx_d);
-    let dpdy = offset(rd.ry_o, rd.ry_d);
+    (offset(rd.rx_o, rd.rx_d), offset(rd.ry_o, rd.ry_d))
+}
+
+/// The `du/dx`, `dv/dx`, `du/dy`, `dv/dy` part of [`footprint`] from `dP/dx`, `dP/dy`.
+#[inline]
+pub fn footprint_uv(hit: &SurfaceHit, dpdx: Vec3, dpdy: Vec3) -> (Vec2, Vec2) {
     // Least squares for [dpdu dpdv] (du, dv)^T = dp.
     let (a, b) = (hit.dpdu, hit.dpdv);
     let (aa, ab, bb) = (a.dot(a), a.dot(b), b.dot(b));
@@ -110,7 +122,7 @@ pub fn footprint(hit: &SurfaceHit, rd: &RayDifferential) -> (Vec3, Vec3, Vec2, V
         };
         Vec2::new(clamp(du), clamp(dv))
     };
-    (dpdx, dpdy, solve(dpdx), solve(dpdy))
+    (solve(dpdx), solve(dpdy))
 }
 
 /// Refract unit direction `d` (travelling toward the surface) through the plane with unit
@@ -155,14 +167,20 @@ pub fn spawn_differentials(
     }
     let reflection = (wi.dot(ns) > 0.0) == ((-d_in).dot(ns) > 0.0);
     let n = if d_in.dot(ns) < 0.0 { ns } else { -ns };
+    // Mirroring and refracting a unit direction about a unit normal give a unit direction up
+    // to rounding (a relative 1e-7 per bounce, harmless to the footprint), so neither is
+    // normalised again; a non-finite result falls back to `wi`.
+    let finite_or_wi = |d: Vec3| if d.is_finite() { d } else { wi };
+    let mirror = |d: Vec3| finite_or_wi(d - 2.0 * d.dot(n) * n);
     let bend = |d: Vec3| -> Vec3 {
-        let mirror = (d - 2.0 * d.dot(n) * n).normalize_or(wi);
         if reflection {
-            mirror
+            mirror(d)
         } else {
-            refract_dir(d, n, eta)
-                .map(|t| t.normalize_or(wi))
-                .unwrap_or(mirror)
+            // The mirror only under total internal reflection (computed only then).
+            match refract_dir(d, n, eta) {
+                Some(t) => finite_or_wi(t),
+                None => mirror(d),
+            }
         }
     };
     RayDifferential {

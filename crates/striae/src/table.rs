@@ -425,10 +425,30 @@ impl ScratchTable {
     /// `R = (2 |theta_o| / pi)^gamma`, for bins `i` (phi_i) and `o` (phi_o).
     #[inline]
     pub fn rho(&self, theta_o: f64, i: usize, o: usize) -> f64 {
-        let g = self.gamma[i * self.m + o];
-        let t = (2.0 * theta_o.abs() / PI).min(1.0);
-        let r = if t == 0.0 { 0.0 } else { t.powf(g) };
+        let r = eq4_r(eq4_t(theta_o), self.gamma[i * self.m + o]);
         r * self.slice(2, i, o) + (1.0 - r) * self.slice(0, i, o)
+    }
+
+    /// [`Self::rho`] at the `theta_o` points `theta_k` for the fixed bins `(i, o)`, one value per
+    /// point, with `R` from `r_common` where this bin's `gamma` is `gamma_common` (bit for bit
+    /// what `rho` gives: the same `powf`, computed once per point instead of once per bin).
+    #[inline]
+    pub fn rho_at_points(
+        &self,
+        i: usize,
+        o: usize,
+        t: &[f64],
+        gamma_common: f64,
+        r_common: &[f64],
+        out: &mut [f64],
+    ) {
+        let g = self.gamma[i * self.m + o];
+        let (s2, s0) = (self.slice(2, i, o), self.slice(0, i, o));
+        let common = g == gamma_common;
+        for k in 0..t.len() {
+            let r = if common { r_common[k] } else { eq4_r(t[k], g) };
+            out[k] = r * s2 + (1.0 - r) * s0;
+        }
     }
 
     /// Convenience: `Array2` views for callers that prefer ndarray.
@@ -475,6 +495,57 @@ pub struct ScratchBrdf {
     rows: Vec<Distribution1D>,
     /// `tan` of the inner bin boundaries `-pi/2 + k pi/M`, `k = 1..M-1` (see [`Self::phi_bin`]).
     tan_bounds: Vec<f64>,
+    /// The eq. (4) exponent most bins share ([`common_gamma`]), NaN if none is shared widely.
+    gamma_common: f64,
+}
+
+/// What the lookups of eq. (3)-(4) and the sampler need of `wo` (scratch frame, above the
+/// surface), computed once per `wo` by [`ScratchBrdf::wo_terms`] and reused by every lookup
+/// with that `wo` (the BSDF evaluates, samples and light-samples one `wo` several times).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct WoTerms {
+    /// The `phi_o` bin.
+    pub o: usize,
+    /// `theta_o = asin(wo.y)`.
+    pub theta_o: f64,
+    /// `R = (2 |theta_o| / pi)^gamma` of eq. (4) for the common `gamma` (0 if there is none).
+    r_common: f64,
+}
+
+/// The `gamma` value most bins of a table share, if at least a quarter do (NaN otherwise).
+/// In `seed` mode every bin with energy has the same closed-form `gamma` (the Fresnel law's
+/// `R_3`), so eq. (4)'s `powf` is computed once per `wo` instead of once per lookup.
+fn common_gamma(gamma: &[f64]) -> f64 {
+    let mut bits: Vec<u64> = gamma.iter().map(|g| g.to_bits()).collect();
+    bits.sort_unstable();
+    let (mut best, mut best_n) = (f64::NAN, 0usize);
+    for run in bits.chunk_by(|a, b| a == b) {
+        if run.len() > best_n {
+            best_n = run.len();
+            best = f64::from_bits(run[0]);
+        }
+    }
+    if best_n * 4 >= gamma.len().max(1) {
+        best
+    } else {
+        f64::NAN
+    }
+}
+
+/// `t = min(2 |theta_o| / pi, 1)` of eq. (4).
+#[inline]
+pub(crate) fn eq4_t(theta_o: f64) -> f64 {
+    (2.0 * theta_o.abs() / PI).min(1.0)
+}
+
+/// `R = t^gamma` of eq. (4) (0 at `t = 0`).
+#[inline]
+pub(crate) fn eq4_r(t: f64, g: f64) -> f64 {
+    if t == 0.0 {
+        0.0
+    } else {
+        t.powf(g)
+    }
 }
 
 /// `atan(r)` within 2e-5 rad (a minimax polynomial on `[-1, 1]`, reflected outside): only to
@@ -561,12 +632,50 @@ impl ScratchBrdf {
         let tan_bounds = (1..m)
             .map(|k| (-FRAC_PI_2 + k as f64 * PI / m as f64).tan())
             .collect();
+        let gamma_common = common_gamma(&table.gamma);
         ScratchBrdf {
             table,
             delta,
             rows,
             tan_bounds,
+            gamma_common,
         }
+    }
+
+    /// The `gamma` most bins share (NaN if none), see [`WoTerms`].
+    pub fn gamma_common(&self) -> f64 {
+        self.gamma_common
+    }
+
+    /// The `wo`-dependent part of every lookup (`wo` in the scratch frame with `wo.z > 0`).
+    #[inline]
+    pub fn wo_terms(&self, wo: Vec3) -> WoTerms {
+        let theta_o = theta_of(wo);
+        let o = self.phi_bin(wo.x as f64, wo.z as f64);
+        let r_common = if self.gamma_common.is_nan() {
+            0.0
+        } else {
+            eq4_r(eq4_t(theta_o), self.gamma_common)
+        };
+        WoTerms {
+            o,
+            theta_o,
+            r_common,
+        }
+    }
+
+    /// [`ScratchTable::rho`]`(theta_o, i, o)` with `theta_o`, `o` from `wt` (the same value).
+    #[inline]
+    pub fn rho_at(&self, wt: &WoTerms, i: usize) -> f64 {
+        let t = &self.table;
+        let o = wt.o;
+        let g = t.gamma[i * t.m + o];
+        let r = if g == self.gamma_common {
+            wt.r_common
+        } else {
+            eq4_r(eq4_t(wt.theta_o), g)
+        };
+        r * t.slice(2, i, o) + (1.0 - r) * t.slice(0, i, o)
     }
 
     /// The `phi` bin of a direction above the surface (`z > 0`), `phi = atan2(x, z)`: the bin
@@ -620,12 +729,30 @@ impl ScratchBrdf {
         if self.delta || wo.z <= 0.0 || wi.z <= 0.0 {
             return (0.0, 0.0);
         }
+        self.eval_pdf_at(&self.wo_terms(wo), wi)
+    }
+
+    /// [`Self::eval`] with the `wo` terms of [`Self::wo_terms`] (`wo.z > 0`): the first half
+    /// of [`Self::eval_pdf_at`], for callers that need no density (light sampling of a delta
+    /// light).
+    #[inline]
+    pub fn eval_at(&self, wt: &WoTerms, wi: Vec3) -> f64 {
+        if self.delta || wi.z <= 0.0 {
+            return 0.0;
+        }
+        2.0 / PI * self.rho_at(wt, self.phi_bin(wi.x as f64, wi.z as f64))
+    }
+
+    /// [`Self::eval_pdf`] with the `wo` terms of [`Self::wo_terms`] (`wo.z > 0`).
+    #[inline]
+    pub fn eval_pdf_at(&self, wt: &WoTerms, wi: Vec3) -> (f64, f64) {
+        if self.delta || wi.z <= 0.0 {
+            return (0.0, 0.0);
+        }
         let m = self.table.m;
-        let theta_o = theta_of(wo);
-        let o = self.phi_bin(wo.x as f64, wo.z as f64);
         let i = self.phi_bin(wi.x as f64, wi.z as f64);
-        let f = 2.0 / PI * self.table.rho(theta_o, i, o);
-        let row = &self.rows[o];
+        let f = 2.0 / PI * self.rho_at(wt, i);
+        let row = &self.rows[wt.o];
         if row.integral() <= 0.0 {
             return (f, 0.0);
         }
@@ -644,10 +771,15 @@ impl ScratchBrdf {
         if wo.z <= 0.0 {
             return None;
         }
+        self.sample_at(&self.wo_terms(wo), u)
+    }
+
+    /// [`Self::sample`] with the `wo` terms of [`Self::wo_terms`] (`wo.z > 0`).
+    #[inline]
+    pub fn sample_at(&self, wt: &WoTerms, u: [f64; 2]) -> Option<ScratchSample> {
         let m = self.table.m;
-        let theta_o = theta_of(wo);
-        let o = self.phi_bin(wo.x as f64, wo.z as f64);
-        let row = &self.rows[o];
+        let theta_o = wt.theta_o;
+        let row = &self.rows[wt.o];
         if row.integral() <= 0.0 {
             return None;
         }
@@ -656,7 +788,7 @@ impl ScratchBrdf {
             let pmf = row.pmf(k);
             let phi_i = -FRAC_PI_2 + (k as f64 + du) * PI / m as f64;
             let wi = direction(-theta_o, phi_i);
-            let value = self.table.rho(theta_o, k, o) * phi_i.cos() * PI / m as f64;
+            let value = self.rho_at(wt, k) * phi_i.cos() * PI / m as f64;
             return Some(ScratchSample {
                 wi,
                 weight: value / pmf,
@@ -671,7 +803,7 @@ impl ScratchBrdf {
         if wi.z <= 0.0 {
             return None;
         }
-        let (f, pdf) = self.eval_pdf(wo, wi);
+        let (f, pdf) = self.eval_pdf_at(wt, wi);
         if pdf <= 0.0 {
             return None;
         }

@@ -114,6 +114,21 @@ impl Bsdf<'_> {
         }
     }
 
+    /// `eval(wo, wi)` for light sampling, with `pdf(wo, wi)` when the model gets it for
+    /// little more (the scratched BSDF: the same table lookups) and the light is not a delta
+    /// one (whose MIS weight needs no BSDF density); `None` leaves it to a later [`Bsdf::pdf`]
+    /// call, made only if the shadow ray is unoccluded. The same values as `eval` and `pdf`.
+    #[inline(always)]
+    pub fn eval_for_light(&self, wo: Vec3, wi: Vec3, delta_light: bool) -> (Rgb, Option<f32>) {
+        match self {
+            Bsdf::Scratched(b) if !delta_light => {
+                let (f, pdf) = b.eval_pdf(wo, wi);
+                (f, Some(pdf))
+            }
+            _ => (self.eval(wo, wi), None),
+        }
+    }
+
     /// Sample `wi` given `wo`: `u_lobe` chooses between lobes (reflection / transmission),
     /// `u` drives the direction. `None` when no direction is produced (wrong side, a
     /// microfacet sample below the surface): the path ends.

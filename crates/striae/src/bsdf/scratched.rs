@@ -31,7 +31,7 @@
 use super::BsdfSample;
 use crate::fresnel;
 use crate::math::{reflect_z, Rgb, Vec2, Vec3};
-use crate::table::{ScratchBrdf, ScratchTable};
+use crate::table::{self, ScratchBrdf, ScratchTable, WoTerms};
 use std::f64::consts::{FRAC_PI_2, PI};
 
 /// Most scratch lobes one hit combines (`layer_mix = "sum"` keeps the largest coverages).
@@ -59,22 +59,40 @@ impl ScratchLobeTable {
     /// sample weight, `table::ScratchBrdf::sample`).
     pub fn new(table: ScratchTable) -> Self {
         let hash = table.params.hash();
+        let brdf = ScratchBrdf::new(table);
+        let table = brdf.table();
         let m = table.m;
         let half = (PI / (2.0 * m as f64)).sin();
         let w: Vec<f64> = table.phi.iter().map(|p| 2.0 * half * p.cos()).collect();
-        let mut albedo = vec![0.0f32; m * ALBEDO_THETA_POINTS];
+        // `rho(theta_k, j, o)` for all theta points of one bin pair at once, eq. (4)'s `powf`
+        // shared by the bins with the common `gamma` (the same values as `table.rho`; the sum
+        // over `j` runs in the same order, so the table is bit for bit what a direct sum gives).
+        const N: usize = ALBEDO_THETA_POINTS;
+        let t: [f64; N] =
+            std::array::from_fn(|k| table::eq4_t(FRAC_PI_2 * k as f64 / (N - 1) as f64));
+        let gc = brdf.gamma_common();
+        let r_common: [f64; N] = std::array::from_fn(|k| {
+            if gc.is_nan() {
+                0.0
+            } else {
+                table::eq4_r(t[k], gc)
+            }
+        });
+        let mut albedo = vec![0.0f32; m * N];
+        let mut rho = [0.0f64; N];
         for o in 0..m {
-            for t in 0..ALBEDO_THETA_POINTS {
-                let theta = FRAC_PI_2 * t as f64 / (ALBEDO_THETA_POINTS - 1) as f64;
-                let a: f64 = (0..m).map(|j| table.rho(theta, j, o) * w[j]).sum();
-                albedo[o * ALBEDO_THETA_POINTS + t] = a.max(0.0) as f32;
+            let mut acc = [0.0f64; N];
+            for (j, &wj) in w.iter().enumerate() {
+                table.rho_at_points(j, o, &t, gc, &r_common, &mut rho);
+                for k in 0..N {
+                    acc[k] += rho[k] * wj;
+                }
+            }
+            for k in 0..N {
+                albedo[o * N + k] = acc[k].max(0.0) as f32;
             }
         }
-        ScratchLobeTable {
-            brdf: ScratchBrdf::new(table),
-            albedo,
-            hash,
-        }
+        ScratchLobeTable { brdf, albedo, hash }
     }
 
     pub fn brdf(&self) -> &ScratchBrdf {
@@ -106,7 +124,12 @@ impl ScratchLobeTable {
         if wo.z <= 0.0 {
             return 0.0;
         }
-        let o = self.brdf.phi_bin(wo.x as f64, wo.z as f64);
+        self.albedo_in_bin(self.brdf.phi_bin(wo.x as f64, wo.z as f64), wo)
+    }
+
+    /// [`Self::albedo`] for `wo.z > 0` whose `phi_o` bin `o` is known.
+    #[inline]
+    fn albedo_in_bin(&self, o: usize, wo: Vec3) -> f32 {
         let theta = (wo.y.clamp(-1.0, 1.0)).asin().abs();
         let x = theta * ((ALBEDO_THETA_POINTS - 1) as f32 / std::f32::consts::FRAC_PI_2);
         let i = (x as usize).min(ALBEDO_THETA_POINTS - 2);
@@ -119,7 +142,11 @@ impl ScratchLobeTable {
     /// it never reflects more than it receives (departure: noise of the table, see `albedo`).
     #[inline]
     pub fn scaled_albedo(&self, wo: Vec3) -> (f32, f32) {
-        let a = self.albedo(wo);
+        Self::scale_albedo(self.albedo(wo))
+    }
+
+    #[inline]
+    fn scale_albedo(a: f32) -> (f32, f32) {
         if a > 1.0 {
             (1.0, 1.0 / a)
         } else {
@@ -168,6 +195,16 @@ impl ScratchLobe {
     }
 }
 
+/// What one lobe's lookups need of `wo`: the table's `wo` terms in the lobe's scratch frame
+/// (`phi_o` bin, `theta_o`, eq. (4)'s common `R`) and [`ScratchLobeTable::scaled_albedo`].
+#[derive(Clone, Copy, Debug, Default)]
+struct LobeWo {
+    terms: WoTerms,
+    /// `min(a(wo), 1)` and the lobe's scale `min(1, 1 / a(wo))`.
+    a: f32,
+    scale: f32,
+}
+
 /// The scratched BSDF at one hit (see the module notes). Built by the `scratched` material.
 #[derive(Clone, Copy, Debug)]
 pub struct ScratchedBsdf<'a> {
@@ -179,6 +216,13 @@ pub struct ScratchedBsdf<'a> {
     count: u8,
     /// `C = sum_k c_k <= 1`.
     total: f32,
+    /// Whether `cache` holds the lobes' [`LobeWo`] for the `wo` whose bits are `wo_bits`
+    /// ([`ScratchedBsdf::at_wo`]). A hit evaluates, light-samples and samples one `wo`, so
+    /// its `phi_o` bin, `asin`, albedo and eq. (4)'s `powf` are computed once instead of in
+    /// each of those lookups (4-8 times); another `wo` is computed afresh, to the same bits.
+    cached: bool,
+    wo_bits: [u32; 3],
+    cache: [LobeWo; MAX_SCRATCH_LOBES],
 }
 
 impl<'a> ScratchedBsdf<'a> {
@@ -216,6 +260,43 @@ impl<'a> ScratchedBsdf<'a> {
             lobes: out,
             count: count as u8,
             total,
+            cached: false,
+            wo_bits: [0; 3],
+            cache: [LobeWo::default(); MAX_SCRATCH_LOBES],
+        }
+    }
+
+    /// The same BSDF with the `wo`-dependent terms of its lobes precomputed for `wo` (the
+    /// direction the integrator will evaluate and sample it with). Changes no result: a call
+    /// with another `wo` computes them afresh.
+    #[inline]
+    pub fn at_wo(mut self, wo: Vec3) -> Self {
+        if wo.z > 0.0 {
+            for k in 0..self.count as usize {
+                self.cache[k] = self.lobe_wo(&self.lobes[k], wo);
+            }
+            self.cached = true;
+            self.wo_bits = wo.to_array().map(f32::to_bits);
+        }
+        self
+    }
+
+    /// [`LobeWo`] of lobe `l` for `wo.z > 0`.
+    #[inline]
+    fn lobe_wo(&self, l: &ScratchLobe, wo: Vec3) -> LobeWo {
+        let wo_s = l.to_scratch(wo);
+        let terms = self.table.brdf().wo_terms(wo_s);
+        let (a, scale) = ScratchLobeTable::scale_albedo(self.table.albedo_in_bin(terms.o, wo_s));
+        LobeWo { terms, a, scale }
+    }
+
+    /// [`LobeWo`] of lobe `k` for `wo.z > 0`: the cached one if `wo` is the cached direction.
+    #[inline]
+    fn terms(&self, k: usize, wo: Vec3) -> LobeWo {
+        if self.cached && wo.to_array().map(f32::to_bits) == self.wo_bits {
+            self.cache[k]
+        } else {
+            self.lobe_wo(&self.lobes[k], wo)
         }
     }
 
@@ -236,9 +317,9 @@ impl<'a> ScratchedBsdf<'a> {
     /// Probability of choosing the scratch lobe `l` (before its own sampling): `c a(wo)` for
     /// glass, `c` for metal.
     #[inline]
-    fn lobe_probability(&self, l: &ScratchLobe, wo_s: Vec3) -> f32 {
+    fn lobe_probability(&self, l: &ScratchLobe, c: &LobeWo) -> f32 {
         if self.is_glass() {
-            l.coverage * self.table.scaled_albedo(wo_s).0
+            l.coverage * c.a
         } else {
             l.coverage
         }
@@ -252,10 +333,10 @@ impl<'a> ScratchedBsdf<'a> {
             return Rgb::ZERO;
         }
         let mut f = 0.0f64;
-        for l in self.lobes() {
-            let wo_s = l.to_scratch(wo);
-            let scale = self.table.scaled_albedo(wo_s).1;
-            f += (l.coverage * scale) as f64 * self.table.brdf().eval(wo_s, l.to_scratch(wi));
+        for (k, l) in self.lobes().iter().enumerate() {
+            let c = self.terms(k, wo);
+            let fk = self.table.brdf().eval_at(&c.terms, l.to_scratch(wi));
+            f += (l.coverage * c.scale) as f64 * fk;
         }
         self.tint * f as f32
     }
@@ -267,11 +348,11 @@ impl<'a> ScratchedBsdf<'a> {
             return 0.0;
         }
         let mut p = 0.0f64;
-        for l in self.lobes() {
-            let wo_s = l.to_scratch(wo);
-            let pk = self.lobe_probability(l, wo_s);
+        for (k, l) in self.lobes().iter().enumerate() {
+            let c = self.terms(k, wo);
+            let pk = self.lobe_probability(l, &c);
             if pk > 0.0 {
-                p += pk as f64 * self.table.brdf().pdf(wo_s, l.to_scratch(wi));
+                p += pk as f64 * self.table.brdf().eval_pdf_at(&c.terms, l.to_scratch(wi)).1;
             }
         }
         p as f32
@@ -284,16 +365,11 @@ impl<'a> ScratchedBsdf<'a> {
             return (Rgb::ZERO, 0.0);
         }
         let (mut f, mut p) = (0.0f64, 0.0f64);
-        for l in self.lobes() {
-            let (wo_s, wi_s) = (l.to_scratch(wo), l.to_scratch(wi));
-            let (a, scale) = self.table.scaled_albedo(wo_s);
-            let (fk, pdf_k) = self.table.brdf().eval_pdf(wo_s, wi_s);
-            f += (l.coverage * scale) as f64 * fk;
-            let pk = if self.is_glass() {
-                l.coverage * a
-            } else {
-                l.coverage
-            };
+        for (k, l) in self.lobes().iter().enumerate() {
+            let c = self.terms(k, wo);
+            let (fk, pdf_k) = self.table.brdf().eval_pdf_at(&c.terms, l.to_scratch(wi));
+            f += (l.coverage * c.scale) as f64 * fk;
+            let pk = self.lobe_probability(l, &c);
             if pk > 0.0 {
                 p += pk as f64 * pdf_k;
             }
@@ -325,7 +401,7 @@ impl<'a> ScratchedBsdf<'a> {
                 let mut p_scatter = [0.0f32; MAX_SCRATCH_LOBES];
                 let mut p_transmit = base * (1.0 - fr.r as f32);
                 for (k, l) in self.lobes().iter().enumerate() {
-                    let pk = self.lobe_probability(l, l.to_scratch(wo));
+                    let pk = self.lobe_probability(l, &self.terms(k, wo));
                     p_scatter[k] = pk;
                     p_transmit += l.coverage - pk;
                 }
@@ -385,15 +461,17 @@ impl<'a> ScratchedBsdf<'a> {
             return None;
         }
         let l = &self.lobes[k];
-        let wo_s = l.to_scratch(wo);
-        let s = self.table.brdf().sample(wo_s, [u.x as f64, u.y as f64])?;
+        let c = self.terms(k, wo);
+        let s = self
+            .table
+            .brdf()
+            .sample_at(&c.terms, [u.x as f64, u.y as f64])?;
         let wi = l.from_scratch(s.wi);
         if s.delta || self.count == 1 {
             // The delta lobe (coefficient c_k s value over P_k pmf), or one smooth lobe (the
             // `max` mode: the mixture's pdf is P_k times the lobe's, its value c_k s f): the
             // lobe's own weight times c_k s / P_k, with P_k = c_k a_k for glass, c_k for metal.
-            let scale = self.table.scaled_albedo(wo_s).1;
-            let w = (s.weight * (l.coverage * scale / pk) as f64) as f32;
+            let w = (s.weight * (l.coverage * c.scale / pk) as f64) as f32;
             return Some(BsdfSample {
                 wi,
                 weight: self.tint * w,
