@@ -209,10 +209,10 @@ pub fn clear_cache() {
 
 impl LayerSet {
     /// The per-layer coverage of a whole pixel's footprint, for the first hit of a camera ray
-    /// through `pixel` (on its shape, in its render), `offset` (pixels) from the pixel's centre: the exact coverage
-    /// ([`Self::coverage_max`] or [`Self::coverage_all`] per `query`, up to
-    /// [`TILE_MAX_CELLS`]) of the footprint `duvdx`, `duvdy` centred on the pixel centre's
-    /// texture point, `uv - offset.x duvdx - offset.y duvdy`. It is computed at the first such
+    /// through `pixel` (on its shape, in its render), `offset` (pixels) from the pixel's
+    /// centre: the exact coverage ([`Self::coverage_max`] or [`Self::coverage_all`] per
+    /// `query`, up to [`TILE_MAX_CELLS`]) of the footprint `duvdx`, `duvdy` centred on the
+    /// pixel centre's texture point, `uv - offset.x duvdx - offset.y duvdy`. It is computed at the first such
     /// hit of the pixel and kept per thread; the pixel's later samples on the same shape reuse
     /// it when their own estimate of the centre agrees within [`PIXEL_TOLERANCE`] of the
     /// footprint (else, at silhouettes and texture seams, they take their tile,
