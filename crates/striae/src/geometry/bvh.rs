@@ -64,14 +64,12 @@ impl WatertightRay {
         let kz = d.abs().max_position();
         let kx = (kz + 1) % 3;
         let ky = (kx + 1) % 3;
-        // The three quotients as one SSE division (the same IEEE quotient per lane).
-        let [sx, sy, sz, _] = (Vec4::new(-d[kx], -d[ky], 1.0, 1.0) / Vec4::splat(d[kz])).to_array();
         WatertightRay {
             o: ray.o,
             kz,
-            sx,
-            sy,
-            sz,
+            sx: -d[kx] / d[kz],
+            sy: -d[ky] / d[kz],
+            sz: 1.0 / d[kz],
         }
     }
 

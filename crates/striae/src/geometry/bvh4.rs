@@ -131,9 +131,11 @@ const T_FAR_SCALE: f32 = 1.0 + 2.0 * 3.0 * f32::EPSILON * 0.5 / (1.0 - 1.5 * f32
 impl BoxRay {
     #[inline(always)]
     fn new(o: Vec3, d: Vec3) -> BoxRay {
-        let mut da = [0.0f32; 4];
+        let mut inv = [0.0f32; 3];
+        let mut near = [0usize; 3];
+        let mut far = [0usize; 3];
         for a in 0..3 {
-            da[a] = if d[a].abs() < 1e-30 {
+            let da = if d[a].abs() < 1e-30 {
                 if d[a].is_sign_negative() {
                     -1e-30
                 } else {
@@ -142,14 +144,7 @@ impl BoxRay {
             } else {
                 d[a]
             };
-        }
-        da[3] = 1.0;
-        // One SSE division for the three reciprocals (the same IEEE quotient per lane).
-        let inv4 = (Vec4::ONE / Vec4::from_array(da)).to_array();
-        let inv = [inv4[0], inv4[1], inv4[2]];
-        let mut near = [0usize; 3];
-        let mut far = [0usize; 3];
-        for a in 0..3 {
+            inv[a] = 1.0 / da;
             if inv[a] < 0.0 {
                 near[a] = a + 3;
                 far[a] = a;
