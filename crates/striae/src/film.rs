@@ -69,14 +69,21 @@ impl Image {
         self.pixels.iter().fold(Rgb::ZERO, |a, &p| a + p) / self.pixels.len().max(1) as f32
     }
 
-    /// Write a linear (scene-referred) RGB OpenEXR file, 32-bit float channels.
+    /// Write a linear (scene-referred) RGB OpenEXR file, 32-bit float channels. The blocks are
+    /// compressed and written in order on the calling thread, so the same image always gives
+    /// the same bytes (the crate's parallel writer stores them in the order they finish).
     pub fn write_exr(&self, path: &Path) -> Result<(), FilmError> {
+        use exr::prelude::{Image, SpecificChannels, WritableImage};
         crate::io::write_atomically(path, |tmp| {
-            exr::prelude::write_rgb_file(tmp, self.width as usize, self.height as usize, |x, y| {
-                let p = self.pixels[y * self.width as usize + x];
+            let channels = SpecificChannels::rgb(|pos: exr::math::Vec2<usize>| {
+                let p = self.pixels[pos.1 * self.width as usize + pos.0];
                 (p.x, p.y, p.z)
-            })
-            .map_err(|e| FilmError::Write {
+            });
+            Image::from_channels((self.width as usize, self.height as usize), channels)
+                .write()
+                .non_parallel()
+                .to_file(tmp)
+                .map_err(|e| FilmError::Write {
                 path: path.to_path_buf(),
                 message: e.to_string(),
             })
@@ -156,6 +163,28 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("b.png"), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The same image gives the same EXR bytes, write after write (many compressed blocks: a
+    /// parallel writer would store them in the order its threads finish).
+    #[test]
+    fn exr_bytes_are_reproducible() {
+        let dir = std::env::temp_dir().join(format!("striae-film-bytes-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut img = Image::new(256, 192);
+        for (i, p) in img.pixels.iter_mut().enumerate() {
+            let f = (i as f32 * 0.618_034).fract();
+            *p = Rgb::new(f, 1.0 - f, f * f);
+        }
+        let bytes: Vec<Vec<u8>> = (0..4)
+            .map(|k| {
+                let path = dir.join(format!("{k}.exr"));
+                img.write_exr(&path).unwrap();
+                std::fs::read(&path).unwrap()
+            })
+            .collect();
+        assert!(bytes.iter().all(|b| *b == bytes[0]));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
