@@ -84,9 +84,9 @@ impl Image {
                 .non_parallel()
                 .to_file(tmp)
                 .map_err(|e| FilmError::Write {
-                path: path.to_path_buf(),
-                message: e.to_string(),
-            })
+                    path: path.to_path_buf(),
+                    message: e.to_string(),
+                })
         })
         .map_err(|e| with_path(path, e))
     }

@@ -37,9 +37,7 @@ use crate::math::{Frame, Ray, RayDifferential, Rgb, Vec2, Vec3};
 use crate::sampler::PixelSampler;
 use crate::sampling::power_heuristic;
 use crate::scene::{material_bsdf, Scene, NO_MATERIAL};
-use crate::shading::{
-    footprint_dp, footprint_uv, spawn_differentials, PrimaryHit, ShadingContext,
-};
+use crate::shading::{footprint_dp, footprint_uv, spawn_differentials, PrimaryHit, ShadingContext};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
 

@@ -224,6 +224,7 @@ impl LayerSet {
     /// entry depends only on the pixel.
     /// # Panics
     /// If `out.len() < len()`.
+    #[allow(clippy::too_many_arguments)] // the footprint, the pixel and the query, as in the tiles
     pub fn coverage_of_pixel(
         &self,
         uv: Vec2,
