@@ -216,13 +216,15 @@ pub struct ScratchedBsdf<'a> {
     count: u8,
     /// `C = sum_k c_k <= 1`.
     total: f32,
-    /// Whether `cache` holds the lobes' [`LobeWo`] for the `wo` whose bits are `wo_bits`
-    /// ([`ScratchedBsdf::at_wo`]). A hit evaluates, light-samples and samples one `wo`, so
-    /// its `phi_o` bin, `asin`, albedo and eq. (4)'s `powf` are computed once instead of in
-    /// each of those lookups (4-8 times); another `wo` is computed afresh, to the same bits.
+    /// Whether `cache` holds the first lobe's [`LobeWo`] for the `wo` whose bits are
+    /// `wo_bits` ([`ScratchedBsdf::at_wo`]). A hit evaluates, light-samples and samples one
+    /// `wo`, so its `phi_o` bin, `asin`, albedo and eq. (4)'s `powf` are computed once instead
+    /// of in each of those lookups (4-8 times); another `wo`, and the other lobes of `sum`
+    /// mode, are computed afresh, to the same bits. (One lobe only: the BSDF is returned and
+    /// moved by value at every hit, so it is kept small; `max` mode has one lobe.)
     cached: bool,
     wo_bits: [u32; 3],
-    cache: [LobeWo; MAX_SCRATCH_LOBES],
+    cache: LobeWo,
 }
 
 impl<'a> ScratchedBsdf<'a> {
@@ -262,7 +264,7 @@ impl<'a> ScratchedBsdf<'a> {
             total,
             cached: false,
             wo_bits: [0; 3],
-            cache: [LobeWo::default(); MAX_SCRATCH_LOBES],
+            cache: LobeWo::default(),
         }
     }
 
@@ -271,10 +273,8 @@ impl<'a> ScratchedBsdf<'a> {
     /// with another `wo` computes them afresh.
     #[inline]
     pub fn at_wo(mut self, wo: Vec3) -> Self {
-        if wo.z > 0.0 {
-            for k in 0..self.count as usize {
-                self.cache[k] = self.lobe_wo(&self.lobes[k], wo);
-            }
+        if wo.z > 0.0 && self.count > 0 {
+            self.cache = self.lobe_wo(&self.lobes[0], wo);
             self.cached = true;
             self.wo_bits = wo.to_array().map(f32::to_bits);
         }
@@ -290,11 +290,11 @@ impl<'a> ScratchedBsdf<'a> {
         LobeWo { terms, a, scale }
     }
 
-    /// [`LobeWo`] of lobe `k` for `wo.z > 0`: the cached one if `wo` is the cached direction.
+    /// [`LobeWo`] of lobe `k` for `wo.z > 0`: the cached one for lobe 0 and the cached `wo`.
     #[inline]
     fn terms(&self, k: usize, wo: Vec3) -> LobeWo {
-        if self.cached && wo.to_array().map(f32::to_bits) == self.wo_bits {
-            self.cache[k]
+        if k == 0 && self.cached && wo.to_array().map(f32::to_bits) == self.wo_bits {
+            self.cache
         } else {
             self.lobe_wo(&self.lobes[k], wo)
         }
