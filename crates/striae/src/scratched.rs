@@ -571,6 +571,7 @@ impl ScratchedMaterial {
     }
 
     /// The BSDF at a hit (see the module notes).
+    #[inline(always)]
     pub fn bsdf(&self, ctx: &ShadingContext) -> Bsdf<'_> {
         let Some(p) = self.prepared.as_deref() else {
             return self.base_bsdf();
