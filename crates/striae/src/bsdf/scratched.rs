@@ -124,14 +124,14 @@ impl ScratchLobeTable {
         if wo.z <= 0.0 {
             return 0.0;
         }
-        self.albedo_in_bin(self.brdf.phi_bin(wo.x as f64, wo.z as f64), wo)
+        self.albedo_at(&self.brdf.wo_terms(wo))
     }
 
-    /// [`Self::albedo`] for `wo.z > 0` whose `phi_o` bin `o` is known.
+    /// [`Self::albedo`] from the table's `wo` terms (`phi_o` bin, `t = 2 |theta_o| / pi`).
     #[inline]
-    fn albedo_in_bin(&self, o: usize, wo: Vec3) -> f32 {
-        let theta = (wo.y.clamp(-1.0, 1.0)).asin().abs();
-        let x = theta * ((ALBEDO_THETA_POINTS - 1) as f32 / std::f32::consts::FRAC_PI_2);
+    fn albedo_at(&self, wt: &WoTerms) -> f32 {
+        let o = wt.o;
+        let x = wt.t as f32 * (ALBEDO_THETA_POINTS - 1) as f32;
         let i = (x as usize).min(ALBEDO_THETA_POINTS - 2);
         let f = (x - i as f32).clamp(0.0, 1.0);
         let row = &self.albedo[o * ALBEDO_THETA_POINTS..(o + 1) * ALBEDO_THETA_POINTS];
@@ -286,7 +286,7 @@ impl<'a> ScratchedBsdf<'a> {
     fn lobe_wo(&self, l: &ScratchLobe, wo: Vec3) -> LobeWo {
         let wo_s = l.to_scratch(wo);
         let terms = self.table.brdf().wo_terms(wo_s);
-        let (a, scale) = ScratchLobeTable::scale_albedo(self.table.albedo_in_bin(terms.o, wo_s));
+        let (a, scale) = ScratchLobeTable::scale_albedo(self.table.albedo_at(&terms));
         LobeWo { terms, a, scale }
     }
 
