@@ -495,6 +495,9 @@ pub struct ScratchBrdf {
     rows: Vec<Distribution1D>,
     /// `tan` of the inner bin boundaries `-pi/2 + k pi/M`, `k = 1..M-1` (see [`Self::phi_bin`]).
     tan_bounds: Vec<f64>,
+    /// [`Self::phi_bin`]'s first guess: the bin at the lower end of each of `4 M` equal cells
+    /// of `u = x / (z + |x|)` in `[-1, 1]`.
+    phi_guess: Vec<u16>,
     /// The eq. (4) exponent most bins share ([`common_gamma`]), NaN if none is shared widely.
     gamma_common: f64,
     /// `t = 2 |theta| / pi` and `R = t^gamma_common` of eq. (4) on the grid
@@ -561,28 +564,6 @@ pub(crate) fn eq4_r(t: f64, g: f64) -> f64 {
     }
 }
 
-/// `atan(r)` within 2e-5 rad (a minimax polynomial on `[-1, 1]`, reflected outside): only to
-/// guess a bin that [`ScratchBrdf::phi_bin`] then corrects exactly.
-#[inline]
-fn atan_approx(r: f64) -> f64 {
-    let (x, flip) = if r.abs() > 1.0 {
-        (1.0 / r, true)
-    } else {
-        (r, false)
-    };
-    let x2 = x * x;
-    let a = x
-        * (0.999_977_26
-            + x2 * (-0.332_623_47
-                + x2 * (0.193_543_46
-                    + x2 * (-0.116_432_87 + x2 * (0.052_653_32 - 0.011_721_20 * x2)))));
-    if flip {
-        FRAC_PI_2.copysign(x) - a
-    } else {
-        a
-    }
-}
-
 /// `theta = asin(y)` of a unit direction (section 1; its `phi` bin is
 /// [`ScratchBrdf::phi_bin`]).
 #[inline]
@@ -645,6 +626,16 @@ impl ScratchBrdf {
         let tan_bounds = (1..m)
             .map(|k| (-FRAC_PI_2 + k as f64 * PI / m as f64).tan())
             .collect();
+        // `phi = atan2(u, 1 - |u|)` changes by at most 2 du, so a cell of width 1 / (2 M)
+        // spans at most 1 / M < pi / M: its lower end's bin is within one of any point's.
+        let cells = 4 * m;
+        let phi_guess = (0..cells)
+            .map(|c| {
+                let u = -1.0 + 2.0 * c as f64 / cells as f64;
+                let phi = u.atan2(1.0 - u.abs());
+                (((phi + FRAC_PI_2) * (m as f64 / PI)) as usize).min(m - 1) as u16
+            })
+            .collect();
         let gamma_common = common_gamma(&table.gamma);
         let t_grid: Vec<f64> = (0..THETA_GRID)
             .map(|k| {
@@ -662,6 +653,7 @@ impl ScratchBrdf {
             delta,
             rows,
             tan_bounds,
+            phi_guess,
             gamma_common,
             t_grid,
             r_grid,
@@ -717,10 +709,11 @@ impl ScratchBrdf {
     }
 
     /// The `phi` bin of a direction above the surface (`z > 0`), `phi = atan2(x, z)`: the bin
-    /// `k` with `tan(phi_k) <= x/z < tan(phi_k+1)` at its boundaries, found from an approximate
-    /// `atan` and corrected by comparing against the boundaries' tangents (no `atan2`: the
-    /// lookups of eq. (3) and of the sampler run several times per scratched hit). Equal to
-    /// `bin_of(atan2(x, z), M)` but where `atan2` rounds across a boundary.
+    /// `k` with `tan(phi_k) <= x/z < tan(phi_k+1)` at its boundaries, guessed from a table
+    /// over `u = x / (z + |x|)` (a monotone map of `phi`, within one bin) and corrected by
+    /// comparing against the boundaries' tangents (no `atan2`: the lookups of eq. (3) and of
+    /// the sampler run several times per scratched hit). Equal to `bin_of(atan2(x, z), M)`
+    /// but where `atan2` rounds across a boundary; the guess only changes the work.
     #[inline]
     pub fn phi_bin(&self, x: f64, z: f64) -> usize {
         let m = self.table.m;
@@ -729,7 +722,10 @@ impl ScratchBrdf {
             return m / 2;
         }
         let b = &self.tan_bounds; // b[k - 1] = tan(phi_k)
-        let mut k = (((atan_approx(r) + FRAC_PI_2) * (m as f64 / PI)) as usize).min(m - 1);
+        let cells = self.phi_guess.len();
+        let u = x / (z + x.abs());
+        let c = (((u + 1.0) * (cells as f64 / 2.0)) as usize).min(cells - 1);
+        let mut k = self.phi_guess[c] as usize;
         while k > 0 && r < b[k - 1] {
             k -= 1;
         }
