@@ -184,8 +184,8 @@ impl Material {
         }
     }
 
-    /// Whether the material's BSDF reads `ShadingContext::u_layer` (only the scratched
-    /// material does): the integrator draws that random number only then.
+    /// Whether the material's BSDF may read `ShadingContext::u_layer` (only the scratched
+    /// material does). The render loop asks the finer [`Material::reads_hit_context`].
     #[inline]
     pub fn reads_layer_choice(&self) -> bool {
         matches!(self, Material::Scratched(_))

@@ -573,6 +573,7 @@ impl ScratchedMaterial {
     }
 
     /// The BSDF at a hit (see the module notes).
+    #[inline(always)]
     pub fn bsdf(&self, ctx: &ShadingContext) -> Bsdf<'_> {
         let Some(p) = self.prepared.as_deref() else {
             return self.base_bsdf();
@@ -669,7 +670,7 @@ impl ScratchedMaterial {
             }
         };
         // The integrator evaluates and samples it with `wo` in this frame: precompute the
-        // lobes' `wo` terms once (`ScratchedBsdf::at_wo`; the same results bit for bit).
+        // first lobe's `wo` terms once (`ScratchedBsdf::at_wo`; the same results bit for bit).
         Bsdf::Scratched(
             ScratchedBsdf::new(p.base, &p.table, p.tint, &lobes[..count])
                 .at_wo(ctx.frame.to_local(ctx.wo)),

@@ -124,14 +124,14 @@ impl ScratchLobeTable {
         if wo.z <= 0.0 {
             return 0.0;
         }
-        self.albedo_in_bin(self.brdf.phi_bin(wo.x as f64, wo.z as f64), wo)
+        self.albedo_at(&self.brdf.wo_terms(wo))
     }
 
-    /// [`Self::albedo`] for `wo.z > 0` whose `phi_o` bin `o` is known.
+    /// [`Self::albedo`] from the table's `wo` terms (`phi_o` bin, `t = 2 |theta_o| / pi`).
     #[inline]
-    fn albedo_in_bin(&self, o: usize, wo: Vec3) -> f32 {
-        let theta = (wo.y.clamp(-1.0, 1.0)).asin().abs();
-        let x = theta * ((ALBEDO_THETA_POINTS - 1) as f32 / std::f32::consts::FRAC_PI_2);
+    fn albedo_at(&self, wt: &WoTerms) -> f32 {
+        let o = wt.o;
+        let x = wt.t as f32 * (ALBEDO_THETA_POINTS - 1) as f32;
         let i = (x as usize).min(ALBEDO_THETA_POINTS - 2);
         let f = (x - i as f32).clamp(0.0, 1.0);
         let row = &self.albedo[o * ALBEDO_THETA_POINTS..(o + 1) * ALBEDO_THETA_POINTS];
@@ -216,13 +216,15 @@ pub struct ScratchedBsdf<'a> {
     count: u8,
     /// `C = sum_k c_k <= 1`.
     total: f32,
-    /// Whether `cache` holds the lobes' [`LobeWo`] for the `wo` whose bits are `wo_bits`
-    /// ([`ScratchedBsdf::at_wo`]). A hit evaluates, light-samples and samples one `wo`, so
-    /// its `phi_o` bin, `asin`, albedo and eq. (4)'s `powf` are computed once instead of in
-    /// each of those lookups (4-8 times); another `wo` is computed afresh, to the same bits.
+    /// Whether `cache` holds the first lobe's [`LobeWo`] for the `wo` whose bits are
+    /// `wo_bits` ([`ScratchedBsdf::at_wo`]). A hit evaluates, light-samples and samples one
+    /// `wo`, so its `phi_o` bin, `asin`, albedo and eq. (4)'s `powf` are computed once instead
+    /// of in each of those lookups (4-8 times); another `wo`, and the other lobes of `sum`
+    /// mode, are computed afresh, to the same bits. (One lobe only: the BSDF is returned and
+    /// moved by value at every hit, so it is kept small; `max` mode has one lobe.)
     cached: bool,
     wo_bits: [u32; 3],
-    cache: [LobeWo; MAX_SCRATCH_LOBES],
+    cache: LobeWo,
 }
 
 impl<'a> ScratchedBsdf<'a> {
@@ -262,7 +264,7 @@ impl<'a> ScratchedBsdf<'a> {
             total,
             cached: false,
             wo_bits: [0; 3],
-            cache: [LobeWo::default(); MAX_SCRATCH_LOBES],
+            cache: LobeWo::default(),
         }
     }
 
@@ -271,10 +273,8 @@ impl<'a> ScratchedBsdf<'a> {
     /// with another `wo` computes them afresh.
     #[inline]
     pub fn at_wo(mut self, wo: Vec3) -> Self {
-        if wo.z > 0.0 {
-            for k in 0..self.count as usize {
-                self.cache[k] = self.lobe_wo(&self.lobes[k], wo);
-            }
+        if wo.z > 0.0 && self.count > 0 {
+            self.cache = self.lobe_wo(&self.lobes[0], wo);
             self.cached = true;
             self.wo_bits = wo.to_array().map(f32::to_bits);
         }
@@ -286,15 +286,15 @@ impl<'a> ScratchedBsdf<'a> {
     fn lobe_wo(&self, l: &ScratchLobe, wo: Vec3) -> LobeWo {
         let wo_s = l.to_scratch(wo);
         let terms = self.table.brdf().wo_terms(wo_s);
-        let (a, scale) = ScratchLobeTable::scale_albedo(self.table.albedo_in_bin(terms.o, wo_s));
+        let (a, scale) = ScratchLobeTable::scale_albedo(self.table.albedo_at(&terms));
         LobeWo { terms, a, scale }
     }
 
-    /// [`LobeWo`] of lobe `k` for `wo.z > 0`: the cached one if `wo` is the cached direction.
+    /// [`LobeWo`] of lobe `k` for `wo.z > 0`: the cached one for lobe 0 and the cached `wo`.
     #[inline]
     fn terms(&self, k: usize, wo: Vec3) -> LobeWo {
-        if self.cached && wo.to_array().map(f32::to_bits) == self.wo_bits {
-            self.cache[k]
+        if k == 0 && self.cached && wo.to_array().map(f32::to_bits) == self.wo_bits {
+            self.cache
         } else {
             self.lobe_wo(&self.lobes[k], wo)
         }
