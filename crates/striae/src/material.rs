@@ -184,13 +184,6 @@ impl Material {
         }
     }
 
-    /// Whether the material's BSDF may read `ShadingContext::u_layer` (only the scratched
-    /// material does). The render loop asks the finer [`Material::reads_hit_context`].
-    #[inline]
-    pub fn reads_layer_choice(&self) -> bool {
-        matches!(self, Material::Scratched(_))
-    }
-
     /// Whether the BSDF at a hit seen from `wo` (world, toward the viewer) with geometric
     /// normal `ng` reads the footprint's `duvdx`, `duvdy` and `u_layer`: the scratched
     /// material's, except glass seen from inside (its smooth base). The integrator computes
