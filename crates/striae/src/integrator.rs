@@ -69,6 +69,14 @@ impl RenderStats {
     }
 }
 
+/// What every pixel of one render shares: the render's id ([`PrimaryHit::render`]) and whether
+/// paths carry ray differentials (only when a material reads the footprint).
+#[derive(Clone, Copy)]
+struct Pass {
+    id: u64,
+    differentials: bool,
+}
+
 /// Per-thread counters, summed at the end of a tile.
 #[derive(Default)]
 struct Counters {
@@ -289,8 +297,10 @@ pub fn render_with(
     let rays = AtomicU64::new(0);
     let nonfinite = AtomicU64::new(0);
     let spp = scene.settings.spp;
-    let differentials = scene.materials.iter().any(Material::reads_footprint);
-    let render_id = NEXT_RENDER.fetch_add(1, Ordering::Relaxed);
+    let pass = Pass {
+        id: NEXT_RENDER.fetch_add(1, Ordering::Relaxed),
+        differentials: scene.materials.iter().any(Material::reads_footprint),
+    };
     let tiles: Vec<(u32, Vec<Rgb>)> = (0..tiles_x * tiles_y)
         .into_par_iter()
         .map(|tile| {
@@ -298,13 +308,7 @@ pub fn render_with(
             let (x0, y0) = (tx * TILE, ty * TILE);
             let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
             let mut counters = Counters::default();
-            let out = render_tile(
-                scene,
-                [x0, y0, x1, y1],
-                (render_id, differentials),
-                wide,
-                &mut counters,
-            );
+            let out = render_tile(scene, [x0, y0, x1, y1], pass, wide, &mut counters);
             rays.fetch_add(counters.rays, Ordering::Relaxed);
             nonfinite.fetch_add(counters.nonfinite, Ordering::Relaxed);
             progress(out.len() as u64 * spp as u64);
@@ -339,17 +343,17 @@ pub fn render_with(
 fn render_tile(
     scene: &Scene,
     rect: [u32; 4],
-    differentials: (u64, bool),
+    pass: Pass,
     wide: bool,
     counters: &mut Counters,
 ) -> Vec<Rgb> {
     #[cfg(target_arch = "x86_64")]
     if wide && wide_simd_available() {
         // SAFETY: the CPU supports the features `render_tile_avx2` is compiled for.
-        return unsafe { render_tile_avx2(scene, rect, differentials, counters) };
+        return unsafe { render_tile_avx2(scene, rect, pass, counters) };
     }
     let _ = wide;
-    render_tile_body(scene, rect, differentials, counters)
+    render_tile_body(scene, rect, pass, counters)
 }
 
 /// Whether this CPU runs the AVX2 + FMA copy of the render loop.
@@ -374,39 +378,31 @@ fn wide_simd_available() -> bool {
 unsafe fn render_tile_avx2(
     scene: &Scene,
     rect: [u32; 4],
-    differentials: (u64, bool),
+    pass: Pass,
     counters: &mut Counters,
 ) -> Vec<Rgb> {
-    render_tile_body(scene, rect, differentials, counters)
+    render_tile_body(scene, rect, pass, counters)
 }
 
 #[inline(always)]
 fn render_tile_body(
     scene: &Scene,
     [x0, y0, x1, y1]: [u32; 4],
-    differentials: (u64, bool),
+    pass: Pass,
     counters: &mut Counters,
 ) -> Vec<Rgb> {
     let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
     for y in y0..y1 {
         for x in x0..x1 {
-            out.push(render_pixel(scene, x, y, differentials, counters));
+            out.push(render_pixel(scene, x, y, pass, counters));
         }
     }
     out
 }
 
 /// The mean of `spp` samples of pixel `(x, y)` (box filter: uniform positions in the pixel).
-/// `(render, differentials)`: the render's id, and whether to carry ray differentials (only
-/// needed when a material reads the footprint).
 #[inline(always)]
-fn render_pixel(
-    scene: &Scene,
-    x: u32,
-    y: u32,
-    (render, differentials): (u64, bool),
-    counters: &mut Counters,
-) -> Rgb {
+fn render_pixel(scene: &Scene, x: u32, y: u32, pass: Pass, counters: &mut Counters) -> Rgb {
     let (w, _) = scene.camera.resolution();
     let pixel_index = y as u64 * w as u64 + x as u64;
     let spp = scene.settings.spp;
@@ -416,9 +412,9 @@ fn render_pixel(
         let in_pixel = sampler.next_2d();
         let film = Vec2::new(x as f32, y as f32) + in_pixel;
         let u_lens = sampler.next_2d();
-        let l = if differentials {
+        let l = if pass.differentials {
             let (ray, rd) = scene.camera.generate_ray(film, u_lens);
-            let pixel = (render, pixel_index, in_pixel - Vec2::splat(0.5));
+            let pixel = (pass.id, pixel_index, in_pixel - Vec2::splat(0.5));
             radiance::<true>(scene, ray, rd, pixel, &mut sampler, counters)
         } else {
             let ray = scene.camera.generate_ray_only(film, u_lens);
@@ -432,7 +428,7 @@ fn render_pixel(
                 scene,
                 ray,
                 rd,
-                (render, pixel_index, Vec2::ZERO),
+                (pass.id, pixel_index, Vec2::ZERO),
                 &mut sampler,
                 counters,
             )

@@ -44,6 +44,7 @@ use crate::bsdf::{
 };
 use crate::fresnel::FresnelLaw;
 use crate::layers::lattice::{PixelKey, TileQuery};
+use crate::layers::layer::MAX_FOOTPRINT_CELLS;
 use crate::layers::{LayerError, LayerParams, LayerSet, MAX_LAYERS};
 use crate::material::{Material, MaterialError};
 use crate::math::{Rgb, Vec3};
@@ -583,40 +584,37 @@ impl ScratchedMaterial {
         }
         let k = p.layers.len();
         let mut cov = [0.0f32; MAX_LAYERS];
+        let query = match p.mix {
+            LayerMix::Max => TileQuery::Max,
+            LayerMix::Sum => TileQuery::All,
+        };
         match p.coverage {
-            CoverageMode::Footprint => {
-                let query = match p.mix {
-                    LayerMix::Max => TileQuery::Max,
-                    LayerMix::Sum => TileQuery::All,
-                };
-                match ctx.primary {
-                    Some(hit) => p.layers.coverage_of_pixel(
-                        ctx.uv,
-                        ctx.duvdx,
-                        ctx.duvdy,
-                        PixelKey {
-                            render: hit.render,
-                            pixel: hit.pixel,
-                            shape: hit.shape,
-                        },
-                        hit.offset,
-                        query,
-                        &mut cov[..k],
-                    ),
-                    None => {
-                        p.layers
-                            .coverage_tiled(ctx.uv, ctx.duvdx, ctx.duvdy, query, &mut cov[..k])
-                    }
-                }
-            }
-            CoverageMode::Sample => match p.mix {
-                LayerMix::Max => p
+            CoverageMode::Footprint => match ctx.primary {
+                Some(hit) => p.layers.coverage_of_pixel(
+                    ctx.uv,
+                    ctx.duvdx,
+                    ctx.duvdy,
+                    PixelKey {
+                        render: hit.render,
+                        pixel: hit.pixel,
+                        shape: hit.shape,
+                    },
+                    hit.offset,
+                    query,
+                    &mut cov[..k],
+                ),
+                None => p
                     .layers
-                    .coverage_max(ctx.uv, ctx.duvdx, ctx.duvdy, &mut cov[..k]),
-                LayerMix::Sum => p
-                    .layers
-                    .coverage_all(ctx.uv, ctx.duvdx, ctx.duvdy, &mut cov[..k]),
+                    .coverage_tiled(ctx.uv, ctx.duvdx, ctx.duvdy, query, &mut cov[..k]),
             },
+            CoverageMode::Sample => p.layers.coverage_query(
+                query,
+                ctx.uv,
+                ctx.duvdx,
+                ctx.duvdy,
+                MAX_FOOTPRINT_CELLS,
+                &mut cov[..k],
+            ),
             CoverageMode::Point => {
                 let mask = p.layers.scratched_mask(ctx.uv);
                 if mask == 0 {

@@ -24,6 +24,7 @@
 //! Determinism: a tile's value depends only on its key, never on which sample or thread
 //! computed it first, so images stay bit-identical for any thread count.
 
+use super::layer::MAX_FOOTPRINT_CELLS;
 use super::LayerSet;
 use crate::math::Vec2;
 use glam::DVec2;
@@ -208,6 +209,24 @@ pub fn clear_cache() {
 }
 
 impl LayerSet {
+    /// [`Self::coverage_all_within`] or [`Self::coverage_max_within`], as `query` asks.
+    /// # Panics
+    /// If `out.len() < len()`.
+    pub fn coverage_query(
+        &self,
+        query: TileQuery,
+        uv: Vec2,
+        duvdx: Vec2,
+        duvdy: Vec2,
+        max_cells: usize,
+        out: &mut [f32],
+    ) {
+        match query {
+            TileQuery::All => self.coverage_all_within(uv, duvdx, duvdy, max_cells, out),
+            TileQuery::Max => self.coverage_max_within(uv, duvdx, duvdy, max_cells, out),
+        }
+    }
+
     /// The per-layer coverage of a whole pixel's footprint, for the first hit of a camera ray
     /// through `pixel` (on its shape, in its render), `offset` (pixels) from the pixel's
     /// centre: the exact coverage ([`Self::coverage_max`] or [`Self::coverage_all`] per
@@ -265,22 +284,7 @@ impl LayerSet {
                 }
                 _ => {
                     let mut values = [0.0f32; CACHED_LAYERS];
-                    match query {
-                        TileQuery::All => self.coverage_all_within(
-                            centre,
-                            duvdx,
-                            duvdy,
-                            TILE_MAX_CELLS,
-                            &mut values[..n],
-                        ),
-                        TileQuery::Max => self.coverage_max_within(
-                            centre,
-                            duvdx,
-                            duvdy,
-                            TILE_MAX_CELLS,
-                            &mut values[..n],
-                        ),
-                    }
+                    self.coverage_query(query, centre, duvdx, duvdy, TILE_MAX_CELLS, &mut values);
                     out[..n].copy_from_slice(&values[..n]);
                     *entry = Some(PixelEntry {
                         key,
@@ -316,10 +320,7 @@ impl LayerSet {
         let n = self.len();
         let tile = FootprintTile::containing(uv, duvdx, duvdy).filter(|_| n <= CACHED_LAYERS);
         let Some(tile) = tile else {
-            match query {
-                TileQuery::All => self.coverage_all(uv, duvdx, duvdy, out),
-                TileQuery::Max => self.coverage_max(uv, duvdx, duvdy, out),
-            }
+            self.coverage_query(query, uv, duvdx, duvdy, MAX_FOOTPRINT_CELLS, out);
             return;
         };
         let key = [
@@ -347,11 +348,7 @@ impl LayerSet {
             // (Compared field by field: `!=` on the array compiled to a `memcmp` call.)
             if !entry.key.iter().zip(&key).all(|(a, b)| a == b) {
                 let (c, a, b) = (tile.centre.as_vec2(), tile.a.as_vec2(), tile.b.as_vec2());
-                let values = &mut entry.values[..n];
-                match query {
-                    TileQuery::All => self.coverage_all_within(c, a, b, TILE_MAX_CELLS, values),
-                    TileQuery::Max => self.coverage_max_within(c, a, b, TILE_MAX_CELLS, values),
-                }
+                self.coverage_query(query, c, a, b, TILE_MAX_CELLS, &mut entry.values);
                 entry.key = key;
             }
             out[..n].copy_from_slice(&entry.values[..n]);

@@ -691,15 +691,7 @@ fn footprint_tiles_contain_their_hits_and_cache_their_exact_coverage() {
             for _ in 0..2 {
                 set.coverage_tiled(uv, a, b, query, &mut tiled);
                 let (c, ta, tb) = (tile.centre.as_vec2(), tile.a.as_vec2(), tile.b.as_vec2());
-                let cells = lattice::TILE_MAX_CELLS;
-                match query {
-                    lattice::TileQuery::Max => {
-                        set.coverage_max_within(c, ta, tb, cells, &mut direct)
-                    }
-                    lattice::TileQuery::All => {
-                        set.coverage_all_within(c, ta, tb, cells, &mut direct)
-                    }
-                }
+                set.coverage_query(query, c, ta, tb, lattice::TILE_MAX_CELLS, &mut direct);
                 assert_eq!(tiled, direct);
             }
         }
@@ -729,9 +721,8 @@ fn pixel_footprint_coverage_is_the_exact_coverage_of_the_pixel_centre() {
             shape,
         };
         for query in [lattice::TileQuery::Max, lattice::TileQuery::All] {
-            let exact = |set: &LayerSet, c: Vec2, out: &mut [f32]| match query {
-                lattice::TileQuery::Max => set.coverage_max_within(c, a, b, cells, out),
-                lattice::TileQuery::All => set.coverage_all_within(c, a, b, cells, out),
+            let exact = |set: &LayerSet, c: Vec2, out: &mut [f32]| {
+                set.coverage_query(query, c, a, b, cells, out)
             };
             // The first hit, a quarter pixel right of the centre.
             let offset = Vec2::new(0.25, -0.125);
