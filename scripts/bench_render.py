@@ -6,6 +6,8 @@ for each Mitsuba variant, all at the same spp and resolution, and prints per ren
 median samples/s (as each renderer reports it: render time including writing the EXR for
 Mitsuba, the render loop for striae), the median CPU time (user + sys, from /usr/bin/time) and
 the CPU samples/s. Interleaving spreads the load of a shared machine over all renderers.
+striae runs once per `--samplers` kind (default: its Sobol sampler and the `independent` one
+that the Mitsuba scene uses, so one row compares equal samplers).
 
     DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM-19.so \\
     python3 scripts/bench_render.py scenes/glass-teapot.toml --spp 64 --rounds 3 \\
@@ -40,6 +42,8 @@ def main():
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--striae", nargs="+", default=[os.path.join(HERE, "..", "target", "release", "striae")])
     ap.add_argument("--variants", nargs="*", default=["scalar_rgb", "llvm_ad_rgb"])
+    ap.add_argument("--samplers", nargs="+", default=["sobol", "independent"],
+                    help="striae's render.sampler kinds to run (Mitsuba always uses `independent`)")
     a = ap.parse_args()
     tmp = tempfile.mkdtemp()
     w, h = (int(x) for x in a.res.split("x"))
@@ -47,10 +51,11 @@ def main():
     runs = {}
     for r in range(a.rounds):
         for b in a.striae:
-            out, cpu = timed([b, "render", a.scene, "--spp", str(a.spp), "--res", a.res, "-q",
-                              "-o", os.path.join(tmp, "st")])
-            m = re.search(r"done in ([0-9.]+) s: ([0-9.]+) M samples/s, ([0-9.]+) M rays/s", out)
-            runs.setdefault(f"striae {b}", []).append((float(m[2]), float(m[3]), cpu))
+            for sampler in a.samplers:
+                out, cpu = timed([b, "render", a.scene, "--spp", str(a.spp), "--res", a.res, "-q",
+                                  "--sampler", sampler, "-o", os.path.join(tmp, "st")])
+                m = re.search(r"done in ([0-9.]+) s: ([0-9.]+) M samples/s, ([0-9.]+) M rays/s", out)
+                runs.setdefault(f"striae {b} ({sampler})", []).append((float(m[2]), float(m[3]), cpu))
         for v in a.variants:
             out, cpu = timed([sys.executable, os.path.join(HERE, "mitsuba_scene.py"), a.scene, "-o",
                               os.path.join(tmp, f"mi_{v}.exr"), "--spp", str(a.spp), "--variant", v,

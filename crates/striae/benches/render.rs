@@ -21,6 +21,7 @@ fn bench_render(c: &mut Criterion) {
             resolution: Some((w, h)),
             seed: Some(0),
             max_depth: None,
+            sampler: None,
         };
         let scene = Scene::parse(
             striae::scene::DEFAULT_SCENE,
@@ -40,6 +41,7 @@ fn bench_render(c: &mut Criterion) {
         resolution: Some((128, 96)),
         seed: Some(0),
         max_depth: None,
+        sampler: None,
     };
     let smooth = Scene::parse(
         include_str!("../../../scenes/glass-teapot.toml"),

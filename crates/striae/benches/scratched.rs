@@ -48,6 +48,7 @@ fn bench(c: &mut Criterion) {
         resolution: Some((128, 96)),
         seed: Some(1),
         max_depth: None,
+        sampler: None,
     };
     let mut g = c.benchmark_group("scratched");
     g.sample_size(10);

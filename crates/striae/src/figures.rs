@@ -181,6 +181,7 @@ pub fn generate(
         resolution: Some(opts.resolution),
         seed: None,
         max_depth: None,
+        sampler: None,
     };
     let mut figures = Vec::new();
 
@@ -412,6 +413,7 @@ mod tests {
                 resolution: Some((8, 6)),
                 seed: None,
                 max_depth: None,
+                sampler: None,
             };
             let scene = Scene::parse(text, Path::new(name), Path::new("."), &o)
                 .unwrap_or_else(|e| panic!("{name}: {e}"));

@@ -408,7 +408,8 @@ fn render_pixel(scene: &Scene, x: u32, y: u32, pass: Pass, counters: &mut Counte
     let spp = scene.settings.spp;
     let mut sum = Rgb::ZERO;
     for s in 0..spp {
-        let mut sampler = PixelSampler::new(pixel_index, s, scene.settings.seed);
+        let mut sampler =
+            PixelSampler::with_kind(scene.settings.sampler, pixel_index, s, scene.settings.seed);
         let in_pixel = sampler.next_2d();
         let film = Vec2::new(x as f32, y as f32) + in_pixel;
         let u_lens = sampler.next_2d();

@@ -91,15 +91,25 @@ fn white_furnace_fails_for_a_lossy_material() {
 
 #[test]
 fn diffuse_plane_under_constant_sky_is_albedo_times_radiance() {
-    // pixel = a L for a Lambertian plane of albedo a seeing only a sky of radiance L
-    // (NEE of the environment + BSDF sampling, combined by MIS).
-    let s = scene(
+    assert_diffuse_plane_under_constant_sky("sobol");
+}
+
+#[test]
+fn independent_sampler_gives_the_same_expectation() {
+    assert_diffuse_plane_under_constant_sky("independent");
+}
+
+/// pixel = a L for a Lambertian plane of albedo a seeing only a sky of radiance L (NEE of the
+/// environment + BSDF sampling, combined by MIS), with the given `render.sampler`.
+fn assert_diffuse_plane_under_constant_sky(sampler: &str) {
+    let s = scene(&format!(
         r#"
 [render]
 width = 32
 height = 32
 spp = 16
 max_depth = 2
+sampler = "{sampler}"
 [camera]
 position = [0, 3, 1]
 look_at = [0, 0, 0]
@@ -110,19 +120,19 @@ reflectance = [0.5, 0.25, 0.8]
 [[shapes]]
 type = "rectangle"
 material = "plane"
-transform = [{ scale = 50 }, { rotate = { axis = [1, 0, 0], angle = -90 } }]
+transform = [{{ scale = 50 }}, {{ rotate = {{ axis = [1, 0, 0], angle = -90 }} }}]
 [environment]
 type = "constant"
 radiance = [2, 2, 1]
-"#,
-    );
+"#
+    ));
     let (img, stats) = render_with_threads(&s, 2);
     assert_eq!(stats.samples, 32 * 32 * 16);
     for (c, expected) in [(0, 1.0), (1, 0.5), (2, 0.8)] {
         let m = centre_mean(&img, 1.0, c);
         assert!(
             m.agrees_with(expected, 4.0, 1e-3),
-            "channel {c}: {} +- {} vs {expected}",
+            "{sampler}, channel {c}: {} +- {} vs {expected}",
             m.mean(),
             m.std_error()
         );
@@ -204,6 +214,7 @@ fn image_is_bit_identical_across_thread_counts() {
         resolution: Some((40, 30)),
         seed: Some(7),
         max_depth: None,
+        sampler: None,
     };
     let s = Scene::parse(text, Path::new("default.toml"), Path::new("."), &o).unwrap();
     let a = assert_bit_identical_across_thread_counts(&s);
@@ -212,6 +223,14 @@ fn image_is_bit_identical_across_thread_counts() {
     let s2 = Scene::parse(text, Path::new("default.toml"), Path::new("."), &o2).unwrap();
     let (c, _) = render_with_threads(&s2, 2);
     assert_ne!(a.pixels, c.pixels);
+    // The independent sampler too, and its image is not the Sobol one.
+    let o3 = Overrides {
+        sampler: Some(striae::sampler::SamplerKind::Independent),
+        ..o
+    };
+    let s3 = Scene::parse(text, Path::new("default.toml"), Path::new("."), &o3).unwrap();
+    let d = assert_bit_identical_across_thread_counts(&s3);
+    assert_ne!(a.pixels, d.pixels);
 }
 
 #[test]
@@ -269,6 +288,7 @@ fn simd_and_portable_render_loops_give_the_same_image() {
         resolution: Some((32, 24)),
         seed: Some(3),
         max_depth: None,
+        sampler: None,
     };
     for text in [striae::scene::DEFAULT_SCENE, rough] {
         let s = Scene::parse(text, Path::new("t.toml"), Path::new("."), &o).unwrap();
@@ -312,6 +332,12 @@ fn bad_scene_files_give_clear_errors() {
     // Out-of-range value.
     let msg = parse_err(&format!("{CAMERA}[render]\nspp = 0\n"));
     assert!(msg.contains("render.spp") && msg.contains('0'), "{msg}");
+    // Unknown sampler.
+    let msg = parse_err(&format!("{CAMERA}[render]\nsampler = \"halton\"\n"));
+    assert!(
+        msg.contains("render.sampler") && msg.contains("halton") && msg.contains("independent"),
+        "{msg}"
+    );
     // Unknown shape type.
     let msg = parse_err(&format!(
         "{CAMERA}[[shapes]]\ntype = \"torus\"\nemission = 1\n"

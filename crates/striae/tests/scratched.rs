@@ -244,6 +244,7 @@ fn scratched_renders_are_bit_identical_across_thread_counts() {
         resolution: Some((40, 40)),
         seed: Some(3),
         max_depth: None,
+        sampler: None,
     };
     let s = Scene::parse(PLATE, Path::new("plate.toml"), Path::new("."), &o).unwrap();
     let a = assert_bit_identical_across_thread_counts(&s);
@@ -274,6 +275,7 @@ fn pixel_footprint_coverage_equals_supersampled_point_coverage() {
             resolution: Some((48, 48)),
             seed: Some(seed),
             max_depth: None,
+            sampler: None,
         };
         let s = Scene::parse(&text, Path::new("plate.toml"), Path::new("."), &o).unwrap();
         render_with_threads(&s, 2).0

@@ -6,6 +6,7 @@
 use anyhow::{bail, Context};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
+use striae::sampler::SamplerKind;
 use striae::scene::{Overrides, Scene};
 
 #[derive(clap::Args)]
@@ -27,6 +28,10 @@ pub struct Args {
     /// Longest path in segments, Mitsuba's convention; 0 = unlimited (overrides `render.max_depth`).
     #[arg(long)]
     pub max_depth: Option<u32>,
+    /// Random numbers: `sobol` (Owen-scrambled Sobol points) or `independent` (overrides
+    /// `render.sampler`).
+    #[arg(long, value_parser = parse_sampler)]
+    pub sampler: Option<SamplerKind>,
     /// PNG preview exposure in stops (overrides `render.exposure`).
     #[arg(long, allow_hyphen_values = true)]
     pub exposure: Option<f32>,
@@ -42,6 +47,10 @@ pub struct Args {
     /// No progress bar.
     #[arg(long, short = 'q')]
     pub quiet: bool,
+}
+
+fn parse_sampler(s: &str) -> Result<SamplerKind, String> {
+    SamplerKind::from_name(s).ok_or_else(|| format!("`{s}` is not `sobol` or `independent`"))
 }
 
 pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
@@ -89,6 +98,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         resolution: args.res,
         seed: args.seed,
         max_depth: args.max_depth,
+        sampler: args.sampler,
     };
     let mut scene = match &args.scene {
         Some(path) => Scene::load(path, &overrides).context("cannot load the scene")?,

@@ -59,6 +59,9 @@ pub struct RenderSection {
     pub seed: u64,
     #[serde(default)]
     pub exposure: f32,
+    /// `"sobol"` (default) or `"independent"` (`sampler::SamplerKind`).
+    #[serde(default = "default_sampler")]
+    pub sampler: String,
 }
 
 fn default_width() -> u32 {
@@ -76,6 +79,9 @@ fn default_max_depth() -> u32 {
 fn default_rr_depth() -> u32 {
     5
 }
+fn default_sampler() -> String {
+    "sobol".into()
+}
 
 impl Default for RenderSection {
     fn default() -> Self {
@@ -87,6 +93,7 @@ impl Default for RenderSection {
             rr_depth: default_rr_depth(),
             seed: 0,
             exposure: 0.0,
+            sampler: default_sampler(),
         }
     }
 }

@@ -19,6 +19,7 @@ use crate::geometry::{Geometry, Shape, ShapeGeometry, TriangleMesh};
 use crate::lights::{Environment, Light};
 use crate::material::Material;
 use crate::math::Vec3;
+use crate::sampler::SamplerKind;
 use crate::shading::ShadingContext;
 use file::{EnvironmentType, LightType, SceneFile, ShapeSection, ShapeType};
 use std::path::{Path, PathBuf};
@@ -45,6 +46,8 @@ pub struct RenderSettings {
     pub seed: u64,
     /// PNG preview exposure in stops.
     pub exposure: f32,
+    /// The random numbers' kind.
+    pub sampler: SamplerKind,
 }
 
 /// Command-line values that replace the scene file's.
@@ -54,6 +57,7 @@ pub struct Overrides {
     pub resolution: Option<(u32, u32)>,
     pub seed: Option<u64>,
     pub max_depth: Option<u32>,
+    pub sampler: Option<SamplerKind>,
 }
 
 /// What can be wrong with a scene.
@@ -157,6 +161,17 @@ fn invalid(
 fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene, SceneError> {
     let r = &f.render;
     let (width, height) = o.resolution.unwrap_or((r.width, r.height));
+    let sampler = match o.sampler {
+        Some(kind) => kind,
+        None => SamplerKind::from_name(&r.sampler).ok_or_else(|| {
+            invalid(
+                file,
+                "render.sampler",
+                &r.sampler,
+                "must be \"sobol\" or \"independent\"",
+            )
+        })?,
+    };
     let settings = RenderSettings {
         width,
         height,
@@ -165,6 +180,7 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
         rr_depth: r.rr_depth,
         seed: o.seed.unwrap_or(r.seed),
         exposure: r.exposure,
+        sampler,
     };
     if settings.spp == 0 || settings.spp > crate::sampler::MAX_SPP {
         return Err(invalid(
