@@ -75,6 +75,10 @@ pub struct PixelSampler {
     seed: u32,
     /// The independent sampler's key of this pixel and sample (dimension 0).
     key: u64,
+    /// The Sobol sampler's shuffled (Owen-scrambled, bit-reversed) sample index: the first step
+    /// of `sobol_burley::sample_4d`, which depends on the seed and the sample only, so it is
+    /// computed once per sample instead of once per 4-dimension set.
+    shuffled_rev_index: u32,
     sample_index: u32,
     dimension: u32,
     /// The last 4-dimension set drawn (`dimension / 4`, `u32::MAX` for none) and its values:
@@ -102,6 +106,7 @@ impl PixelSampler {
             // Sample `i`'s dimensions are the keys `key + d`: distinct samples of a pixel
             // start 2^32 apart, far beyond any dimension a path reads.
             key: pixel_seed.wrapping_add((sample_index as u64) << 32),
+            shuffled_rev_index: shuffle_rev_index(sample_index, pixel_seed as u32),
             sample_index,
             dimension: 0,
             cached_set: u32::MAX,
@@ -135,12 +140,12 @@ impl PixelSampler {
         if set != self.cached_set {
             // `NUM_DIMENSIONS` is a multiple of 4, so a set never straddles the wrap.
             let n = sobol_burley::NUM_DIMENSIONS;
-            let seed = if d < n {
-                self.seed
+            self.cached = if d < n {
+                sobol_set(self.shuffled_rev_index, set, self.seed)
             } else {
-                mix64(self.seed as u64 ^ ((d / n) as u64) << 32) as u32
+                let seed = mix64(self.seed as u64 ^ ((d / n) as u64) << 32) as u32;
+                sobol_burley::sample_4d(self.sample_index, (d % n) / 4, seed)
             };
-            self.cached = sobol_burley::sample_4d(self.sample_index, (d % n) / 4, seed);
             self.cached_set = set;
         }
         self.cached[(d % 4) as usize]
@@ -153,6 +158,30 @@ impl PixelSampler {
         let y = self.next_1d();
         Vec2::new(x, y)
     }
+}
+
+/// The index shuffle of `sobol_burley::sample_4d` (its first step, verbatim).
+#[inline]
+fn shuffle_rev_index(sample_index: u32, seed: u32) -> u32 {
+    use sobol_burley::parts::{hash, owen_scramble_rev};
+    owen_scramble_rev(sample_index.reverse_bits(), hash(seed ^ 0x79c68e4a))
+}
+
+/// The rest of `sobol_burley::sample_4d(sample_index, set, seed)` given
+/// `shuffle_rev_index(sample_index, seed)`: the same operations, so the same bits (test
+/// `cached_4d_sets_equal_single_dimensions`).
+#[inline]
+fn sobol_set(shuffled_rev_index: u32, set: u32, seed: u32) -> [f32; 4] {
+    use sobol_burley::parts::{hash_int4, owen_scramble_int4_rev, sobol_int4_rev, Int4};
+    let sobol = sobol_int4_rev(shuffled_rev_index, set);
+    let scramble: Int4 = {
+        let seed: Int4 = [seed.wrapping_mul(0x9c8f2d3b); 4].into();
+        let set: Int4 = [set; 4].into();
+        seed ^ set ^ [0x912f69ba, 0x174f18ab, 0x691e72ca, 0xb40cc1b8].into()
+    };
+    owen_scramble_int4_rev(sobol, hash_int4(scramble))
+        .reverse_bits()
+        .to_f32_norm()
 }
 
 #[cfg(test)]
