@@ -177,8 +177,35 @@ pub struct Prepared {
     pub tint: Rgb,
     pub table: Arc<ScratchLobeTable>,
     pub layers: LayerSet,
+    /// Each layer's scratch direction `d_k` in texture space ([`LayerSet::direction`]), as `f32`,
+    /// computed once here rather than with a `sin_cos` per hit.
+    directions: Vec<[f32; 2]>,
     pub mix: LayerMix,
     pub coverage: CoverageMode,
+}
+
+impl Prepared {
+    fn new(
+        base: ScratchedBase,
+        tint: Rgb,
+        table: Arc<ScratchLobeTable>,
+        layers: LayerSet,
+        mix: LayerMix,
+        coverage: CoverageMode,
+    ) -> Prepared {
+        let directions = (0..layers.len())
+            .map(|k| layers.direction(k).map(|x| x as f32))
+            .collect();
+        Prepared {
+            base,
+            tint,
+            table,
+            layers,
+            directions,
+            mix,
+            coverage,
+        }
+    }
 }
 
 impl std::fmt::Debug for Prepared {
@@ -480,14 +507,9 @@ impl ScratchedMaterial {
             source: Box::new(e),
         })?;
         let layers = LayerSet::new(r.layers, r.layer_seed).map_err(layer_error)?;
-        self.prepared = Some(Arc::new(Prepared {
-            base: r.base,
-            tint: r.tint,
-            table,
-            layers,
-            mix: r.mix,
-            coverage: r.coverage,
-        }));
+        self.prepared = Some(Arc::new(Prepared::new(
+            r.base, r.tint, table, layers, r.mix, r.coverage,
+        )));
         Ok(())
     }
 
@@ -510,14 +532,9 @@ impl ScratchedMaterial {
             eta: None,
             k: None,
             scratches: ScratchSpec::default(),
-            prepared: Some(Arc::new(Prepared {
-                base,
-                tint,
-                table,
-                layers,
-                mix,
-                coverage,
-            })),
+            prepared: Some(Arc::new(Prepared::new(
+                base, tint, table, layers, mix, coverage,
+            ))),
         }
     }
 
@@ -679,8 +696,8 @@ impl ScratchedMaterial {
 /// Scratch lobe of `layer` with coverage `c`: `t = d.x dP/du + d.y dP/dv` in the shading
 /// plane, as `(cos beta, sin beta)` against the frame's `s` axis (METHOD.md section 1).
 fn lobe(p: &Prepared, ctx: &ShadingContext, layer: usize, c: f32) -> ScratchLobe {
-    let d = p.layers.direction(layer);
-    let t: Vec3 = ctx.dpdu * d[0] as f32 + ctx.dpdv * d[1] as f32;
+    let d = p.directions[layer];
+    let t: Vec3 = ctx.dpdu * d[0] + ctx.dpdv * d[1];
     let (x, y) = (t.dot(ctx.frame.s), t.dot(ctx.frame.t));
     let len = (x * x + y * y).sqrt();
     let (cos, sin) = if len > 1e-20 && len.is_finite() {
