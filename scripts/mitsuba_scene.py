@@ -135,7 +135,7 @@ def material(mi, m):
     raise ValueError(f"material type {kind} is not translated")
 
 
-def scene_dict(mi, path, striae_bin, res=None, spp=None, seed=None):
+def scene_dict(mi, path, striae_bin, res=None, spp=None, seed=None, sampler="independent"):
     with open(path, "rb") as f:
         sc = tomllib.load(f)
     base = os.path.dirname(os.path.abspath(path))
@@ -149,7 +149,7 @@ def scene_dict(mi, path, striae_bin, res=None, spp=None, seed=None):
                                                    up=cam.get("up", [0, 1, 0])),
         "film": {"type": "hdrfilm", "width": int(width), "height": int(height),
                  "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-        "sampler": {"type": "independent", "sample_count": int(spp or r.get("spp", 64)),
+        "sampler": {"type": sampler, "sample_count": int(spp or r.get("spp", 64)),
                     "seed": int(seed if seed is not None else r.get("seed", 0))},
     }
     if sensor["type"] == "thinlens":
@@ -217,12 +217,14 @@ def main():
     ap.add_argument("--res", help="WIDTHxHEIGHT")
     ap.add_argument("--seed", type=int)
     ap.add_argument("--variant", default="scalar_rgb")
+    ap.add_argument("--sampler", default="independent",
+                    help="Mitsuba sampler plugin: independent (default), stratified, multijitter, ldsampler, ...")
     ap.add_argument("--striae", default=os.path.join(os.path.dirname(__file__), "..", "target", "release", "striae"))
     a = ap.parse_args()
     import mitsuba as mi
     mi.set_variant(a.variant)
     res = tuple(int(x) for x in a.res.lower().split("x")) if a.res else None
-    scene = mi.load_dict(scene_dict(mi, a.scene, a.striae, res, a.spp, a.seed))
+    scene = mi.load_dict(scene_dict(mi, a.scene, a.striae, res, a.spp, a.seed, a.sampler))
     import time
     t0 = time.time()
     img = mi.render(scene, seed=a.seed or 0)

@@ -9,7 +9,7 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::path::Path;
 use striae::integrator::{render, render_with, Simd};
-use striae::sampler::PixelSampler;
+use striae::sampler::{PixelSampler, SamplerKind};
 use striae::scene::{Overrides, Scene};
 
 fn bench_render(c: &mut Criterion) {
@@ -60,18 +60,20 @@ fn bench_render(c: &mut Criterion) {
 
     let mut g = c.benchmark_group("sampler");
     g.throughput(Throughput::Elements(32));
-    g.bench_function("32_dimensions", |b| {
-        let mut i = 0u32;
-        b.iter(|| {
-            i = i.wrapping_add(1);
-            let mut s = PixelSampler::new(i as u64, i & 1023, 1);
-            let mut acc = 0.0f32;
-            for _ in 0..32 {
-                acc += s.next_1d();
-            }
-            acc
-        })
-    });
+    for kind in [SamplerKind::Sobol, SamplerKind::Independent] {
+        g.bench_function(format!("32_dimensions_{}", kind.name()), |b| {
+            let mut i = 0u32;
+            b.iter(|| {
+                i = i.wrapping_add(1);
+                let mut s = PixelSampler::with_kind(kind, i as u64, i & 1023, 1);
+                let mut acc = 0.0f32;
+                for _ in 0..32 {
+                    acc += s.next_1d();
+                }
+                acc
+            })
+        });
+    }
     g.finish();
 }
 

@@ -132,24 +132,24 @@ pub fn shade<'a>(
     wo_world: Vec3,
     u_layer: f32,
 ) -> Shaded<'a> {
-    shade_impl(material, hit, Some(rd), wo_world, u_layer, None, true)
+    shade_impl(material, hit, Some(rd), wo_world, Some(u_layer), None, true)
 }
 
 /// [`shade`] for the render loop, with the footprint computed only when `rd` is given:
 /// without differentials `duvdx`, `duvdy`, `dpdx` and `dpdy` are zero (the render loop passes
 /// `None` when no material of the scene reads the footprint, see
-/// [`Material::reads_footprint`]). With them, `duvdx` and `duvdy` are zero too where the
-/// material does not read them at this hit ([`Material::reads_hit_context`]: any material but
-/// the scratched one, and scratched glass seen from inside); `dpdx`, `dpdy` are always there
-/// (the spawned ray's differentials need them). `primary` tells a camera ray's first hit
-/// ([`ShadingContext::primary`]); only meaningful with `rd`.
+/// [`Material::reads_footprint`]). `u_layer` is `Some` exactly where the material reads the
+/// hit's context ([`Material::reads_hit_context`]: the scratched material, not glass seen from
+/// inside); elsewhere `duvdx` and `duvdy` are zero too and the context's `u_layer` is 0.5.
+/// `dpdx`, `dpdy` are always there (the spawned ray's differentials need them). `primary`
+/// tells a camera ray's first hit ([`ShadingContext::primary`]); only meaningful with `rd`.
 #[inline(always)]
 pub fn shade_with<'a>(
     material: &'a Material,
     hit: &SurfaceHit,
     rd: Option<&RayDifferential>,
     wo_world: Vec3,
-    u_layer: f32,
+    u_layer: Option<f32>,
     primary: Option<PrimaryHit>,
 ) -> Shaded<'a> {
     shade_impl(material, hit, rd, wo_world, u_layer, primary, false)
@@ -162,14 +162,14 @@ fn shade_impl<'a>(
     hit: &SurfaceHit,
     rd: Option<&RayDifferential>,
     wo_world: Vec3,
-    u_layer: f32,
+    u_layer: Option<f32>,
     primary: Option<PrimaryHit>,
     full_footprint: bool,
 ) -> Shaded<'a> {
     let (dpdx, dpdy, duvdx, duvdy) = match rd {
         Some(rd) => {
             let (dpdx, dpdy) = footprint_dp(hit, rd);
-            let (duvdx, duvdy) = if full_footprint || material.reads_hit_context(wo_world, hit.ng) {
+            let (duvdx, duvdy) = if full_footprint || u_layer.is_some() {
                 footprint_uv(hit, dpdx, dpdy)
             } else {
                 (Vec2::ZERO, Vec2::ZERO)
@@ -187,7 +187,7 @@ fn shade_impl<'a>(
         dpdv: hit.dpdv,
         frame: Frame::from_normal_tangent(hit.ns, hit.dpdu),
         ng: hit.ng,
-        u_layer,
+        u_layer: u_layer.unwrap_or(0.5),
         wo: wo_world,
         primary: primary.filter(|_| rd.is_some()),
     };
@@ -524,10 +524,10 @@ fn radiance<const DIFFERENTIALS: bool>(
         // first four dimensions at delta bounces (the dimensions keep their places, so the
         // image is the same).
         let u_layer = if material.reads_hit_context(wo_world, hit.ng) {
-            sampler.next_1d()
+            Some(sampler.next_1d())
         } else {
             sampler.seek(depth, 1);
-            0.5
+            None
         };
         let Shaded {
             ctx,
