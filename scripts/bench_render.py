@@ -7,7 +7,8 @@ median samples/s (as each renderer reports it: render time including writing the
 Mitsuba, the render loop for striae), the median CPU time (user + sys, from /usr/bin/time) and
 the CPU samples/s. Interleaving spreads the load of a shared machine over all renderers.
 striae runs once per `--samplers` kind (default: its Sobol sampler and the `independent` one
-that the Mitsuba scene uses, so one row compares equal samplers).
+that the Mitsuba scene uses, so one row compares equal samplers), Mitsuba once per
+`--mitsuba-samplers` plugin (default `independent`).
 
     DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM-19.so \\
     python3 scripts/bench_render.py scenes/glass-teapot.toml --spp 64 --rounds 3 \\
@@ -43,7 +44,9 @@ def main():
     ap.add_argument("--striae", nargs="+", default=[os.path.join(HERE, "..", "target", "release", "striae")])
     ap.add_argument("--variants", nargs="*", default=["scalar_rgb", "llvm_ad_rgb"])
     ap.add_argument("--samplers", nargs="+", default=["sobol", "independent"],
-                    help="striae's render.sampler kinds to run (Mitsuba always uses `independent`)")
+                    help="striae's render.sampler kinds to run")
+    ap.add_argument("--mitsuba-samplers", nargs="+", default=["independent"],
+                    help="Mitsuba sampler plugins to run each variant with (e.g. independent multijitter)")
     a = ap.parse_args()
     tmp = tempfile.mkdtemp()
     w, h = (int(x) for x in a.res.split("x"))
@@ -57,11 +60,12 @@ def main():
                 m = re.search(r"done in ([0-9.]+) s: ([0-9.]+) M samples/s, ([0-9.]+) M rays/s", out)
                 runs.setdefault(f"striae {b} ({sampler})", []).append((float(m[2]), float(m[3]), cpu))
         for v in a.variants:
-            out, cpu = timed([sys.executable, os.path.join(HERE, "mitsuba_scene.py"), a.scene, "-o",
-                              os.path.join(tmp, f"mi_{v}.exr"), "--spp", str(a.spp), "--variant", v,
-                              "--res", a.res])
-            m = re.search(r"([0-9.]+) M samples/s", out)
-            runs.setdefault(f"mitsuba {v}", []).append((float(m[1]), float("nan"), cpu))
+            for sampler in a.mitsuba_samplers:
+                out, cpu = timed([sys.executable, os.path.join(HERE, "mitsuba_scene.py"), a.scene, "-o",
+                                  os.path.join(tmp, f"mi_{v}.exr"), "--spp", str(a.spp), "--variant", v,
+                                  "--res", a.res, "--sampler", sampler])
+                m = re.search(r"([0-9.]+) M samples/s", out)
+                runs.setdefault(f"mitsuba {v} ({sampler})", []).append((float(m[1]), float("nan"), cpu))
         print(f"round {r + 1}: " + ", ".join(f"{k}: {v[-1][0]:.3f} M/s, {v[-1][2]:.2f} s CPU"
                                              for k, v in runs.items()), flush=True)
     print(f"\nmedians over {a.rounds} rounds, {a.res}, {a.spp} spp ({n / 1e6:.2f} M samples):")
