@@ -200,6 +200,7 @@ impl ScratchLayer {
         match self.footprint_candidates(p, a, b, max_cells, centres) {
             Candidates::Done(c) => c,
             Candidates::Discs(f) => Some(f.coverage(&centres[..f.n])),
+            Candidates::Overflow => unreachable!("a buffer of MAX_DISCS never overflows"),
         }
     }
 
@@ -207,6 +208,11 @@ impl ScratchLayer {
     /// in noise space (their centres go to `centres`), or the answer itself where no area work
     /// is needed (no disc, a degenerate or non-finite footprint, one too large: see
     /// [`Self::footprint_coverage`]).
+    ///
+    /// `centres` may be shorter than [`MAX_DISCS`] (a share of a larger buffer, as
+    /// [`super::LayerSet::coverage_max`] keeps every layer's candidates): when more discs than
+    /// it holds but at most [`MAX_DISCS`] touch the footprint, the answer is
+    /// [`Candidates::Overflow`] and the call must be repeated with a buffer of [`MAX_DISCS`].
     ///
     /// Cells are enumerated over the noise-space bounding box as in the reference (a
     /// row-by-row enumeration over the parallelogram's extent was tried and measured slower:
@@ -218,17 +224,10 @@ impl ScratchLayer {
         a: DVec2,
         b: DVec2,
         max_cells: usize,
-        centres: &mut [DVec2; MAX_DISCS],
+        centres: &mut [DVec2],
     ) -> Candidates {
-        let NoiseFootprint {
-            q0,
-            qa,
-            qb,
-            cr,
-            poly,
-            ext,
-        } = match self.noise_footprint(p, a, b) {
-            Ok(f) => f,
+        let (q0, ext, mut found) = match self.candidate_geometry(p, a, b) {
+            Ok(g) => g,
             Err(c) => return Candidates::Done(Some(c)),
         };
         let tau = self.tau;
@@ -243,12 +242,8 @@ impl ScratchLayer {
         if cells > max_cells as f64 {
             return Candidates::Done(None);
         }
-        // Edges qa, qb, -qa, -qb: two outward unit normals, offsets |cr| / (2 |q|) (the
-        // half-widths of the parallelogram across each pair of edges).
-        let (la, lb) = (qa.length(), qb.length());
-        let (na, nb) = (DVec2::new(qa.y, -qa.x) / la, DVec2::new(qb.y, -qb.x) / lb);
-        let (ha, hb) = (0.5 * cr / la, 0.5 * cr / lb);
-        let planes = [(na, ha), (nb, hb), (-na, ha), (-nb, hb)];
+        let [(na, ha), (nb, hb), ..] = found.planes;
+        let room = centres.len().min(MAX_DISCS);
         let mut n = 0;
         for j in j0..=j1 {
             for i in i0..=i1 {
@@ -257,8 +252,12 @@ impl ScratchLayer {
                 if na.dot(f).abs() - ha >= tau || nb.dot(f).abs() - hb >= tau {
                     continue;
                 }
-                if n == MAX_DISCS {
-                    return Candidates::Done(None);
+                if n == room {
+                    return if room == MAX_DISCS {
+                        Candidates::Done(None)
+                    } else {
+                        Candidates::Overflow
+                    };
                 }
                 centres[n] = f;
                 n += 1;
@@ -267,13 +266,51 @@ impl ScratchLayer {
         if n == 0 {
             return Candidates::Done(Some(0.0));
         }
-        Candidates::Discs(FootprintCandidates {
-            n,
-            tau,
+        found.n = n;
+        Candidates::Discs(found)
+    }
+
+    /// The footprint `{p + s a + t b : s, t in [-1/2, 1/2]}` in noise space: its centre, the
+    /// half-extent of its bounding box grown by `tau`, and what the areas need (no discs yet);
+    /// `Err(coverage)` as [`Self::noise_footprint`].
+    #[inline]
+    fn candidate_geometry(
+        &self,
+        p: DVec2,
+        a: DVec2,
+        b: DVec2,
+    ) -> Result<(DVec2, DVec2, FootprintCandidates), f64> {
+        let NoiseFootprint {
+            q0,
+            qa,
+            qb,
             cr,
             poly,
-            planes,
-        })
+            ext,
+        } = self.noise_footprint(p, a, b)?;
+        // Edges qa, qb, -qa, -qb: two outward unit normals, offsets |cr| / (2 |q|) (the
+        // half-widths of the parallelogram across each pair of edges).
+        let (la, lb) = (qa.length(), qb.length());
+        let (na, nb) = (DVec2::new(qa.y, -qa.x) / la, DVec2::new(qb.y, -qb.x) / lb);
+        let (ha, hb) = (0.5 * cr / la, 0.5 * cr / lb);
+        let found = FootprintCandidates {
+            n: 0,
+            tau: self.tau,
+            cr,
+            poly,
+            planes: [(na, ha), (nb, hb), (-na, ha), (-nb, hb)],
+        };
+        Ok((q0, ext, found))
+    }
+
+    /// The exact coverage of the footprint `{p + s a + t b : s, t in [-1/2, 1/2]}` from its
+    /// candidate discs `centres`, as [`Self::footprint_candidates`] found them (so the same
+    /// value as [`Self::footprint_coverage`], without enumerating the cells again).
+    pub fn coverage_of_candidates(&self, p: DVec2, a: DVec2, b: DVec2, centres: &[DVec2]) -> f64 {
+        match self.candidate_geometry(p, a, b) {
+            Ok((_, _, f)) => f.coverage(centres),
+            Err(c) => c,
+        }
     }
 
     /// The reference for [`Self::footprint_coverage`]: every cell of the noise-space bounding
@@ -478,6 +515,9 @@ pub enum Candidates {
     Done(Option<f64>),
     /// Discs to clip against the footprint.
     Discs(FootprintCandidates),
+    /// More discs than the caller's buffer holds (but at most [`MAX_DISCS`]): ask again with a
+    /// buffer of [`MAX_DISCS`].
+    Overflow,
 }
 
 /// How many scratch discs (radius `tau`, centres relative to the footprint's centre, in noise

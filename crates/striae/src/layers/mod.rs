@@ -291,29 +291,48 @@ impl LayerSet {
         out: &mut [f32],
     ) {
         const TIE: f64 = 2e-6;
+        /// Candidate discs kept from pass 1 for pass 2, for all layers together (a layer that
+        /// does not fit is enumerated again in pass 2).
+        const POOL: usize = 2 * footprint::MAX_DISCS;
         let (p, a, b) = (uv.as_dvec2(), duvdx.as_dvec2(), duvdy.as_dvec2());
         let n = self.layers.len();
         let out = &mut out[..n];
-        // Pass 1: exact values that need no area work, bounds for the rest.
+        // Pass 1: exact values that need no area work, bounds (and the candidate discs) for
+        // the rest.
         let mut bound = [0.0f64; MAX_LAYERS];
         let mut order = [0u8; MAX_LAYERS];
+        // Layer k's discs are pool[kept[k].0..kept[k].1]; an empty range: not kept.
+        let mut kept = [(0u16, 0u16); MAX_LAYERS];
+        let mut pool = [glam::DVec2::ZERO; POOL];
+        let mut used = 0;
         let mut pending = 0;
         let mut best = 0.0f64;
-        let mut centres = [glam::DVec2::ZERO; footprint::MAX_DISCS];
         for (k, layer) in self.layers.iter().enumerate() {
             out[k] = 0.0;
-            match layer.footprint_candidates(p, a, b, max_cells, &mut centres) {
+            match layer.footprint_candidates(p, a, b, max_cells, &mut pool[used..]) {
                 layer::Candidates::Done(c) => {
                     let c = c.unwrap_or(self.expected_coverage);
                     out[k] = c as f32;
                     best = best.max(c);
+                    continue;
                 }
                 layer::Candidates::Discs(f) => {
-                    bound[k] = f.coverage_bound(&centres[..f.n]);
-                    order[pending] = k as u8;
-                    pending += 1;
+                    bound[k] = f.coverage_bound(&pool[used..used + f.n]);
+                    kept[k] = (used as u16, (used + f.n) as u16);
+                    used += f.n;
+                }
+                layer::Candidates::Overflow => {
+                    let mut centres = [glam::DVec2::ZERO; footprint::MAX_DISCS];
+                    match layer.footprint_candidates(p, a, b, max_cells, &mut centres) {
+                        layer::Candidates::Discs(f) => {
+                            bound[k] = f.coverage_bound(&centres[..f.n]);
+                        }
+                        _ => unreachable!("the same footprint has the same discs"),
+                    }
                 }
             }
+            order[pending] = k as u8;
+            pending += 1;
         }
         // Pass 2: exact areas, largest bound first.
         let order = &mut order[..pending];
@@ -323,9 +342,15 @@ impl LayerSet {
             if bound[k] < best - TIE {
                 break;
             }
-            let c = self.layers[k]
-                .footprint_coverage_in(p, a, b, max_cells, &mut centres)
-                .unwrap_or(self.expected_coverage);
+            let (start, end) = (kept[k].0 as usize, kept[k].1 as usize);
+            let c = if end > start {
+                self.layers[k].coverage_of_candidates(p, a, b, &pool[start..end])
+            } else {
+                let mut centres = [glam::DVec2::ZERO; footprint::MAX_DISCS];
+                self.layers[k]
+                    .footprint_coverage_in(p, a, b, max_cells, &mut centres)
+                    .unwrap_or(self.expected_coverage)
+            };
             out[k] = c as f32;
             best = best.max(c);
         }
