@@ -508,31 +508,27 @@ fn fast_footprint_coverage_matches_the_reference() {
     );
 }
 
-/// The closed forms for one disc against a parallelogram (`disc_parallelogram_area`, and its
-/// triangle decomposition `disc_convex_polygon_area` with one `atan2`) against the exact union
-/// kernel on random discs: centres inside, near edges and corners, far outside; parallelograms
-/// from thin needles to squares, some inside the disc (circle fully outside the polygon).
+/// The closed forms for one disc against a parallelogram (`disc_parallelogram_area`: its
+/// segment forms, and the Green's theorem form with one `atan2` for circles that cross both
+/// pairs of edge lines; and the triangle decomposition `disc_convex_polygon_area` it replaced)
+/// against the exact union kernel on random discs: centres inside, near edges and corners, far
+/// outside; parallelograms from thin needles to squares, some inside the disc (circle fully
+/// outside the polygon).
 #[test]
 fn single_disc_closed_forms_match_the_union_kernel() {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(12);
-    let mut partial = 0;
+    let (mut partial, mut crossing) = (0, 0);
     for case in 0..20000 {
         let a = DVec2::new(rng.random_range(-2.0..2.0), rng.random_range(-2.0..2.0));
         let thin = 10f64.powf(rng.random_range(-4.0..0.0));
         let b = DVec2::new(-a.y, a.x) * thin + a * rng.random_range(-1.0..1.0);
-        let poly = [(-a - b) * 0.5, (a - b) * 0.5, (a + b) * 0.5, (b - a) * 0.5];
-        let mut planes = [(DVec2::ZERO, 0.0f64); 4];
-        for e in 0..4 {
-            let d = poly[(e + 1) % 4] - poly[e];
-            let n = DVec2::new(d.y, -d.x).normalize_or_zero();
-            planes[e] = (n, n.dot(poly[e]));
-        }
+        let shape = layer::Parallelogram::new(a, b);
+        let poly = shape.poly;
         let r = 10f64.powf(rng.random_range(-2.0..0.5));
         let c = poly[case % 4] * rng.random_range(0.0..1.5)
             + DVec2::new(rng.random_range(-r..r), rng.random_range(-r..r));
         let exact = footprint::union_discs_polygon_area(&[c], r, &poly);
-        let fast =
-            layer::disc_parallelogram_area(c, r, &poly, &planes, (a.x * b.y - a.y * b.x).abs());
+        let fast = layer::disc_parallelogram_area(c, r, &shape);
         let tri = layer::disc_convex_polygon_area(c, r, &poly);
         let tol = 1e-10 * (PI * r * r);
         assert!((fast - exact).abs() < tol, "case {case}: {fast} vs {exact}");
@@ -541,8 +537,17 @@ fn single_disc_closed_forms_match_the_union_kernel() {
             "case {case}: triangles {tri} vs {exact}"
         );
         partial += (exact > 0.0 && exact < PI * r * r * 0.999) as usize;
+        // The Green's theorem form: lines of both pairs cross the circle, some corner outside.
+        let dist = shape.planes.map(|(n, d)| (d - n.dot(c)).abs() < r);
+        crossing += ((dist[0] || dist[2])
+            && (dist[1] || dist[3])
+            && shape.planes.iter().all(|&(n, d)| d - n.dot(c) > -r)
+            && poly.iter().any(|&v| (v - c).length_squared() > r * r)) as usize;
     }
-    assert!(partial > 5000, "{partial}");
+    assert!(
+        partial > 5000 && crossing > 3000,
+        "{partial} partial, {crossing} crossing"
+    );
 }
 
 /// `n` random footprints in `[0.05, 0.95]^2`, sheared and of aspect up to 20, with edges
