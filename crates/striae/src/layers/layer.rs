@@ -301,6 +301,23 @@ impl ScratchLayer {
         }
     }
 
+    /// [`Self::coverage_of_candidates`] where it may reach `floor`, else `None`
+    /// ([`FootprintCandidates::coverage_reaching`]: layers that cannot be the largest are given
+    /// up part way).
+    pub fn coverage_reaching(
+        &self,
+        p: DVec2,
+        a: DVec2,
+        b: DVec2,
+        centres: &[DVec2],
+        floor: f64,
+    ) -> Option<f64> {
+        match self.candidate_geometry(p, a, b) {
+            Ok((_, _, f)) => f.coverage_reaching(centres, floor),
+            Err(c) => (c >= floor).then_some(c),
+        }
+    }
+
     /// The reference for [`Self::footprint_coverage`]: every cell of the noise-space bounding
     /// box, and the exact union area of all candidate discs (kept for the tests).
     pub fn footprint_coverage_reference(
@@ -646,6 +663,35 @@ impl FootprintCandidates {
                 .map(|&c| disc_parallelogram_area(c, self.tau, &self.shape))
                 .sum()
         };
+        self.coverage_of_area(area)
+    }
+
+    /// [`Self::coverage`] where it may reach `floor`, else `None`: where no two discs overlap,
+    /// the discs' exact areas replace their bounds ([`Self::disc_bound`]) one by one, and the
+    /// layer is given up as soon as the exact areas so far and the bounds of the rest, padded as
+    /// in [`Self::coverage_bound`], fall below `floor`. The value, when there is one, is the
+    /// same as [`Self::coverage`]'s bit for bit (the same sum in the same order).
+    pub fn coverage_reaching(&self, centres: &[DVec2], floor: f64) -> Option<f64> {
+        if any_overlap(centres, self.tau) {
+            let c = self.coverage(centres);
+            return (c >= floor).then_some(c);
+        }
+        let mut rest: f64 = centres.iter().map(|&c| self.disc_bound(c)).sum();
+        let mut area = 0.0;
+        for &c in centres {
+            area += disc_parallelogram_area(c, self.tau, &self.shape);
+            rest -= self.disc_bound(c);
+            if self.pad_bound(area + rest.max(0.0)) < floor {
+                return None;
+            }
+        }
+        Some(self.coverage_of_area(area))
+    }
+
+    /// The coverage of a scratched area: below 1e-12 it is rounding noise (see
+    /// [`Self::coverage`]).
+    #[inline]
+    fn coverage_of_area(&self, area: f64) -> f64 {
         let c = area / self.shape.area;
         if c < 1e-12 {
             0.0
@@ -654,27 +700,37 @@ impl FootprintCandidates {
         }
     }
 
-    /// An upper bound on [`Self::coverage`] at a fraction of its cost: each disc's area within
-    /// the parallelogram is at most `pi tau^2`, the parallelogram's area, and for each pair of
-    /// parallel edges the slab's width times the longest chord of the disc inside the slab,
-    /// `2 h * 2 sqrt(tau^2 - d^2)` (`h` the slab's half-width, `d` the distance from the centre
-    /// to the slab). The sum bounds the union too. Padded by a relative 1e-9 so that rounding
-    /// in [`Self::coverage`] never exceeds it.
+    /// An upper bound on [`Self::coverage`] at a fraction of its cost: the sum of the discs'
+    /// bounds ([`Self::disc_bound`]), which bounds their union too. Padded by a relative 1e-9
+    /// (and 1e-12) so that rounding in [`Self::coverage`] never exceeds it.
     pub fn coverage_bound(&self, centres: &[DVec2]) -> f64 {
-        let (t2, full) = (
-            self.tau * self.tau,
-            std::f64::consts::PI * self.tau * self.tau,
-        );
-        let cap = full.min(self.shape.area);
-        let mut sum = 0.0;
-        for &c in centres {
-            let mut b = cap;
-            for &(nrm, h) in &self.shape.planes[..2] {
-                let d = (nrm.dot(c).abs() - h).max(0.0);
-                b = b.min(4.0 * h * (t2 - d * d).max(0.0).sqrt());
-            }
-            sum += b;
-        }
+        let sum: f64 = centres.iter().map(|&c| self.disc_bound(c)).sum();
+        self.pad_bound(sum)
+    }
+
+    /// A bound on the scratched area `sum` as a coverage, padded for rounding.
+    #[inline]
+    fn pad_bound(&self, sum: f64) -> f64 {
         (sum / self.shape.area * (1.0 + 1e-9) + 1e-12).min(1.0)
+    }
+
+    /// An upper bound on the area of `disc(c, tau) ∩ parallelogram`: at most `pi tau^2`, the
+    /// parallelogram's area, and for each pair of parallel edges the area of the disc inside
+    /// their slab, `integral over x in [x0, x1] of chord(x)` (`x` across the slab, `[x0, x1]`
+    /// the part of the slab the disc spans, `chord(x) = 2 sqrt(tau^2 - (x - x_c)^2)`), which is
+    /// at most `(x1 - x0) chord((x0 + x1) / 2)` since the chord is concave in `x` (Jensen).
+    /// (Before: `2 h` times the longest chord in the slab, `h` its half-width; twice the exact
+    /// area on average for the teapot's footprints after the glass, 1.45 times with this one.)
+    #[inline]
+    pub fn disc_bound(&self, c: DVec2) -> f64 {
+        let tau = self.tau;
+        let mut b = (std::f64::consts::PI * tau * tau).min(self.shape.area);
+        for &(nrm, h) in &self.shape.planes[..2] {
+            let xc = nrm.dot(c);
+            let (x0, x1) = ((xc - tau).max(-h), (xc + tau).min(h));
+            let m = 0.5 * (x0 + x1) - xc;
+            b = b.min((x1 - x0).max(0.0) * 2.0 * (tau * tau - m * m).max(0.0).sqrt());
+        }
+        b
     }
 }

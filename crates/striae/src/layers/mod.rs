@@ -344,7 +344,10 @@ impl LayerSet {
             }
             let (start, end) = (kept[k].0 as usize, kept[k].1 as usize);
             let c = if end > start {
-                self.layers[k].coverage_of_candidates(p, a, b, &pool[start..end])
+                match self.layers[k].coverage_reaching(p, a, b, &pool[start..end], best - TIE) {
+                    Some(c) => c,
+                    None => continue, // below the best: not a tie
+                }
             } else {
                 let mut centres = [glam::DVec2::ZERO; footprint::MAX_DISCS];
                 self.layers[k]
