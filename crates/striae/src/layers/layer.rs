@@ -444,6 +444,20 @@ impl Parallelogram {
     }
 }
 
+/// The upper bound of [`FootprintCandidates::disc_bound`] on the area of
+/// `disc(c, r) ∩ parallelogram`.
+#[inline]
+pub(crate) fn disc_parallelogram_area_bound(c: DVec2, r: f64, shape: &Parallelogram) -> f64 {
+    let mut b = (std::f64::consts::PI * r * r).min(shape.area);
+    for &(nrm, h) in &shape.planes[..2] {
+        let xc = nrm.dot(c);
+        let (x0, x1) = ((xc - r).max(-h), (xc + r).min(h));
+        let m = 0.5 * (x0 + x1) - xc;
+        b = b.min((x1 - x0).max(0.0) * 2.0 * (r * r - m * m).max(0.0).sqrt());
+    }
+    b
+}
+
 /// Area of `disc(c, r) ∩ parallelogram`. Closed form when the circle crosses at most one pair
 /// of parallel edge lines (the two segments cut off are disjoint) or holds all four corners
 /// (the whole parallelogram: small footprints); otherwise
@@ -723,14 +737,6 @@ impl FootprintCandidates {
     /// area on average for the teapot's footprints after the glass, 1.45 times with this one.)
     #[inline]
     pub fn disc_bound(&self, c: DVec2) -> f64 {
-        let tau = self.tau;
-        let mut b = (std::f64::consts::PI * tau * tau).min(self.shape.area);
-        for &(nrm, h) in &self.shape.planes[..2] {
-            let xc = nrm.dot(c);
-            let (x0, x1) = ((xc - tau).max(-h), (xc + tau).min(h));
-            let m = 0.5 * (x0 + x1) - xc;
-            b = b.min((x1 - x0).max(0.0) * 2.0 * (tau * tau - m * m).max(0.0).sqrt());
-        }
-        b
+        disc_parallelogram_area_bound(c, self.tau, &self.shape)
     }
 }

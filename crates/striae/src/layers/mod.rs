@@ -136,6 +136,11 @@ pub struct LayerSet {
     id: u64,
 }
 
+/// Candidate discs [`LayerSet::coverage_max`] keeps from its first pass (bounds) for its
+/// second (exact areas), for all layers together; a layer that does not fit is enumerated
+/// again.
+pub(crate) const CANDIDATE_POOL: usize = 2 * footprint::MAX_DISCS;
+
 /// The next [`LayerSet`] id.
 static NEXT_SET_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
@@ -291,9 +296,7 @@ impl LayerSet {
         out: &mut [f32],
     ) {
         const TIE: f64 = 2e-6;
-        /// Candidate discs kept from pass 1 for pass 2, for all layers together (a layer that
-        /// does not fit is enumerated again in pass 2).
-        const POOL: usize = 2 * footprint::MAX_DISCS;
+        const POOL: usize = CANDIDATE_POOL;
         let (p, a, b) = (uv.as_dvec2(), duvdx.as_dvec2(), duvdy.as_dvec2());
         let n = self.layers.len();
         let out = &mut out[..n];
