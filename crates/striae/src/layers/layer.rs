@@ -427,7 +427,8 @@ impl Parallelogram {
             (qa + qb) * 0.5,
             (qb - qa) * 0.5,
         ];
-        let (ta, tb) = (qa / la, qb / lb);
+        // The unit directions, na and nb turned back a quarter (exactly qa / la, qb / lb).
+        let (ta, tb) = (DVec2::new(-na.y, na.x), DVec2::new(-nb.y, nb.x));
         Parallelogram {
             poly,
             planes: [(na, ha), (nb, hb), (-na, ha), (-nb, hb)],
