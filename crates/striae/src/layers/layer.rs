@@ -687,6 +687,9 @@ impl FootprintCandidates {
     /// in [`Self::coverage_bound`], fall below `floor`. The value, when there is one, is the
     /// same as [`Self::coverage`]'s bit for bit (the same sum in the same order).
     pub fn coverage_reaching(&self, centres: &[DVec2], floor: f64) -> Option<f64> {
+        if centres.len() < 2 {
+            return Some(self.coverage(centres)); // no cheaper way to know
+        }
         if any_overlap(centres, self.tau) {
             let c = self.coverage(centres);
             return (c >= floor).then_some(c);
