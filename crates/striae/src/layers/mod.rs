@@ -276,9 +276,14 @@ impl LayerSet {
     /// smaller (its value is then not computed). So the largest value and the set of layers
     /// within 1e-6 of it (the ties) are exactly those of [`Self::coverage_all`].
     ///
-    /// Every layer first gathers its candidate discs and an upper bound on its coverage
+    /// Every layer first gathers its candidate discs (kept in a pool shared by the layers,
+    /// [`CANDIDATE_POOL`]) and an upper bound on its coverage
     /// ([`layer::FootprintCandidates::coverage_bound`]); the exact areas are then computed in
-    /// decreasing order of bound until the next bound falls below the best coverage so far.
+    /// decreasing order of bound until the next bound falls below the best coverage so far,
+    /// each layer given up part way once it cannot reach the best
+    /// ([`layer::FootprintCandidates::coverage_reaching`]). Which layers are computed depends
+    /// on the bounds; the values kept do not (a layer is skipped only where its exact coverage
+    /// is below the best less the tie tolerance, where it is cleared anyway).
     /// # Panics
     /// If `out.len() < len()`.
     pub fn coverage_max(&self, uv: Vec2, duvdx: Vec2, duvdy: Vec2, out: &mut [f32]) {
