@@ -262,7 +262,7 @@ impl LayerSet {
         out: &mut [f32],
     ) {
         let (p, a, b) = (uv.as_dvec2(), duvdx.as_dvec2(), duvdy.as_dvec2());
-        let mut centres = [glam::DVec2::ZERO; footprint::MAX_DISCS];
+        let mut centres = [glam::DVec2::ZERO; layer::CANDIDATE_ROOM];
         for (layer, o) in self.layers.iter().zip(&mut out[..self.layers.len()]) {
             *o = layer
                 .footprint_coverage_in(p, a, b, max_cells, &mut centres)
@@ -330,7 +330,7 @@ impl LayerSet {
                     used += f.n;
                 }
                 layer::Candidates::Overflow => {
-                    let mut centres = [glam::DVec2::ZERO; footprint::MAX_DISCS];
+                    let mut centres = [glam::DVec2::ZERO; layer::CANDIDATE_ROOM];
                     match layer.footprint_candidates(p, a, b, max_cells, &mut centres) {
                         layer::Candidates::Discs(f) => {
                             bound[k] = f.coverage_bound(&centres[..f.n]);
@@ -357,7 +357,7 @@ impl LayerSet {
                     None => continue, // below the best: not a tie
                 }
             } else {
-                let mut centres = [glam::DVec2::ZERO; footprint::MAX_DISCS];
+                let mut centres = [glam::DVec2::ZERO; layer::CANDIDATE_ROOM];
                 self.layers[k]
                     .footprint_coverage_in(p, a, b, max_cells, &mut centres)
                     .unwrap_or(self.expected_coverage)

@@ -571,7 +571,7 @@ fn coverage_reaching_is_the_coverage_or_below_the_floor() {
         for (uv, a, b) in random_footprints(&mut rng, 300, scale) {
             let (p, da, db) = (uv.as_dvec2(), a.as_dvec2(), b.as_dvec2());
             for layer in set.layers() {
-                let mut centres = [DVec2::ZERO; footprint::MAX_DISCS];
+                let mut centres = [DVec2::ZERO; layer::CANDIDATE_ROOM];
                 let layer::Candidates::Discs(f) =
                     layer.footprint_candidates(p, da, db, layer::MAX_FOOTPRINT_CELLS, &mut centres)
                 else {
@@ -645,7 +645,7 @@ fn coverage_max_with_more_discs_than_its_pool() {
         let (p, da, db) = (uv.as_dvec2(), a.as_dvec2(), b.as_dvec2());
         let mut total = 0;
         for layer in set.layers() {
-            let mut centres = [DVec2::ZERO; footprint::MAX_DISCS];
+            let mut centres = [DVec2::ZERO; layer::CANDIDATE_ROOM];
             if let layer::Candidates::Discs(f) =
                 layer.footprint_candidates(p, da, db, layer::MAX_FOOTPRINT_CELLS, &mut centres)
             {
@@ -706,7 +706,7 @@ fn coverage_max_keeps_the_largest_and_its_ties() {
                 }
                 pruned += (all[k] > 0.0 && max[k] == 0.0) as usize;
                 // Bounds.
-                let mut centres = [DVec2::ZERO; footprint::MAX_DISCS];
+                let mut centres = [DVec2::ZERO; layer::CANDIDATE_ROOM];
                 let layer = &set.layers()[k];
                 let (p, da, db) = (uv.as_dvec2(), a.as_dvec2(), b.as_dvec2());
                 if let layer::Candidates::Discs(f) =
