@@ -318,10 +318,11 @@ impl ScratchLayer {
         a: DVec2,
         b: DVec2,
         centres: &[DVec2],
+        bound_area: f64,
         floor: f64,
     ) -> Option<f64> {
         match self.candidate_geometry(p, a, b) {
-            Ok((_, _, f)) => f.coverage_reaching(centres, floor),
+            Ok((_, _, f)) => f.coverage_reaching(centres, bound_area, floor),
             Err(c) => (c >= floor).then_some(c),
         }
     }
@@ -692,9 +693,11 @@ impl FootprintCandidates {
     /// [`Self::coverage`] where it may reach `floor`, else `None`: where no two discs overlap,
     /// the discs' exact areas replace their bounds ([`Self::disc_bound`]) one by one, and the
     /// layer is given up as soon as the exact areas so far and the bounds of the rest, padded as
-    /// in [`Self::coverage_bound`], fall below `floor`. The value, when there is one, is the
-    /// same as [`Self::coverage`]'s bit for bit (the same sum in the same order).
-    pub fn coverage_reaching(&self, centres: &[DVec2], floor: f64) -> Option<f64> {
+    /// in [`Self::coverage_bound`], fall below `floor`. `bound_area` is the sum of the discs'
+    /// bounds, [`Self::bound_area`] (the caller has it from choosing the layer). The value, when
+    /// there is one, is the same as [`Self::coverage`]'s bit for bit (the same sum in the same
+    /// order).
+    pub fn coverage_reaching(&self, centres: &[DVec2], bound_area: f64, floor: f64) -> Option<f64> {
         if centres.len() < 2 {
             return Some(self.coverage(centres)); // no cheaper way to know
         }
@@ -702,12 +705,11 @@ impl FootprintCandidates {
             let c = self.coverage(centres);
             return (c >= floor).then_some(c);
         }
-        let mut rest: f64 = centres.iter().map(|&c| self.disc_bound(c)).sum();
-        let mut area = 0.0;
+        let (mut area, mut bounded) = (0.0, 0.0);
         for &c in centres {
             area += disc_parallelogram_area(c, self.tau, &self.shape);
-            rest -= self.disc_bound(c);
-            if self.pad_bound(area + rest.max(0.0)) < floor {
+            bounded += self.disc_bound(c);
+            if self.coverage_bound_of_area(area + (bound_area - bounded).max(0.0)) < floor {
                 return None;
             }
         }
@@ -727,17 +729,23 @@ impl FootprintCandidates {
     }
 
     /// An upper bound on [`Self::coverage`] at a fraction of its cost: the sum of the discs'
-    /// bounds ([`Self::disc_bound`]), which bounds their union too. Padded by a relative 1e-9
-    /// (and 1e-12) so that rounding in [`Self::coverage`] never exceeds it.
+    /// bounds ([`Self::bound_area`]), which bounds their union too, as a coverage
+    /// ([`Self::coverage_bound_of_area`]).
     pub fn coverage_bound(&self, centres: &[DVec2]) -> f64 {
-        let sum: f64 = centres.iter().map(|&c| self.disc_bound(c)).sum();
-        self.pad_bound(sum)
+        self.coverage_bound_of_area(self.bound_area(centres))
     }
 
-    /// A bound on the scratched area `sum` as a coverage, padded for rounding.
+    /// The sum of the discs' area bounds ([`Self::disc_bound`]).
     #[inline]
-    fn pad_bound(&self, sum: f64) -> f64 {
-        (sum / self.shape.area * (1.0 + 1e-9) + 1e-12).min(1.0)
+    pub fn bound_area(&self, centres: &[DVec2]) -> f64 {
+        centres.iter().map(|&c| self.disc_bound(c)).sum()
+    }
+
+    /// A bound on the scratched area `area` as a coverage, padded by a relative 1e-9 (and
+    /// 1e-12) so that rounding in [`Self::coverage`] never exceeds it.
+    #[inline]
+    pub fn coverage_bound_of_area(&self, area: f64) -> f64 {
+        (area / self.shape.area * (1.0 + 1e-9) + 1e-12).min(1.0)
     }
 
     /// An upper bound on the area of `disc(c, tau) ∩ parallelogram`: at most `pi tau^2`, the

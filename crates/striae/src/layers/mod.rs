@@ -308,6 +308,7 @@ impl LayerSet {
         // Pass 1: exact values that need no area work, bounds (and the candidate discs) for
         // the rest.
         let mut bound = [0.0f64; MAX_LAYERS];
+        let mut bound_area = [0.0f64; MAX_LAYERS];
         let mut order = [0u8; MAX_LAYERS];
         // Layer k's discs are pool[kept[k].0..kept[k].1]; an empty range: not kept.
         let mut kept = [(0u16, 0u16); MAX_LAYERS];
@@ -325,7 +326,8 @@ impl LayerSet {
                     continue;
                 }
                 layer::Candidates::Discs(f) => {
-                    bound[k] = f.coverage_bound(&pool[used..used + f.n]);
+                    bound_area[k] = f.bound_area(&pool[used..used + f.n]);
+                    bound[k] = f.coverage_bound_of_area(bound_area[k]);
                     kept[k] = (used as u16, (used + f.n) as u16);
                     used += f.n;
                 }
@@ -352,7 +354,14 @@ impl LayerSet {
             }
             let (start, end) = (kept[k].0 as usize, kept[k].1 as usize);
             let c = if end > start {
-                match self.layers[k].coverage_reaching(p, a, b, &pool[start..end], best - TIE) {
+                match self.layers[k].coverage_reaching(
+                    p,
+                    a,
+                    b,
+                    &pool[start..end],
+                    bound_area[k],
+                    best - TIE,
+                ) {
                     Some(c) => c,
                     None => continue, // below the best: not a tie
                 }

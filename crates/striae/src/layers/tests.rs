@@ -587,7 +587,7 @@ fn coverage_reaching_is_the_coverage_or_below_the_floor() {
                     exact * 1.5 + 1e-4,
                     rng.random_range(0.0..0.2),
                 ] {
-                    match f.coverage_reaching(centres, floor) {
+                    match f.coverage_reaching(centres, f.bound_area(centres), floor) {
                         Some(c) => {
                             assert_eq!(c.to_bits(), exact.to_bits(), "{c} vs {exact}");
                             kept += 1;
@@ -598,7 +598,9 @@ fn coverage_reaching_is_the_coverage_or_below_the_floor() {
                         }
                     }
                     if floor <= exact {
-                        assert!(f.coverage_reaching(centres, floor).is_some());
+                        assert!(f
+                            .coverage_reaching(centres, f.bound_area(centres), floor)
+                            .is_some());
                     }
                 }
             }
