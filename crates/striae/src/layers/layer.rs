@@ -259,7 +259,8 @@ impl ScratchLayer {
             for i in i0..=i1 {
                 let o = self.noise.offset(i, j);
                 let f = DVec2::new((i as f64 - q0.x) + o.x, (j as f64 - q0.y) + o.y);
-                let keep = !(na.dot(f).abs() - ha >= tau) & !(nb.dot(f).abs() - hb >= tau);
+                // (`<` keeps what `!(.. >= tau)` kept: the values are finite here.)
+                let keep = (na.dot(f).abs() - ha < tau) & (nb.dot(f).abs() - hb < tau);
                 centres[n] = f;
                 n += keep as usize;
                 if n > room {
@@ -476,8 +477,7 @@ pub(crate) fn disc_parallelogram_area_bound(c: DVec2, r: f64, shape: &Parallelog
 pub(crate) fn disc_parallelogram_area(c: DVec2, r: f64, shape: &Parallelogram) -> f64 {
     let mut s = [0.0f64; 4];
     let mut active = 0u32;
-    for e in 0..4 {
-        let (nrm, d) = shape.planes[e];
+    for (e, &(nrm, d)) in shape.planes.iter().enumerate() {
         s[e] = d - nrm.dot(c);
         if s[e] <= -r {
             return 0.0;
@@ -649,6 +649,7 @@ struct NoiseFootprint {
 }
 
 /// What [`ScratchLayer::footprint_candidates`] found.
+#[allow(clippy::large_enum_variant)] // returned once per layer and query: no allocation
 pub enum Candidates {
     /// The coverage needs no area work (`None`: too large a footprint, see
     /// [`ScratchLayer::footprint_coverage`]).
