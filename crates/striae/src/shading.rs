@@ -144,6 +144,10 @@ pub fn refract_dir(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
 /// the specular rule, `ns` is the shading normal of the bounce and, for refraction,
 /// `eta = n_incident / n_transmitted` along the path's direction of travel.
 #[allow(clippy::too_many_arguments)]
+// Always inlined: LLVM's inliner once dropped it (and its offset-direction closure) from the
+// render loop after an unrelated change in the layers, costing the close-up 6 % (BENCHMARKS.md,
+// "Secondary-hit coverage, session 4").
+#[inline(always)]
 pub fn spawn_differentials(
     p: Vec3,
     dpdx: Vec3,
@@ -170,24 +174,28 @@ pub fn spawn_differentials(
     // Mirroring and refracting a unit direction about a unit normal give a unit direction up
     // to rounding (a relative 1e-7 per bounce, harmless to the footprint), so neither is
     // normalised again; a non-finite result falls back to `wi`.
-    let finite_or_wi = |d: Vec3| if d.is_finite() { d } else { wi };
-    let mirror = |d: Vec3| finite_or_wi(d - 2.0 * d.dot(n) * n);
-    let bend = |d: Vec3| -> Vec3 {
-        if reflection {
-            mirror(d)
-        } else {
-            // The mirror only under total internal reflection (computed only then).
-            match refract_dir(d, n, eta) {
-                Some(t) => finite_or_wi(t),
-                None => mirror(d),
-            }
-        }
-    };
     RayDifferential {
         rx_o,
-        rx_d: bend(rd.rx_d),
+        rx_d: bend_differential(rd.rx_d, n, wi, reflection, eta),
         ry_o,
-        ry_d: bend(rd.ry_d),
+        ry_d: bend_differential(rd.ry_d, n, wi, reflection, eta),
+    }
+}
+
+/// An offset ray's direction `d` mirrored (`reflection`) or refracted about the unit normal
+/// `n` facing it (see [`spawn_differentials`]); a non-finite result falls back to `wi`.
+#[inline(always)]
+fn bend_differential(d: Vec3, n: Vec3, wi: Vec3, reflection: bool, eta: f32) -> Vec3 {
+    let finite_or_wi = |d: Vec3| if d.is_finite() { d } else { wi };
+    let mirror = |d: Vec3| finite_or_wi(d - 2.0 * d.dot(n) * n);
+    if reflection {
+        mirror(d)
+    } else {
+        // The mirror only under total internal reflection (computed only then).
+        match refract_dir(d, n, eta) {
+            Some(t) => finite_or_wi(t),
+            None => mirror(d),
+        }
     }
 }
 

@@ -136,6 +136,11 @@ pub struct LayerSet {
     id: u64,
 }
 
+/// Candidate discs [`LayerSet::coverage_max`] keeps from its first pass (bounds) for its
+/// second (exact areas), for all layers together; a layer that does not fit is enumerated
+/// again.
+pub(crate) const CANDIDATE_POOL: usize = 2 * footprint::MAX_DISCS;
+
 /// The next [`LayerSet`] id.
 static NEXT_SET_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
@@ -257,7 +262,7 @@ impl LayerSet {
         out: &mut [f32],
     ) {
         let (p, a, b) = (uv.as_dvec2(), duvdx.as_dvec2(), duvdy.as_dvec2());
-        let mut centres = [glam::DVec2::ZERO; footprint::MAX_DISCS];
+        let mut centres = [glam::DVec2::ZERO; layer::CANDIDATE_ROOM];
         for (layer, o) in self.layers.iter().zip(&mut out[..self.layers.len()]) {
             *o = layer
                 .footprint_coverage_in(p, a, b, max_cells, &mut centres)
@@ -271,9 +276,14 @@ impl LayerSet {
     /// smaller (its value is then not computed). So the largest value and the set of layers
     /// within 1e-6 of it (the ties) are exactly those of [`Self::coverage_all`].
     ///
-    /// Every layer first gathers its candidate discs and an upper bound on its coverage
+    /// Every layer first gathers its candidate discs (kept in a pool shared by the layers,
+    /// [`CANDIDATE_POOL`]) and an upper bound on its coverage
     /// ([`layer::FootprintCandidates::coverage_bound`]); the exact areas are then computed in
-    /// decreasing order of bound until the next bound falls below the best coverage so far.
+    /// decreasing order of bound until the next bound falls below the best coverage so far,
+    /// each layer given up part way once it cannot reach the best
+    /// ([`layer::FootprintCandidates::coverage_reaching`]). Which layers are computed depends
+    /// on the bounds; the values kept do not (a layer is skipped only where its exact coverage
+    /// is below the best less the tie tolerance, where it is cleared anyway).
     /// # Panics
     /// If `out.len() < len()`.
     pub fn coverage_max(&self, uv: Vec2, duvdx: Vec2, duvdy: Vec2, out: &mut [f32]) {
@@ -291,29 +301,48 @@ impl LayerSet {
         out: &mut [f32],
     ) {
         const TIE: f64 = 2e-6;
+        const POOL: usize = CANDIDATE_POOL;
         let (p, a, b) = (uv.as_dvec2(), duvdx.as_dvec2(), duvdy.as_dvec2());
         let n = self.layers.len();
         let out = &mut out[..n];
-        // Pass 1: exact values that need no area work, bounds for the rest.
+        // Pass 1: exact values that need no area work, bounds (and the candidate discs) for
+        // the rest.
         let mut bound = [0.0f64; MAX_LAYERS];
+        let mut bound_area = [0.0f64; MAX_LAYERS];
         let mut order = [0u8; MAX_LAYERS];
+        // Layer k's discs are pool[kept[k].0..kept[k].1]; an empty range: not kept.
+        let mut kept = [(0u16, 0u16); MAX_LAYERS];
+        let mut pool = [glam::DVec2::ZERO; POOL];
+        let mut used = 0;
         let mut pending = 0;
         let mut best = 0.0f64;
-        let mut centres = [glam::DVec2::ZERO; footprint::MAX_DISCS];
         for (k, layer) in self.layers.iter().enumerate() {
             out[k] = 0.0;
-            match layer.footprint_candidates(p, a, b, max_cells, &mut centres) {
+            match layer.footprint_candidates(p, a, b, max_cells, &mut pool[used..]) {
                 layer::Candidates::Done(c) => {
                     let c = c.unwrap_or(self.expected_coverage);
                     out[k] = c as f32;
                     best = best.max(c);
+                    continue;
                 }
                 layer::Candidates::Discs(f) => {
-                    bound[k] = f.coverage_bound(&centres[..f.n]);
-                    order[pending] = k as u8;
-                    pending += 1;
+                    bound_area[k] = f.bound_area(&pool[used..used + f.n]);
+                    bound[k] = f.coverage_bound_of_area(bound_area[k]);
+                    kept[k] = (used as u16, (used + f.n) as u16);
+                    used += f.n;
+                }
+                layer::Candidates::Overflow => {
+                    let mut centres = [glam::DVec2::ZERO; layer::CANDIDATE_ROOM];
+                    match layer.footprint_candidates(p, a, b, max_cells, &mut centres) {
+                        layer::Candidates::Discs(f) => {
+                            bound[k] = f.coverage_bound(&centres[..f.n]);
+                        }
+                        _ => unreachable!("the same footprint has the same discs"),
+                    }
                 }
             }
+            order[pending] = k as u8;
+            pending += 1;
         }
         // Pass 2: exact areas, largest bound first.
         let order = &mut order[..pending];
@@ -323,9 +352,25 @@ impl LayerSet {
             if bound[k] < best - TIE {
                 break;
             }
-            let c = self.layers[k]
-                .footprint_coverage_in(p, a, b, max_cells, &mut centres)
-                .unwrap_or(self.expected_coverage);
+            let (start, end) = (kept[k].0 as usize, kept[k].1 as usize);
+            let c = if end > start {
+                match self.layers[k].coverage_reaching(
+                    p,
+                    a,
+                    b,
+                    &pool[start..end],
+                    bound_area[k],
+                    best - TIE,
+                ) {
+                    Some(c) => c,
+                    None => continue, // below the best: not a tie
+                }
+            } else {
+                let mut centres = [glam::DVec2::ZERO; layer::CANDIDATE_ROOM];
+                self.layers[k]
+                    .footprint_coverage_in(p, a, b, max_cells, &mut centres)
+                    .unwrap_or(self.expected_coverage)
+            };
             out[k] = c as f32;
             best = best.max(c);
         }

@@ -508,31 +508,27 @@ fn fast_footprint_coverage_matches_the_reference() {
     );
 }
 
-/// The closed forms for one disc against a parallelogram (`disc_parallelogram_area`, and its
-/// triangle decomposition `disc_convex_polygon_area` with one `atan2`) against the exact union
-/// kernel on random discs: centres inside, near edges and corners, far outside; parallelograms
-/// from thin needles to squares, some inside the disc (circle fully outside the polygon).
+/// The closed forms for one disc against a parallelogram (`disc_parallelogram_area`: its
+/// segment forms, and the Green's theorem form with one `atan2` for circles that cross both
+/// pairs of edge lines; and the triangle decomposition `disc_convex_polygon_area` it replaced)
+/// against the exact union kernel on random discs: centres inside, near edges and corners, far
+/// outside; parallelograms from thin needles to squares, some inside the disc (circle fully
+/// outside the polygon).
 #[test]
 fn single_disc_closed_forms_match_the_union_kernel() {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(12);
-    let mut partial = 0;
+    let (mut partial, mut crossing, mut tight) = (0, 0, 0);
     for case in 0..20000 {
         let a = DVec2::new(rng.random_range(-2.0..2.0), rng.random_range(-2.0..2.0));
         let thin = 10f64.powf(rng.random_range(-4.0..0.0));
         let b = DVec2::new(-a.y, a.x) * thin + a * rng.random_range(-1.0..1.0);
-        let poly = [(-a - b) * 0.5, (a - b) * 0.5, (a + b) * 0.5, (b - a) * 0.5];
-        let mut planes = [(DVec2::ZERO, 0.0f64); 4];
-        for e in 0..4 {
-            let d = poly[(e + 1) % 4] - poly[e];
-            let n = DVec2::new(d.y, -d.x).normalize_or_zero();
-            planes[e] = (n, n.dot(poly[e]));
-        }
+        let shape = layer::Parallelogram::new(a, b);
+        let poly = shape.poly;
         let r = 10f64.powf(rng.random_range(-2.0..0.5));
         let c = poly[case % 4] * rng.random_range(0.0..1.5)
             + DVec2::new(rng.random_range(-r..r), rng.random_range(-r..r));
         let exact = footprint::union_discs_polygon_area(&[c], r, &poly);
-        let fast =
-            layer::disc_parallelogram_area(c, r, &poly, &planes, (a.x * b.y - a.y * b.x).abs());
+        let fast = layer::disc_parallelogram_area(c, r, &shape);
         let tri = layer::disc_convex_polygon_area(c, r, &poly);
         let tol = 1e-10 * (PI * r * r);
         assert!((fast - exact).abs() < tol, "case {case}: {fast} vs {exact}");
@@ -541,8 +537,126 @@ fn single_disc_closed_forms_match_the_union_kernel() {
             "case {case}: triangles {tri} vs {exact}"
         );
         partial += (exact > 0.0 && exact < PI * r * r * 0.999) as usize;
+        // The bound `coverage_max` prunes with.
+        let bound = layer::disc_parallelogram_area_bound(c, r, &shape);
+        assert!(
+            exact <= bound * (1.0 + 1e-9) + 1e-12 * shape.area,
+            "case {case}: bound {bound} below {exact}"
+        );
+        tight += (exact > 0.0 && bound < 1.1 * exact) as usize;
+        // The Green's theorem form: lines of both pairs cross the circle, some corner outside.
+        let dist = shape.planes.map(|(n, d)| (d - n.dot(c)).abs() < r);
+        crossing += ((dist[0] || dist[2])
+            && (dist[1] || dist[3])
+            && shape.planes.iter().all(|&(n, d)| d - n.dot(c) > -r)
+            && poly.iter().any(|&v| (v - c).length_squared() > r * r)) as usize;
     }
-    assert!(partial > 5000, "{partial}");
+    assert!(
+        partial > 5000 && crossing > 3000 && tight > 5000,
+        "{partial} partial, {crossing} crossing, {tight} bounds within 10 %"
+    );
+}
+
+/// `coverage_reaching` (exact areas given up part way once a layer cannot reach a floor) gives
+/// `coverage`'s value bit for bit whenever it gives one, and gives up only below the floor.
+#[test]
+fn coverage_reaching_is_the_coverage_or_below_the_floor() {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(23);
+    let (mut kept, mut given_up) = (0, 0);
+    for (set_params, scale) in [
+        (LayerParams::setting(1).unwrap(), 0.03f32),
+        (params(0.05, 0.02, 0.45, 4), 0.2),
+    ] {
+        let set = LayerSet::new(set_params, 5).unwrap();
+        for (uv, a, b) in random_footprints(&mut rng, 300, scale) {
+            let (p, da, db) = (uv.as_dvec2(), a.as_dvec2(), b.as_dvec2());
+            for layer in set.layers() {
+                let mut centres = [DVec2::ZERO; layer::CANDIDATE_ROOM];
+                let layer::Candidates::Discs(f) =
+                    layer.footprint_candidates(p, da, db, layer::MAX_FOOTPRINT_CELLS, &mut centres)
+                else {
+                    continue;
+                };
+                let centres = &centres[..f.n];
+                let exact = f.coverage(centres);
+                for floor in [
+                    0.0,
+                    exact * 0.5,
+                    exact - 1e-9,
+                    exact + 1e-6,
+                    exact * 1.5 + 1e-4,
+                    rng.random_range(0.0..0.2),
+                ] {
+                    match f.coverage_reaching(centres, f.bound_area(centres), floor) {
+                        Some(c) => {
+                            assert_eq!(c.to_bits(), exact.to_bits(), "{c} vs {exact}");
+                            kept += 1;
+                        }
+                        None => {
+                            assert!(exact < floor, "gave up on {exact} at floor {floor}");
+                            given_up += 1;
+                        }
+                    }
+                    if floor <= exact {
+                        assert!(f
+                            .coverage_reaching(centres, f.bound_area(centres), floor)
+                            .is_some());
+                    }
+                }
+            }
+        }
+    }
+    assert!(
+        kept > 2000 && given_up > 1000,
+        "{kept} kept, {given_up} given up"
+    );
+}
+
+/// `coverage_max` keeps the first pass's candidate discs in a pool shared by all layers; layers
+/// that do not fit are enumerated again. With large, dense footprints (many discs per layer,
+/// more than the pool in all) it still gives `coverage_all`'s largest value and ties.
+#[test]
+fn coverage_max_with_more_discs_than_its_pool() {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(24);
+    let set = LayerSet::new(params(0.05, 0.02, 0.3, 8), 7).unwrap();
+    let n = set.len();
+    let (mut all, mut max) = (vec![0.0f32; n], vec![0.0f32; n]);
+    let mut overflowed = 0;
+    for _ in 0..300 {
+        // Edges 0.1 to 0.2 long: 5-10 noise cells across the scratches, 2-4 along them.
+        let uv = Vec2::new(rng.random_range(0.2..0.8), rng.random_range(0.2..0.8));
+        let edge = |rng: &mut rand_pcg::Pcg64| {
+            let phi = rng.random_range(0.0..std::f32::consts::TAU);
+            Vec2::new(phi.cos(), phi.sin()) * rng.random_range(0.1..0.2)
+        };
+        let (a, b) = (edge(&mut rng), edge(&mut rng));
+        set.coverage_all(uv, a, b, &mut all);
+        set.coverage_max(uv, a, b, &mut max);
+        let best = all.iter().copied().fold(0.0f32, f32::max);
+        assert_eq!(max.iter().copied().fold(0.0f32, f32::max), best);
+        for k in 0..n {
+            let tie = |c: f32| c > 0.0 && c >= best - 1e-6;
+            assert_eq!(
+                tie(all[k]),
+                tie(max[k]),
+                "layer {k}: {} vs {}",
+                all[k],
+                max[k]
+            );
+        }
+        let (p, da, db) = (uv.as_dvec2(), a.as_dvec2(), b.as_dvec2());
+        let mut total = 0;
+        for layer in set.layers() {
+            let mut centres = [DVec2::ZERO; layer::CANDIDATE_ROOM];
+            if let layer::Candidates::Discs(f) =
+                layer.footprint_candidates(p, da, db, layer::MAX_FOOTPRINT_CELLS, &mut centres)
+            {
+                total += f.n;
+            }
+        }
+        overflowed += (total > CANDIDATE_POOL) as usize;
+    }
+    assert!(overflowed > 100, "{overflowed} footprints beyond the pool");
 }
 
 /// `n` random footprints in `[0.05, 0.95]^2`, sheared and of aspect up to 20, with edges
@@ -594,7 +708,7 @@ fn coverage_max_keeps_the_largest_and_its_ties() {
                 }
                 pruned += (all[k] > 0.0 && max[k] == 0.0) as usize;
                 // Bounds.
-                let mut centres = [DVec2::ZERO; footprint::MAX_DISCS];
+                let mut centres = [DVec2::ZERO; layer::CANDIDATE_ROOM];
                 let layer = &set.layers()[k];
                 let (p, da, db) = (uv.as_dvec2(), a.as_dvec2(), b.as_dvec2());
                 if let layer::Candidates::Discs(f) =
