@@ -217,9 +217,9 @@ impl ScratchLayer {
     ///
     /// `centres` (at least one slot) holds `centres.len() - 1` discs; it may be shorter than
     /// [`CANDIDATE_ROOM`] (a share of a larger buffer, as [`super::LayerSet::coverage_max`]
-    /// keeps every layer's candidates): when more discs than it holds but at most [`MAX_DISCS`]
-    /// touch the footprint, the answer is [`Candidates::Overflow`] and the call must be
-    /// repeated with a buffer of [`CANDIDATE_ROOM`].
+    /// keeps every layer's candidates): when more discs than it holds touch the footprint, the
+    /// answer is [`Candidates::Overflow`] and the call must be repeated with a buffer of
+    /// [`CANDIDATE_ROOM`] (which answers `Done(None)` where more than [`MAX_DISCS`] touch it).
     ///
     /// Cells are enumerated over the noise-space bounding box as in the reference (a
     /// row-by-row enumeration over the parallelogram's extent was tried and measured slower:
@@ -656,8 +656,8 @@ pub enum Candidates {
     Done(Option<f64>),
     /// Discs to clip against the footprint.
     Discs(FootprintCandidates),
-    /// More discs than the caller's buffer holds (but at most [`MAX_DISCS`]): ask again with a
-    /// buffer of [`MAX_DISCS`].
+    /// More discs than the caller's buffer (shorter than [`CANDIDATE_ROOM`]) holds: ask again
+    /// with a buffer of [`CANDIDATE_ROOM`].
     Overflow,
 }
 

@@ -318,27 +318,33 @@ impl LayerSet {
         let mut best = 0.0f64;
         for (k, layer) in self.layers.iter().enumerate() {
             out[k] = 0.0;
-            match layer.footprint_candidates(p, a, b, max_cells, &mut pool[used..]) {
-                layer::Candidates::Done(c) => {
-                    let c = c.unwrap_or(self.expected_coverage);
-                    out[k] = c as f32;
-                    best = best.max(c);
-                    continue;
-                }
+            let mut centres = [glam::DVec2::ZERO; layer::CANDIDATE_ROOM];
+            let found = match layer.footprint_candidates(p, a, b, max_cells, &mut pool[used..]) {
                 layer::Candidates::Discs(f) => {
                     bound_area[k] = f.bound_area(&pool[used..used + f.n]);
                     bound[k] = f.coverage_bound_of_area(bound_area[k]);
                     kept[k] = (used as u16, (used + f.n) as u16);
                     used += f.n;
+                    None
                 }
+                // The pool's rest was too small: ask again with a whole buffer, which may find
+                // more than MAX_DISCS discs (then `Done(None)`: the expected coverage).
                 layer::Candidates::Overflow => {
-                    let mut centres = [glam::DVec2::ZERO; layer::CANDIDATE_ROOM];
-                    match layer.footprint_candidates(p, a, b, max_cells, &mut centres) {
-                        layer::Candidates::Discs(f) => {
-                            bound[k] = f.coverage_bound(&centres[..f.n]);
-                        }
-                        _ => unreachable!("the same footprint has the same discs"),
-                    }
+                    Some(layer.footprint_candidates(p, a, b, max_cells, &mut centres))
+                }
+                done => Some(done),
+            };
+            match found {
+                None => {}
+                Some(layer::Candidates::Done(c)) => {
+                    let c = c.unwrap_or(self.expected_coverage);
+                    out[k] = c as f32;
+                    best = best.max(c);
+                    continue;
+                }
+                Some(layer::Candidates::Discs(f)) => bound[k] = f.coverage_bound(&centres[..f.n]),
+                Some(layer::Candidates::Overflow) => {
+                    unreachable!("a buffer of CANDIDATE_ROOM never overflows")
                 }
             }
             order[pending] = k as u8;

@@ -617,17 +617,32 @@ fn coverage_reaching_is_the_coverage_or_below_the_floor() {
 /// more than the pool in all) it still gives `coverage_all`'s largest value and ties.
 #[test]
 fn coverage_max_with_more_discs_than_its_pool() {
+    coverage_max_agrees_beyond_the_pool(0.1..0.2, 100);
+}
+
+#[test]
+fn coverage_max_with_more_discs_than_one_layer_holds() {
+    // Larger footprints: some layers have more than MAX_DISCS candidate discs once the shared
+    // pool is full (the layer then takes the expected coverage, as in `coverage_all`; this
+    // path once hit an `unreachable!` in `coverage = "sample"` renders).
+    coverage_max_agrees_beyond_the_pool(0.3..0.45, 30);
+}
+
+/// `coverage_max` against `coverage_all` on 300 random footprints with edges of the given
+/// length; at least `min_overflowed` of them have more candidate discs than the shared pool.
+fn coverage_max_agrees_beyond_the_pool(edges: std::ops::Range<f32>, min_overflowed: usize) {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(24);
     let set = LayerSet::new(params(0.05, 0.02, 0.3, 8), 7).unwrap();
     let n = set.len();
     let (mut all, mut max) = (vec![0.0f32; n], vec![0.0f32; n]);
     let mut overflowed = 0;
+    let mut too_many = 0;
     for _ in 0..300 {
-        // Edges 0.1 to 0.2 long: 5-10 noise cells across the scratches, 2-4 along them.
+        // (Edges of 0.1 to 0.2: 5-10 noise cells across the scratches, 2-4 along them.)
         let uv = Vec2::new(rng.random_range(0.2..0.8), rng.random_range(0.2..0.8));
         let edge = |rng: &mut rand_pcg::Pcg64| {
             let phi = rng.random_range(0.0..std::f32::consts::TAU);
-            Vec2::new(phi.cos(), phi.sin()) * rng.random_range(0.1..0.2)
+            Vec2::new(phi.cos(), phi.sin()) * rng.random_range(edges.clone())
         };
         let (a, b) = (edge(&mut rng), edge(&mut rng));
         set.coverage_all(uv, a, b, &mut all);
@@ -648,15 +663,25 @@ fn coverage_max_with_more_discs_than_its_pool() {
         let mut total = 0;
         for layer in set.layers() {
             let mut centres = [DVec2::ZERO; layer::CANDIDATE_ROOM];
-            if let layer::Candidates::Discs(f) =
-                layer.footprint_candidates(p, da, db, layer::MAX_FOOTPRINT_CELLS, &mut centres)
-            {
-                total += f.n;
+            match layer.footprint_candidates(p, da, db, layer::MAX_FOOTPRINT_CELLS, &mut centres) {
+                layer::Candidates::Discs(f) => total += f.n,
+                layer::Candidates::Done(None) => {
+                    // More than MAX_DISCS discs (or too many cells): the pool overflows too.
+                    total += CANDIDATE_POOL + 1;
+                    too_many += 1;
+                }
+                _ => {}
             }
         }
         overflowed += (total > CANDIDATE_POOL) as usize;
     }
-    assert!(overflowed > 100, "{overflowed} footprints beyond the pool");
+    assert!(
+        overflowed > min_overflowed,
+        "{overflowed} footprints beyond the pool"
+    );
+    if edges.start > 0.25 {
+        assert!(too_many > 0, "no layer beyond MAX_DISCS");
+    }
 }
 
 /// `n` random footprints in `[0.05, 0.95]^2`, sheared and of aspect up to 20, with edges
