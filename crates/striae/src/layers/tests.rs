@@ -628,6 +628,18 @@ fn coverage_max_with_more_discs_than_one_layer_holds() {
     coverage_max_agrees_beyond_the_pool(0.3..0.45, 30);
 }
 
+/// `coverage_max`'s values `max` have the largest of `coverage_all`'s values `all` and the same
+/// layers within 1e-6 of it (the ties the renderer picks from); returns the largest.
+fn assert_same_largest_and_ties(all: &[f32], max: &[f32]) -> f32 {
+    let best = all.iter().copied().fold(0.0f32, f32::max);
+    assert_eq!(max.iter().copied().fold(0.0f32, f32::max), best);
+    let tie = |c: f32| c > 0.0 && c >= best - 1e-6;
+    for (k, (&a, &m)) in all.iter().zip(max).enumerate() {
+        assert_eq!(tie(a), tie(m), "layer {k}: {a} vs {m}");
+    }
+    best
+}
+
 /// `coverage_max` against `coverage_all` on 300 random footprints with edges of the given
 /// length; at least `min_overflowed` of them have more candidate discs than the shared pool.
 fn coverage_max_agrees_beyond_the_pool(edges: std::ops::Range<f32>, min_overflowed: usize) {
@@ -647,18 +659,7 @@ fn coverage_max_agrees_beyond_the_pool(edges: std::ops::Range<f32>, min_overflow
         let (a, b) = (edge(&mut rng), edge(&mut rng));
         set.coverage_all(uv, a, b, &mut all);
         set.coverage_max(uv, a, b, &mut max);
-        let best = all.iter().copied().fold(0.0f32, f32::max);
-        assert_eq!(max.iter().copied().fold(0.0f32, f32::max), best);
-        for k in 0..n {
-            let tie = |c: f32| c > 0.0 && c >= best - 1e-6;
-            assert_eq!(
-                tie(all[k]),
-                tie(max[k]),
-                "layer {k}: {} vs {}",
-                all[k],
-                max[k]
-            );
-        }
+        assert_same_largest_and_ties(&all, &max);
         let (p, da, db) = (uv.as_dvec2(), a.as_dvec2(), b.as_dvec2());
         let mut total = 0;
         for layer in set.layers() {
@@ -717,17 +718,9 @@ fn coverage_max_keeps_the_largest_and_its_ties() {
         for (uv, a, b) in random_footprints(&mut rng, 400, scale) {
             set.coverage_all(uv, a, b, &mut all);
             set.coverage_max(uv, a, b, &mut max);
-            let best = all.iter().copied().fold(0.0f32, f32::max);
-            assert_eq!(max.iter().copied().fold(0.0f32, f32::max), best);
+            let best = assert_same_largest_and_ties(&all, &max);
             for k in 0..n {
                 let tie = |c: f32| c > 0.0 && c >= best - 1e-6;
-                assert_eq!(
-                    tie(all[k]),
-                    tie(max[k]),
-                    "layer {k}: {} vs {}",
-                    all[k],
-                    max[k]
-                );
                 if tie(all[k]) {
                     assert_eq!(all[k], max[k]);
                 }
