@@ -318,8 +318,9 @@ impl LayerSet {
         let mut best = 0.0f64;
         for (k, layer) in self.layers.iter().enumerate() {
             out[k] = 0.0;
-            let mut centres = [glam::DVec2::ZERO; layer::CANDIDATE_ROOM];
-            let found = match layer.footprint_candidates(p, a, b, max_cells, &mut pool[used..]) {
+            // `Some(coverage)` where no area work is needed.
+            let done = match layer.footprint_candidates(p, a, b, max_cells, &mut pool[used..]) {
+                layer::Candidates::Done(c) => Some(c),
                 layer::Candidates::Discs(f) => {
                     bound_area[k] = f.bound_area(&pool[used..used + f.n]);
                     bound[k] = f.coverage_bound_of_area(bound_area[k]);
@@ -330,22 +331,24 @@ impl LayerSet {
                 // The pool's rest was too small: ask again with a whole buffer, which may find
                 // more than MAX_DISCS discs (then `Done(None)`: the expected coverage).
                 layer::Candidates::Overflow => {
-                    Some(layer.footprint_candidates(p, a, b, max_cells, &mut centres))
+                    let mut centres = [glam::DVec2::ZERO; layer::CANDIDATE_ROOM];
+                    match layer.footprint_candidates(p, a, b, max_cells, &mut centres) {
+                        layer::Candidates::Done(c) => Some(c),
+                        layer::Candidates::Discs(f) => {
+                            bound[k] = f.coverage_bound(&centres[..f.n]);
+                            None
+                        }
+                        layer::Candidates::Overflow => {
+                            unreachable!("a buffer of CANDIDATE_ROOM never overflows")
+                        }
+                    }
                 }
-                done => Some(done),
             };
-            match found {
-                None => {}
-                Some(layer::Candidates::Done(c)) => {
-                    let c = c.unwrap_or(self.expected_coverage);
-                    out[k] = c as f32;
-                    best = best.max(c);
-                    continue;
-                }
-                Some(layer::Candidates::Discs(f)) => bound[k] = f.coverage_bound(&centres[..f.n]),
-                Some(layer::Candidates::Overflow) => {
-                    unreachable!("a buffer of CANDIDATE_ROOM never overflows")
-                }
+            if let Some(c) = done {
+                let c = c.unwrap_or(self.expected_coverage);
+                out[k] = c as f32;
+                best = best.max(c);
+                continue;
             }
             order[pending] = k as u8;
             pending += 1;
