@@ -77,7 +77,8 @@ pub struct PixelSampler {
     key: u64,
     /// The Sobol sampler's shuffled (Owen-scrambled, bit-reversed) sample index: the first step
     /// of `sobol_burley::sample_4d`, which depends on the seed and the sample only, so it is
-    /// computed once per sample instead of once per 4-dimension set.
+    /// computed once per sample instead of once per 4-dimension set (0 for the independent
+    /// kind, which does not read it).
     shuffled_rev_index: u32,
     sample_index: u32,
     dimension: u32,
@@ -106,7 +107,10 @@ impl PixelSampler {
             // Sample `i`'s dimensions are the keys `key + d`: distinct samples of a pixel
             // start 2^32 apart, far beyond any dimension a path reads.
             key: pixel_seed.wrapping_add((sample_index as u64) << 32),
-            shuffled_rev_index: shuffle_rev_index(sample_index, pixel_seed as u32),
+            shuffled_rev_index: match kind {
+                SamplerKind::Sobol => shuffle_rev_index(sample_index, pixel_seed as u32),
+                SamplerKind::Independent => 0,
+            },
             sample_index,
             dimension: 0,
             cached_set: u32::MAX,
