@@ -302,17 +302,9 @@ impl ScratchLayer {
 
     /// The exact coverage of the footprint `{p + s a + t b : s, t in [-1/2, 1/2]}` from its
     /// candidate discs `centres`, as [`Self::footprint_candidates`] found them (so the same
-    /// value as [`Self::footprint_coverage`], without enumerating the cells again).
-    pub fn coverage_of_candidates(&self, p: DVec2, a: DVec2, b: DVec2, centres: &[DVec2]) -> f64 {
-        match self.candidate_geometry(p, a, b) {
-            Ok((_, _, f)) => f.coverage(centres),
-            Err(c) => c,
-        }
-    }
-
-    /// [`Self::coverage_of_candidates`] where it may reach `floor`, else `None`
-    /// ([`FootprintCandidates::coverage_reaching`]: layers that cannot be the largest are given
-    /// up part way).
+    /// value as [`Self::footprint_coverage`], without enumerating the cells again), where it
+    /// may reach `floor`, else `None` ([`FootprintCandidates::coverage_reaching`]: layers that
+    /// cannot be the largest are given up part way).
     pub fn coverage_reaching(
         &self,
         p: DVec2,
