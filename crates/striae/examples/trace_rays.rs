@@ -1,0 +1,106 @@
+//! Times striae's ray queries alone, on rays read from a file: the striae half of
+//! `scripts/bench_traversal.py`, which times Mitsuba 3 (Embree) on the same rays of the same
+//! scene, so the traversal can be compared apart from the rest of the path tracer.
+//!
+//! ```sh
+//! cargo run --release -p striae --example trace_rays -- SCENE.toml RAYS.f32 [REPEATS]
+//! ```
+//!
+//! `RAYS.f32` is little-endian `f32`, six per ray (origin, direction), `t_max` infinite. On one
+//! thread, in the AVX2 + FMA copy where the CPU has it (as the render loop), it runs
+//! `Geometry::intersect` (closest hit with the whole `SurfaceHit`) and `Geometry::occluded`
+//! (any hit) over all rays `REPEATS` times (default 7) and prints, per query, the median
+//! rate and the number of rays that hit, one `key=value` line each.
+
+use std::error::Error;
+use std::path::Path;
+use std::time::Instant;
+use striae::math::{Ray, Vec3};
+use striae::scene::{Overrides, Scene};
+
+#[derive(Clone, Copy, PartialEq)]
+enum Query {
+    Intersect,
+    Occluded,
+}
+
+/// Runs `query` over `rays`: the number of hits and a checksum the optimiser cannot drop.
+#[inline(always)]
+fn run(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
+    let (mut hits, mut sum) = (0usize, 0.0f32);
+    for ray in rays {
+        match query {
+            Query::Intersect => {
+                if let Some(hit) = scene.geometry.intersect(ray) {
+                    hits += 1;
+                    sum += hit.t + hit.uv.x + hit.ns.x;
+                }
+            }
+            Query::Occluded => hits += scene.geometry.occluded(ray) as usize,
+        }
+    }
+    (hits, sum)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+unsafe fn run_avx2(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
+    run(scene, rays, query)
+}
+
+fn run_best(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2")
+        && std::arch::is_x86_feature_detected!("fma")
+        && std::arch::is_x86_feature_detected!("bmi1")
+        && std::arch::is_x86_feature_detected!("bmi2")
+        && std::arch::is_x86_feature_detected!("lzcnt")
+        && std::arch::is_x86_feature_detected!("popcnt")
+    {
+        // SAFETY: the CPU has the features `run_avx2` is compiled for.
+        return unsafe { run_avx2(scene, rays, query) };
+    }
+    run(scene, rays, query)
+}
+
+fn main() -> Result<(), Box<dyn Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    if args.len() < 3 {
+        return Err("usage: trace_rays SCENE.toml RAYS.f32 [REPEATS]".into());
+    }
+    let repeats: usize = match args.get(3) {
+        Some(r) => r.parse().map_err(|_| format!("REPEATS: not a count: {r}"))?,
+        None => 7,
+    };
+    let scene = Scene::load(Path::new(&args[1]), &Overrides::default())?;
+    let bytes = std::fs::read(&args[2]).map_err(|e| format!("{}: {e}", args[2]))?;
+    if bytes.len() % 24 != 0 {
+        return Err(format!("{}: not a whole number of rays (6 f32 each)", args[2]).into());
+    }
+    let rays: Vec<Ray> = bytes
+        .chunks_exact(24)
+        .map(|c| {
+            let f = |i: usize| f32::from_le_bytes([c[4 * i], c[4 * i + 1], c[4 * i + 2], c[4 * i + 3]]);
+            Ray::new(Vec3::new(f(0), f(1), f(2)), Vec3::new(f(3), f(4), f(5)))
+        })
+        .collect();
+    for (query, name) in [(Query::Intersect, "intersect"), (Query::Occluded, "occluded")] {
+        let mut seconds = Vec::with_capacity(repeats.max(1));
+        let mut hits = 0;
+        for _ in 0..repeats.max(1) {
+            let start = Instant::now();
+            let (h, sum) = run_best(&scene, &rays, query);
+            std::hint::black_box(sum);
+            seconds.push(start.elapsed().as_secs_f64());
+            hits = h;
+        }
+        seconds.sort_by(f64::total_cmp);
+        let median = seconds[seconds.len() / 2];
+        println!(
+            "query={name} rays={} hits={hits} seconds={median:.6} mrays_per_s={:.3}",
+            rays.len(),
+            rays.len() as f64 / median / 1e6
+        );
+    }
+    Ok(())
+}
