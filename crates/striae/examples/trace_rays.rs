@@ -69,7 +69,9 @@ fn main() -> Result<(), Box<dyn Error>> {
         return Err("usage: trace_rays SCENE.toml RAYS.f32 [REPEATS]".into());
     }
     let repeats: usize = match args.get(3) {
-        Some(r) => r.parse().map_err(|_| format!("REPEATS: not a count: {r}"))?,
+        Some(r) => r
+            .parse()
+            .map_err(|_| format!("REPEATS: not a count: {r}"))?,
         None => 7,
     };
     let scene = Scene::load(Path::new(&args[1]), &Overrides::default())?;
@@ -80,11 +82,15 @@ fn main() -> Result<(), Box<dyn Error>> {
     let rays: Vec<Ray> = bytes
         .chunks_exact(24)
         .map(|c| {
-            let f = |i: usize| f32::from_le_bytes([c[4 * i], c[4 * i + 1], c[4 * i + 2], c[4 * i + 3]]);
+            let f =
+                |i: usize| f32::from_le_bytes([c[4 * i], c[4 * i + 1], c[4 * i + 2], c[4 * i + 3]]);
             Ray::new(Vec3::new(f(0), f(1), f(2)), Vec3::new(f(3), f(4), f(5)))
         })
         .collect();
-    for (query, name) in [(Query::Intersect, "intersect"), (Query::Occluded, "occluded")] {
+    for (query, name) in [
+        (Query::Intersect, "intersect"),
+        (Query::Occluded, "occluded"),
+    ] {
         let mut seconds = Vec::with_capacity(repeats.max(1));
         let mut hits = 0;
         for _ in 0..repeats.max(1) {
