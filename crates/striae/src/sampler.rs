@@ -41,7 +41,10 @@ pub enum SamplerKind {
 }
 
 impl SamplerKind {
-    /// The name used in scene files and on the command line.
+    /// Every kind, in the order messages list them.
+    pub const ALL: [SamplerKind; 2] = [SamplerKind::Sobol, SamplerKind::Independent];
+
+    /// The name used in scene files and on the command line (the one place it is spelled).
     pub fn name(self) -> &'static str {
         match self {
             SamplerKind::Sobol => "sobol",
@@ -49,13 +52,18 @@ impl SamplerKind {
         }
     }
 
-    /// The kind called `name` (`sobol` or `independent`).
+    /// The kind called `name` (one of [`SamplerKind::name`]'s).
     pub fn from_name(name: &str) -> Option<SamplerKind> {
-        match name {
-            "sobol" => Some(SamplerKind::Sobol),
-            "independent" => Some(SamplerKind::Independent),
-            _ => None,
-        }
+        Self::ALL.into_iter().find(|kind| kind.name() == name)
+    }
+
+    /// The allowed names for error messages: `"sobol" or "independent"`.
+    pub fn allowed_names() -> String {
+        let quoted: Vec<String> = Self::ALL
+            .iter()
+            .map(|k| format!("\"{}\"", k.name()))
+            .collect();
+        quoted.join(" or ")
     }
 }
 
@@ -215,6 +223,16 @@ mod tests {
         let mut a = PixelSampler::new(5, 9, 1);
         let mut b = PixelSampler::new(5, 9, 1);
         assert_eq!(a.next_2d(), b.next_2d());
+    }
+
+    #[test]
+    fn every_kind_is_found_by_its_name_and_listed() {
+        for kind in SamplerKind::ALL {
+            assert_eq!(SamplerKind::from_name(kind.name()), Some(kind));
+            assert!(SamplerKind::allowed_names().contains(&format!("\"{}\"", kind.name())));
+        }
+        assert_eq!(SamplerKind::from_name("halton"), None);
+        assert_eq!(SamplerKind::from_name("Sobol"), None);
     }
 
     #[test]

@@ -50,7 +50,8 @@ pub struct Args {
 }
 
 fn parse_sampler(s: &str) -> Result<SamplerKind, String> {
-    SamplerKind::from_name(s).ok_or_else(|| format!("`{s}` is not `sobol` or `independent`"))
+    SamplerKind::from_name(s)
+        .ok_or_else(|| format!("`{s}` is not {}", SamplerKind::allowed_names()))
 }
 
 pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {

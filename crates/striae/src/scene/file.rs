@@ -80,7 +80,7 @@ fn default_rr_depth() -> u32 {
     5
 }
 fn default_sampler() -> String {
-    "sobol".into()
+    crate::sampler::SamplerKind::default().name().into()
 }
 
 impl Default for RenderSection {

@@ -168,7 +168,7 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
                 file,
                 "render.sampler",
                 &r.sampler,
-                "must be \"sobol\" or \"independent\"",
+                format!("must be {}", SamplerKind::allowed_names()),
             )
         })?,
     };
