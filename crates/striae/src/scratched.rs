@@ -119,8 +119,10 @@ pub struct ScratchSpec {
     /// Profile spec, as `striae precompute --profile` (`file:` paths are relative to the scene).
     pub profile: Option<String>,
     /// Wall micro-BRDF: glass default `diffuse` (the seed), metal `specular` ([Raymond16]).
+    #[serde(default, deserialize_with = "keyed::walls")]
     pub walls: Option<Walls>,
     /// Where Fresnel is applied: glass default `seed`, metal `walls`.
+    #[serde(default, deserialize_with = "keyed::fresnel")]
     pub fresnel: Option<FresnelMode>,
     /// `schlick`, `dielectric`, `conductor:ETA,K` or `none`; glass default `schlick`, metal the
     /// base's complex IOR in its brightest channel (`none` for a perfect mirror base).
@@ -144,12 +146,45 @@ pub struct ScratchSpec {
     pub layers: Option<usize>,
     /// Seed of the layer set (default 1).
     pub seed: Option<u64>,
+    #[serde(default, deserialize_with = "keyed::layer_mix")]
     pub layer_mix: Option<LayerMix>,
     /// `footprint` (default, section 6) or `point` (see [`CoverageMode`]).
+    #[serde(default, deserialize_with = "keyed::coverage")]
     pub coverage: Option<CoverageMode>,
     /// A table file (`.npz`, relative to the scene file) to load instead of computing one;
     /// excludes the table keys above.
     pub table: Option<PathBuf>,
+}
+
+/// Deserialisers of the scratched material's word-valued keys that put the key in the error.
+/// A material is an internally tagged enum, which serde buffers, so `toml` can point only at the
+/// material's table and its message would name the bad word but not the key.
+mod keyed {
+    use super::{BaseKind, CoverageMode, FresnelMode, LayerMix, Walls};
+    use serde::de::{Deserialize, Deserializer, Error};
+
+    fn named<'de, T: Deserialize<'de>, D: Deserializer<'de>>(
+        d: D,
+        key: &str,
+    ) -> Result<T, D::Error> {
+        T::deserialize(d).map_err(|e| D::Error::custom(format_args!("key `{key}`: {e}")))
+    }
+
+    pub fn base<'de, D: Deserializer<'de>>(d: D) -> Result<BaseKind, D::Error> {
+        named(d, "base")
+    }
+    pub fn walls<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Walls>, D::Error> {
+        named(d, "scratches.walls")
+    }
+    pub fn fresnel<'de, D: Deserializer<'de>>(d: D) -> Result<Option<FresnelMode>, D::Error> {
+        named(d, "scratches.fresnel")
+    }
+    pub fn layer_mix<'de, D: Deserializer<'de>>(d: D) -> Result<Option<LayerMix>, D::Error> {
+        named(d, "scratches.layer_mix")
+    }
+    pub fn coverage<'de, D: Deserializer<'de>>(d: D) -> Result<Option<CoverageMode>, D::Error> {
+        named(d, "scratches.coverage")
+    }
 }
 
 /// Where a material's table comes from.
@@ -224,6 +259,7 @@ impl std::fmt::Debug for Prepared {
 #[derive(Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScratchedMaterial {
+    #[serde(deserialize_with = "keyed::base")]
     pub base: BaseKind,
     /// Glass: interior index (default 1.5; the exterior is 1).
     pub ior: Option<f32>,

@@ -357,9 +357,36 @@ fn bad_scene_files_give_clear_errors() {
         msg.contains("shapes[0].material") && msg.contains("glas"),
         "{msg}"
     );
-    // Degenerate camera.
+    // Degenerate camera: the message names the key at fault, not the whole section.
     let msg = parse_err("[camera]\nposition = [0, 0, 0]\nlook_at = [0, 0, 0]\nfov = 40\n");
-    assert!(msg.contains("camera"), "{msg}");
+    assert!(msg.contains("`camera.look_at`"), "{msg}");
+    let msg = parse_err("[camera]\nposition = [0, 0, 3]\nlook_at = [0, 0, 0]\nfov = 180\n");
+    assert!(msg.contains("`camera.fov` = 180"), "{msg}");
+    let msg = parse_err(
+        "[camera]\nposition = [0, 0, 3]\nlook_at = [0, 0, 0]\nup = [0, 0, 1]\nfov = 40\n",
+    );
+    assert!(msg.contains("`camera.up`"), "{msg}");
+    let msg = parse_err(&format!("{CAMERA}aperture_radius = -0.1\n"));
+    assert!(msg.contains("`camera.aperture_radius` = -0.1"), "{msg}");
+    // A material's key under its full name; a colour quoted as written.
+    let msg = parse_err(&format!(
+        "{CAMERA}[materials.g]\ntype = \"scratched\"\nbase = \"glass\"\n[materials.g.scratches]\nm = 0\n"
+    ));
+    assert!(msg.contains("`materials.g.scratches.m` = 0"), "{msg}");
+    let msg = parse_err(&format!(
+        "{CAMERA}[materials.g]\ntype = \"scratched\"\nbase = \"glass\"\n[materials.g.scratches]\nwalls = \"rough\"\n"
+    ));
+    assert!(
+        msg.contains("[materials.g]") && msg.contains("`scratches.walls`"),
+        "{msg}"
+    );
+    let msg = parse_err(&format!(
+        "{CAMERA}[environment]\ntype = \"constant\"\nradiance = [-1, 0, 0]\n"
+    ));
+    assert!(
+        msg.contains("`environment.radiance` = [-1.0, 0.0, 0.0]"),
+        "{msg}"
+    );
     // Negative emission.
     let msg = parse_err(&format!(
         "{CAMERA}[[shapes]]\ntype = \"rectangle\"\nemission = -1\n"
@@ -377,10 +404,7 @@ fn bad_scene_files_give_clear_errors() {
     let msg = parse_err(&format!(
         "{CAMERA}[materials.glass]\ntype = \"dielectric\"\nior = 0.9\n"
     ));
-    assert!(
-        msg.contains("materials.glass") && msg.contains("ior") && msg.contains("0.9"),
-        "{msg}"
-    );
+    assert!(msg.contains("`materials.glass.ior` = 0.9"), "{msg}");
     // A key that does not belong to the shape's type.
     let msg = parse_err(&format!(
         "{CAMERA}[[shapes]]\ntype = \"rectangle\"\nradius = 2\nemission = 1\n"

@@ -9,11 +9,21 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 
 /// A colour: one number (grey) or `[r, g, b]`, linear.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Deserialize, PartialEq)]
 #[serde(untagged, expecting = "a number or an [r, g, b] array")]
 pub enum Colour {
     Grey(f32),
     Rgb([f32; 3]),
+}
+
+impl std::fmt::Debug for Colour {
+    /// As written in the file (`-1.0`, `[1.0, 0.5, 0.0]`): scene errors quote it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Colour::Grey(g) => write!(f, "{g:?}"),
+            Colour::Rgb(c) => write!(f, "{c:?}"),
+        }
+    }
 }
 
 impl Colour {

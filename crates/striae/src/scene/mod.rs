@@ -13,11 +13,11 @@
 pub mod file;
 
 use crate::bsdf::Bsdf;
-use crate::camera::PerspectiveCamera;
+use crate::camera::{CameraError, PerspectiveCamera};
 use crate::envmap::EnvMap;
 use crate::geometry::{Geometry, Shape, ShapeGeometry, TriangleMesh};
 use crate::lights::{Environment, Light};
-use crate::material::Material;
+use crate::material::{Material, MaterialError};
 use crate::math::Vec3;
 use crate::sampler::SamplerKind;
 use crate::shading::ShadingContext;
@@ -74,6 +74,14 @@ pub enum SceneError {
         key: String,
         value: String,
         reason: String,
+    },
+    /// A problem with a key that is not one bad value (a missing file, a table that cannot be
+    /// built, keys that do not go together).
+    #[error("scene file {file}: key `{key}`: {message}")]
+    Key {
+        file: PathBuf,
+        key: String,
+        message: String,
     },
 }
 
@@ -158,6 +166,93 @@ fn invalid(
     }
 }
 
+/// A camera error as the key it is about (`camera.fov`, `camera.look_at`, ...).
+fn camera_error(
+    file: &Path,
+    c: &file::CameraSection,
+    (width, height): (u32, u32),
+    e: CameraError,
+) -> SceneError {
+    match e {
+        CameraError::BadFov(fov) => {
+            invalid(file, "camera.fov", fov, "must lie in (0, 180) degrees")
+        }
+        CameraError::DegenerateView => invalid(
+            file,
+            "camera.look_at",
+            c.look_at,
+            "must be finite and differ from camera.position",
+        ),
+        CameraError::DegenerateUp => invalid(
+            file,
+            "camera.up",
+            c.up,
+            "must be finite and not parallel to the view direction (look_at - position)",
+        ),
+        CameraError::BadLens(radius, _) if !(radius >= 0.0) => {
+            invalid(file, "camera.aperture_radius", radius, "must be >= 0")
+        }
+        // Without `focus_distance` the focus is the look-at distance, zero when they coincide.
+        CameraError::BadLens(..) if c.focus_distance.is_none() => invalid(
+            file,
+            "camera.look_at",
+            c.look_at,
+            "must be finite and differ from camera.position",
+        ),
+        CameraError::BadLens(_, focus) => invalid(
+            file,
+            "camera.focus_distance",
+            focus,
+            "must be finite and > 0",
+        ),
+        CameraError::BadResolution(..) => invalid(
+            file,
+            "render.width, render.height",
+            [width, height],
+            "must be at least 1 x 1",
+        ),
+    }
+}
+
+/// A material's error under its full key, `materials.NAME.KEY` (the material's own message
+/// names `KEY` relative to the material).
+fn material_error(file: &Path, name: &str, e: MaterialError) -> SceneError {
+    let key = |k: &str| format!("materials.{name}.{k}");
+    match e {
+        MaterialError::InvalidValue {
+            key: k,
+            value,
+            reason,
+        } => SceneError::Invalid {
+            file: file.to_path_buf(),
+            key: key(k),
+            value,
+            reason,
+        },
+        MaterialError::UnknownPreset { value, known } => invalid(
+            file,
+            key("preset"),
+            value,
+            format!("unknown preset; known presets: {known}"),
+        ),
+        MaterialError::Texture { key: k, source } => SceneError::Key {
+            file: file.to_path_buf(),
+            key: key(k),
+            message: source.to_string(),
+        },
+        MaterialError::ScratchTable { key: k, source } => SceneError::Key {
+            file: file.to_path_buf(),
+            key: key(k),
+            message: source.to_string(),
+        },
+        e @ MaterialError::ConductorIor { .. } => SceneError::Key {
+            file: file.to_path_buf(),
+            key: format!("materials.{name}"),
+            message: e.to_string(),
+        },
+    }
+}
+
 fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene, SceneError> {
     let r = &f.render;
     let (width, height) = o.resolution.unwrap_or((r.width, r.height));
@@ -221,15 +316,14 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
         c.aperture_radius,
         focus,
     )
-    .map_err(|e| invalid(file, "camera", c, e))?;
+    .map_err(|e| camera_error(file, c, (width, height), e))?;
 
     // Materials by name, in file order of the table (sorted keys: BTreeMap).
     let names: Vec<&String> = f.materials.keys().collect();
     let mut materials: Vec<Material> = Vec::with_capacity(names.len());
     for (name, m) in &f.materials {
         let mut m = m.clone();
-        m.prepare(base)
-            .map_err(|e| invalid(file, format!("materials.{name}"), m.clone(), e))?;
+        m.prepare(base).map_err(|e| material_error(file, name, e))?;
         materials.push(m);
     }
 

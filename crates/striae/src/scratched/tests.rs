@@ -594,7 +594,7 @@ fn keys_are_validated() {
         .unwrap();
     assert!(r.tint.x == 1.0 && r.tint.z < 0.6, "{:?}", r.tint);
     let cases: &[(&str, &[&str])] = &[
-        ("base = \"wood\"", &["wood"]),
+        ("base = \"wood\"", &["`base`", "wood"]),
         ("base = \"glass\"\nior = 0.5", &["`ior`", "0.5"]),
         (
             "base = \"glass\"\npreset = \"gold\"",
@@ -650,11 +650,19 @@ fn keys_are_validated() {
         ),
         (
             "base = \"glass\"\n[scratches]\nlayer_mix = \"avg\"",
-            &["avg"],
+            &["`scratches.layer_mix`", "avg"],
         ),
         (
             "base = \"glass\"\n[scratches]\nwalls = \"rough\"",
-            &["rough"],
+            &["`scratches.walls`", "rough"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nfresnel = \"exact\"",
+            &["`scratches.fresnel`", "exact"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\ncoverage = \"pixel\"",
+            &["`scratches.coverage`", "pixel"],
         ),
         ("base = \"glass\"\n[scratches]\nfoo = 1", &["foo"]),
         ("base = \"glass\"\nroughness = 0.1", &["roughness"]),
