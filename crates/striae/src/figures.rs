@@ -112,7 +112,8 @@ pub enum FigureError {
     Layer(#[from] LayerError),
     #[error(transparent)]
     Film(#[from] FilmError),
-    #[error("{path}: {source}")]
+    /// (The I/O error is the source: `anyhow`'s chain prints it after the path.)
+    #[error("{path}")]
     Io {
         path: PathBuf,
         source: std::io::Error,

@@ -381,6 +381,15 @@ fn bad_scene_files_give_clear_errors() {
         "{msg}"
     );
     let msg = parse_err(&format!(
+        "{CAMERA}[materials.g]\ntype = \"scratched\"\nbase = \"glass\"\n[materials.g.scratches]\ntable = \"nowhere.npz\"\n"
+    ));
+    assert!(
+        msg.contains("`materials.g.scratches.table`")
+            && msg.contains("nowhere.npz")
+            && msg.contains("os error"),
+        "{msg}"
+    );
+    let msg = parse_err(&format!(
         "{CAMERA}[environment]\ntype = \"constant\"\nradiance = [-1, 0, 0]\n"
     ));
     assert!(

@@ -238,12 +238,12 @@ fn material_error(file: &Path, name: &str, e: MaterialError) -> SceneError {
         MaterialError::Texture { key: k, source } => SceneError::Key {
             file: file.to_path_buf(),
             key: key(k),
-            message: source.to_string(),
+            message: with_causes(&source),
         },
         MaterialError::ScratchTable { key: k, source } => SceneError::Key {
             file: file.to_path_buf(),
             key: key(k),
-            message: source.to_string(),
+            message: with_causes(&*source),
         },
         e @ MaterialError::ConductorIor { .. } => SceneError::Key {
             file: file.to_path_buf(),
@@ -251,6 +251,21 @@ fn material_error(file: &Path, name: &str, e: MaterialError) -> SceneError {
             message: e.to_string(),
         },
     }
+}
+
+/// `e` followed by its chain of causes (`cannot read or write table t.npz: No such file or
+/// directory`), each cause left out where the text before already quotes it.
+fn with_causes(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        let t = c.to_string();
+        if !text.contains(&t) {
+            text = format!("{text}: {t}");
+        }
+        cause = c.source();
+    }
+    text
 }
 
 fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene, SceneError> {
