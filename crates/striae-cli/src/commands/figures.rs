@@ -13,7 +13,8 @@ pub struct Args {
     #[arg(short = 'o', long = "out")]
     pub out: PathBuf,
     /// Samples per pixel of the renders (Figs. 6-8).
-    #[arg(long, default_value_t = FigureOptions::default().spp)]
+    #[arg(long, default_value_t = FigureOptions::default().spp,
+          value_parser = clap::value_parser!(u32).range(1..=striae::sampler::MAX_SPP as i64))]
     pub spp: u32,
     /// Render size as WIDTHxHEIGHT.
     #[arg(long, value_parser = super::render::parse_resolution, default_value = "384x288")]
@@ -22,7 +23,7 @@ pub struct Args {
     #[arg(long, default_value_t = FigureOptions::default().layer_resolution)]
     pub layer_res: usize,
     /// Worker threads (default: all cores).
-    #[arg(long)]
+    #[arg(long, value_parser = super::render::parse_threads)]
     pub threads: Option<usize>,
 }
 
@@ -30,13 +31,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.out.exists() && !args.out.is_dir() {
         bail!("output {} exists and is not a folder", args.out.display());
     }
-    if args.spp == 0 {
-        bail!("--spp must be at least 1");
-    }
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
-    if threads == 0 {
-        bail!("--threads must be at least 1");
-    }
     let opts = FigureOptions {
         spp: args.spp,
         resolution: args.res,

@@ -14,7 +14,7 @@ pub struct Args {
     /// Scene file (TOML, see docs/scenes.md). Without it the built-in default scene renders.
     pub scene: Option<PathBuf>,
     /// Samples per pixel (overrides `render.spp`).
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=striae::sampler::MAX_SPP as i64))]
     pub spp: Option<u32>,
     /// Image size as WIDTHxHEIGHT, e.g. 512x384 (overrides `render.width`, `render.height`).
     #[arg(long, value_parser = parse_resolution)]
@@ -23,7 +23,7 @@ pub struct Args {
     #[arg(long)]
     pub seed: Option<u64>,
     /// Worker threads (default: all cores).
-    #[arg(long)]
+    #[arg(long, value_parser = parse_threads)]
     pub threads: Option<usize>,
     /// Longest path in segments, Mitsuba's convention; 0 = unlimited (overrides `render.max_depth`).
     #[arg(long)]
@@ -47,6 +47,14 @@ pub struct Args {
     /// No progress bar.
     #[arg(long, short = 'q')]
     pub quiet: bool,
+}
+
+/// `--threads`: a count of at least 1.
+pub(crate) fn parse_threads(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err(format!("`{s}` is not a thread count (1 or more)")),
+    }
 }
 
 fn parse_sampler(s: &str) -> Result<SamplerKind, String> {
@@ -107,7 +115,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     if let Some(e) = args.exposure {
         if !e.is_finite() {
-            bail!("--exposure must be finite");
+            bail!("--exposure {e}: must be finite");
         }
         scene.settings.exposure = e;
     }
@@ -118,9 +126,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let s = &scene.settings;
     let total = s.width as u64 * s.height as u64 * s.spp as u64;
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
-    if threads == 0 {
-        bail!("--threads must be at least 1");
-    }
     eprintln!(
         "rendering {} at {}x{}, {} spp, max depth {}, seed {}, {} thread(s)",
         args.scene
