@@ -109,14 +109,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         max_depth: args.max_depth,
         sampler: args.sampler,
     };
+    if let Some(e) = args.exposure.filter(|e| !e.is_finite()) {
+        bail!("--exposure {e}: must be finite");
+    }
     let mut scene = match &args.scene {
         Some(path) => Scene::load(path, &overrides).context("cannot load the scene")?,
         None => Scene::default_scene(&overrides).context("building the built-in default scene")?,
     };
     if let Some(e) = args.exposure {
-        if !e.is_finite() {
-            bail!("--exposure {e}: must be finite");
-        }
         scene.settings.exposure = e;
     }
     if let Some(dir) = &args.export_meshes {
