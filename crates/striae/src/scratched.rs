@@ -275,7 +275,7 @@ pub struct ScratchedMaterial {
 }
 
 impl std::fmt::Debug for ScratchedMaterial {
-    /// Short: scene errors quote the material, and the key they name says the rest.
+    /// Short: the material as its scene file names it, without its prepared table and layers.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
