@@ -7,6 +7,7 @@
 The conventions that differ between the two renderers are translated here, once:
 * camera: striae's `fov` is vertical -> Mitsuba `fov_axis = "y"`; box pixel filter;
 * dielectric: striae's `ext_ior` defaults to 1.0 (Mitsuba: 1.000277) -> both set explicitly;
+* opaque materials: striae's reflect on both sides, Mitsuba's on the front only -> `twosided`;
 * emitters: a shape with `emission` and no material reflects nothing -> black diffuse BSDF;
 * sun: striae's `direction` points toward the sun, Mitsuba's `directional` along the light;
 * depth: striae's `max_depth = 0` (unlimited) -> Mitsuba's -1; `rr_depth` carried over;
@@ -101,6 +102,14 @@ def transform(t):
 
 
 def material(mi, m):
+    """Mitsuba's BSDF for a striae material. striae's opaque materials (diffuse, conductor)
+    reflect on both sides of a surface, Mitsuba's only on the front: they are wrapped in
+    `twosided` (it matters where a path reaches a back face, e.g. through the teapot's lid gap)."""
+    d = material_one_sided(mi, m)
+    return d if d["type"].endswith("dielectric") else {"type": "twosided", "bsdf": d}
+
+
+def material_one_sided(mi, m):
     kind = m["type"]
     rough = float(m.get("roughness", 0.0))
     if kind == "diffuse":

@@ -11,6 +11,9 @@ its first K. Agreement means striae-vs-Mitsuba looks like Mitsuba-vs-Mitsuba.
 The smooth-glass teapot is checked twice: first with flat normals (its triangles exported by
 `striae render --export-meshes` with the vertex normals stripped, loaded as an OBJ by both), then
 with smooth normals (striae's built-in teapot; Mitsuba loads the exported OBJ with normals).
+The rough GGX materials are checked on the glass teapot with `roughness = 0.2` and the gold
+teapot with `roughness = 0.3` (Mitsuba's `roughdielectric` / `roughconductor`, `distribution =
+"ggx"`, the same `alpha`).
 
     cargo build --release
     pip install mitsuba numpy matplotlib
@@ -35,20 +38,24 @@ sys.path.insert(0, os.path.join(ROOT, "scripts"))
 import mitsuba_scene  # noqa: E402  (the scene translator)
 
 STRIAE = os.path.join(ROOT, "target", "release", "striae")
-SCENES = ["glass-plate", "glass-teapot-flat", "glass-teapot", "metal-teapot"]
+SCENES = ["glass-plate", "glass-teapot-flat", "glass-teapot", "metal-teapot", "glass-teapot-rough",
+          "metal-teapot-rough", "metal-teapot-rough-flat"]
+# Rough (GGX) variants of two scenes, written by `rough_scene`: (source scene, material, alpha).
+ROUGH = {"glass-teapot-rough": ("glass-teapot", "glass", 0.2),
+         "metal-teapot-rough": ("metal-teapot", "gold", 0.3)}
 
 
-def flat_teapot_scene(out):
-    """scenes/glass-teapot.toml with the teapot replaced by its exported triangles, no normals."""
-    src = os.path.join(ROOT, "scenes", "glass-teapot.toml")
-    mesh_dir = os.path.join(out, "meshes")
+def flat_teapot_scene(out, src, name):
+    """The scene file `src` with its teapot replaced by its exported triangles, no normals, as
+    `out/NAME.toml`."""
+    mesh_dir = os.path.join(out, "meshes-" + name)
     subprocess.run([STRIAE, "render", src, "--export-meshes", mesh_dir], check=True, stderr=subprocess.DEVNULL)
     text = open(src).read()
     blocks = text.split("[[shapes]]")
     for i, b in enumerate(blocks[1:], start=1):
         if re.search(r'^type\s*=\s*"teapot"', b, re.M):
             obj = os.path.join(mesh_dir, f"shape-{i - 1}.obj")
-            flat = os.path.join(out, "teapot-flat.obj")
+            flat = os.path.join(out, name + ".obj")
             with open(obj) as f, open(flat, "w") as g:
                 for line in f:
                     if line.startswith("vn "):
@@ -60,10 +67,34 @@ def flat_teapot_scene(out):
             lines = [l for l in b.splitlines() if not re.match(r"\s*(subdivisions|transform)\s*=", l)]
             b = "\n".join(lines).replace('type = "teapot"', f'type = "mesh"\npath = "{flat}"') + "\n\n"
             blocks[i] = b
-    path = os.path.join(out, "glass-teapot-flat.toml")
+    path = os.path.join(out, name + ".toml")
     with open(path, "w") as f:
         f.write("[[shapes]]".join(blocks))
     return path
+
+
+def rough_scene(out, name):
+    """scenes/SOURCE.toml with `roughness = ALPHA` added to one material (see `ROUGH`)."""
+    source, material, alpha = ROUGH[name]
+    with open(os.path.join(ROOT, "scenes", source + ".toml")) as f:
+        text = f.read()
+    header = f"[materials.{material}]\n"
+    if header not in text:
+        sys.exit(f"{source}.toml has no {header.strip()}")
+    path = os.path.join(out, name + ".toml")
+    with open(path, "w") as f:
+        f.write(text.replace(header, f"{header}roughness = {alpha}\n", 1))
+    return path
+
+
+def scene_path(out, name):
+    """The scene file of `name`: one of `scenes/`, or one this script derives from them
+    (`NAME-rough`: see `ROUGH`; `NAME-flat`: NAME's teapot with flat normals)."""
+    if name.endswith("-flat"):
+        return flat_teapot_scene(out, scene_path(out, name[: -len("-flat")]), name)
+    if name in ROUGH:
+        return rough_scene(out, name)
+    return os.path.join(ROOT, "scenes", name + ".toml")
 
 
 def read_exr(mi, path):
@@ -114,7 +145,7 @@ def main():
     for name in SCENES:
         if args.only and name not in args.only.split(","):
             continue
-        path = flat_teapot_scene(args.out) if name == "glass-teapot-flat" else os.path.join(ROOT, "scenes", name + ".toml")
+        path = scene_path(args.out, name)
         scene = mi.load_dict(mitsuba_scene.scene_dict(mi, path, STRIAE, (width, height), args.spp, 0))
         S, M, M2, ts, tm = [], [], [], 0.0, 0.0
         for k in range(args.k):
