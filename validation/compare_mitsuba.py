@@ -11,6 +11,8 @@ its first K. Agreement means striae-vs-Mitsuba looks like Mitsuba-vs-Mitsuba.
 The smooth-glass teapot is checked twice: first with flat normals (its triangles exported by
 `striae render --export-meshes` with the vertex normals stripped, loaded as an OBJ by both), then
 with smooth normals (striae's built-in teapot; Mitsuba loads the exported OBJ with normals).
+A last scene, `features`, holds what the teapots leave out: a thin-lens camera, analytic
+spheres, a sun and an equirectangular environment map turned by a transform.
 The rough GGX materials are checked on the glass teapot with `roughness = 0.2` and the gold
 teapot with `roughness = 0.3` (Mitsuba's `roughdielectric` / `roughconductor`, `distribution =
 "ggx"`, the same `alpha`).
@@ -39,7 +41,7 @@ import mitsuba_scene  # noqa: E402  (the scene translator)
 
 STRIAE = os.path.join(ROOT, "target", "release", "striae")
 SCENES = ["glass-plate", "glass-teapot-flat", "glass-teapot", "metal-teapot", "glass-teapot-rough",
-          "metal-teapot-rough", "metal-teapot-rough-flat"]
+          "metal-teapot-rough", "metal-teapot-rough-flat", "features"]
 # Rough (GGX) variants of two scenes, written by `rough_scene`: (source scene, material, alpha).
 ROUGH = {"glass-teapot-rough": ("glass-teapot", "glass", 0.2),
          "metal-teapot-rough": ("metal-teapot", "gold", 0.3)}
@@ -87,6 +89,89 @@ def rough_scene(out, name):
     return path
 
 
+FEATURES = """# Written by validation/compare_mitsuba.py: what the teapot scenes leave out. A thin-lens
+# camera, analytic spheres (smooth glass, rough gold, diffuse), a sun, and an equirectangular
+# environment map turned by a transform, so that the map's orientation convention is checked too.
+[render]
+max_depth = 16
+
+[camera]
+position = [0.0, 1.6, 5.0]
+look_at = [0.0, 0.5, 0.0]
+fov = 35.0
+aperture_radius = 0.08
+focus_distance = 5.0
+
+[materials.glass]
+type = "dielectric"
+ior = 1.5
+
+[materials.gold]
+type = "conductor"
+preset = "gold"
+roughness = 0.2
+
+[materials.white]
+type = "diffuse"
+reflectance = 0.7
+
+[materials.floor]
+type = "diffuse"
+reflectance = { type = "checkerboard", color0 = [0.7, 0.7, 0.7], color1 = [0.15, 0.15, 0.15], scale = 6.0 }
+
+[[shapes]]
+type = "sphere"
+material = "glass"
+center = [0.0, 0.5, 0.0]
+radius = 0.5
+
+[[shapes]]
+type = "sphere"
+material = "gold"
+center = [-1.2, 0.5, -0.6]
+radius = 0.5
+
+[[shapes]]
+type = "sphere"
+material = "white"
+center = [1.2, 0.5, -0.4]
+radius = 0.5
+
+[[shapes]]
+type = "rectangle"
+material = "floor"
+transform = [{ scale = 4.0 }, { rotate = { axis = [1, 0, 0], angle = -90 } }]
+
+[[lights]]
+type = "sun"
+direction = [0.5, 0.8, 0.4]
+irradiance = [2.0, 1.8, 1.5]
+
+[environment]
+type = "map"
+path = "features-sky.exr"
+transform = { rotate = { axis = [0, 1, 0], angle = 40 } }
+"""
+
+
+def features_scene(out):
+    """`FEATURES` and its environment map: a sky gradient with a bright warm patch and a green
+    one at different azimuths (so a turned or mirrored map shows), 64 x 32, written by Mitsuba."""
+    import mitsuba as mi
+    w, h = 64, 32
+    u = (np.arange(w) + 0.5) / w
+    v = np.arange(h) / (h - 1)
+    uu, vv = np.meshgrid(u, v)
+    sky = np.where(vv[..., None] < 0.5, [0.35, 0.45, 0.7], [0.25, 0.2, 0.15]) * (1.2 - vv[..., None])
+    warm = np.exp(-(((uu - 0.3) / 0.05) ** 2 + ((vv - 0.3) / 0.08) ** 2))[..., None] * [12.0, 9.0, 5.0]
+    green = np.exp(-(((uu - 0.8) / 0.08) ** 2 + ((vv - 0.45) / 0.1) ** 2))[..., None] * [0.5, 3.0, 0.5]
+    mi.Bitmap((sky + warm + green).astype(np.float32)).write(os.path.join(out, "features-sky.exr"))
+    path = os.path.join(out, "features.toml")
+    with open(path, "w") as f:
+        f.write(FEATURES)
+    return path
+
+
 def scene_path(out, name):
     """The scene file of `name`: one of `scenes/`, or one this script derives from them
     (`NAME-rough`: see `ROUGH`; `NAME-flat`: NAME's teapot with flat normals)."""
@@ -94,6 +179,8 @@ def scene_path(out, name):
         return flat_teapot_scene(out, scene_path(out, name[: -len("-flat")]), name)
     if name in ROUGH:
         return rough_scene(out, name)
+    if name == "features":
+        return features_scene(out)
     return os.path.join(ROOT, "scenes", name + ".toml")
 
 

@@ -14,11 +14,12 @@
 //!
 //! so `-z` is at `u = 0`, `+x` at `u = 1/4`, `+z` at `u = 1/2`, `-x` at `u = 3/4`, and image
 //! row 0 is the zenith. Like Mitsuba, the image's pixels are treated as *samples on a grid*:
-//! pixel `(x, y)` sits at `u = x / W`, `v = y / (H - 1)` (the first and last rows are the
-//! poles, columns wrap), and radiance is bilinear between them. (The brief suggested
-//! `u = 0.5 + atan2(d.x, -d.z) / (2 pi)` with pixel centres; we follow Mitsuba instead so
-//! that the same EXR lights both renderers identically.) An optional rotation maps world
-//! directions to the map's frame (Mitsuba's `to_world`).
+//! pixel `(x, y)` sits at `u = (x + 1/2) / W`, `v = y / (H - 1)` (pixel centres across, the
+//! first and last rows at the poles, columns wrap), and radiance is bilinear between them.
+//! (Mitsuba 3.9's `envmap` shifts `u` by this half texel, `half_texel()`; before session 5
+//! striae put pixel `x` at `u = x / W`, which the Mitsuba comparison of the `features` scene
+//! in `docs/validation.md` caught.) An optional rotation maps world directions to the map's
+//! frame (Mitsuba's `to_world`).
 //!
 //! Sampling: cell `(i, j)` of the `W x (H - 1)` bilinear patches gets weight (mean corner
 //! luminance) `* sin(theta_centre)`, positive wherever the radiance is; a sample picks a
@@ -168,11 +169,33 @@ impl EnvMap {
         self.image.height
     }
 
+    /// `u` of the pixel grid (pixel `x` at `x / W`) for map coordinate `u` (pixel `x` at
+    /// `(x + 1/2) / W`), wrapped to `[0, 1)`; [`EnvMap::grid_to_map_u`] inverts it.
+    #[inline]
+    fn map_to_grid_u(&self, u: f32) -> f32 {
+        let g = u - 0.5 / self.image.width as f32;
+        if g < 0.0 {
+            g + 1.0
+        } else {
+            g
+        }
+    }
+
+    #[inline]
+    fn grid_to_map_u(&self, g: f32) -> f32 {
+        let u = g + 0.5 / self.image.width as f32;
+        if u >= 1.0 {
+            u - 1.0
+        } else {
+            u
+        }
+    }
+
     /// Bilinear radiance at map coordinates `uv`, pixels on a grid (see the module comment).
     #[inline]
     fn lookup(&self, uv: Vec2) -> Rgb {
         let (w, h) = (self.image.width, self.image.height);
-        let x = uv.x * w as f32;
+        let x = self.map_to_grid_u(uv.x) * w as f32;
         let y = (uv.y * (h - 1) as f32).clamp(0.0, (h - 1) as f32);
         let (x0, y0) = (x.floor(), y.floor().min((h - 2) as f32));
         let (fx, fy) = (x - x0, y - y0);
@@ -199,7 +222,7 @@ impl EnvMap {
     #[inline]
     pub fn sample(&self, u: Vec2) -> (Vec3, Rgb, f32) {
         let ([x, y], pdf_uv) = self.distribution.sample([u.x as f64, u.y as f64]);
-        let uv = Vec2::new(x as f32, y as f32);
+        let uv = Vec2::new(self.grid_to_map_u(x as f32), y as f32);
         let local = uv_to_direction(uv);
         let sin_theta = (PI * uv.y).sin();
         let dir = self.to_world * local;
@@ -218,7 +241,8 @@ impl EnvMap {
         if !(sin_theta > 0.0) {
             return 0.0;
         }
-        self.distribution.pdf([uv.x as f64, uv.y as f64]) as f32 / (2.0 * PI * PI * sin_theta)
+        let g = self.map_to_grid_u(uv.x);
+        self.distribution.pdf([g as f64, uv.y as f64]) as f32 / (2.0 * PI * PI * sin_theta)
     }
 
     /// Radiance averaged over the sphere of directions (for choosing among lights by power).
@@ -295,11 +319,12 @@ mod tests {
                 "{uv:?} -> {back:?}"
             );
         }
-        // Grid-sampled pixels: pixel (x, y) is at (x / W, y / (H - 1)).
+        // Grid-sampled pixels: pixel (x, y) is at ((x + 1/2) / W, y / (H - 1)), as in
+        // Mitsuba 3.9's `envmap` (`half_texel`).
         let m = test_map(16, 9);
         // (Rows 0 and H - 1 are the poles, where u is undefined.)
         for (x, y) in [(0, 1), (5, 2), (15, 7), (5, 4)] {
-            let d = uv_to_direction(Vec2::new(x as f32 / 16.0, y as f32 / 8.0));
+            let d = uv_to_direction(Vec2::new((x as f32 + 0.5) / 16.0, y as f32 / 8.0));
             let want = m.image.pixels[y * 16 + x];
             assert!(
                 (m.eval(d) - want).abs().max_element() < 1e-3 * want.max_element().max(1.0),
@@ -326,7 +351,12 @@ mod tests {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(2);
         let mut est = MeanEstimate::default();
         let n = 300_000;
-        let grid = SphereGrid::new(40, 80);
+        // The pdf is piecewise constant: a fine quadrature keeps its jumps from biasing the
+        // expected counts.
+        let grid = SphereGrid {
+            sub: 24,
+            ..SphereGrid::new(40, 80)
+        };
         let mut pdf_mismatch = 0;
         let r = chi2_sphere(
             &grid,
@@ -397,7 +427,12 @@ mod tests {
         let m = EnvMap::load(&path).unwrap();
         assert_eq!((m.width(), m.height()), (4, 3));
         assert!(
-            (m.eval(uv_to_direction(Vec2::new(0.5, 0.5))) - Rgb::new(2.0, 1.0, 0.5)).length()
+            (m.eval(uv_to_direction(Vec2::new(2.5 / 4.0, 0.5))) - Rgb::new(2.0, 1.0, 0.5)).length()
+                < 1e-4
+        );
+        // Halfway between pixel columns 3 and 0 (the wrap, u = 0 = 1): their mean.
+        assert!(
+            (m.eval(uv_to_direction(Vec2::new(0.0, 0.5))) - Rgb::new(1.5, 1.0, 0.5)).length()
                 < 1e-4
         );
         let e = EnvMap::load(&dir.join("missing.exr"))
