@@ -101,15 +101,15 @@ def transform(t):
     return m
 
 
-def material(mi, m):
+def material(mi, m, base="."):
     """Mitsuba's BSDF for a striae material. striae's opaque materials (diffuse, conductor)
     reflect on both sides of a surface, Mitsuba's only on the front: they are wrapped in
     `twosided` (it matters where a path reaches a back face, e.g. through the teapot's lid gap)."""
-    d = material_one_sided(mi, m)
+    d = material_one_sided(mi, m, base)
     return d if d["type"].endswith("dielectric") else {"type": "twosided", "bsdf": d}
 
 
-def material_one_sided(mi, m):
+def material_one_sided(mi, m, base):
     kind = m["type"]
     rough = float(m.get("roughness", 0.0))
     if kind == "diffuse":
@@ -119,6 +119,15 @@ def material_one_sided(mi, m):
             tex = {"type": "checkerboard", "color0": {"type": "rgb", "value": rgb(r["color0"])},
                    "color1": {"type": "rgb", "value": rgb(r["color1"])},
                    "to_uv": mi.ScalarTransform4f().scale([s, s, 1.0])}
+            return {"type": "diffuse", "reflectance": tex}
+        if isinstance(r, dict) and r.get("type") == "image":
+            # striae: bilinear between pixel centres, wrapping, row 0 at v = 0, PNG decoded from
+            # sRGB unless `srgb = false`, EXR linear: Mitsuba's `bitmap` with the same settings.
+            path = os.path.join(base, r["path"])
+            srgb = r.get("srgb", True) and path.lower().endswith(".png")
+            s = float(r.get("scale", 1.0))
+            tex = {"type": "bitmap", "filename": path, "raw": not srgb, "filter_type": "bilinear",
+                   "wrap_mode": "repeat", "to_uv": mi.ScalarTransform4f().scale([s, s, 1.0])}
             return {"type": "diffuse", "reflectance": tex}
         if isinstance(r, dict):
             raise ValueError(f"texture {r.get('type')} is not translated")
@@ -170,7 +179,7 @@ def scene_dict(mi, path, striae_bin, res=None, spp=None, seed=None, sampler="ind
          "integrator": {"type": "path", "max_depth": -1 if max_depth == 0 else max_depth,
                         "rr_depth": int(r.get("rr_depth", 5))},
          "sensor": sensor}
-    mats = {name: material(mi, m) for name, m in sc.get("materials", {}).items()}
+    mats = {name: material(mi, m, base) for name, m in sc.get("materials", {}).items()}
     shapes = sc.get("shapes", [])
     mesh_dir = None
     if any(s["type"] in ("teapot", "mesh") for s in shapes):

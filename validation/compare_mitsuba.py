@@ -90,8 +90,9 @@ def rough_scene(out, name):
 
 
 FEATURES = """# Written by validation/compare_mitsuba.py: what the teapot scenes leave out. A thin-lens
-# camera, analytic spheres (smooth glass, rough gold, diffuse), a sun, and an equirectangular
-# environment map turned by a transform, so that the map's orientation convention is checked too.
+# camera, analytic spheres (smooth glass, rough gold, diffuse), a spherical light, a sun, an
+# image texture on a rectangle, and an equirectangular environment map turned by a transform,
+# so that the map's and the texture's orientation conventions are checked too.
 [render]
 max_depth = 16
 
@@ -119,6 +120,10 @@ reflectance = 0.7
 type = "diffuse"
 reflectance = { type = "checkerboard", color0 = [0.7, 0.7, 0.7], color1 = [0.15, 0.15, 0.15], scale = 6.0 }
 
+[materials.poster]
+type = "diffuse"
+reflectance = { type = "image", path = "features-poster.png" }
+
 [[shapes]]
 type = "sphere"
 material = "glass"
@@ -141,6 +146,17 @@ radius = 0.5
 type = "rectangle"
 material = "floor"
 transform = [{ scale = 4.0 }, { rotate = { axis = [1, 0, 0], angle = -90 } }]
+
+[[shapes]]                       # a textured wall behind the spheres, facing the camera
+type = "rectangle"
+material = "poster"
+transform = [{ scale = [2.4, 1.2, 1.0] }, { translate = [0.0, 1.2, -2.0] }]
+
+[[shapes]]                       # a small spherical light
+type = "sphere"
+center = [1.6, 1.6, 0.8]
+radius = 0.15
+emission = [6.0, 5.0, 4.0]
 
 [[lights]]
 type = "sun"
@@ -166,6 +182,14 @@ def features_scene(out):
     warm = np.exp(-(((uu - 0.3) / 0.05) ** 2 + ((vv - 0.3) / 0.08) ** 2))[..., None] * [12.0, 9.0, 5.0]
     green = np.exp(-(((uu - 0.8) / 0.08) ** 2 + ((vv - 0.45) / 0.1) ** 2))[..., None] * [0.5, 3.0, 0.5]
     mi.Bitmap((sky + warm + green).astype(np.float32)).write(os.path.join(out, "features-sky.exr"))
+    # The poster: red rising to the right, green rising downwards, and a white block in the
+    # top-left corner, so that a flipped or shifted image shows.
+    pw, ph = 48, 24
+    x, y = np.meshgrid(np.arange(pw) / (pw - 1), np.arange(ph) / (ph - 1))
+    poster = np.stack([0.1 + 0.8 * x, 0.1 + 0.8 * y, np.full_like(x, 0.3)], -1)
+    poster[2:8, 3:12] = 1.0
+    from PIL import Image  # (Pillow comes with matplotlib)
+    Image.fromarray((poster * 255).round().astype(np.uint8)).save(os.path.join(out, "features-poster.png"))
     path = os.path.join(out, "features.toml")
     with open(path, "w") as f:
         f.write(FEATURES)
