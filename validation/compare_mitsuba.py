@@ -11,11 +11,11 @@ its first K. Agreement means striae-vs-Mitsuba looks like Mitsuba-vs-Mitsuba.
 The smooth-glass teapot is checked twice: first with flat normals (its triangles exported by
 `striae render --export-meshes` with the vertex normals stripped, loaded as an OBJ by both), then
 with smooth normals (striae's built-in teapot; Mitsuba loads the exported OBJ with normals).
-A last scene, `features`, holds what the teapots leave out: a thin-lens camera, analytic
-spheres, a sun and an equirectangular environment map turned by a transform.
 The rough GGX materials are checked on the glass teapot with `roughness = 0.2` and the gold
 teapot with `roughness = 0.3` (Mitsuba's `roughdielectric` / `roughconductor`, `distribution =
-"ggx"`, the same `alpha`).
+"ggx"`, the same `alpha`). A last scene, `features`, holds what the teapots leave out: a
+thin-lens camera, analytic spheres, a spherical light, a sun, an image texture and an
+equirectangular environment map turned by a transform.
 
     cargo build --release
     pip install mitsuba numpy matplotlib
