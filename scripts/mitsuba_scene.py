@@ -14,8 +14,8 @@ The conventions that differ between the two renderers are translated here, once:
 * rectangles, boxes and spheres use Mitsuba's own shapes (the same parametrisations) with the
   transform computed here; teapots and OBJ meshes are exported by `striae render
   --export-meshes` in world space and loaded as OBJ (identical triangles and normals).
-Texture-space orientation of OBJ meshes may differ (Mitsuba flips v on OBJ import); it does not
-matter for the smooth dielectric/conductor scenes this is meant for.
+Image textures become Mitsuba `bitmap`s with striae's filtering; both renderers flip an OBJ
+file's `vt` the same way (`1 - v`), so an image on an OBJ mesh comes out the same way up.
 """
 
 import argparse

@@ -152,6 +152,11 @@ type = "rectangle"
 material = "poster"
 transform = [{ scale = [2.4, 1.2, 1.0] }, { translate = [0.0, 1.2, -2.0] }]
 
+[[shapes]]                       # the same image on an OBJ quad (its own uvs), left of the spheres
+type = "mesh"
+path = "features-panel.obj"
+material = "poster"
+
 [[shapes]]                       # a small spherical light
 type = "sphere"
 center = [1.6, 1.6, 0.8]
@@ -188,6 +193,11 @@ def features_scene(out):
     x, y = np.meshgrid(np.arange(pw) / (pw - 1), np.arange(ph) / (ph - 1))
     poster = np.stack([0.1 + 0.8 * x, 0.1 + 0.8 * y, np.full_like(x, 0.3)], -1)
     poster[2:8, 3:12] = 1.0
+    # A quad standing left of the spheres, turned toward the camera; `vt` (0, 0) at its
+    # bottom-left corner, as OBJ files have it.
+    with open(os.path.join(out, "features-panel.obj"), "w") as f:
+        f.write("v -2.4 0.0 -1.4\nv -1.5 0.0 -0.7\nv -1.5 1.1 -0.7\nv -2.4 1.1 -1.4\n"
+                "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n")
     from PIL import Image  # (Pillow comes with matplotlib)
     Image.fromarray((poster * 255).round().astype(np.uint8)).save(os.path.join(out, "features-poster.png"))
     path = os.path.join(out, "features.toml")

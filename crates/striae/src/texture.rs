@@ -4,9 +4,9 @@
 //! ## Conventions (matching Mitsuba 3, which the renderer is validated against)
 //!
 //! * Image row 0 (the top row of the file) is at `v = 0`, column 0 at `u = 0`; pixel centres
-//!   are at `((i + 0.5) / width, (j + 0.5) / height)` (Mitsuba's `bitmap`). Mitsuba's OBJ loader
-//!   flips `v` (`1 - v`) so that OBJ files' bottom-left texture origin maps correctly; mesh
-//!   loaders must do the same.
+//!   are at `((i + 0.5) / width, (j + 0.5) / height)` (Mitsuba's `bitmap`). Like Mitsuba's, the
+//!   OBJ loader flips `v` (`1 - v`) so that OBJ files' bottom-left texture origin maps
+//!   correctly (`geometry/obj.rs`).
 //! * The checkerboard is Mitsuba's `checkerboard`: `color0` where `frac(u s) < 1/2` and
 //!   `frac(v s) < 1/2` agree, `color1` elsewhere, so one unit of scaled uv holds 2 x 2 checks.
 //!

@@ -2,6 +2,11 @@
 //! [`TriangleMesh`] per file: all models of the file are merged. Normals and uvs are kept
 //! when every model has them. [`TriangleMesh::write_obj`] exports a mesh (e.g. the built-in
 //! teapot, so Mitsuba can render the identical geometry).
+//!
+//! An OBJ file's `vt` puts `(0, 0)` at the bottom-left of a texture image, while striae's
+//! image textures put the image's top row at `v = 0` (`texture.rs`). So `v` is flipped to
+//! `1 - v` on load and back on export, as Mitsuba 3's OBJ loader does: an image on an OBJ
+//! mesh appears the same way up in both renderers (`docs/validation.md`, scene `features`).
 
 use std::io::Write;
 use std::path::Path;
@@ -77,7 +82,7 @@ impl TriangleMesh {
                 uvs.extend(
                     mesh.texcoords
                         .chunks_exact(2)
-                        .map(|c| Vec2::new(c[0], c[1])),
+                        .map(|c| Vec2::new(c[0], 1.0 - c[1])),
                 );
             }
             indices.extend(
@@ -124,7 +129,7 @@ impl TriangleMesh {
             }
             if let Some(uvs) = self.uvs() {
                 for t in uvs {
-                    writeln!(f, "vt {} {}", t.x, t.y)?;
+                    writeln!(f, "vt {} {}", t.x, 1.0 - t.y)?;
                 }
             }
             if let Some(ns) = self.normals() {

@@ -493,9 +493,15 @@ fn obj_files_load_and_bad_ones_are_named() {
         .intersect(&Ray::new(Vec3::new(1.5, 0.5, 1.0), -Vec3::Z))
         .unwrap();
     assert!((h.uv - Vec2::new(0.75, 0.5)).length() < 1e-6 && (h.ng - Vec3::Z).length() < 1e-6);
+    // `v` is flipped on load (OBJ's texture origin is the image's bottom-left, striae's its
+    // top-left), so v grows toward -y here.
     assert!(
-        (h.dpdu - Vec3::new(2.0, 0.0, 0.0)).length() < 1e-5 && (h.dpdv - Vec3::Y).length() < 1e-5
+        (h.dpdu - Vec3::new(2.0, 0.0, 0.0)).length() < 1e-5 && (h.dpdv + Vec3::Y).length() < 1e-5
     );
+    let h = g
+        .intersect(&Ray::new(Vec3::new(0.5, 0.8, 1.0), -Vec3::Z))
+        .unwrap();
+    assert!((h.uv - Vec2::new(0.25, 0.2)).length() < 1e-6, "{:?}", h.uv);
 
     let missing = dir.join("missing.obj");
     let err = TriangleMesh::from_obj(&missing).unwrap_err().to_string();
