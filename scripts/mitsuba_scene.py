@@ -11,9 +11,10 @@ The conventions that differ between the two renderers are translated here, once:
 * emitters: a shape with `emission` and no material reflects nothing -> black diffuse BSDF;
 * sun: striae's `direction` points toward the sun, Mitsuba's `directional` along the light;
 * depth: striae's `max_depth = 0` (unlimited) -> Mitsuba's -1; `rr_depth` carried over;
-* rectangles, boxes and spheres use Mitsuba's own shapes (the same parametrisations) with the
-  transform computed here; teapots and OBJ meshes are exported by `striae render
-  --export-meshes` in world space and loaded as OBJ (identical triangles and normals).
+* rectangles and spheres use Mitsuba's own shapes (the same parametrisations, uv included)
+  with the transform computed here; teapots, boxes and OBJ meshes are exported by `striae
+  render --export-meshes` in world space and loaded as OBJ (identical triangles, normals and
+  uvs: striae's box lays out its faces' uvs differently from Mitsuba's `cube`).
 Image textures become Mitsuba `bitmap`s with striae's filtering; both renderers flip an OBJ
 file's `vt` the same way (`1 - v`), so an image on an OBJ mesh comes out the same way up.
 """
@@ -182,14 +183,14 @@ def scene_dict(mi, path, striae_bin, res=None, spp=None, seed=None, sampler="ind
     mats = {name: material(mi, m, base) for name, m in sc.get("materials", {}).items()}
     shapes = sc.get("shapes", [])
     mesh_dir = None
-    if any(s["type"] in ("teapot", "mesh") for s in shapes):
+    if any(s["type"] in ("teapot", "mesh", "box") for s in shapes):
         mesh_dir = tempfile.mkdtemp(prefix="striae-mi-")
         subprocess.run([striae_bin, "render", path, "--export-meshes", mesh_dir], check=True,
                        stderr=subprocess.DEVNULL)
     for i, s in enumerate(shapes):
         m = transform(s.get("transform"))
         kind = s["type"]
-        if kind in ("teapot", "mesh"):
+        if kind in ("teapot", "mesh", "box"):
             obj = os.path.join(mesh_dir, f"shape-{i}.obj")
             sh = {"type": "obj", "filename": obj}
             # Mitsuba computes smooth vertex normals for an OBJ without any; striae shades such a
@@ -199,8 +200,6 @@ def scene_dict(mi, path, striae_bin, res=None, spp=None, seed=None, sampler="ind
                     sh["face_normals"] = True
         elif kind == "rectangle":
             sh = {"type": "rectangle", "to_world": mi.ScalarTransform4f(m.tolist())}
-        elif kind == "box":
-            sh = {"type": "cube", "to_world": mi.ScalarTransform4f(m.tolist())}
         elif kind == "sphere":
             c = np.asarray(s.get("center", [0, 0, 0]), float)
             scale = np.linalg.norm(m[:3, 0])

@@ -90,9 +90,10 @@ def rough_scene(out, name):
 
 
 FEATURES = """# Written by validation/compare_mitsuba.py: what the teapot scenes leave out. A thin-lens
-# camera, analytic spheres (smooth glass, rough gold, diffuse), a spherical light, a sun, an
-# image texture on a rectangle, and an equirectangular environment map turned by a transform,
-# so that the map's and the texture's orientation conventions are checked too.
+# camera, analytic spheres (smooth glass, rough gold, textured diffuse), a spherical light, a
+# sun, an image texture on a sphere, a rectangle, an OBJ quad and a box, and an
+# equirectangular environment map turned by a transform, so that the orientation conventions
+# of the map and of every shape's uvs are checked too.
 [render]
 max_depth = 16
 
@@ -114,7 +115,7 @@ roughness = 0.2
 
 [materials.white]
 type = "diffuse"
-reflectance = 0.7
+reflectance = { type = "image", path = "features-poster.png" }
 
 [materials.floor]
 type = "diffuse"
@@ -156,6 +157,11 @@ transform = [{ scale = [2.4, 1.2, 1.0] }, { translate = [0.0, 1.2, -2.0] }]
 type = "mesh"
 path = "features-panel.obj"
 material = "poster"
+
+[[shapes]]                       # the same image on a turned box (striae's box uvs, exported)
+type = "box"
+material = "poster"
+transform = [{ scale = [0.35, 0.25, 0.3] }, { rotate = { axis = [0, 1, 0], angle = 35 } }, { rotate = { axis = [1, 0, 0], angle = 20 } }, { translate = [0.6, 0.3, 1.2] }]
 
 [[shapes]]                       # a small spherical light
 type = "sphere"

@@ -1,5 +1,5 @@
 //! Triangle meshes: positions, optional per-vertex normals, uvs and tangents (dP/du, dP/dv),
-//! with the built-in rectangle and box (Mitsuba's `rectangle` and `cube`), the Utah teapot
+//! with the built-in rectangle and box (the shapes of Mitsuba's `rectangle` and `cube`), the Utah teapot
 //! ([`super::teapot`]) and OBJ files ([`super::obj`]).
 //!
 //! The geometric normal of triangle `(p0, p1, p2)` is `(p1 - p0) x (p2 - p0)` normalised
@@ -139,8 +139,10 @@ impl TriangleMesh {
             .expect("valid built-in mesh")
     }
 
-    /// Mitsuba's `cube`: the box `[-1, 1]^3`, outward normals, each face with its own
-    /// `[0, 1]^2` uv (24 vertices, flat faces). A glass plate is a thinly scaled box.
+    /// The box `[-1, 1]^3` (the triangles of Mitsuba's `cube`), outward normals, each face with
+    /// its own `[0, 1]^2` uv (24 vertices, flat faces). A glass plate is a thinly scaled box.
+    /// The faces' uv layout is striae's own, not the `cube`'s (`docs/validation.md`): face
+    /// `n` has `u` along the next axis after `n`'s and `v` along `n x u`.
     pub fn cuboid() -> TriangleMesh {
         let mut positions = Vec::with_capacity(24);
         let mut uvs = Vec::with_capacity(24);
