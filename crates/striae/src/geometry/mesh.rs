@@ -1,6 +1,6 @@
 //! Triangle meshes: positions, optional per-vertex normals, uvs and tangents (dP/du, dP/dv),
-//! with the built-in rectangle and box (the shapes of Mitsuba's `rectangle` and `cube`), the Utah teapot
-//! ([`super::teapot`]) and OBJ files ([`super::obj`]).
+//! with the built-in rectangle and box (the shapes of Mitsuba's `rectangle` and `cube`), the
+//! Utah teapot ([`super::teapot`]) and OBJ files ([`super::obj`]).
 //!
 //! The geometric normal of triangle `(p0, p1, p2)` is `(p1 - p0) x (p2 - p0)` normalised
 //! (counter-clockwise is front); every built-in mesh is wound so that it points outward.
