@@ -318,6 +318,7 @@ fn trace_key(key: &str) -> &'static str {
         "albedo" => "scratches.albedo",
         "max_bounces" => "scratches.max_bounces",
         "fresnel_law" => "scratches.fresnel_law",
+        "ior" => "scratches.ior",
         _ => "scratches",
     }
 }

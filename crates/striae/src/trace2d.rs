@@ -194,19 +194,28 @@ impl TraceSettings {
                 "must be in 1..=100000",
             );
         }
-        let law_ok = match self.fresnel_law {
-            FresnelLaw::Schlick { n } | FresnelLaw::Dielectric { n } => n.is_finite() && n > 0.0,
-            FresnelLaw::Conductor { eta, k } => {
-                eta.is_finite() && k.is_finite() && eta > 0.0 && k >= 0.0
+        // The walls are the scratched material seen from outside (air), so a dielectric
+        // index below 1 is a mistake, as for a glass material's `ior`.
+        match self.fresnel_law {
+            FresnelLaw::Schlick { n } | FresnelLaw::Dielectric { n } => {
+                if !(n.is_finite() && n >= 1.0) {
+                    return bad(
+                        "ior",
+                        n.to_string(),
+                        "an index of refraction must be finite and >= 1",
+                    );
+                }
             }
-            FresnelLaw::None => true,
-        };
-        if !law_ok {
-            return bad(
-                "fresnel_law",
-                format!("{:?}", self.fresnel_law),
-                "indices must be finite, n > 0, k >= 0",
-            );
+            FresnelLaw::Conductor { eta, k } => {
+                if !(eta.is_finite() && k.is_finite() && eta > 0.0 && k >= 0.0) {
+                    return bad(
+                        "fresnel_law",
+                        format!("{:?}", self.fresnel_law),
+                        "a conductor needs finite eta > 0 and k >= 0",
+                    );
+                }
+            }
+            FresnelLaw::None => {}
         }
         if self.estimator == Estimator::Kernel {
             if self.walls != Walls::Diffuse {

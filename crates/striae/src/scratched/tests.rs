@@ -641,6 +641,10 @@ fn keys_are_validated() {
             &["`scratches.profile`", "zigzag"],
         ),
         (
+            "base = \"glass\"\n[scratches]\nior = 0.5",
+            &["`scratches.ior`", "0.5", ">= 1"],
+        ),
+        (
             "base = \"glass\"\n[scratches]\nfresnel_law = \"fancy\"",
             &["`scratches.fresnel_law`", "fancy"],
         ),
