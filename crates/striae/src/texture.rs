@@ -270,16 +270,43 @@ impl Texture {
     }
 }
 
+/// A colour: one number (grey) or `[r, g, b]`, linear.
+#[derive(Clone, Copy, Deserialize, PartialEq)]
+#[serde(untagged, expecting = "a number or an [r, g, b] array")]
+pub enum Colour {
+    Grey(f32),
+    Rgb([f32; 3]),
+}
+
+impl std::fmt::Debug for Colour {
+    /// As written in the file (`-1.0`, `[1.0, 0.5, 0.0]`): scene errors quote it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Colour::Grey(g) => write!(f, "{g:?}"),
+            Colour::Rgb(c) => write!(f, "{c:?}"),
+        }
+    }
+}
+
+impl Colour {
+    pub fn rgb(self) -> Rgb {
+        match self {
+            Colour::Grey(g) => Rgb::splat(g),
+            Colour::Rgb(c) => Rgb::from_array(c),
+        }
+    }
+}
+
 /// The table form of a texture in a scene file.
 #[derive(Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
 enum TextureTable {
     Constant {
-        value: [f32; 3],
+        value: Colour,
     },
     Checkerboard {
-        color0: [f32; 3],
-        color1: [f32; 3],
+        color0: Colour,
+        color1: Colour,
         #[serde(default = "one")]
         scale: f32,
     },
@@ -300,14 +327,14 @@ fn one() -> f32 {
 impl From<TextureTable> for Texture {
     fn from(t: TextureTable) -> Self {
         match t {
-            TextureTable::Constant { value } => Texture::Constant(Rgb::from(value)),
+            TextureTable::Constant { value } => Texture::Constant(value.rgb()),
             TextureTable::Checkerboard {
                 color0,
                 color1,
                 scale,
             } => Texture::Checkerboard {
-                color0: Rgb::from(color0),
-                color1: Rgb::from(color1),
+                color0: color0.rgb(),
+                color1: color1.rgb(),
                 scale,
             },
             TextureTable::Image { path, srgb, scale } => Texture::Image {
@@ -493,6 +520,19 @@ mod tests {
         assert_eq!(
             p("t = { type = \"checkerboard\", color0 = [1, 1, 1], color1 = [0, 0, 0], scale = 4 }").unwrap(),
             Texture::Checkerboard { color0: Rgb::ONE, color1: Rgb::ZERO, scale: 4.0 }
+        );
+        // A colour inside a table may be a grey number too, as everywhere else.
+        assert_eq!(
+            p("t = { type = \"checkerboard\", color0 = 0.5, color1 = [0, 0, 1] }").unwrap(),
+            Texture::Checkerboard {
+                color0: Rgb::splat(0.5),
+                color1: Rgb::Z,
+                scale: 1.0
+            }
+        );
+        assert_eq!(
+            p("t = { type = \"constant\", value = 0.25 }").unwrap(),
+            Texture::Constant(Rgb::splat(0.25))
         );
         let e = p(
             "t = { type = \"checkerboard\", color0 = [1, 1, 1], color1 = [0, 0, 0], scael = 4 }",

@@ -4,36 +4,11 @@
 
 use crate::geometry::Transform;
 use crate::material::Material;
-use crate::math::{Rgb, Vec3};
+use crate::math::Vec3;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 
-/// A colour: one number (grey) or `[r, g, b]`, linear.
-#[derive(Clone, Copy, Deserialize, PartialEq)]
-#[serde(untagged, expecting = "a number or an [r, g, b] array")]
-pub enum Colour {
-    Grey(f32),
-    Rgb([f32; 3]),
-}
-
-impl std::fmt::Debug for Colour {
-    /// As written in the file (`-1.0`, `[1.0, 0.5, 0.0]`): scene errors quote it.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Colour::Grey(g) => write!(f, "{g:?}"),
-            Colour::Rgb(c) => write!(f, "{c:?}"),
-        }
-    }
-}
-
-impl Colour {
-    pub fn rgb(self) -> Rgb {
-        match self {
-            Colour::Grey(g) => Rgb::splat(g),
-            Colour::Rgb(c) => Rgb::from_array(c),
-        }
-    }
-}
+pub use crate::texture::Colour;
 
 /// The whole file.
 #[derive(Debug, Deserialize)]
