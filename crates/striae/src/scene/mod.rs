@@ -173,16 +173,19 @@ fn camera_error(
     (width, height): (u32, u32),
     e: CameraError,
 ) -> SceneError {
-    match e {
-        CameraError::BadFov(fov) => {
-            invalid(file, "camera.fov", fov, "must lie in (0, 180) degrees")
-        }
-        CameraError::DegenerateView => invalid(
+    let bad_look_at = || {
+        invalid(
             file,
             "camera.look_at",
             c.look_at,
             "must be finite and differ from camera.position",
-        ),
+        )
+    };
+    match e {
+        CameraError::BadFov(fov) => {
+            invalid(file, "camera.fov", fov, "must lie in (0, 180) degrees")
+        }
+        CameraError::DegenerateView => bad_look_at(),
         CameraError::DegenerateUp => invalid(
             file,
             "camera.up",
@@ -193,12 +196,7 @@ fn camera_error(
             invalid(file, "camera.aperture_radius", radius, "must be >= 0")
         }
         // Without `focus_distance` the focus is the look-at distance, zero when they coincide.
-        CameraError::BadLens(..) if c.focus_distance.is_none() => invalid(
-            file,
-            "camera.look_at",
-            c.look_at,
-            "must be finite and differ from camera.position",
-        ),
+        CameraError::BadLens(..) if c.focus_distance.is_none() => bad_look_at(),
         CameraError::BadLens(_, focus) => invalid(
             file,
             "camera.focus_distance",
