@@ -60,6 +60,8 @@ pub struct EnvMap {
     to_local: Mat3,
     to_world: Mat3,
     distribution: Distribution2D,
+    /// Half a pixel in `u`, `0.5 / W`: the offset between map and grid coordinates.
+    half_texel: f32,
 }
 
 /// The map-frame direction for texture coordinates `(u, v)`.
@@ -142,6 +144,7 @@ impl EnvMap {
             to_local: Mat3::IDENTITY,
             to_world: Mat3::IDENTITY,
             distribution,
+            half_texel: 0.5 / w as f32,
         })
     }
 
@@ -173,7 +176,7 @@ impl EnvMap {
     /// `(x + 1/2) / W`), wrapped to `[0, 1)`; [`EnvMap::grid_to_map_u`] inverts it.
     #[inline]
     fn map_to_grid_u(&self, u: f32) -> f32 {
-        let g = u - 0.5 / self.image.width as f32;
+        let g = u - self.half_texel;
         if g < 0.0 {
             g + 1.0
         } else {
@@ -183,7 +186,7 @@ impl EnvMap {
 
     #[inline]
     fn grid_to_map_u(&self, g: f32) -> f32 {
-        let u = g + 0.5 / self.image.width as f32;
+        let u = g + self.half_texel;
         if u >= 1.0 {
             u - 1.0
         } else {
