@@ -50,13 +50,7 @@ unsafe fn run_avx2(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
 
 fn run_best(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2")
-        && std::arch::is_x86_feature_detected!("fma")
-        && std::arch::is_x86_feature_detected!("bmi1")
-        && std::arch::is_x86_feature_detected!("bmi2")
-        && std::arch::is_x86_feature_detected!("lzcnt")
-        && std::arch::is_x86_feature_detected!("popcnt")
-    {
+    if striae::integrator::wide_simd_available() {
         // SAFETY: the CPU has the features `run_avx2` is compiled for.
         return unsafe { run_avx2(scene, rays, query) };
     }

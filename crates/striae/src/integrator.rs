@@ -356,8 +356,9 @@ fn render_tile(
     render_tile_body(scene, rect, pass, counters)
 }
 
-/// Whether this CPU runs the AVX2 + FMA copy of the render loop.
-fn wide_simd_available() -> bool {
+/// Whether this CPU runs the AVX2 + FMA copy of the render loop (the features it is compiled
+/// for; benchmarks that time the same code outside the loop check them with this).
+pub fn wide_simd_available() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2")
