@@ -51,7 +51,8 @@ unsafe fn run_avx2(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
 fn run_best(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
     #[cfg(target_arch = "x86_64")]
     if striae::integrator::wide_simd_available() {
-        // SAFETY: the CPU has the features `run_avx2` is compiled for.
+        // SAFETY: the CPU has the features `run_avx2` is compiled for (the render loop's, which
+        // `wide_simd_available` checks).
         return unsafe { run_avx2(scene, rays, query) };
     }
     run(scene, rays, query)
