@@ -7,10 +7,14 @@
 //! `dP/dx`, `dP/dy`, and `du/dx`, ... follow by least squares against `dP/du`, `dP/dv`
 //! (pbrt's `ComputeDifferentials`). Spawned rays carry differentials as follows:
 //! * delta reflection / refraction: the two offset rays start at `p + dP/dx`, `p + dP/dy` and
-//!   their directions are reflected / refracted with the **central hit's shading normal**
-//!   (Igehy's differentials with `dn/dx = 0`, i.e. a locally flat surface; curvature of the
-//!   surface does not widen the beam — a documented approximation, since `SurfaceHit` carries
-//!   no normal derivatives). Under total internal reflection of an offset ray it is mirrored.
+//!   their directions are reflected / refracted about the **shading normal at their own
+//!   start**, the hit's normal plus the change of the surface's normal field from `p` to
+//!   `p + dP/dx` (`Geometry::shading_normals_near`: exact on spheres, the interpolated vertex
+//!   normals continued over the hit triangle's plane on meshes). This is Igehy's (1999) and
+//!   pbrt-v4's `dn/dx` term, applied to the offset ray itself rather than linearised, so a
+//!   curved mirror or lens widens or narrows the beam as it should; flat surfaces keep the
+//!   hit's normal. Whether a bounce reflects or refracts is decided once, by the central ray;
+//!   an offset ray totally reflected where the central one refracts is mirrored.
 //! * any non-delta bounce: the offset rays start at `p + dP/dx`, `p + dP/dy` and run
 //!   **parallel** to the new direction, so the footprint keeps the width it had at this hit
 //!   (a footprint-preserving approximation; pbrt-v3 drops differentials there, pbrt-v4
@@ -141,8 +145,10 @@ pub fn refract_dir(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
 
 /// Differentials of a ray spawned at `p` in direction `wi` (world, unit) from a hit reached by
 /// a ray with direction `d_in` and differentials `rd` (see the module notes). `delta` selects
-/// the specular rule, `ns` is the shading normal of the bounce and, for refraction,
-/// `eta = n_incident / n_transmitted` along the path's direction of travel.
+/// the specular rule, `ns` is the shading normal of the bounce, `offset_normals` the shading
+/// normals at `p + dpdx` and `p + dpdy` on the same side as `ns` (`None`: `ns` for both, a
+/// locally flat surface) and, for refraction, `eta = n_incident / n_transmitted` along the
+/// path's direction of travel.
 #[allow(clippy::too_many_arguments)]
 // Always inlined: LLVM's inliner once dropped it (and its offset-direction closure) from the
 // render loop after an unrelated change in the layers, costing the close-up 6 % (BENCHMARKS.md,
@@ -155,6 +161,7 @@ pub fn spawn_differentials(
     d_in: Vec3,
     rd: &RayDifferential,
     ns: Vec3,
+    offset_normals: Option<(Vec3, Vec3)>,
     wi: Vec3,
     delta: bool,
     eta: f32,
@@ -170,15 +177,17 @@ pub fn spawn_differentials(
         };
     }
     let reflection = (wi.dot(ns) > 0.0) == ((-d_in).dot(ns) > 0.0);
-    let n = if d_in.dot(ns) < 0.0 { ns } else { -ns };
+    // The normals facing the incoming ray.
+    let side = if d_in.dot(ns) < 0.0 { 1.0 } else { -1.0 };
+    let (nx, ny) = offset_normals.unwrap_or((ns, ns));
     // Mirroring and refracting a unit direction about a unit normal give a unit direction up
     // to rounding (a relative 1e-7 per bounce, harmless to the footprint), so neither is
     // normalised again; a non-finite result falls back to `wi`.
     RayDifferential {
         rx_o,
-        rx_d: bend_differential(rd.rx_d, n, wi, reflection, eta),
+        rx_d: bend_differential(rd.rx_d, side * nx, wi, reflection, eta),
         ry_o,
-        ry_d: bend_differential(rd.ry_d, n, wi, reflection, eta),
+        ry_d: bend_differential(rd.ry_d, side * ny, wi, reflection, eta),
     }
 }
 
@@ -259,6 +268,7 @@ mod tests {
             d,
             &rd,
             Vec3::Z,
+            None,
             t,
             true,
             1.0 / 1.5,
@@ -279,6 +289,7 @@ mod tests {
             d,
             &rd,
             Vec3::Z,
+            None,
             t,
             true,
             1.0 / 1.5,
@@ -295,6 +306,7 @@ mod tests {
             d,
             &rd,
             Vec3::Z,
+            None,
             r,
             true,
             1.0,

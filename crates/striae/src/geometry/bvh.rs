@@ -655,6 +655,26 @@ impl Geometry {
         }
     }
 
+    /// The shading normal of the surface `hit` lies on at the hit and at the points
+    /// `hit.p + dp` for each `dp` of `offsets` (steps in the tangent plane, e.g. a ray
+    /// differential's `dP/dx`, `dP/dy`), continued smoothly across the hit's primitive: for a
+    /// sphere the normal at the nearest point of the sphere, for a mesh with vertex normals
+    /// their interpolation over the hit triangle's plane ([`TriangleMesh::shading_normals_at`]).
+    /// `None` where the shading normal does not vary (meshes without normals: boxes,
+    /// rectangles, flat OBJ files), so the caller keeps the hit's own. The first normal is at
+    /// the hit itself, computed the same way, so that the caller can take differences.
+    #[inline]
+    pub fn shading_normals_near(&self, hit: &SurfaceHit, offsets: [Vec3; 2]) -> Option<[Vec3; 3]> {
+        let q = [hit.p, hit.p + offsets[0], hit.p + offsets[1]];
+        match &self.shapes[hit.shape as usize].geometry {
+            ShapeGeometry::Mesh(mesh) => mesh.shading_normals_at(hit.prim as usize, q),
+            ShapeGeometry::Sphere { centre, .. } => {
+                let n = q.map(|q| (q - *centre).normalize_or_zero());
+                n.iter().all(|n| *n != Vec3::ZERO).then_some(n)
+            }
+        }
+    }
+
     #[inline(always)]
     fn surface_hit(&self, ray: &Ray, id: usize, t: f32, b1: f32, b2: f32) -> SurfaceHit {
         let prim = &self.prims[id];

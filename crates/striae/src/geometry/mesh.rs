@@ -300,6 +300,45 @@ impl TriangleMesh {
     }
 }
 
+impl TriangleMesh {
+    /// The shading normal field of triangle `prim` extended linearly over the triangle's plane,
+    /// at the points `q` (projected onto the plane): the normalised barycentric interpolation
+    /// of the vertex normals, put on the geometric normal's side, as [`Self::surface`] gives it
+    /// inside the triangle. `None` for a mesh without normals (its shading normal is the
+    /// geometric one: flat) or a degenerate triangle. For the ray differentials of a bounce off
+    /// a curved surface (`shading::spawn_differentials`).
+    #[inline]
+    pub fn shading_normals_at<const N: usize>(
+        &self,
+        prim: usize,
+        q: [Vec3; N],
+    ) -> Option<[Vec3; N]> {
+        self.normals.as_ref()?;
+        let [v0, v1, v2] = self.indices[prim].map(|k| &self.vertices[k as usize]);
+        let (e1, e2) = (v1.p - v0.p, v2.p - v0.p);
+        let (a11, a12, a22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+        let det = a11 * a22 - a12 * a12;
+        if !(det > 0.0) || !det.is_finite() {
+            return None;
+        }
+        let ng = e1.cross(e2);
+        let mut out = [Vec3::ZERO; N];
+        for (n, q) in out.iter_mut().zip(q) {
+            // Barycentrics of q's projection: q - p0 = b1 e1 + b2 e2 in least squares.
+            let d = q - v0.p;
+            let (r1, r2) = (e1.dot(d), e2.dot(d));
+            let b1 = (a22 * r1 - a12 * r2) / det;
+            let b2 = (a11 * r2 - a12 * r1) / det;
+            let m = ((1.0 - b1 - b2) * v0.n + b1 * v1.n + b2 * v2.n).normalize_or_zero();
+            if m == Vec3::ZERO || !m.is_finite() {
+                return None;
+            }
+            *n = if m.dot(ng) < 0.0 { -m } else { m };
+        }
+        Some(out)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
