@@ -115,7 +115,7 @@ pub fn guard_shading_normal(ns: Vec3, ng: Vec3, wo: Vec3) -> Vec3 {
 /// The shading normals at the starts of a delta bounce's offset rays
 /// ([`spawn_differentials`]): the bounce's normal `n` (the frame's, which may be flipped to
 /// `wo`'s side or guarded) plus the change of the surface's normal field from the hit to
-/// `p + dpdx` and `p + dpdy` ([`Geometry::shading_normals_near`]). `None` on flat surfaces.
+/// `p + dpdx` and `p + dpdy` ([`Geometry::shading_normal_steps`]). `None` on flat surfaces.
 #[inline]
 pub fn offset_normals(
     geometry: &Geometry,
@@ -124,10 +124,10 @@ pub fn offset_normals(
     dpdx: Vec3,
     dpdy: Vec3,
 ) -> Option<(Vec3, Vec3)> {
-    let [n0, nx, ny] = geometry.shading_normals_near(hit, [dpdx, dpdy])?;
+    let [dnx, dny] = geometry.shading_normal_steps(hit, [dpdx, dpdy])?;
     let side = if n.dot(hit.ns) < 0.0 { -1.0 } else { 1.0 };
-    let bent = |m: Vec3| (n + side * (m - n0)).normalize_or(n);
-    Some((bent(nx), bent(ny)))
+    let bent = |dn: Vec3| (n + side * dn).normalize_or(n);
+    Some((bent(dnx), bent(dny)))
 }
 
 /// The material's view of a hit and the BSDF it presents there.

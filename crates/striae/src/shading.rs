@@ -9,9 +9,9 @@
 //! * delta reflection / refraction: the two offset rays start at `p + dP/dx`, `p + dP/dy` and
 //!   their directions are reflected / refracted about the **shading normal at their own
 //!   start**, the hit's normal plus the change of the surface's normal field from `p` to
-//!   `p + dP/dx` (`Geometry::shading_normals_near`: exact on spheres, the interpolated vertex
-//!   normals continued over the hit triangle's plane on meshes). This is Igehy's (1999) and
-//!   pbrt-v4's `dn/dx` term, applied to the offset ray itself rather than linearised, so a
+//!   `p + dP/dx` (`Geometry::shading_normal_steps`: `dP/dx / r` on a sphere, the derivative of
+//!   the interpolated vertex normals on a mesh). This is Igehy's (1999) and pbrt-v4's `dn/dx`
+//!   term, with the offset ray then mirrored or refracted exactly about its own normal, so a
 //!   curved mirror or lens widens or narrows the beam as it should; flat surfaces keep the
 //!   hit's normal. Whether a bounce reflects or refracts is decided once, by the central ray;
 //!   an offset ray totally reflected where the central one refracts is mirrored.

@@ -655,23 +655,16 @@ impl Geometry {
         }
     }
 
-    /// The shading normal of the surface `hit` lies on at the hit and at the points
-    /// `hit.p + dp` for each `dp` of `offsets` (steps in the tangent plane, e.g. a ray
-    /// differential's `dP/dx`, `dP/dy`), continued smoothly across the hit's primitive: for a
-    /// sphere the normal at the nearest point of the sphere, for a mesh with vertex normals
-    /// their interpolation over the hit triangle's plane ([`TriangleMesh::shading_normals_at`]).
-    /// `None` where the shading normal does not vary (meshes without normals: boxes,
-    /// rectangles, flat OBJ files), so the caller keeps the hit's own. The first normal is at
-    /// the hit itself, computed the same way, so that the caller can take differences.
+    /// The change of the shading normal of the surface `hit` lies on, for each step `dp` of
+    /// `steps` in the tangent plane (e.g. a ray differential's `dP/dx`, `dP/dy`): `dp / r` on a
+    /// sphere of radius `r`, [`TriangleMesh::shading_normal_steps`] on a mesh with vertex
+    /// normals; `None` where the shading normal does not vary (meshes without normals: boxes,
+    /// rectangles, flat OBJ files).
     #[inline]
-    pub fn shading_normals_near(&self, hit: &SurfaceHit, offsets: [Vec3; 2]) -> Option<[Vec3; 3]> {
-        let q = [hit.p, hit.p + offsets[0], hit.p + offsets[1]];
+    pub fn shading_normal_steps(&self, hit: &SurfaceHit, steps: [Vec3; 2]) -> Option<[Vec3; 2]> {
         match &self.shapes[hit.shape as usize].geometry {
-            ShapeGeometry::Mesh(mesh) => mesh.shading_normals_at(hit.prim as usize, q),
-            ShapeGeometry::Sphere { centre, .. } => {
-                let n = q.map(|q| (q - *centre).normalize_or_zero());
-                n.iter().all(|n| *n != Vec3::ZERO).then_some(n)
-            }
+            ShapeGeometry::Mesh(mesh) => mesh.shading_normal_steps(hit.prim as usize, steps),
+            ShapeGeometry::Sphere { radius, .. } => Some(steps.map(|dp| dp / *radius)),
         }
     }
 
