@@ -37,14 +37,14 @@ use crate::math::{Frame, Ray, RayDifferential, Rgb, Vec2, Vec3};
 use crate::sampler::PixelSampler;
 use crate::sampling::power_heuristic;
 use crate::scene::{material_bsdf, Scene, NO_MATERIAL};
-use crate::shading::{footprint_dp, footprint_uv, spawn_differentials, PrimaryHit, ShadingContext};
+use crate::shading::{footprint_dp, footprint_uv, spawn_differentials, PixelHit, ShadingContext};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Side of a square tile of pixels, the unit of parallel work.
 pub const TILE: u32 = 16;
 
-/// The next render's id ([`PrimaryHit::render`]).
+/// The next render's id ([`PixelHit::render`]).
 static NEXT_RENDER: AtomicU64 = AtomicU64::new(1);
 
 /// Counters of one render.
@@ -69,7 +69,7 @@ impl RenderStats {
     }
 }
 
-/// What every pixel of one render shares: the render's id ([`PrimaryHit::render`]) and whether
+/// What every pixel of one render shares: the render's id ([`PixelHit::render`]) and whether
 /// paths carry ray differentials (only when a material reads the footprint).
 #[derive(Clone, Copy)]
 struct Pass {
@@ -159,8 +159,9 @@ pub fn shade<'a>(
 /// [`Material::reads_footprint`]). `u_layer` is `Some` exactly where the material reads the
 /// hit's context ([`Material::reads_hit_context`]: the scratched material, not glass seen from
 /// inside); elsewhere `duvdx` and `duvdy` are zero too and the context's `u_layer` is 0.5.
-/// `dpdx`, `dpdy` are always there (the spawned ray's differentials need them). `primary`
-/// tells a camera ray's first hit ([`ShadingContext::primary`]); only meaningful with `rd`.
+/// `dpdx`, `dpdy` are always there (the spawned ray's differentials need them). `pixel`
+/// tells a hit reached from the camera by delta bounces only ([`ShadingContext::pixel`]);
+/// only meaningful with `rd`.
 #[inline(always)]
 pub fn shade_with<'a>(
     material: &'a Material,
@@ -168,9 +169,9 @@ pub fn shade_with<'a>(
     rd: Option<&RayDifferential>,
     wo_world: Vec3,
     u_layer: Option<f32>,
-    primary: Option<PrimaryHit>,
+    pixel: Option<PixelHit>,
 ) -> Shaded<'a> {
-    shade_impl(material, hit, rd, wo_world, u_layer, primary, false)
+    shade_impl(material, hit, rd, wo_world, u_layer, pixel, false)
 }
 
 /// [`shade`] (`full_footprint`: `duvdx`, `duvdy` at every hit) and [`shade_with`].
@@ -181,7 +182,7 @@ fn shade_impl<'a>(
     rd: Option<&RayDifferential>,
     wo_world: Vec3,
     u_layer: Option<f32>,
-    primary: Option<PrimaryHit>,
+    pixel: Option<PixelHit>,
     full_footprint: bool,
 ) -> Shaded<'a> {
     let (dpdx, dpdy, duvdx, duvdy) = match rd {
@@ -207,7 +208,7 @@ fn shade_impl<'a>(
         ng: hit.ng,
         u_layer: u_layer.unwrap_or(0.5),
         wo: wo_world,
-        primary: primary.filter(|_| rd.is_some()),
+        pixel: pixel.filter(|_| rd.is_some()),
     };
     let mut bsdf = material_bsdf(material, &ctx);
     let (mut ng, mut ns) = (hit.ng, hit.ns);
@@ -465,8 +466,9 @@ fn render_pixel(scene: &Scene, x: u32, y: u32, pass: Pass, counters: &mut Counte
 }
 
 /// Radiance arriving at the camera along `ray` (one path sample) through a pixel (the render's
-/// id, the pixel's index and the ray's offset from its centre, see [`PrimaryHit`]). With `DIFFERENTIALS` false the ray
-/// differentials are neither used nor updated (no material of the scene reads them).
+/// id, the pixel's index and the ray's offset from its centre, see [`PixelHit`]). With
+/// `DIFFERENTIALS` false the ray differentials are neither used nor updated (no material of
+/// the scene reads them).
 #[inline(always)]
 fn radiance<const DIFFERENTIALS: bool>(
     scene: &Scene,
@@ -496,6 +498,8 @@ fn radiance<const DIFFERENTIALS: bool>(
     // The camera acts like a delta bounce: emitters seen directly count fully.
     let mut specular = true;
     let mut prev_pdf = 0.0f32;
+    // While every bounce so far was a delta one: the chain of bounces ([`PixelHit::chain`]).
+    let mut delta_chain = Some(0u64);
 
     let mut depth = 0u32;
     loop {
@@ -561,10 +565,11 @@ fn radiance<const DIFFERENTIALS: bool>(
             DIFFERENTIALS.then_some(&rd),
             wo_world,
             u_layer,
-            (DIFFERENTIALS && depth == 0).then_some(PrimaryHit {
+            delta_chain.filter(|_| DIFFERENTIALS).map(|chain| PixelHit {
                 render,
                 pixel,
                 shape: hit.shape,
+                chain,
                 offset,
             }),
         );
@@ -626,6 +631,9 @@ fn radiance<const DIFFERENTIALS: bool>(
         let transmitted = bs.wi.z * wo.z < 0.0;
         let eta_path = if transmitted { 1.0 / bs.eta } else { 1.0 };
         if DIFFERENTIALS {
+            delta_chain = delta_chain
+                .filter(|_| bs.delta)
+                .map(|chain| PixelHit::chain_after(chain, hit.shape, transmitted));
             let normals = bs
                 .delta
                 .then(|| offset_normals(&scene.geometry, &hit, frame.n, dpdx, dpdy))

@@ -84,10 +84,11 @@ pub enum LayerMix {
 #[serde(rename_all = "lowercase")]
 pub enum CoverageMode {
     /// The exact share of the pixel footprint (`uv`, `duvdx`, `duvdy`) each layer's scratches
-    /// cover (METHOD.md section 6, [Raymond16]): at a camera ray's first hit, of the footprint
-    /// centred on the pixel's centre, computed once per pixel
-    /// ([`LayerSet::coverage_of_pixel`]); at other hits, with the footprint snapped to the
-    /// footprint-shaped tile that holds the hit and cached per tile
+    /// cover (METHOD.md section 6, [Raymond16]): at hits reached from the camera by delta
+    /// bounces only (the camera ray's first hit, surfaces seen through the glass or in a
+    /// mirror), of the footprint centred on the pixel centre's ray, computed once per pixel and
+    /// chain of bounces ([`LayerSet::coverage_of_pixel`]); at other hits, with the footprint
+    /// snapped to the footprint-shaped tile that holds the hit and cached per tile
     /// ([`crate::layers::lattice`]).
     #[default]
     Footprint,
@@ -643,7 +644,7 @@ impl ScratchedMaterial {
             LayerMix::Sum => TileQuery::All,
         };
         match p.coverage {
-            CoverageMode::Footprint => match ctx.primary {
+            CoverageMode::Footprint => match ctx.pixel {
                 Some(hit) => p.layers.coverage_of_pixel(
                     ctx.uv,
                     ctx.duvdx,
@@ -652,6 +653,7 @@ impl ScratchedMaterial {
                         render: hit.render,
                         pixel: hit.pixel,
                         shape: hit.shape,
+                        chain: hit.chain,
                     },
                     hit.offset,
                     query,

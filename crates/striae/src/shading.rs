@@ -52,15 +52,16 @@ pub struct ShadingContext {
     /// The direction toward the viewer (`-ray.d`, world, unit). The scratched glass of issue 5
     /// skips its layer queries for rays arriving from inside.
     pub wo: Vec3,
-    /// For the first hit of a camera ray that carries differentials: which pixel and which
-    /// shape, and where in the pixel the ray went, so that a material can filter over the
-    /// footprint of the whole pixel once and share it among the pixel's samples.
-    pub primary: Option<PrimaryHit>,
+    /// For a hit of a camera path that carries differentials and has only bounced specularly
+    /// so far (the camera ray's first hit included): which pixel, which chain of delta bounces
+    /// and which shape, and where in the pixel the ray went, so that a material can filter
+    /// over the footprint of the whole pixel once and share it among the pixel's samples.
+    pub pixel: Option<PixelHit>,
 }
 
-/// The first hit of a camera ray ([`ShadingContext::primary`]).
+/// A hit reached from a pixel by delta bounces only ([`ShadingContext::pixel`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PrimaryHit {
+pub struct PixelHit {
     /// Names the render (unique per call of `integrator::render` in the process), so that
     /// per-pixel state never outlives it.
     pub render: u64,
@@ -68,10 +69,23 @@ pub struct PrimaryHit {
     pub pixel: u64,
     /// The shape hit.
     pub shape: u32,
+    /// Names the chain of delta bounces that led here: 0 for the camera ray's first hit, else
+    /// a hash of the shapes met and whether each bounce reflected or refracted
+    /// ([`PixelHit::chain_after`]). The pixel's samples that took the same chain see the same
+    /// surface through the same lenses and mirrors.
+    pub chain: u64,
     /// The film position of the ray minus the pixel's centre, in pixels (each component in
-    /// `[-1/2, 1/2]`): the pixel centre's texture point is about
-    /// `uv - offset.x duvdx - offset.y duvdy`.
+    /// `[-1/2, 1/2]`): the texture point of the pixel centre's ray along the same chain is
+    /// about `uv - offset.x duvdx - offset.y duvdy` (the differentials are carried linearly).
     pub offset: Vec2,
+}
+
+impl PixelHit {
+    /// The chain after a delta bounce off `shape` that reflected or (`transmitted`) refracted.
+    #[inline]
+    pub fn chain_after(chain: u64, shape: u32, transmitted: bool) -> u64 {
+        crate::sampler::mix64(chain ^ (((shape as u64) << 1 | transmitted as u64) + 1))
+    }
 }
 
 /// `dP/dx`, `dP/dy`, `du/dx`, `dv/dx`, `du/dy`, `dv/dy` at a hit from the ray's differentials

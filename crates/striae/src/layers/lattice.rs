@@ -1,7 +1,8 @@
 //! Footprint tiles: the renderer's coverage queries snapped to a lattice of footprint-shaped
-//! tiles, and a per-thread cache of their exact coverage; and, for camera rays' first hits, the
-//! exact coverage of the whole pixel's footprint, computed once per pixel
-//! ([`LayerSet::coverage_of_pixel`]).
+//! tiles, and a per-thread cache of their exact coverage; and, for hits reached from the
+//! camera by delta bounces only (a camera ray's first hit, a surface seen through glass or in
+//! a mirror), the exact coverage of the whole pixel's footprint, computed once per pixel and
+//! chain of bounces ([`LayerSet::coverage_of_pixel`]).
 //!
 //! A pixel's samples hit points spread over one pixel footprint, and each asks for the scratch
 //! coverage of a footprint of that same shape (METHOD.md section 6). Computing it exactly at
@@ -172,29 +173,49 @@ struct Entry {
     values: [f32; CACHED_LAYERS],
 }
 
+/// Pixel footprints ([`LayerSet::coverage_of_pixel`]) each thread keeps: the pixel's first
+/// hit and the surfaces its samples see through the glass or in mirrors, one per chain of
+/// delta bounces, replaced oldest first.
+const PIXEL_ENTRIES: usize = 8;
+
 thread_local! {
     static CACHE: RefCell<Vec<Entry>> = const { RefCell::new(Vec::new()) };
-    static PIXEL: RefCell<Option<PixelEntry>> = const { RefCell::new(None) };
+    static PIXEL: RefCell<PixelCache> = const {
+        RefCell::new(PixelCache {
+            entries: [None; PIXEL_ENTRIES],
+            next: 0,
+        })
+    };
+}
+
+/// The pixel footprints of one thread, written round-robin. A pixel's entries are replaced
+/// only by the pixel's own later ones, oldest first, whatever the slot the pixel starts at, so
+/// the values a sample sees depend only on its pixel's earlier samples (determinism).
+struct PixelCache {
+    entries: [Option<PixelEntry>; PIXEL_ENTRIES],
+    next: usize,
 }
 
 /// A pixel's footprint coverage ([`LayerSet::coverage_of_pixel`]): set id, query, render,
-/// pixel and shape; the footprint's centre and edges; the values.
+/// pixel, shape and chain; the footprint's centre and edges; the values.
 #[derive(Clone, Copy)]
 struct PixelEntry {
-    key: [u64; 5],
+    key: [u64; 6],
     centre: Vec2,
     a: Vec2,
     b: Vec2,
     values: [f32; CACHED_LAYERS],
 }
 
-/// Which pixel of which render a camera ray's first hit belongs to, and the shape it hit
-/// ([`LayerSet::coverage_of_pixel`]).
+/// Which pixel of which render a hit belongs to, the chain of delta bounces that reached it
+/// and the shape it is on ([`LayerSet::coverage_of_pixel`], `shading::PixelHit`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PixelKey {
     pub render: u64,
     pub pixel: u64,
     pub shape: u32,
+    /// 0 for the camera ray's first hit, else names the chain of delta bounces.
+    pub chain: u64,
 }
 
 /// A sample shares its pixel's footprint coverage when its own estimate of the pixel centre's
@@ -205,7 +226,7 @@ pub const PIXEL_TOLERANCE: f32 = 0.25;
 /// results never depend on it, only the time does).
 pub fn clear_cache() {
     CACHE.with(|cache| cache.borrow_mut().clear());
-    PIXEL.with(|entry| *entry.borrow_mut() = None);
+    PIXEL.with(|cache| cache.borrow_mut().entries = [None; PIXEL_ENTRIES]);
 }
 
 impl LayerSet {
@@ -227,20 +248,21 @@ impl LayerSet {
         }
     }
 
-    /// The per-layer coverage of a whole pixel's footprint, for the first hit of a camera ray
-    /// through `pixel` (on its shape, in its render), `offset` (pixels) from the pixel's
-    /// centre: the exact coverage ([`Self::coverage_max`] or [`Self::coverage_all`] per
-    /// `query`, up to [`TILE_MAX_CELLS`]) of the footprint `duvdx`, `duvdy` centred on the
-    /// pixel centre's texture point, `uv - offset.x duvdx - offset.y duvdy`. It is computed at the first such
-    /// hit of the pixel and kept per thread; the pixel's later samples on the same shape reuse
-    /// it when their own estimate of the centre agrees within [`PIXEL_TOLERANCE`] of the
-    /// footprint (else, at silhouettes and texture seams, they take their tile,
-    /// [`Self::coverage_tiled`]).
+    /// The per-layer coverage of a whole pixel's footprint, for a hit reached from the camera
+    /// through `pixel` by delta bounces only (on its shape, along its chain, in its render),
+    /// `offset` (pixels) from the pixel's centre: the exact coverage ([`Self::coverage_max`] or
+    /// [`Self::coverage_all`] per `query`, up to [`TILE_MAX_CELLS`]) of the footprint `duvdx`,
+    /// `duvdy` centred on the texture point of the pixel centre's ray along the same chain,
+    /// `uv - offset.x duvdx - offset.y duvdy`. It is computed at the pixel's first such hit and
+    /// kept per thread ([`PIXEL_ENTRIES`] of them); the pixel's later samples on the same
+    /// shape along the same chain reuse it when their own estimate of the centre agrees within
+    /// [`PIXEL_TOLERANCE`] of the footprint (else, at silhouettes and texture seams, they take
+    /// their tile, [`Self::coverage_tiled`]).
     ///
     /// So every sample of a pixel sees the coverage of the pixel's own footprint, exactly, as
-    /// METHOD.md section 6 asks, for one exact query per pixel instead of one per tile.
-    /// Deterministic: a pixel's samples run in order on one thread, so which sample fills the
-    /// entry depends only on the pixel.
+    /// METHOD.md section 6 asks, for one exact query per pixel and chain instead of one per
+    /// tile. Deterministic: a pixel's samples run in order on one thread, so which sample
+    /// fills an entry depends only on the pixel ([`PixelCache`]).
     /// # Panics
     /// If `out.len() < len()`.
     #[allow(clippy::too_many_arguments)] // the footprint, the pixel and the query, as in the tiles
@@ -267,11 +289,13 @@ impl LayerSet {
             pixel.render,
             pixel.pixel,
             pixel.shape as u64,
+            pixel.chain,
         ];
-        let shared = PIXEL.with(|entry| {
-            let mut entry = entry.borrow_mut();
-            match &*entry {
-                Some(e) if e.key == key => {
+        let shared = PIXEL.with(|cache| {
+            let mut cache = cache.borrow_mut();
+            let found = cache.entries.iter().flatten().find(|e| e.key == key);
+            match found {
+                Some(e) => {
                     // This sample's centre in the stored footprint's edge coordinates.
                     let d = centre - e.centre;
                     let det = e.a.perp_dot(e.b);
@@ -282,17 +306,19 @@ impl LayerSet {
                     }
                     near
                 }
-                _ => {
+                None => {
                     let mut values = [0.0f32; CACHED_LAYERS];
                     self.coverage_query(query, centre, duvdx, duvdy, TILE_MAX_CELLS, &mut values);
                     out[..n].copy_from_slice(&values[..n]);
-                    *entry = Some(PixelEntry {
+                    let slot = cache.next;
+                    cache.entries[slot] = Some(PixelEntry {
                         key,
                         centre,
                         a: duvdx,
                         b: duvdy,
                         values,
                     });
+                    cache.next = (slot + 1) % PIXEL_ENTRIES;
                     true
                 }
             }

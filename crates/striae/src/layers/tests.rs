@@ -851,6 +851,7 @@ fn pixel_footprint_coverage_is_the_exact_coverage_of_the_pixel_centre() {
             render: 1,
             pixel: pixel as u64,
             shape,
+            chain: 0,
         };
         for query in [lattice::TileQuery::Max, lattice::TileQuery::All] {
             let exact = |set: &LayerSet, c: Vec2, out: &mut [f32]| {
@@ -880,4 +881,48 @@ fn pixel_footprint_coverage_is_the_exact_coverage_of_the_pixel_centre() {
         }
     }
     assert!(nonzero > 50, "{nonzero}");
+}
+
+/// Hits the pixel's samples reach through different chains of delta bounces keep apart: a
+/// chain's first hit is exact about its own centre even where another chain's footprint lies
+/// within the tolerance, and each chain's entry outlives the others' insertions (up to the
+/// cache's size), so its later hits share its own value.
+#[test]
+fn pixel_footprint_coverage_keeps_chains_of_bounces_apart() {
+    let set = LayerSet::new(LayerParams::setting(2).unwrap(), 9).unwrap();
+    let n = set.len();
+    let cells = lattice::TILE_MAX_CELLS;
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(43);
+    let (mut got, mut want) = (vec![0.0f32; n], vec![0.0f32; n]);
+    let mut distinct = 0;
+    for (pixel, (uv, a, b)) in random_footprints(&mut rng, 200, 0.05)
+        .into_iter()
+        .enumerate()
+    {
+        let key = |chain| lattice::PixelKey {
+            render: 2,
+            pixel: pixel as u64,
+            shape: 3,
+            chain,
+        };
+        let query = lattice::TileQuery::Max;
+        let exact = |c: Vec2, out: &mut [f32]| set.coverage_query(query, c, a, b, cells, out);
+        let offset = Vec2::ZERO;
+        // Chain 1 fills its entry about uv.
+        set.coverage_of_pixel(uv, a, b, key(1), offset, query, &mut got);
+        let first = got.clone();
+        // Chains 2..=4 (less than the cache holds) a fifth of a footprint away: each exact
+        // about its own centre, not chain 1's value.
+        let near = uv + 0.2 * a;
+        exact(near, &mut want);
+        for chain in 2..=4 {
+            set.coverage_of_pixel(near, a, b, key(chain), offset, query, &mut got);
+            assert_eq!(got, want);
+        }
+        distinct += (want != first) as usize;
+        // Chain 1 again, near its own centre: its stored value.
+        set.coverage_of_pixel(near, a, b, key(1), offset, query, &mut got);
+        assert_eq!(got, first);
+    }
+    assert!(distinct > 20, "{distinct}");
 }

@@ -365,7 +365,7 @@ fn wide_layers(k: usize, seed: u64) -> LayerSet {
 
 fn flat_ctx(uv: Vec2, footprint: f32, wo: Vec3, u_layer: f32) -> ShadingContext {
     ShadingContext {
-        primary: None,
+        pixel: None,
         p: Vec3::ZERO,
         uv,
         duvdx: Vec2::new(footprint, 0.0),
