@@ -116,7 +116,9 @@ pub fn guard_shading_normal(ns: Vec3, ng: Vec3, wo: Vec3) -> Vec3 {
 /// ([`spawn_differentials`]): the bounce's normal `n` (the frame's, which may be flipped to
 /// `wo`'s side or guarded) plus the change of the surface's normal field from the hit to
 /// `p + dpdx` and `p + dpdy` ([`Geometry::shading_normal_steps`]). `None` on flat surfaces.
-#[inline]
+/// Out of line: the render loop calls it only on shapes with curved normals
+/// ([`Geometry::has_curved_normals`]), so scenes of flat glass do not carry its code.
+#[inline(never)]
 pub fn offset_normals(
     geometry: &Geometry,
     hit: &SurfaceHit,
@@ -634,10 +636,11 @@ fn radiance<const DIFFERENTIALS: bool>(
             delta_chain = delta_chain
                 .filter(|_| bs.delta)
                 .map(|chain| PixelHit::chain_after(chain, hit.shape, transmitted));
-            let normals = bs
-                .delta
-                .then(|| offset_normals(&scene.geometry, &hit, frame.n, dpdx, dpdy))
-                .flatten();
+            let normals = if bs.delta && scene.geometry.has_curved_normals(hit.shape) {
+                offset_normals(&scene.geometry, &hit, frame.n, dpdx, dpdy)
+            } else {
+                None
+            };
             rd = spawn_differentials(
                 hit.p, dpdx, dpdy, ray.d, &rd, frame.n, normals, wi_world, bs.delta, eta_path,
             );
@@ -765,5 +768,13 @@ mod tests {
             }
         }
         assert!(checked > 200, "{checked}");
+        // Flat faces keep the hit's normal: a box has normals, all equal per face.
+        let cube = geometry(ShapeGeometry::Mesh(TriangleMesh::cuboid()));
+        assert!(shapes.iter().all(|(_, g)| g.has_curved_normals(0)));
+        assert!(!cube.has_curved_normals(0));
+        let ray = Ray::new(Vec3::new(0.3, 0.2, 5.0), -Vec3::Z);
+        let hit = cube.intersect(&ray).unwrap();
+        let normals = offset_normals(&cube, &hit, hit.ns, 0.1 * Vec3::X, 0.1 * Vec3::Y);
+        assert_eq!(normals, None);
     }
 }

@@ -655,6 +655,17 @@ impl Geometry {
         }
     }
 
+    /// Whether the shading normal of shape `shape` varies over its surface (a sphere, a mesh
+    /// with [`TriangleMesh::has_curved_normals`]), so that [`Self::shading_normal_steps`] may
+    /// be non-zero.
+    #[inline]
+    pub fn has_curved_normals(&self, shape: u32) -> bool {
+        match &self.shapes[shape as usize].geometry {
+            ShapeGeometry::Mesh(mesh) => mesh.has_curved_normals(),
+            ShapeGeometry::Sphere { .. } => true,
+        }
+    }
+
     /// The change of the shading normal of the surface `hit` lies on, for each step `dp` of
     /// `steps` in the tangent plane (e.g. a ray differential's `dP/dx`, `dP/dy`): `dp / r` on a
     /// sphere of radius `r`, [`TriangleMesh::shading_normal_steps`] on a mesh with vertex

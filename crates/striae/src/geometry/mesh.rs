@@ -24,6 +24,8 @@ pub struct TriangleMesh {
     /// The per-vertex data above interleaved, one cache line per vertex, for
     /// [`TriangleMesh::surface`] (a hit then reads three lines instead of up to fifteen).
     vertices: Vec<ShadingVertex>,
+    /// Whether the shading normal varies over some triangle ([`Self::has_curved_normals`]).
+    curved: bool,
 }
 
 /// A vertex's position and (where the mesh has them, else zero) normal, uv and tangents.
@@ -108,8 +110,15 @@ impl TriangleMesh {
                 dpdv: tangents.as_ref().map_or(Vec3::ZERO, |(_, dv)| dv[i]),
             })
             .collect();
+        let curved = normals.as_ref().is_some_and(|ns| {
+            indices.iter().any(|t| {
+                let [a, b, c] = t.map(|i| ns[i as usize]);
+                a != b || b != c
+            })
+        });
         Ok(TriangleMesh {
             vertices,
+            curved,
             area_distribution: Distribution1D::new(&areas),
             area,
             positions,
@@ -301,18 +310,27 @@ impl TriangleMesh {
 }
 
 impl TriangleMesh {
+    /// Whether the mesh has vertex normals that differ across some triangle, so that its
+    /// shading normal varies ([`Self::shading_normal_steps`]); a box's or a rectangle's does not.
+    pub fn has_curved_normals(&self) -> bool {
+        self.curved
+    }
+
     /// The change of triangle `prim`'s shading normal field for each step `dp` in its plane:
     /// `dn = (n1 - n0) (grad b1 . dp) + (n2 - n0) (grad b2 . dp)`, the barycentric
     /// interpolation of the unit vertex normals differentiated along the step (Igehy 1999's
     /// `dn/dx`; the interpolated normal's length, within a fraction of a per cent of 1 for a
     /// smooth mesh, is not divided out). Put on the geometric normal's side like
-    /// [`Self::surface`]'s normal. `None` for a mesh without normals (flat shading) or a
-    /// degenerate triangle. For the ray differentials of a delta bounce
+    /// [`Self::surface`]'s normal. `None` for a mesh without normals (flat shading), a
+    /// triangle whose three normals are equal (flat) or a degenerate one. For the ray differentials of a delta bounce
     /// (`shading::spawn_differentials`).
     #[inline]
     pub fn shading_normal_steps(&self, prim: usize, dp: [Vec3; 2]) -> Option<[Vec3; 2]> {
         self.normals.as_ref()?;
         let [v0, v1, v2] = self.indices[prim].map(|k| &self.vertices[k as usize]);
+        if v0.n == v1.n && v1.n == v2.n {
+            return None; // a flat triangle (a box's face): the normal does not change
+        }
         let (e1, e2) = (v1.p - v0.p, v2.p - v0.p);
         let (a11, a12, a22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
         let det = a11 * a22 - a12 * a12;

@@ -190,7 +190,8 @@ thread_local! {
 
 /// The pixel footprints of one thread, written round-robin. A pixel's entries are replaced
 /// only by the pixel's own later ones, oldest first, whatever the slot the pixel starts at, so
-/// the values a sample sees depend only on its pixel's earlier samples (determinism).
+/// the values a sample sees depend only on its pixel's earlier samples (determinism). Its
+/// entries are always the newest ones, so a lookup stops at the first entry of another pixel.
 struct PixelCache {
     entries: [Option<PixelEntry>; PIXEL_ENTRIES],
     next: usize,
@@ -293,7 +294,13 @@ impl LayerSet {
         ];
         let shared = PIXEL.with(|cache| {
             let mut cache = cache.borrow_mut();
-            let found = cache.entries.iter().flatten().find(|e| e.key == key);
+            // The pixel's own entries are the newest ones (its samples run one after another
+            // on this thread): look back from the newest, up to the first of another pixel.
+            let found = (1..=PIXEL_ENTRIES)
+                .map(|back| (cache.next + PIXEL_ENTRIES - back) % PIXEL_ENTRIES)
+                .map_while(|slot| cache.entries[slot].as_ref())
+                .take_while(|e| e.key[2] == key[2] && e.key[3] == key[3]) // render, pixel
+                .find(|e| e.key.iter().zip(&key).all(|(a, b)| a == b));
             match found {
                 Some(e) => {
                     // This sample's centre in the stored footprint's edge coordinates.
