@@ -685,7 +685,8 @@ impl ScratchedMaterial {
         let count = match p.mix {
             LayerMix::Max => {
                 let best = cov[..k].iter().copied().fold(0.0f32, f32::max);
-                if !(best > 0.0) {
+                if best <= 0.0 {
+                    // (`best` is never NaN: `f32::max` drops NaN.)
                     return self.base_bsdf();
                 }
                 // Ties (several scratches crossing the footprint equally): one at random.

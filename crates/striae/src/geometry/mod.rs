@@ -70,6 +70,9 @@ pub enum GeometryError {
 }
 
 /// The surface of a shape, in world space.
+// One per shape, so the size difference costs nothing; boxing the mesh would add an
+// indirection at every hit.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
 pub enum ShapeGeometry {
     Mesh(TriangleMesh),
