@@ -1,4 +1,5 @@
 //! `striae render` flags: bad values are usage errors that name the flag, and nothing is written.
+//! `--threads` means the same in every subcommand: 1 or more, all cores when left out.
 
 use std::process::Command;
 
@@ -29,6 +30,31 @@ fn bad_render_flags_name_the_flag_and_write_nothing() {
         assert!(
             !out.with_extension("exr").exists() && !out.with_extension("png").exists(),
             "{flag} {value} wrote an image"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn zero_threads_is_refused_by_every_subcommand() {
+    let dir = std::env::temp_dir().join(format!("striae-threads-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("out");
+    for command in ["render", "figures", "precompute"] {
+        let o = Command::new(env!("CARGO_BIN_EXE_striae"))
+            .args([command, "--threads", "0", "-o"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{command} --threads 0 should fail");
+        assert!(
+            err.contains("--threads") && err.contains("1 or more"),
+            "{command}: {err}"
+        );
+        assert!(
+            std::fs::read_dir(&dir).unwrap().next().is_none(),
+            "{command} wrote"
         );
     }
     let _ = std::fs::remove_dir_all(&dir);
