@@ -64,7 +64,7 @@ impl Frame {
     pub fn from_normal_tangent(n: Vec3, tangent: Vec3) -> Self {
         let s = tangent - n * n.dot(tangent);
         let len2 = s.length_squared();
-        if !(len2.is_finite() && len2 > 1e-12) {
+        if !(len2 > 1e-12 && len2.is_finite()) {
             return Frame::from_normal(n);
         }
         let s = s / len2.sqrt();
