@@ -254,6 +254,43 @@ fn scratched_renders_are_bit_identical_across_thread_counts() {
         &format!("{WIDE}m = 16\nn = 600\nnr = 8\nlayer_mix = \"sum\"\n"),
     );
     assert_bit_identical_across_thread_counts(&g);
+    // The glass teapot: surfaces seen through the glass share their pixel's footprint
+    // coverage per chain of bounces (`LayerSet::coverage_of_pixel`).
+    let teapot = scene(&format!(
+        r#"
+[render]
+width = 48
+height = 36
+spp = 4
+max_depth = 8
+[camera]
+position = [0.0, 2.6, 6.0]
+look_at = [0.0, 0.7, 0.0]
+fov = 30
+[materials.m]
+type = "scratched"
+base = "glass"
+ior = 1.5
+[materials.m.scratches]
+m = 16
+n = 600
+nr = 8
+{WIDE}
+[[shapes]]
+type = "teapot"
+material = "m"
+subdivisions = 4
+transform = [{{ scale = 0.5 }}]
+[[lights]]
+type = "sun"
+direction = [-0.3, 0.7, 0.6]
+irradiance = 60
+[environment]
+type = "constant"
+radiance = 0.05
+"#
+    ));
+    assert_bit_identical_across_thread_counts(&teapot);
 }
 
 /// Footprint coverage at a camera ray's first hit is the exact coverage of the pixel's own
