@@ -322,8 +322,8 @@ impl TriangleMesh {
     /// `dn/dx`; the interpolated normal's length, within a fraction of a per cent of 1 for a
     /// smooth mesh, is not divided out). Put on the geometric normal's side like
     /// [`Self::surface`]'s normal. `None` for a mesh without normals (flat shading), a
-    /// triangle whose three normals are equal (flat) or a degenerate one. For the ray differentials of a delta bounce
-    /// (`shading::spawn_differentials`).
+    /// triangle whose three normals are equal (flat) or a degenerate one. For the ray
+    /// differentials of a delta bounce (`shading::spawn_differentials`).
     #[inline]
     pub fn shading_normal_steps(&self, prim: usize, dp: [Vec3; 2]) -> Option<[Vec3; 2]> {
         self.normals.as_ref()?;
