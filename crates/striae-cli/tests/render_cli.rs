@@ -1,7 +1,22 @@
 //! `striae render` flags: bad values are usage errors that name the flag, and nothing is written.
 //! `--threads` means the same in every subcommand: 1 or more, all cores when left out.
 
+use std::path::Path;
 use std::process::Command;
+
+/// Run `striae ARGS -o OUT`: whether it succeeded, and its standard error.
+fn striae(args: &[&str], out: &Path) -> (bool, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_striae"))
+        .args(args)
+        .arg("-o")
+        .arg(out)
+        .output()
+        .unwrap();
+    (
+        o.status.success(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
 
 #[test]
 fn bad_render_flags_name_the_flag_and_write_nothing() {
@@ -16,13 +31,8 @@ fn bad_render_flags_name_the_flag_and_write_nothing() {
         ("--sampler", "halton"),
         ("--exposure", "NaN"),
     ] {
-        let o = Command::new(env!("CARGO_BIN_EXE_striae"))
-            .args(["render", flag, value, "-q", "-o"])
-            .arg(&out)
-            .output()
-            .unwrap();
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(!o.status.success(), "{flag} {value} should fail");
+        let (ok, err) = striae(&["render", flag, value, "-q"], &out);
+        assert!(!ok, "{flag} {value} should fail");
         assert!(
             err.contains(flag) && err.contains(value),
             "{flag} {value}: {err}"
@@ -41,13 +51,8 @@ fn zero_threads_is_refused_by_every_subcommand() {
     std::fs::create_dir_all(&dir).unwrap();
     let out = dir.join("out");
     for command in ["render", "figures", "precompute"] {
-        let o = Command::new(env!("CARGO_BIN_EXE_striae"))
-            .args([command, "--threads", "0", "-o"])
-            .arg(&out)
-            .output()
-            .unwrap();
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(!o.status.success(), "{command} --threads 0 should fail");
+        let (ok, err) = striae(&[command, "--threads", "0"], &out);
+        assert!(!ok, "{command} --threads 0 should fail");
         assert!(
             err.contains("--threads") && err.contains("1 or more"),
             "{command}: {err}"
