@@ -128,7 +128,10 @@ pub fn offset_normals(
 ) -> Option<(Vec3, Vec3)> {
     let [dnx, dny] = geometry.shading_normal_steps(hit, [dpdx, dpdy])?;
     let side = if n.dot(hit.ns) < 0.0 { -1.0 } else { 1.0 };
-    let bent = |dn: Vec3| (n + side * dn).normalize_or(n);
+    // The change's component along `n` only changes the normal's length (the interpolated
+    // normal is shorter inside a triangle): dropping it keeps `n + dn` unit to second order
+    // in the step, with no square root.
+    let bent = |dn: Vec3| n + side * (dn - dn.dot(n) * n);
     Some((bent(dnx), bent(dny)))
 }
 

@@ -669,8 +669,8 @@ impl Geometry {
     /// The change of the shading normal of the surface `hit` lies on, for each step `dp` of
     /// `steps` in the tangent plane (e.g. a ray differential's `dP/dx`, `dP/dy`): `dp / r` on a
     /// sphere of radius `r`, [`TriangleMesh::shading_normal_steps`] on a mesh with vertex
-    /// normals; `None` where the shading normal does not vary (a mesh without vertex normals,
-    /// or a triangle whose three are equal: boxes, rectangles, flat OBJ files).
+    /// normals (zero on its flat triangles); `None` on a mesh whose shading normal never varies
+    /// (no vertex normals, or equal ones on every triangle: boxes, rectangles, flat OBJ files).
     #[inline]
     pub fn shading_normal_steps(&self, hit: &SurfaceHit, steps: [Vec3; 2]) -> Option<[Vec3; 2]> {
         match &self.shapes[hit.shape as usize].geometry {

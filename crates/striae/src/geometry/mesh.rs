@@ -8,6 +8,7 @@
 use super::{GeometryError, Transform};
 use crate::math::{Vec2, Vec3};
 use crate::sampling::Distribution1D;
+use glam::Mat3;
 
 /// An indexed triangle mesh in world space (transforms are applied at load time).
 #[derive(Clone, Debug)]
@@ -24,8 +25,9 @@ pub struct TriangleMesh {
     /// The per-vertex data above interleaved, one cache line per vertex, for
     /// [`TriangleMesh::surface`] (a hit then reads three lines instead of up to fifteen).
     vertices: Vec<ShadingVertex>,
-    /// Whether the shading normal varies over some triangle ([`Self::has_curved_normals`]).
-    curved: bool,
+    /// Per triangle, the gradient of its shading normal field (`Some` only where the normal
+    /// varies over some triangle, [`Self::has_curved_normals`]; zero on a flat triangle).
+    normal_gradients: Option<Vec<Mat3>>,
 }
 
 /// A vertex's position and (where the mesh has them, else zero) normal, uv and tangents.
@@ -110,15 +112,23 @@ impl TriangleMesh {
                 dpdv: tangents.as_ref().map_or(Vec3::ZERO, |(_, dv)| dv[i]),
             })
             .collect();
-        let curved = normals.as_ref().is_some_and(|ns| {
-            indices.iter().any(|t| {
+        let normal_gradients = normals.as_ref().and_then(|ns| {
+            let curved = indices.iter().any(|t| {
                 let [a, b, c] = t.map(|i| ns[i as usize]);
                 a != b || b != c
+            });
+            curved.then(|| {
+                let gradient = |t: &[u32; 3]| {
+                    let [p0, p1, p2] = t.map(|i| positions[i as usize]);
+                    let [n0, n1, n2] = t.map(|i| ns[i as usize]);
+                    normal_gradient([p0, p1, p2], [n0, n1, n2])
+                };
+                indices.iter().map(gradient).collect()
             })
         });
         Ok(TriangleMesh {
             vertices,
-            curved,
+            normal_gradients,
             area_distribution: Distribution1D::new(&areas),
             area,
             positions,
@@ -313,40 +323,54 @@ impl TriangleMesh {
     /// Whether the mesh has vertex normals that differ across some triangle, so that its
     /// shading normal varies ([`Self::shading_normal_steps`]); a box's or a rectangle's does not.
     pub fn has_curved_normals(&self) -> bool {
-        self.curved
+        self.normal_gradients.is_some()
     }
 
-    /// The change of triangle `prim`'s shading normal field for each step `dp` in its plane:
-    /// `dn = (n1 - n0) (grad b1 . dp) + (n2 - n0) (grad b2 . dp)`, the barycentric
-    /// interpolation of the unit vertex normals differentiated along the step (Igehy 1999's
-    /// `dn/dx`; the interpolated normal's length, within a fraction of a per cent of 1 for a
-    /// smooth mesh, is not divided out). Put on the geometric normal's side like
-    /// [`Self::surface`]'s normal. `None` for a mesh without normals (flat shading), a
-    /// triangle whose three normals are equal (flat) or a degenerate one. For the ray
-    /// differentials of a delta bounce (`shading::spawn_differentials`).
+    /// The change of triangle `prim`'s shading normal field for each step `dp` in its plane
+    /// (see [`normal_gradient`]), on the geometric normal's side like [`Self::surface`]'s
+    /// normal; zero on a flat triangle. `None` for a mesh whose normals never vary (no
+    /// vertex normals, or flat ones everywhere: boxes, rectangles). For the ray differentials
+    /// of a delta bounce (`shading::spawn_differentials`).
     #[inline]
     pub fn shading_normal_steps(&self, prim: usize, dp: [Vec3; 2]) -> Option<[Vec3; 2]> {
-        self.normals.as_ref()?;
-        let [v0, v1, v2] = self.indices[prim].map(|k| &self.vertices[k as usize]);
-        if v0.n == v1.n && v1.n == v2.n {
-            return None; // a flat triangle (a box's face): the normal does not change
-        }
-        let (e1, e2) = (v1.p - v0.p, v2.p - v0.p);
-        let (a11, a12, a22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
-        let det = a11 * a22 - a12 * a12;
-        if !(det > 0.0) || !det.is_finite() {
-            return None;
-        }
-        // Gradients of b1, b2 in the plane: dp = db1 e1 + db2 e2 in least squares.
-        let (g1, g2) = ((a22 * e1 - a12 * e2) / det, (a11 * e2 - a12 * e1) / det);
-        let side = if (v0.n + v1.n + v2.n).dot(e1.cross(e2)) < 0.0 {
-            -1.0
-        } else {
-            1.0
-        };
-        let (d1, d2) = (side * (v1.n - v0.n), side * (v2.n - v0.n));
-        let dn = dp.map(|dp| d1 * g1.dot(dp) + d2 * g2.dot(dp));
-        dn.iter().all(|d| d.is_finite()).then_some(dn)
+        let gradient = self.normal_gradients.as_ref()?[prim];
+        Some(dp.map(|dp| gradient * dp))
+    }
+}
+
+/// The gradient of a triangle's interpolated shading normal in its plane, the matrix `G`
+/// with `dn = G dp = (n1 - n0) (grad b1 . dp) + (n2 - n0) (grad b2 . dp)` for a step `dp`:
+/// the barycentric interpolation of the unit vertex normals differentiated along the step
+/// (Igehy 1999's `dn/dx`; the interpolated normal's length, within a fraction of a per cent
+/// of 1 for a smooth mesh, is not divided out). Its sign puts `dn` on the geometric
+/// normal's side, as [`TriangleMesh::surface`] puts the normal. Zero for a flat or
+/// degenerate triangle. Computed once per triangle at load time: per bounce it is then one
+/// matrix product instead of a least-squares solve over three vertices.
+fn normal_gradient([p0, p1, p2]: [Vec3; 3], [n0, n1, n2]: [Vec3; 3]) -> Mat3 {
+    let (e1, e2) = (p1 - p0, p2 - p0);
+    let (a11, a12, a22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let det = a11 * a22 - a12 * a12;
+    if (n0 == n1 && n1 == n2) || !(det > 0.0) || !det.is_finite() {
+        return Mat3::ZERO;
+    }
+    // Gradients of b1, b2 in the plane: dp = db1 e1 + db2 e2 in least squares.
+    let (g1, g2) = ((a22 * e1 - a12 * e2) / det, (a11 * e2 - a12 * e1) / det);
+    let side = if (n0 + n1 + n2).dot(e1.cross(e2)) < 0.0 {
+        -1.0
+    } else {
+        1.0
+    };
+    let (d1, d2) = (side * (n1 - n0), side * (n2 - n0));
+    // The sum of the outer products d1 g1^T + d2 g2^T, column by column.
+    let gradient = Mat3::from_cols(
+        d1 * g1.x + d2 * g2.x,
+        d1 * g1.y + d2 * g2.y,
+        d1 * g1.z + d2 * g2.z,
+    );
+    if gradient.is_finite() {
+        gradient
+    } else {
+        Mat3::ZERO
     }
 }
 
