@@ -10,7 +10,9 @@
 //!   their directions are reflected / refracted about the **shading normal at their own
 //!   start**, the hit's normal plus the change of the surface's normal field from `p` to
 //!   `p + dP/dx` (`Geometry::shading_normal_steps`: `dP/dx / r` on a sphere, the derivative of
-//!   the interpolated vertex normals on a mesh). This is Igehy's (1999) and pbrt-v4's `dn/dx`
+//!   the interpolated vertex normals on a mesh, a per-triangle matrix computed at load time),
+//!   its part along the normal dropped (it only changes the length: the offset normal is then
+//!   unit to second order in the step). This is Igehy's (1999) and pbrt-v4's `dn/dx`
 //!   term, with the offset ray then mirrored or refracted exactly about its own normal, so a
 //!   curved mirror or lens widens or narrows the beam as it should; flat surfaces keep the
 //!   hit's normal. Whether a bounce reflects or refracts is decided once, by the central ray;
