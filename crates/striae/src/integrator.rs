@@ -516,7 +516,7 @@ fn radiance<const DIFFERENTIALS: bool>(
                 let w = if specular {
                     1.0
                 } else {
-                    power_heuristic(prev_pdf, light_select_pdf * env.pdf(ray.d))
+                    power_heuristic(prev_pdf, light_select_pdf * env.light_pdf(ray.d))
                 };
                 l += beta * le * w;
             }
@@ -581,7 +581,8 @@ fn radiance<const DIFFERENTIALS: bool>(
         let frame = ctx.frame;
         let wo = frame.to_local(wo_world);
 
-        // Next-event estimation: one light, chosen uniformly.
+        // Next-event estimation: one light, chosen uniformly (a constant environment, left to
+        // BSDF sampling, gives no sample when chosen: pbrt-v4's `allowIncompletePDF`).
         if !bsdf.is_delta() && n_lights > 0 {
             let u_choice = sampler.next_1d();
             let u_light = sampler.next_2d();

@@ -5,8 +5,14 @@
 //!   geometric normal points to, one-sided as in Mitsuba); sampled uniformly by area
 //!   (`Shape::sample_area`) and converted to solid angle, `pdf = pdf_A d^2 / |cos theta_l|`;
 //!   a sphere seen from outside is sampled uniformly in the cone it subtends (pbrt-v4).
-//! * [`Light::Environment`]: light from infinitely far away, either constant (sampled uniformly
-//!   over the sphere) or an equirectangular map (importance-sampled by `envmap::EnvMap`).
+//! * [`Light::Environment`]: light from infinitely far away, either constant or an
+//!   equirectangular map (importance-sampled by `envmap::EnvMap`). A constant environment
+//!   gives next-event estimation no sample: BSDF sampling alone carries it, with MIS weight 1
+//!   ([`Environment::light_pdf`]), as pbrt-v4 does with `allowIncompletePDF` (its
+//!   `UniformInfiniteLight::SampleLi`). Against a constant radiance the BSDF's own sample is
+//!   the better strategy (for a Lambertian surface it is exact but for visibility), so a
+//!   uniform-sphere sample added a shadow ray and almost no information: measured on the
+//!   shipped scenes, the same noise in less time (`BENCHMARKS.md`, "Session 8").
 //! * [`Light::Sun`]: a directional (delta) light given by its irradiance on a surface facing it.
 //!
 //! The integrator picks one light uniformly per shading point (probability `1 / n_lights`).
@@ -35,6 +41,18 @@ impl Environment {
         match self {
             Environment::Constant { radiance } => *radiance,
             Environment::Map(m) => m.eval(dir),
+        }
+    }
+
+    /// Solid-angle density with which next-event estimation ([`Light::sample_li`]) returns
+    /// `dir`: the map's [`Environment::pdf`], and 0 for a constant environment, which is left
+    /// to BSDF sampling (the module notes). Enters the MIS weight of BSDF-sampled rays that
+    /// escape the scene.
+    #[inline]
+    pub fn light_pdf(&self, dir: Vec3) -> f32 {
+        match self {
+            Environment::Constant { .. } => 0.0,
+            Environment::Map(m) => m.pdf(dir),
         }
     }
 
@@ -92,7 +110,8 @@ pub struct LightSample {
 
 impl Light {
     /// Sample light arriving at `p` with the random pair `u`. `None` when the sample carries
-    /// nothing (back side of an area light, zero density).
+    /// nothing (back side of an area light, zero density), and always for a constant
+    /// environment ([`Environment::light_pdf`]).
     #[inline(always)]
     pub fn sample_li(&self, p: Vec3, u: Vec2, shapes: &[Shape]) -> Option<LightSample> {
         match self {
@@ -134,6 +153,8 @@ impl Light {
                     delta: false,
                 })
             }
+            // Left to BSDF sampling ([`Environment::light_pdf`]).
+            Light::Environment(Environment::Constant { .. }) => None,
             Light::Environment(env) => {
                 let (wi, radiance, pdf) = env.sample(u)?;
                 if !(pdf > 0.0) {

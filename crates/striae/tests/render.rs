@@ -99,8 +99,8 @@ fn independent_sampler_gives_the_same_expectation() {
     assert_diffuse_plane_under_constant_sky("independent");
 }
 
-/// pixel = a L for a Lambertian plane of albedo a seeing only a sky of radiance L (NEE of the
-/// environment + BSDF sampling, combined by MIS), with the given `render.sampler`.
+/// pixel = a L for a Lambertian plane of albedo a seeing only a sky of radiance L (reached by
+/// BSDF sampling; a constant sky is not light-sampled), with the given `render.sampler`.
 fn assert_diffuse_plane_under_constant_sky(sampler: &str) {
     let s = scene(&format!(
         r#"
@@ -137,6 +137,53 @@ radiance = [2, 2, 1]
             m.std_error()
         );
         assert!(m.std_error() < 0.01);
+    }
+}
+
+#[test]
+fn diffuse_plane_under_constant_sky_and_sun_counts_each_light_once() {
+    // pixel = a (L + E cos(theta_sun) / pi). The sky reaches the plane by BSDF sampling only
+    // (a constant environment gives next-event estimation no sample), so its escaping rays
+    // must weigh 1; the sun is light-sampled when chosen (one of two lights, weight 2).
+    let (e, cos_sun) = (3.0f64, 0.8f64);
+    let s = scene(
+        r#"
+[render]
+width = 32
+height = 32
+spp = 16
+max_depth = 2
+[camera]
+position = [0, 3, 1]
+look_at = [0, 0, 0]
+fov = 30
+[materials.plane]
+type = "diffuse"
+reflectance = [0.5, 0.25, 0.8]
+[[shapes]]
+type = "rectangle"
+material = "plane"
+transform = [{ scale = 50 }, { rotate = { axis = [1, 0, 0], angle = -90 } }]
+[[lights]]
+type = "sun"
+direction = [0.6, 0.8, 0]
+irradiance = 3
+[environment]
+type = "constant"
+radiance = [2, 2, 1]
+"#,
+    );
+    let (img, _) = render_with_threads(&s, 2);
+    let sun = e * cos_sun / std::f64::consts::PI;
+    for (c, a, sky) in [(0, 0.5, 2.0), (1, 0.25, 2.0), (2, 0.8, 1.0)] {
+        let expected = a * (sky + sun);
+        let m = centre_mean(&img, 1.0, c);
+        assert!(
+            m.agrees_with(expected, 4.0, 1e-3),
+            "channel {c}: {} +- {} vs {expected}",
+            m.mean(),
+            m.std_error()
+        );
     }
 }
 
