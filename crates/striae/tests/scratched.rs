@@ -17,7 +17,11 @@ use common::{assert_bit_identical_across_thread_counts, render_with_threads, sce
 /// A unit sphere of `material` (TOML body of `[materials.m]`, then `scratches`) filling the
 /// view in a uniform white environment.
 fn furnace(material: &str, scratches: &str) -> Scene {
-    scene(&format!(
+    scene(&furnace_text(material, scratches))
+}
+
+fn furnace_text(material: &str, scratches: &str) -> String {
+    format!(
         r#"
 [render]
 width = 24
@@ -39,7 +43,36 @@ material = "m"
 type = "constant"
 radiance = 1
 "#
-    ))
+    )
+}
+
+/// [`furnace`] with the white environment given as an equirectangular map (a constant EXR
+/// written to a temporary folder), which next-event estimation samples: the scratch lobe's
+/// `eval` and `pdf` then meet light samples under MIS. (A `constant` environment is left to
+/// BSDF sampling alone.)
+fn furnace_lit_by_a_map(material: &str, scratches: &str) -> Scene {
+    let dir = std::env::temp_dir().join(format!("striae-furnace-map-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut sky = striae::film::Image::new(16, 8);
+    sky.pixels.fill(striae::math::Rgb::ONE);
+    sky.write_exr(&dir.join("white.exr")).unwrap();
+    let text = furnace_text(material, scratches).replace(
+        "type = \"constant\"\nradiance = 1",
+        "type = \"map\"\npath = \"white.exr\"",
+    );
+    let s = Scene::parse(
+        &text,
+        Path::new("furnace.toml"),
+        &dir,
+        &Overrides::default(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(matches!(
+        s.environment(),
+        Some(striae::lights::Environment::Map(_))
+    ));
+    s
 }
 
 /// Wide scratches so that most of the sphere is scratched.
@@ -108,16 +141,20 @@ fn white_furnace_scratched_glass() {
 
 #[test]
 fn white_furnace_scratched_metal_with_f_one() {
-    // Diffuse walls, F = 1: a smooth scratch lobe, sampled and MIS-combined with environment
-    // sampling. The table's noise makes its albedo fall short of 1 by a little (its bounce cap
-    // and the 1/a scaling where a column sum exceeds 1); the slack covers it.
+    // Diffuse walls, F = 1: a smooth scratch lobe, sampled alone (constant sky) and
+    // MIS-combined with light samples (the same sky as a map). The table's noise makes its
+    // albedo fall short of 1 by a little (its bounce cap and the 1/a scaling where a column sum
+    // exceeds 1); the slack covers it.
     let diffuse = "m = 16\nn = 4000\nnr = 8\nwalls = \"diffuse\"\n";
+    let metal = "type = \"scratched\"\nbase = \"metal\"\npreset = \"none\"";
     check_furnace(
         "metal, diffuse walls",
-        &furnace(
-            "type = \"scratched\"\nbase = \"metal\"\npreset = \"none\"",
-            &format!("{WIDE}{diffuse}"),
-        ),
+        &furnace(metal, &format!("{WIDE}{diffuse}")),
+        0.01,
+    );
+    check_furnace(
+        "metal, diffuse walls, light-sampled sky",
+        &furnace_lit_by_a_map(metal, &format!("{WIDE}{diffuse}")),
         0.01,
     );
     // Mirror walls ([Raymond16]): the delta-in-theta lobe.
