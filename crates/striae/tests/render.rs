@@ -99,10 +99,10 @@ fn independent_sampler_gives_the_same_expectation() {
     assert_diffuse_plane_under_constant_sky("independent");
 }
 
-/// pixel = a L for a Lambertian plane of albedo a seeing only a sky of radiance L (reached by
-/// BSDF sampling; a constant sky is not light-sampled), with the given `render.sampler`.
-fn assert_diffuse_plane_under_constant_sky(sampler: &str) {
-    let s = scene(&format!(
+/// A Lambertian plane of albedo (0.5, 0.25, 0.8) filling the view under a constant sky of
+/// radiance (2, 2, 1), with the given `render.sampler` and `[[lights]]` tables.
+fn plane_under_constant_sky(sampler: &str, lights: &str) -> Scene {
+    scene(&format!(
         r#"
 [render]
 width = 32
@@ -121,11 +121,18 @@ reflectance = [0.5, 0.25, 0.8]
 type = "rectangle"
 material = "plane"
 transform = [{{ scale = 50 }}, {{ rotate = {{ axis = [1, 0, 0], angle = -90 }} }}]
+{lights}
 [environment]
 type = "constant"
 radiance = [2, 2, 1]
 "#
-    ));
+    ))
+}
+
+/// pixel = a L for a Lambertian plane of albedo a seeing only a sky of radiance L (reached by
+/// BSDF sampling; a constant sky is not light-sampled), with the given `render.sampler`.
+fn assert_diffuse_plane_under_constant_sky(sampler: &str) {
+    let s = plane_under_constant_sky(sampler, "");
     let (img, stats) = render_with_threads(&s, 2);
     assert_eq!(stats.samples, 32 * 32 * 16);
     for (c, expected) in [(0, 1.0), (1, 0.5), (2, 0.8)] {
@@ -146,32 +153,9 @@ fn diffuse_plane_under_constant_sky_and_sun_counts_each_light_once() {
     // (a constant environment gives next-event estimation no sample), so its escaping rays
     // must weigh 1; the sun is light-sampled when chosen (one of two lights, weight 2).
     let (e, cos_sun) = (3.0f64, 0.8f64);
-    let s = scene(
-        r#"
-[render]
-width = 32
-height = 32
-spp = 16
-max_depth = 2
-[camera]
-position = [0, 3, 1]
-look_at = [0, 0, 0]
-fov = 30
-[materials.plane]
-type = "diffuse"
-reflectance = [0.5, 0.25, 0.8]
-[[shapes]]
-type = "rectangle"
-material = "plane"
-transform = [{ scale = 50 }, { rotate = { axis = [1, 0, 0], angle = -90 } }]
-[[lights]]
-type = "sun"
-direction = [0.6, 0.8, 0]
-irradiance = 3
-[environment]
-type = "constant"
-radiance = [2, 2, 1]
-"#,
+    let s = plane_under_constant_sky(
+        "sobol",
+        "[[lights]]\ntype = \"sun\"\ndirection = [0.6, 0.8, 0]\nirradiance = 3",
     );
     let (img, _) = render_with_threads(&s, 2);
     let sun = e * cos_sun / std::f64::consts::PI;
