@@ -23,7 +23,6 @@
 use crate::envmap::EnvMap;
 use crate::geometry::{Shape, ShapeGeometry};
 use crate::math::{Frame, Rgb, Vec2, Vec3, PI};
-use crate::sampling::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
 
 /// Light arriving from infinitely far away.
 #[derive(Debug)]
@@ -45,7 +44,7 @@ impl Environment {
     }
 
     /// Solid-angle density with which next-event estimation ([`Light::sample_li`]) returns
-    /// `dir`: the map's [`Environment::pdf`], and 0 for a constant environment, which is left
+    /// `dir`: the map's density (`EnvMap::pdf`), and 0 for a constant environment, which is left
     /// to BSDF sampling (the module notes). Enters the MIS weight of BSDF-sampled rays that
     /// escape the scene.
     #[inline]
@@ -53,26 +52,6 @@ impl Environment {
         match self {
             Environment::Constant { .. } => 0.0,
             Environment::Map(m) => m.pdf(dir),
-        }
-    }
-
-    /// Solid-angle density with which [`Environment::sample`] returns `dir`.
-    #[inline]
-    pub fn pdf(&self, dir: Vec3) -> f32 {
-        match self {
-            Environment::Constant { .. } => UNIFORM_SPHERE_PDF,
-            Environment::Map(m) => m.pdf(dir),
-        }
-    }
-
-    /// A direction toward the environment, its radiance and density.
-    #[inline]
-    pub fn sample(&self, u: Vec2) -> Option<(Vec3, Rgb, f32)> {
-        match self {
-            Environment::Constant { radiance } => {
-                Some((square_to_uniform_sphere(u), *radiance, UNIFORM_SPHERE_PDF))
-            }
-            Environment::Map(m) => Some(m.sample(u)),
         }
     }
 }
@@ -155,8 +134,8 @@ impl Light {
             }
             // Left to BSDF sampling ([`Environment::light_pdf`]).
             Light::Environment(Environment::Constant { .. }) => None,
-            Light::Environment(env) => {
-                let (wi, radiance, pdf) = env.sample(u)?;
+            Light::Environment(Environment::Map(map)) => {
+                let (wi, radiance, pdf) = map.sample(u);
                 if !(pdf > 0.0) {
                     return None;
                 }
