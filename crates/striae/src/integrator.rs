@@ -39,6 +39,7 @@ use crate::sampling::power_heuristic;
 use crate::scene::{material_bsdf, Scene, NO_MATERIAL};
 use crate::shading::{footprint_dp, footprint_uv, spawn_differentials, PixelHit, ShadingContext};
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Side of a square tile of pixels, the unit of parallel work.
@@ -135,13 +136,95 @@ pub fn offset_normals(
     Some((bent(dnx), bent(dny)))
 }
 
+/// A bounce whose spawned ray differentials are not worked out yet ([`PathDifferentials`]):
+/// what [`footprint_dp`], [`offset_normals`] and [`spawn_differentials`] read of it.
+#[derive(Clone, Copy)]
+struct DeferredBounce {
+    hit: SurfaceHit,
+    /// The normal of the frame the hit was shaded in (flipped or guarded).
+    n: Vec3,
+    /// Direction of the ray that arrived, and of the one that left.
+    d_in: Vec3,
+    wi: Vec3,
+    delta: bool,
+    /// `n_incident / n_transmitted` along the path (1 for a reflection).
+    eta: f32,
+}
+
+impl DeferredBounce {
+    /// The differentials of the ray leaving this bounce, from those of the ray that arrived:
+    /// the footprint on the hit's tangent plane, the offset rays' normals on curved surfaces
+    /// (delta bounces only) and the bent offset rays.
+    #[inline(always)]
+    fn spawn(&self, geometry: &Geometry, rd: &RayDifferential) -> RayDifferential {
+        let (dpdx, dpdy) = footprint_dp(&self.hit, rd);
+        let normals = if self.delta && geometry.has_curved_normals(self.hit.shape) {
+            offset_normals(geometry, &self.hit, self.n, dpdx, dpdy)
+        } else {
+            None
+        };
+        spawn_differentials(
+            self.hit.p, dpdx, dpdy, self.d_in, rd, self.n, normals, self.wi, self.delta, self.eta,
+        )
+    }
+}
+
+/// The ray differentials of one path, worked out lazily: each bounce is recorded, and the
+/// records are turned into differentials only when a later hit reads its footprint (the
+/// scratched material seen from outside), so the bounces after a path's last such hit (most of
+/// a path through glass: the hits inside, the floor, the sky) cost a copy instead of the
+/// bending. The same operations run in the same order as when every bounce is worked out at
+/// once, so every footprint, and the image, is the same bit for bit (test
+/// `deferred_differentials_equal_eager_ones`; `BENCHMARKS.md`, "Session 10").
+struct PathDifferentials {
+    /// Differentials of the ray that arrived at the first pending bounce (of the path's current
+    /// ray when none is pending).
+    rd: RayDifferential,
+    /// The first `len` entries are initialised.
+    pending: [MaybeUninit<DeferredBounce>; PathDifferentials::CAPACITY],
+    len: usize,
+}
+
+impl PathDifferentials {
+    /// Bounces kept pending at most; a longer run is worked out as it fills up.
+    const CAPACITY: usize = 8;
+
+    #[inline(always)]
+    fn new(rd: RayDifferential) -> Self {
+        PathDifferentials {
+            rd,
+            pending: [MaybeUninit::uninit(); Self::CAPACITY],
+            len: 0,
+        }
+    }
+
+    /// Record a bounce (the ray leaving it is the path's current ray).
+    #[inline(always)]
+    fn push(&mut self, geometry: &Geometry, bounce: DeferredBounce) {
+        if self.len == Self::CAPACITY {
+            self.resolve(geometry);
+        }
+        self.pending[self.len].write(bounce);
+        self.len += 1;
+    }
+
+    /// The differentials of the path's current ray.
+    #[inline(always)]
+    fn resolve(&mut self, geometry: &Geometry) -> RayDifferential {
+        for entry in &self.pending[..self.len] {
+            // SAFETY: the first `len` entries were written by `push`.
+            let bounce = unsafe { entry.assume_init_ref() };
+            self.rd = bounce.spawn(geometry, &self.rd);
+        }
+        self.len = 0;
+        self.rd
+    }
+}
+
 /// The material's view of a hit and the BSDF it presents there.
 pub struct Shaded<'a> {
     pub ctx: ShadingContext,
     pub bsdf: Bsdf<'a>,
-    /// Position derivatives per pixel step (for the spawned ray's differentials).
-    pub dpdx: Vec3,
-    pub dpdy: Vec3,
 }
 
 /// Build the shading context at `hit` seen from `wo_world` and ask the material for its BSDF.
@@ -159,13 +242,12 @@ pub fn shade<'a>(
 }
 
 /// [`shade`] for the render loop, with the footprint computed only when `rd` is given:
-/// without differentials `duvdx`, `duvdy`, `dpdx` and `dpdy` are zero (the render loop passes
-/// `None` when no material of the scene reads the footprint, see
-/// [`Material::reads_footprint`]). `u_layer` is `Some` exactly where the material reads the
-/// hit's context ([`Material::reads_hit_context`]: the scratched material, not glass seen from
-/// inside); elsewhere `duvdx` and `duvdy` are zero too and the context's `u_layer` is 0.5.
-/// `dpdx`, `dpdy` are always there (the spawned ray's differentials need them). `pixel`
-/// tells a hit reached from the camera by delta bounces only ([`ShadingContext::pixel`]);
+/// without differentials `duvdx` and `duvdy` are zero (the render loop passes `None` where the
+/// material does not read the footprint: in a scene where no material does, see
+/// [`Material::reads_footprint`], and at hits where the material does not read the hit's
+/// context). `u_layer` is `Some` exactly where the material reads the hit's context
+/// ([`Material::reads_hit_context`]: the scratched material, not glass seen from inside);
+/// elsewhere the context's `u_layer` is 0.5. `pixel` tells a hit reached from the camera by delta bounces only ([`ShadingContext::pixel`]);
 /// only meaningful with `rd`.
 #[inline(always)]
 pub fn shade_with<'a>(
@@ -190,17 +272,12 @@ fn shade_impl<'a>(
     pixel: Option<PixelHit>,
     full_footprint: bool,
 ) -> Shaded<'a> {
-    let (dpdx, dpdy, duvdx, duvdy) = match rd {
-        Some(rd) => {
+    let (duvdx, duvdy) = match rd {
+        Some(rd) if full_footprint || u_layer.is_some() => {
             let (dpdx, dpdy) = footprint_dp(hit, rd);
-            let (duvdx, duvdy) = if full_footprint || u_layer.is_some() {
-                footprint_uv(hit, dpdx, dpdy)
-            } else {
-                (Vec2::ZERO, Vec2::ZERO)
-            };
-            (dpdx, dpdy, duvdx, duvdy)
+            footprint_uv(hit, dpdx, dpdy)
         }
-        None => (Vec3::ZERO, Vec3::ZERO, Vec2::ZERO, Vec2::ZERO),
+        _ => (Vec2::ZERO, Vec2::ZERO),
     };
     let mut ctx = ShadingContext {
         p: hit.p,
@@ -227,12 +304,7 @@ fn shade_impl<'a>(
         ctx.frame = Frame::from_normal_tangent(guarded, hit.dpdu);
         bsdf = material_bsdf(material, &ctx);
     }
-    Shaded {
-        ctx,
-        bsdf,
-        dpdx,
-        dpdy,
-    }
+    Shaded { ctx, bsdf }
 }
 
 /// The shading contexts along the camera ray through film position `film` (pinhole centre of
@@ -272,19 +344,15 @@ pub fn trace_contexts(scene: &Scene, film: Vec2, max_hits: usize) -> Vec<Shading
         } else {
             1.0
         };
-        let normals = offset_normals(&scene.geometry, &hit, sh.ctx.frame.n, sh.dpdx, sh.dpdy);
-        rd = spawn_differentials(
-            hit.p,
-            sh.dpdx,
-            sh.dpdy,
-            ray.d,
-            &rd,
-            sh.ctx.frame.n,
-            normals,
+        let bounce = DeferredBounce {
+            hit,
+            n: sh.ctx.frame.n,
+            d_in: ray.d,
             wi,
-            true,
-            eta_path,
-        );
+            delta: true,
+            eta: eta_path,
+        };
+        rd = bounce.spawn(&scene.geometry, &rd);
         ray = Ray::new(offset_origin(hit.p, hit.ng, wi), wi);
     }
     out
@@ -478,7 +546,7 @@ fn render_pixel(scene: &Scene, x: u32, y: u32, pass: Pass, counters: &mut Counte
 fn radiance<const DIFFERENTIALS: bool>(
     scene: &Scene,
     mut ray: Ray,
-    mut rd: RayDifferential,
+    rd: RayDifferential,
     (render, pixel, offset): (u64, u64, Vec2),
     sampler: &mut PixelSampler,
     counters: &mut Counters,
@@ -505,6 +573,8 @@ fn radiance<const DIFFERENTIALS: bool>(
     let mut prev_pdf = 0.0f32;
     // While every bounce so far was a delta one: the chain of bounces ([`PixelHit::chain`]).
     let mut delta_chain = Some(0u64);
+
+    let mut differentials = PathDifferentials::new(rd);
 
     let mut depth = 0u32;
     loop {
@@ -559,15 +629,13 @@ fn radiance<const DIFFERENTIALS: bool>(
             sampler.seek(depth, 1);
             None
         };
-        let Shaded {
-            ctx,
-            bsdf,
-            dpdx,
-            dpdy,
-        } = shade_with(
+        // The footprint is worked out only where the material reads it.
+        let rd_here =
+            (DIFFERENTIALS && u_layer.is_some()).then(|| differentials.resolve(&scene.geometry));
+        let Shaded { ctx, bsdf } = shade_with(
             material,
             &hit,
-            DIFFERENTIALS.then_some(&rd),
+            rd_here.as_ref(),
             wo_world,
             u_layer,
             delta_chain.filter(|_| DIFFERENTIALS).map(|chain| PixelHit {
@@ -640,13 +708,16 @@ fn radiance<const DIFFERENTIALS: bool>(
             delta_chain = delta_chain
                 .filter(|_| bs.delta)
                 .map(|chain| PixelHit::chain_after(chain, hit.shape, transmitted));
-            let normals = if bs.delta && scene.geometry.has_curved_normals(hit.shape) {
-                offset_normals(&scene.geometry, &hit, frame.n, dpdx, dpdy)
-            } else {
-                None
-            };
-            rd = spawn_differentials(
-                hit.p, dpdx, dpdy, ray.d, &rd, frame.n, normals, wi_world, bs.delta, eta_path,
+            differentials.push(
+                &scene.geometry,
+                DeferredBounce {
+                    hit,
+                    n: frame.n,
+                    d_in: ray.d,
+                    wi: wi_world,
+                    delta: bs.delta,
+                    eta: eta_path,
+                },
             );
         }
         ray = Ray::new(offset_origin(hit.p, hit.ng, wi_world), wi_world);
@@ -688,6 +759,98 @@ mod tests {
         } else {
             refract_dir(d, n, 1.0 / 1.5).unwrap()
         }
+    }
+
+    /// Deferred differentials ([`PathDifferentials`]) equal the ones worked out at every
+    /// bounce, bit for bit, whenever a hit asks for them: along paths of reflections,
+    /// refractions and diffuse bounces inside and around the teapot and a sphere, asked at
+    /// irregular bounces and longer than the pending capacity (so the records also flush as
+    /// they fill up).
+    #[test]
+    fn deferred_differentials_equal_eager_ones() {
+        let shapes = [
+            geometry(ShapeGeometry::sphere(Vec3::ZERO, 1.0).unwrap()),
+            geometry(ShapeGeometry::Mesh(TriangleMesh::teapot(12))),
+        ];
+        let bits = |rd: &RayDifferential| {
+            [rd.rx_o, rd.rx_d, rd.ry_o, rd.ry_d].map(|v| v.to_array().map(f32::to_bits))
+        };
+        let (mut compared, mut longest) = (0, 0);
+        for g in &shapes {
+            for path in 0..30u32 {
+                let a = path as f32 * 0.73;
+                let o = Vec3::new(4.0 * a.cos(), 0.7 + 0.4 * (1.7 * a).sin(), 4.0 * a.sin());
+                let d = (Vec3::new(0.05 * a.sin(), 0.7, 0.0) - o).normalize();
+                let ex = d.cross(Vec3::Y).normalize();
+                let ey = ex.cross(d);
+                let camera = RayDifferential {
+                    rx_o: o + 1e-3 * ex,
+                    rx_d: (d + 1e-3 * ex).normalize(),
+                    ry_o: o + 1e-3 * ey,
+                    ry_d: (d + 1e-3 * ey).normalize(),
+                };
+                let mut eager = camera;
+                let mut lazy = PathDifferentials::new(camera);
+                let mut ray = Ray::new(o, d);
+                let mut bounces = 0;
+                while let Some(hit) = g.intersect(&ray) {
+                    // The render loop's eager propagation (before `PathDifferentials`).
+                    let k = bounces as u32 + 7 * path;
+                    let delta = k % 5 != 3;
+                    let n = if ray.d.dot(hit.ns) < 0.0 {
+                        hit.ns
+                    } else {
+                        -hit.ns
+                    };
+                    let inside = ray.d.dot(hit.ng) > 0.0;
+                    let eta = if inside { 1.5 } else { 1.0 / 1.5 };
+                    // Refracted in, then reflected inside: long paths.
+                    let refracted = refract_dir(ray.d, n, eta).filter(|_| delta && !inside);
+                    let wi = match (delta, refracted) {
+                        (true, Some(t)) => t.normalize(),
+                        (true, None) => reflect(-ray.d, n),
+                        // A diffuse bounce: some direction on the incoming side.
+                        (false, _) => (n + 0.6 * hit.dpdu.normalize()).normalize(),
+                    };
+                    let eta_path = if refracted.is_some() { eta } else { 1.0 };
+                    let (dpdx, dpdy) = footprint_dp(&hit, &eager);
+                    let normals = if delta && g.has_curved_normals(hit.shape) {
+                        offset_normals(g, &hit, n, dpdx, dpdy)
+                    } else {
+                        None
+                    };
+                    eager = spawn_differentials(
+                        hit.p, dpdx, dpdy, ray.d, &eager, n, normals, wi, delta, eta_path,
+                    );
+                    lazy.push(
+                        g,
+                        DeferredBounce {
+                            hit,
+                            n,
+                            d_in: ray.d,
+                            wi,
+                            delta,
+                            eta: eta_path,
+                        },
+                    );
+                    bounces += 1;
+                    // Ask at irregular bounces, and never for some paths' first 12.
+                    if k.wrapping_mul(2_654_435_761) % 7 < 2 && (path % 3 != 0 || bounces > 12) {
+                        assert_eq!(bits(&lazy.resolve(g)), bits(&eager), "path {path}");
+                        compared += 1;
+                    }
+                    if bounces == 24 {
+                        break;
+                    }
+                    ray = Ray::new(offset_origin(hit.p, hit.ng, wi), wi);
+                }
+                assert_eq!(bits(&lazy.resolve(g)), bits(&eager), "path {path}, end");
+                compared += 1;
+                longest = longest.max(bounces);
+            }
+        }
+        assert!(longest > 2 * PathDifferentials::CAPACITY, "{longest}");
+        assert!(compared > 100, "{compared}");
     }
 
     /// A delta bounce's offset rays follow their neighbours: a ray offset by a small step
