@@ -15,9 +15,12 @@
 //!   Mitsuba handle by flipping or by geometric-side checks).
 //! * **Ray differentials** start at the camera and are carried to every hit
 //!   (`shading::spawn_differentials`); their texture-space footprint reaches the material in
-//!   the [`ShadingContext`]. In a scene where no material reads the footprint
-//!   ([`Material::reads_footprint`]: only the scratched material does) they are skipped
-//!   altogether (the footprint fields are then zero), which changes no pixel.
+//!   the [`ShadingContext`]. They are worked out lazily ([`PathDifferentials`]): a bounce is
+//!   recorded, and the records are turned into differentials only when a later hit reads its
+//!   footprint (the scratched material seen from outside), with the same operations, so the
+//!   image is the same as if every bounce were worked out. In a scene where no material
+//!   reads the footprint ([`Material::reads_footprint`]) they are skipped altogether (the
+//!   footprint fields are then zero), which changes no pixel either.
 //! * **Speed**: the render loop is compiled twice, for AVX2 + FMA (chosen at run time) and
 //!   portable, with traversal and shading inlined into it; both give the same image bit for
 //!   bit ([`render_with`], `BENCHMARKS.md`, "Renderer speed, session 2").
