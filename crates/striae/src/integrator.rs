@@ -250,8 +250,8 @@ pub fn shade<'a>(
 /// [`Material::reads_footprint`], and at hits where the material does not read the hit's
 /// context). `u_layer` is `Some` exactly where the material reads the hit's context
 /// ([`Material::reads_hit_context`]: the scratched material, not glass seen from inside);
-/// elsewhere the context's `u_layer` is 0.5. `pixel` tells a hit reached from the camera by delta bounces only ([`ShadingContext::pixel`]);
-/// only meaningful with `rd`.
+/// elsewhere the context's `u_layer` is 0.5. `pixel` tells a hit reached from the camera by
+/// delta bounces only ([`ShadingContext::pixel`]); only meaningful with `rd`.
 #[inline(always)]
 pub fn shade_with<'a>(
     material: &'a Material,
