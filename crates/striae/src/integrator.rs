@@ -40,7 +40,7 @@ use crate::math::{Frame, Ray, RayDifferential, Rgb, Vec2, Vec3};
 use crate::sampler::PixelSampler;
 use crate::sampling::power_heuristic;
 use crate::scene::{material_bsdf, Scene, NO_MATERIAL};
-use crate::shading::{footprint_dp, footprint_uv, spawn_differentials, PixelHit, ShadingContext};
+use crate::shading::{footprint_dp, spawn_differentials, PixelHit, ShadingContext};
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -241,12 +241,12 @@ pub fn shade<'a>(
     wo_world: Vec3,
     u_layer: f32,
 ) -> Shaded<'a> {
-    shade_impl(material, hit, Some(rd), wo_world, Some(u_layer), None, true)
+    shade_with(material, hit, Some(rd), wo_world, Some(u_layer), None)
 }
 
-/// [`shade`] for the render loop, with the footprint computed only when `rd` is given:
-/// without differentials `duvdx` and `duvdy` are zero (the render loop passes `None` where the
-/// material does not read the footprint: in a scene where no material does, see
+/// [`shade`] for the render loop, with a footprint only when `rd` is given: without
+/// differentials it is zero (the render loop passes `None` where the material does not read
+/// the footprint: in a scene where no material does, see
 /// [`Material::reads_footprint`], and at hits where the material does not read the hit's
 /// context). `u_layer` is `Some` exactly where the material reads the hit's context
 /// ([`Material::reads_hit_context`]: the scratched material, not glass seen from inside);
@@ -261,32 +261,10 @@ pub fn shade_with<'a>(
     u_layer: Option<f32>,
     pixel: Option<PixelHit>,
 ) -> Shaded<'a> {
-    shade_impl(material, hit, rd, wo_world, u_layer, pixel, false)
-}
-
-/// [`shade`] (`full_footprint`: `duvdx`, `duvdy` at every hit) and [`shade_with`].
-#[inline(always)]
-fn shade_impl<'a>(
-    material: &'a Material,
-    hit: &SurfaceHit,
-    rd: Option<&RayDifferential>,
-    wo_world: Vec3,
-    u_layer: Option<f32>,
-    pixel: Option<PixelHit>,
-    full_footprint: bool,
-) -> Shaded<'a> {
-    let (duvdx, duvdy) = match rd {
-        Some(rd) if full_footprint || u_layer.is_some() => {
-            let (dpdx, dpdy) = footprint_dp(hit, rd);
-            footprint_uv(hit, dpdx, dpdy)
-        }
-        _ => (Vec2::ZERO, Vec2::ZERO),
-    };
     let mut ctx = ShadingContext {
         p: hit.p,
         uv: hit.uv,
-        duvdx,
-        duvdy,
+        rd: rd.copied(),
         dpdu: hit.dpdu,
         dpdv: hit.dpdv,
         frame: Frame::from_normal_tangent(hit.ns, hit.dpdu),
@@ -623,11 +601,12 @@ fn radiance<const DIFFERENTIALS: bool>(
         // Shading frame and the material's BSDF.
         let material = &scene.materials[shape.material as usize];
         // Dimension 0 of the bounce's block; drawn only where the material reads it (the
-        // scratched material, not glass seen from inside), which spares computing the block's
-        // first four dimensions at delta bounces (the dimensions keep their places, so the
-        // image is the same).
+        // scratched material, not glass seen from inside). It only breaks ties between
+        // crossing scratches, so it is hashed: the block's first Sobol set (light choice and
+        // position) is computed only where light sampling runs, not at every hit of a
+        // scratched surface (most of them see no scratch and are delta bounces).
         let u_layer = if material.reads_hit_context(wo_world, hit.ng) {
-            Some(sampler.next_1d())
+            Some(sampler.next_1d_hashed())
         } else {
             sampler.seek(depth, 1);
             None

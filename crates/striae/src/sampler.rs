@@ -25,7 +25,8 @@ use crate::math::Vec2;
 /// Dimensions used by the camera ray: pixel position (2) and lens position (2).
 pub const CAMERA_DIMS: u32 = 4;
 /// Dimensions reserved per bounce: BSDF lobe (1) and direction (2), light choice (1) and
-/// position (2), Russian roulette (1), and one for the material's layer choice (1).
+/// position (2), Russian roulette (1), and one for the material's layer choice (1, drawn by
+/// [`PixelSampler::next_1d_hashed`]).
 pub const BOUNCE_DIMS: u32 = 8;
 /// The most samples per pixel one sequence supports (a limit of `sobol_burley`).
 pub const MAX_SPP: u32 = 1 << 16;
@@ -132,7 +133,7 @@ impl PixelSampler {
     }
 
     /// Jump to dimension `offset` within the block of bounce `depth` (the layout of a block:
-    /// 0 layer choice, 1 light choice, 2-3 light position, 4 BSDF lobe, 5-6 BSDF direction,
+    /// 0 layer choice (hashed), 1 light choice, 2-3 light position, 4 BSDF lobe, 5-6 BSDF direction,
     /// 7 Russian roulette), so a decision keeps its dimension whether or not earlier ones ran.
     pub fn seek(&mut self, depth: u32, offset: u32) {
         self.dimension = CAMERA_DIMS + depth * BOUNCE_DIMS + offset;
@@ -141,13 +142,11 @@ impl PixelSampler {
     /// The next number in `[0, 1)`.
     #[inline]
     pub fn next_1d(&mut self) -> f32 {
+        if self.kind == SamplerKind::Independent {
+            return self.next_1d_hashed();
+        }
         let d = self.dimension;
         self.dimension += 1;
-        if self.kind == SamplerKind::Independent {
-            // The top 24 bits of a SplitMix64 output: exactly representable, in [0, 1).
-            let bits = mix64(self.key.wrapping_add(d as u64)) >> 40;
-            return bits as f32 * (1.0 / (1u64 << 24) as f32);
-        }
         let set = d / 4;
         if set != self.cached_set {
             // `NUM_DIMENSIONS` is a multiple of 4, so a set never straddles the wrap.
@@ -161,6 +160,19 @@ impl PixelSampler {
             self.cached_set = set;
         }
         self.cached[(d % 4) as usize]
+    }
+
+    /// The next number in `[0, 1)`, hashed from the pixel, the sample and the dimension
+    /// whatever the kind (what [`Self::next_1d`] gives for the independent kind): for a choice
+    /// that gains nothing from stratification, such as breaking a rare tie, at the cost of one
+    /// hash instead of a Sobol set (a 4-dimension set costs about as much as a BSDF lookup).
+    #[inline]
+    pub fn next_1d_hashed(&mut self) -> f32 {
+        let d = self.dimension;
+        self.dimension += 1;
+        // The top 24 bits of a SplitMix64 output: exactly representable, in [0, 1).
+        let bits = mix64(self.key.wrapping_add(d as u64)) >> 40;
+        bits as f32 * (1.0 / (1u64 << 24) as f32)
     }
 
     /// The next two numbers in `[0, 1)^2`.

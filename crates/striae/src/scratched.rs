@@ -29,7 +29,7 @@
 //! time), so each distinct table is computed or loaded once ([`obtain_table`]).
 //!
 //! At a hit ([`ScratchedMaterial::bsdf`]): every layer's coverage of the pixel footprint
-//! (`uv`, `duvdx`, `duvdy`; exact, [`crate::layers`]); in `max` mode (section 6) the layer
+//! (`uv` and `ShadingContext::footprint_uv`; exact, [`crate::layers`]); in `max` mode (section 6) the layer
 //! with the largest coverage, one chosen by `ShadingContext::u_layer` among ties (where several
 //! scratches cross); in `sum` mode ([Raymond16]) every layer with some coverage (at most
 //! [`MAX_SCRATCH_LOBES`], the largest). The scratch frame's `t` is the layer's texture direction
@@ -83,8 +83,9 @@ pub enum LayerMix {
 #[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum CoverageMode {
-    /// The exact share of the pixel footprint (`uv`, `duvdx`, `duvdy`) each layer's scratches
-    /// cover (METHOD.md section 6, [Raymond16]): at hits reached from the camera by delta
+    /// The exact share of the pixel footprint (the hit's `uv` and
+    /// `ShadingContext::footprint_uv`) each layer's scratches cover (METHOD.md section 6,
+    /// [Raymond16]): at hits reached from the camera by delta
     /// bounces only (the camera ray's first hit, surfaces seen through the glass or in a
     /// mirror), of the footprint centred on the pixel centre's ray, computed once per pixel and
     /// chain of bounces ([`LayerSet::coverage_of_pixel`]); at other hits, with the footprint
@@ -647,8 +648,7 @@ impl ScratchedMaterial {
             CoverageMode::Footprint => match ctx.pixel {
                 Some(hit) => p.layers.coverage_of_pixel(
                     ctx.uv,
-                    ctx.duvdx,
-                    ctx.duvdy,
+                    || ctx.footprint_uv(),
                     PixelKey {
                         render: hit.render,
                         pixel: hit.pixel,
@@ -659,18 +659,23 @@ impl ScratchedMaterial {
                     query,
                     &mut cov[..k],
                 ),
-                None => p
-                    .layers
-                    .coverage_tiled(ctx.uv, ctx.duvdx, ctx.duvdy, query, &mut cov[..k]),
+                None => {
+                    let (duvdx, duvdy) = ctx.footprint_uv();
+                    p.layers
+                        .coverage_tiled(ctx.uv, duvdx, duvdy, query, &mut cov[..k])
+                }
             },
-            CoverageMode::Sample => p.layers.coverage_query(
-                query,
-                ctx.uv,
-                ctx.duvdx,
-                ctx.duvdy,
-                MAX_FOOTPRINT_CELLS,
-                &mut cov[..k],
-            ),
+            CoverageMode::Sample => {
+                let (duvdx, duvdy) = ctx.footprint_uv();
+                p.layers.coverage_query(
+                    query,
+                    ctx.uv,
+                    duvdx,
+                    duvdy,
+                    MAX_FOOTPRINT_CELLS,
+                    &mut cov[..k],
+                )
+            }
             CoverageMode::Point => {
                 let mask = p.layers.scratched_mask(ctx.uv);
                 if mask == 0 {

@@ -29,17 +29,18 @@ use crate::geometry::SurfaceHit;
 use crate::math::{Frame, RayDifferential, Vec2, Vec3};
 
 /// Everything a material may use to build its BSDF at one hit. New fields may be added (the
-/// scratched material of issue 5 filters its layers over `duvdx`, `duvdy`).
+/// scratched material of issue 5 filters its layers over the footprint,
+/// [`ShadingContext::footprint_uv`]).
 #[derive(Clone, Copy, Debug)]
 pub struct ShadingContext {
     /// World position.
     pub p: Vec3,
     /// Texture coordinates.
     pub uv: Vec2,
-    /// Change of `uv` for one pixel step in x and in y (the pixel footprint in texture space);
-    /// zero when the ray carries no differentials.
-    pub duvdx: Vec2,
-    pub duvdy: Vec2,
+    /// The differentials of the ray that arrived (`None`: it carries none). The footprint they
+    /// give ([`ShadingContext::footprint_uv`]) is worked out on demand: the scratched material
+    /// needs it only at a pixel's first sample on a surface, the others share that sample's.
+    pub rd: Option<RayDifferential>,
     /// Position derivatives, as in `SurfaceHit`.
     pub dpdu: Vec3,
     pub dpdv: Vec3,
@@ -59,6 +60,21 @@ pub struct ShadingContext {
     /// and which shape, and where in the pixel the ray went, so that a material can filter
     /// over the footprint of the whole pixel once and share it among the pixel's samples.
     pub pixel: Option<PixelHit>,
+}
+
+impl ShadingContext {
+    /// Change of `uv` for one pixel step in x and in y (the pixel footprint in texture space):
+    /// the ray differentials met with the tangent plane ([`footprint`]); zero without them.
+    #[inline]
+    pub fn footprint_uv(&self) -> (Vec2, Vec2) {
+        match &self.rd {
+            Some(rd) => {
+                let (dpdx, dpdy) = footprint_dp_at(self.p, self.ng, rd);
+                footprint_uv_at(self.dpdu, self.dpdv, dpdx, dpdy)
+            }
+            None => (Vec2::ZERO, Vec2::ZERO),
+        }
+    }
 }
 
 /// A hit reached from a pixel by delta bounces only ([`ShadingContext::pixel`]).
@@ -101,15 +117,20 @@ pub fn footprint(hit: &SurfaceHit, rd: &RayDifferential) -> (Vec3, Vec3, Vec2, V
 /// The `dP/dx`, `dP/dy` part of [`footprint`]: the offset rays met with the tangent plane.
 #[inline]
 pub fn footprint_dp(hit: &SurfaceHit, rd: &RayDifferential) -> (Vec3, Vec3) {
-    let n = hit.ng;
-    let plane = n.dot(hit.p);
+    footprint_dp_at(hit.p, hit.ng, rd)
+}
+
+/// [`footprint_dp`] at the point `p` with the unit geometric normal `n`.
+#[inline]
+fn footprint_dp_at(p: Vec3, n: Vec3, rd: &RayDifferential) -> (Vec3, Vec3) {
+    let plane = n.dot(p);
     let offset = |o: Vec3, d: Vec3| -> Vec3 {
         let denom = n.dot(d);
         if denom == 0.0 {
             return Vec3::ZERO;
         }
         let t = (plane - n.dot(o)) / denom;
-        let dp = o + t * d - hit.p;
+        let dp = o + t * d - p;
         if dp.is_finite() {
             dp
         } else {
@@ -122,8 +143,13 @@ pub fn footprint_dp(hit: &SurfaceHit, rd: &RayDifferential) -> (Vec3, Vec3) {
 /// The `du/dx`, `dv/dx`, `du/dy`, `dv/dy` part of [`footprint`] from `dP/dx`, `dP/dy`.
 #[inline]
 pub fn footprint_uv(hit: &SurfaceHit, dpdx: Vec3, dpdy: Vec3) -> (Vec2, Vec2) {
+    footprint_uv_at(hit.dpdu, hit.dpdv, dpdx, dpdy)
+}
+
+/// [`footprint_uv`] with the position derivatives `a = dP/du`, `b = dP/dv`.
+#[inline]
+fn footprint_uv_at(a: Vec3, b: Vec3, dpdx: Vec3, dpdy: Vec3) -> (Vec2, Vec2) {
     // Least squares for [dpdu dpdv] (du, dv)^T = dp.
-    let (a, b) = (hit.dpdu, hit.dpdv);
     let (aa, ab, bb) = (a.dot(a), a.dot(b), b.dot(b));
     let det = aa * bb - ab * ab;
     let solve = |dp: Vec3| -> Vec2 {

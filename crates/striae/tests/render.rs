@@ -467,19 +467,18 @@ fn pixel_width(dist: f64, fov_deg: f64, height: f64) -> f64 {
 const FOOTPRINT_CAMERA: &str = "[render]\nwidth = 64\nheight = 64\n[camera]\nposition = [0, 0, 4]\nlook_at = [0, 0, 0]\nfov = 30\n";
 
 fn assert_footprint(ctx: &striae::shading::ShadingContext, expected_du: f64, what: &str) {
-    for (name, d) in [("duvdx", ctx.duvdx), ("duvdy", ctx.duvdy)] {
+    let (duvdx, duvdy) = ctx.footprint_uv();
+    for (name, d) in [("duvdx", duvdx), ("duvdy", duvdy)] {
         let got = d.length() as f64;
         assert!(
             (got / expected_du - 1.0).abs() < 0.01,
             "{what}: |{name}| = {got}, expected {expected_du}"
         );
     }
-    let cos = ctx.duvdx.dot(ctx.duvdy) / (ctx.duvdx.length() * ctx.duvdy.length());
+    let cos = duvdx.dot(duvdy) / (duvdx.length() * duvdy.length());
     assert!(
         cos.abs() < 0.01,
-        "{what}: square pixels stay square ({:?}, {:?})",
-        ctx.duvdx,
-        ctx.duvdy
+        "{what}: square pixels stay square ({duvdx:?}, {duvdy:?})"
     );
 }
 
@@ -490,7 +489,10 @@ fn footprint_of_a_plane_seen_head_on() {
     let ctx = striae::integrator::trace_contexts(&s, striae::math::Vec2::new(32.0, 32.0), 4);
     assert_eq!(ctx.len(), 1);
     assert_footprint(&ctx[0], pixel_width(4.0, 30.0, 64.0) / 4.0, "head-on plane");
-    assert!(ctx[0].duvdy.y < 0.0, "v grows upward, image rows downward");
+    assert!(
+        ctx[0].footprint_uv().1.y < 0.0,
+        "v grows upward, image rows downward"
+    );
 }
 
 #[test]

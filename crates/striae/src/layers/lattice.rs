@@ -174,9 +174,17 @@ struct Entry {
 }
 
 /// Pixel footprints ([`LayerSet::coverage_of_pixel`]) each thread keeps: the pixel's first
-/// hit and the surfaces its samples see through the glass or in mirrors, one per chain of
-/// delta bounces, replaced oldest first.
-const PIXEL_ENTRIES: usize = 8;
+/// hit and the surfaces its samples see through the glass or in mirrors, up to
+/// [`PIXEL_CLUSTERS`] per chain of delta bounces, replaced oldest first.
+const PIXEL_ENTRIES: usize = 16;
+
+/// Footprints one pixel keeps per shape and chain: a sample whose estimate of the pixel
+/// centre is not near any of them starts another, until there are this many (then it takes
+/// its tile). Behind curved glass the estimates of a pixel's samples scatter (the footprint
+/// changes across the pixel faster than the differentials' linear model): on the setting-1
+/// teapot about 3 in 10 samples seen through the glass miss the first sample's footprint,
+/// and the tiles they fell back to were shared by one sample in four.
+pub const PIXEL_CLUSTERS: usize = 4;
 
 thread_local! {
     static CACHE: RefCell<Vec<Entry>> = const { RefCell::new(Vec::new()) };
@@ -198,13 +206,14 @@ struct PixelCache {
 }
 
 /// A pixel's footprint coverage ([`LayerSet::coverage_of_pixel`]): set id, query, render,
-/// pixel, shape and chain; the footprint's centre and edges; the values.
+/// pixel, shape and chain; the footprint's centre and edges, and `1 / (a x b)`; the values.
 #[derive(Clone, Copy)]
 struct PixelEntry {
     key: [u64; 6],
     centre: Vec2,
     a: Vec2,
     b: Vec2,
+    inv_det: f32,
     values: [f32; CACHED_LAYERS],
 }
 
@@ -249,38 +258,41 @@ impl LayerSet {
         }
     }
 
-    /// The per-layer coverage of a whole pixel's footprint, for a hit reached from the camera
-    /// through `pixel` by delta bounces only (on its shape, along its chain, in its render),
-    /// `offset` (pixels) from the pixel's centre: the exact coverage ([`Self::coverage_max`] or
-    /// [`Self::coverage_all`] per `query`, up to [`TILE_MAX_CELLS`]) of the footprint `duvdx`,
-    /// `duvdy` centred on the texture point of the pixel centre's ray along the same chain,
+    /// The per-layer coverage of a whole pixel's footprint, for a hit at texture point `uv`
+    /// reached from the camera through `pixel` by delta bounces only (on its shape, along its
+    /// chain, in its render), `offset` (pixels) from the pixel's centre, with the footprint
+    /// `footprint() = (duvdx, duvdy)`: the exact coverage ([`Self::coverage_max`] or
+    /// [`Self::coverage_all`] per `query`, up to [`TILE_MAX_CELLS`]) of that footprint centred
+    /// on the texture point of the pixel centre's ray along the same chain,
     /// `uv - offset.x duvdx - offset.y duvdy`. It is computed at the pixel's first such hit and
     /// kept per thread ([`PIXEL_ENTRIES`] of them); the pixel's later samples on the same
-    /// shape along the same chain reuse it when their own estimate of the centre agrees within
-    /// [`PIXEL_TOLERANCE`] of the footprint (else, at silhouettes and texture seams, they take
-    /// their tile, [`Self::coverage_tiled`]).
+    /// shape along the same chain reuse it when their own estimate of the centre,
+    /// `uv - offset.x a - offset.y b` with the stored footprint's edges `a`, `b`, lies within
+    /// [`PIXEL_TOLERANCE`] of those edges from the stored centre. Those samples never call
+    /// `footprint`: most samples of a pixel need no ray differentials worked out. A sample
+    /// near none of the pixel's footprints for the hit (at silhouettes, texture seams, and
+    /// behind curved glass, where the estimates scatter) adds its own, centred on its own
+    /// estimate, up to [`PIXEL_CLUSTERS`]; after that it takes its tile
+    /// ([`Self::coverage_tiled`]).
     ///
     /// So every sample of a pixel sees the coverage of the pixel's own footprint, exactly, as
-    /// METHOD.md section 6 asks, for one exact query per pixel and chain instead of one per
-    /// tile. Deterministic: a pixel's samples run in order on one thread, so which sample
-    /// fills an entry depends only on the pixel ([`PixelCache`]).
+    /// METHOD.md section 6 asks, for one exact query per pixel and chain (a few behind curved
+    /// glass) instead of one per tile. Deterministic: a pixel's samples run in order on one
+    /// thread, so which sample fills an entry depends only on the pixel ([`PixelCache`]).
     /// # Panics
     /// If `out.len() < len()`.
-    #[allow(clippy::too_many_arguments)] // the footprint, the pixel and the query, as in the tiles
     pub fn coverage_of_pixel(
         &self,
         uv: Vec2,
-        duvdx: Vec2,
-        duvdy: Vec2,
+        footprint: impl FnOnce() -> (Vec2, Vec2),
         pixel: PixelKey,
         offset: Vec2,
         query: TileQuery,
         out: &mut [f32],
     ) {
         let n = self.len();
-        let centre = uv - offset.x * duvdx - offset.y * duvdy;
-        let det = duvdx.perp_dot(duvdy);
-        if n > CACHED_LAYERS || !(det.abs() > 0.0 && det.is_finite() && centre.is_finite()) {
+        if n > CACHED_LAYERS {
+            let (duvdx, duvdy) = footprint();
             self.coverage_tiled(uv, duvdx, duvdy, query, out);
             return;
         }
@@ -292,47 +304,64 @@ impl LayerSet {
             pixel.shape as u64,
             pixel.chain,
         ];
-        let shared = PIXEL.with(|cache| {
-            let mut cache = cache.borrow_mut();
+        // Whether this sample shares one of the pixel's footprints for this hit, and if not,
+        // how many the pixel has.
+        enum Lookup {
+            Shared,
+            Far(usize),
+        }
+        let lookup = PIXEL.with(|cache| {
+            let cache = cache.borrow();
             // The pixel's own entries are the newest ones (its samples run one after another
             // on this thread): look back from the newest, up to the first of another pixel.
-            let found = (1..=PIXEL_ENTRIES)
+            let mut same = 0;
+            for e in (1..=PIXEL_ENTRIES)
                 .map(|back| (cache.next + PIXEL_ENTRIES - back) % PIXEL_ENTRIES)
                 .map_while(|slot| cache.entries[slot].as_ref())
                 .take_while(|e| e.key[2] == key[2] && e.key[3] == key[3]) // render, pixel
-                .find(|e| e.key.iter().zip(&key).all(|(a, b)| a == b));
-            match found {
-                Some(e) => {
-                    // This sample's centre in the stored footprint's edge coordinates.
-                    let d = centre - e.centre;
-                    let det = e.a.perp_dot(e.b);
-                    let (s, t) = (d.perp_dot(e.b) / det, e.a.perp_dot(d) / det);
-                    let near = s.abs() <= PIXEL_TOLERANCE && t.abs() <= PIXEL_TOLERANCE;
-                    if near {
-                        out[..n].copy_from_slice(&e.values[..n]);
-                    }
-                    near
+                .filter(|e| e.key.iter().zip(&key).all(|(a, b)| a == b))
+            {
+                // This sample's estimate of the centre in the stored footprint's edge
+                // coordinates.
+                let d = uv - offset.x * e.a - offset.y * e.b - e.centre;
+                let (s, t) = (d.perp_dot(e.b) * e.inv_det, e.a.perp_dot(d) * e.inv_det);
+                if s.abs() <= PIXEL_TOLERANCE && t.abs() <= PIXEL_TOLERANCE {
+                    out[..n].copy_from_slice(&e.values[..n]);
+                    return Lookup::Shared;
                 }
-                None => {
-                    let mut values = [0.0f32; CACHED_LAYERS];
-                    self.coverage_query(query, centre, duvdx, duvdy, TILE_MAX_CELLS, &mut values);
-                    out[..n].copy_from_slice(&values[..n]);
-                    let slot = cache.next;
-                    cache.entries[slot] = Some(PixelEntry {
-                        key,
-                        centre,
-                        a: duvdx,
-                        b: duvdy,
-                        values,
-                    });
-                    cache.next = (slot + 1) % PIXEL_ENTRIES;
-                    true
-                }
+                same += 1;
             }
+            Lookup::Far(same)
         });
-        if !shared {
-            self.coverage_tiled(uv, duvdx, duvdy, query, out);
+        let same = match lookup {
+            Lookup::Shared => return,
+            Lookup::Far(same) => same,
+        };
+        let (duvdx, duvdy) = footprint();
+        // A new footprint of the pixel, centred on this sample's estimate of the pixel centre
+        // (up to `PIXEL_CLUSTERS`; then, and where it is degenerate, the tile).
+        let centre = uv - offset.x * duvdx - offset.y * duvdy;
+        let det = duvdx.perp_dot(duvdy);
+        if same < PIXEL_CLUSTERS && det.abs() > 0.0 && det.is_finite() && centre.is_finite() {
+            let mut values = [0.0f32; CACHED_LAYERS];
+            self.coverage_query(query, centre, duvdx, duvdy, TILE_MAX_CELLS, &mut values);
+            out[..n].copy_from_slice(&values[..n]);
+            PIXEL.with(|cache| {
+                let mut cache = cache.borrow_mut();
+                let slot = cache.next;
+                cache.entries[slot] = Some(PixelEntry {
+                    key,
+                    centre,
+                    a: duvdx,
+                    b: duvdy,
+                    inv_det: 1.0 / det,
+                    values,
+                });
+                cache.next = (slot + 1) % PIXEL_ENTRIES;
+            });
+            return;
         }
+        self.coverage_tiled(uv, duvdx, duvdy, query, out);
     }
 
     /// The per-layer coverage of the footprint tile containing `uv` ([`FootprintTile`]), into

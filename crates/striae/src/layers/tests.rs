@@ -833,8 +833,10 @@ fn footprint_tiles_contain_their_hits_and_cache_their_exact_coverage() {
 
 /// A pixel's footprint coverage: the first camera hit of a pixel gets the exact coverage of
 /// the footprint centred on its estimate of the pixel centre; the pixel's later hits whose
-/// estimate agrees within the tolerance get the same values, farther ones (a silhouette, a
-/// seam) their own tile, another shape or pixel a fresh exact value.
+/// estimate agrees within the tolerance get the same values without working out their
+/// footprint, farther ones (a silhouette, a seam, curved glass) a footprint of their own about
+/// their own estimate (up to `PIXEL_CLUSTERS`, then their tile), another shape or pixel a
+/// fresh exact value.
 #[test]
 fn pixel_footprint_coverage_is_the_exact_coverage_of_the_pixel_centre() {
     let set = LayerSet::new(LayerParams::setting(2).unwrap(), 9).unwrap();
@@ -860,22 +862,39 @@ fn pixel_footprint_coverage_is_the_exact_coverage_of_the_pixel_centre() {
             // The first hit, a quarter pixel right of the centre.
             let offset = Vec2::new(0.25, -0.125);
             let centre = uv - offset.x * a - offset.y * b;
-            set.coverage_of_pixel(uv, a, b, key(3), offset, query, &mut got);
+            set.coverage_of_pixel(uv, || (a, b), key(3), offset, query, &mut got);
             exact(&set, centre, &mut want);
             assert_eq!(got, want);
             nonzero += want.iter().any(|&c| c > 0.0) as usize;
-            // A later hit of the pixel on the same surface: the same values.
+            // A later hit of the pixel on the same surface: the same values, and no footprint
+            // worked out for it.
             let offset2 = Vec2::new(-0.4, 0.3);
             let uv2 = centre + offset2.x * a + offset2.y * b;
-            set.coverage_of_pixel(uv2, a, b, key(3), offset2, query, &mut got);
+            let unused = || -> (Vec2, Vec2) { panic!("a shared footprint needs no differentials") };
+            set.coverage_of_pixel(uv2, unused, key(3), offset2, query, &mut got);
             assert_eq!(got, want);
-            // A hit whose centre estimate is half a footprint away: its own tile.
+            // A hit whose centre estimate is half a footprint away: a footprint of its own,
+            // exact about its own estimate, which a later hit near that estimate shares.
             let far = uv2 + 0.5 * a;
-            set.coverage_of_pixel(far, a, b, key(3), offset2, query, &mut got);
-            set.coverage_tiled(far, a, b, query, &mut want);
+            set.coverage_of_pixel(far, || (a, b), key(3), offset2, query, &mut got);
+            exact(&set, far - offset2.x * a - offset2.y * b, &mut want);
+            assert_eq!(got, want);
+            set.coverage_of_pixel(far + 0.2 * b, unused, key(3), offset2, query, &mut got);
+            assert_eq!(got, want);
+            // Up to `PIXEL_CLUSTERS` footprints per pixel and chain; a hit far from all of
+            // them then takes its tile.
+            for j in 2..lattice::PIXEL_CLUSTERS {
+                let uv3 = uv2 + j as f32 * a;
+                set.coverage_of_pixel(uv3, || (a, b), key(3), offset2, query, &mut got);
+                exact(&set, uv3 - offset2.x * a - offset2.y * b, &mut want);
+                assert_eq!(got, want);
+            }
+            let beyond = uv2 + 10.0 * a;
+            set.coverage_of_pixel(beyond, || (a, b), key(3), offset2, query, &mut got);
+            set.coverage_tiled(beyond, a, b, query, &mut want);
             assert_eq!(got, want);
             // Another shape in the same pixel: exact again, about its own centre.
-            set.coverage_of_pixel(far, a, b, key(4), offset2, query, &mut got);
+            set.coverage_of_pixel(far, || (a, b), key(4), offset2, query, &mut got);
             exact(&set, far - offset2.x * a - offset2.y * b, &mut want);
             assert_eq!(got, want);
         }
@@ -909,19 +928,19 @@ fn pixel_footprint_coverage_keeps_chains_of_bounces_apart() {
         let exact = |c: Vec2, out: &mut [f32]| set.coverage_query(query, c, a, b, cells, out);
         let offset = Vec2::ZERO;
         // Chain 1 fills its entry about uv.
-        set.coverage_of_pixel(uv, a, b, key(1), offset, query, &mut got);
+        set.coverage_of_pixel(uv, || (a, b), key(1), offset, query, &mut got);
         let first = got.clone();
         // Chains 2..=4 (less than the cache holds) a fifth of a footprint away: each exact
         // about its own centre, not chain 1's value.
         let near = uv + 0.2 * a;
         exact(near, &mut want);
         for chain in 2..=4 {
-            set.coverage_of_pixel(near, a, b, key(chain), offset, query, &mut got);
+            set.coverage_of_pixel(near, || (a, b), key(chain), offset, query, &mut got);
             assert_eq!(got, want);
         }
         distinct += (want != first) as usize;
         // Chain 1 again, near its own centre: its stored value.
-        set.coverage_of_pixel(near, a, b, key(1), offset, query, &mut got);
+        set.coverage_of_pixel(near, || (a, b), key(1), offset, query, &mut got);
         assert_eq!(got, first);
     }
     assert!(distinct > 20, "{distinct}");

@@ -5,7 +5,7 @@
 
 use super::*;
 use crate::bsdf::BsdfSample;
-use crate::math::{Frame, Vec2};
+use crate::math::{Frame, RayDifferential, Vec2};
 use crate::testing::{chi2_discrete, chi2_sphere, MeanEstimate, SphereGrid};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -363,13 +363,20 @@ fn wide_layers(k: usize, seed: u64) -> LayerSet {
     .unwrap()
 }
 
+/// A hit on the plane `z = 0` with `dP/du = x`, `dP/dv = y`, whose ray differentials (offset
+/// rays parallel to the central one, `footprint` apart) give `duvdx = (footprint, 0)`,
+/// `duvdy = (0, footprint)` exactly.
 fn flat_ctx(uv: Vec2, footprint: f32, wo: Vec3, u_layer: f32) -> ShadingContext {
     ShadingContext {
         pixel: None,
         p: Vec3::ZERO,
         uv,
-        duvdx: Vec2::new(footprint, 0.0),
-        duvdy: Vec2::new(0.0, footprint),
+        rd: Some(RayDifferential {
+            rx_o: Vec3::new(footprint, 0.0, 1.0),
+            rx_d: -Vec3::Z,
+            ry_o: Vec3::new(0.0, footprint, 1.0),
+            ry_d: -Vec3::Z,
+        }),
         dpdu: Vec3::X,
         dpdv: Vec3::Y,
         frame: Frame {
