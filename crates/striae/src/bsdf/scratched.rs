@@ -28,8 +28,7 @@
 //! `eval cos / pdf` with `pdf(wi) = sum_k P_k pdf_k(wi)` the probability of its lobe times its
 //! density, the same value `pdf` returns, so MIS with light sampling is consistent.
 
-use super::BsdfSample;
-use crate::fresnel;
+use super::{fresnel_f32, BsdfSample};
 use crate::math::{reflect_z, Rgb, Vec2, Vec3};
 use crate::table::{self, ScratchBrdf, ScratchTable, WoTerms};
 use std::f64::consts::{FRAC_PI_2, PI};
@@ -386,9 +385,10 @@ impl<'a> ScratchedBsdf<'a> {
                 if wo.z <= 0.0 {
                     return super::Dielectric::new(eta).sample(wo, u_lobe);
                 }
-                let fr = fresnel::dielectric(wo.z as f64, eta as f64);
+                // The smooth base's own Fresnel (`Dielectric::sample`'s, in `f32`).
+                let (fr, cos_t, eta_it) = fresnel_f32::dielectric(wo.z, eta);
                 let base = 1.0 - self.total;
-                let p_reflect = base * fr.r as f32;
+                let p_reflect = base * fr;
                 if u_lobe < p_reflect {
                     return Some(BsdfSample {
                         wi: reflect_z(wo),
@@ -399,7 +399,7 @@ impl<'a> ScratchedBsdf<'a> {
                     });
                 }
                 let mut p_scatter = [0.0f32; MAX_SCRATCH_LOBES];
-                let mut p_transmit = base * (1.0 - fr.r as f32);
+                let mut p_transmit = base * (1.0 - fr);
                 for (k, l) in self.lobes().iter().enumerate() {
                     let pk = self.lobe_probability(l, &self.terms(k, wo));
                     p_scatter[k] = pk;
@@ -407,9 +407,8 @@ impl<'a> ScratchedBsdf<'a> {
                 }
                 let mut acc = p_reflect + p_transmit;
                 if u_lobe < acc || self.count == 0 {
-                    let eta_it = fr.eta_it as f32;
                     let eta_ti = 1.0 / eta_it;
-                    let wi = Vec3::new(-eta_ti * wo.x, -eta_ti * wo.y, fr.cos_theta_t as f32);
+                    let wi = Vec3::new(-eta_ti * wo.x, -eta_ti * wo.y, cos_t);
                     return Some(BsdfSample {
                         wi,
                         weight: Rgb::splat(eta_ti * eta_ti),

@@ -315,12 +315,16 @@ impl LayerSet {
             // The pixel's own entries are the newest ones (its samples run one after another
             // on this thread): look back from the newest, up to the first of another pixel.
             let mut same = 0;
-            for e in (1..=PIXEL_ENTRIES)
-                .map(|back| (cache.next + PIXEL_ENTRIES - back) % PIXEL_ENTRIES)
-                .map_while(|slot| cache.entries[slot].as_ref())
-                .take_while(|e| e.key[2] == key[2] && e.key[3] == key[3]) // render, pixel
-                .filter(|e| e.key.iter().zip(&key).all(|(a, b)| a == b))
-            {
+            let mut slot = cache.next;
+            for _ in 0..PIXEL_ENTRIES {
+                slot = slot.checked_sub(1).unwrap_or(PIXEL_ENTRIES - 1);
+                let Some(e) = &cache.entries[slot] else { break };
+                if e.key[2] != key[2] || e.key[3] != key[3] {
+                    break; // another pixel's (render, pixel)
+                }
+                if e.key[4] != key[4] || e.key[5] != key[5] || e.key[..2] != key[..2] {
+                    continue; // another shape or chain (or set, or query)
+                }
                 // This sample's estimate of the centre in the stored footprint's edge
                 // coordinates.
                 let d = uv - offset.x * e.a - offset.y * e.b - e.centre;
