@@ -140,7 +140,9 @@ impl PerspectiveCamera {
 
     /// The primary ray through continuous film position `film` (pixels, row 0 on top), with
     /// the lens sample `u_lens` in `[0,1)^2`, and its differentials one pixel to the right and
-    /// one pixel down (same lens point).
+    /// one pixel down (same lens point). Always inlined: out of line it ran outside the render
+    /// loop's AVX2 copy, at about 5 % of a scratched render.
+    #[inline(always)]
     pub fn generate_ray(&self, film: Vec2, u_lens: Vec2) -> (Ray, RayDifferential) {
         // A pinhole skips the disk warp (its sin/cos cost ~1% of a render).
         let lens = if self.lens_radius > 0.0 {

@@ -241,7 +241,8 @@ pub fn shade<'a>(
     wo_world: Vec3,
     u_layer: f32,
 ) -> Shaded<'a> {
-    shade_with(material, hit, Some(rd), wo_world, Some(u_layer), None)
+    let (ctx, bsdf) = shade_impl(material, hit, Some(rd), wo_world, Some(u_layer), None);
+    Shaded { ctx, bsdf }
 }
 
 /// [`shade`] for the render loop, with a footprint only when `rd` is given: without
@@ -251,7 +252,10 @@ pub fn shade<'a>(
 /// context). `u_layer` is `Some` exactly where the material reads the hit's context
 /// ([`Material::reads_hit_context`]: the scratched material, not glass seen from inside);
 /// elsewhere the context's `u_layer` is 0.5. `pixel` tells a hit reached from the camera by
-/// delta bounces only ([`ShadingContext::pixel`]); only meaningful with `rd`.
+/// delta bounces only ([`ShadingContext::pixel`]); only meaningful with `rd`. Returns the
+/// shading frame and the BSDF only: the render loop reads nothing else of the context, and
+/// moving the whole context out with the BSDF (about 400 bytes, partly written field by
+/// field) cost the scratched renders store-forwarding stalls (`BENCHMARKS.md`, "Session 11").
 #[inline(always)]
 pub fn shade_with<'a>(
     material: &'a Material,
@@ -260,7 +264,21 @@ pub fn shade_with<'a>(
     wo_world: Vec3,
     u_layer: Option<f32>,
     pixel: Option<PixelHit>,
-) -> Shaded<'a> {
+) -> (Frame, Bsdf<'a>) {
+    let (ctx, bsdf) = shade_impl(material, hit, rd, wo_world, u_layer, pixel);
+    (ctx.frame, bsdf)
+}
+
+/// [`shade`] and [`shade_with`]: the context and the BSDF.
+#[inline(always)]
+fn shade_impl<'a>(
+    material: &'a Material,
+    hit: &SurfaceHit,
+    rd: Option<&RayDifferential>,
+    wo_world: Vec3,
+    u_layer: Option<f32>,
+    pixel: Option<PixelHit>,
+) -> (ShadingContext, Bsdf<'a>) {
     let mut ctx = ShadingContext {
         p: hit.p,
         uv: hit.uv,
@@ -285,7 +303,7 @@ pub fn shade_with<'a>(
         ctx.frame = Frame::from_normal_tangent(guarded, hit.dpdu);
         bsdf = material_bsdf(material, &ctx);
     }
-    Shaded { ctx, bsdf }
+    (ctx, bsdf)
 }
 
 /// The shading contexts along the camera ray through film position `film` (pinhole centre of
@@ -422,13 +440,26 @@ fn render_tile(
     wide: bool,
     counters: &mut Counters,
 ) -> Vec<Rgb> {
+    // One compiled loop per case, each with only its own state to keep in registers: the
+    // loop that carries ray differentials ran about 20 % slower for the same work when both
+    // were inlined into one function (`BENCHMARKS.md`, "Session 11").
     #[cfg(target_arch = "x86_64")]
     if wide && wide_simd_available() {
         // SAFETY: the CPU supports the features `render_tile_avx2` is compiled for.
-        return unsafe { render_tile_avx2(scene, rect, pass, counters) };
+        return unsafe {
+            if pass.differentials {
+                render_tile_avx2::<true>(scene, rect, pass, counters)
+            } else {
+                render_tile_avx2::<false>(scene, rect, pass, counters)
+            }
+        };
     }
     let _ = wide;
-    render_tile_body(scene, rect, pass, counters)
+    if pass.differentials {
+        render_tile_body::<true>(scene, rect, pass, counters)
+    } else {
+        render_tile_body::<false>(scene, rect, pass, counters)
+    }
 }
 
 /// Whether this CPU runs the AVX2 + FMA copy of the render loop (the features it is compiled
@@ -451,17 +482,19 @@ pub fn wide_simd_available() -> bool {
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
-unsafe fn render_tile_avx2(
+unsafe fn render_tile_avx2<const DIFFERENTIALS: bool>(
     scene: &Scene,
     rect: [u32; 4],
     pass: Pass,
     counters: &mut Counters,
 ) -> Vec<Rgb> {
-    render_tile_body(scene, rect, pass, counters)
+    render_tile_body::<DIFFERENTIALS>(scene, rect, pass, counters)
 }
 
+/// The tile's pixels, with (`DIFFERENTIALS`, `pass.differentials`) or without ray
+/// differentials.
 #[inline(always)]
-fn render_tile_body(
+fn render_tile_body<const DIFFERENTIALS: bool>(
     scene: &Scene,
     [x0, y0, x1, y1]: [u32; 4],
     pass: Pass,
@@ -470,7 +503,7 @@ fn render_tile_body(
     let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
     for y in y0..y1 {
         for x in x0..x1 {
-            out.push(render_pixel(scene, x, y, pass, counters));
+            out.push(render_pixel::<DIFFERENTIALS>(scene, x, y, pass, counters));
         }
     }
     out
@@ -478,7 +511,13 @@ fn render_tile_body(
 
 /// The mean of `spp` samples of pixel `(x, y)` (box filter: uniform positions in the pixel).
 #[inline(always)]
-fn render_pixel(scene: &Scene, x: u32, y: u32, pass: Pass, counters: &mut Counters) -> Rgb {
+fn render_pixel<const DIFFERENTIALS: bool>(
+    scene: &Scene,
+    x: u32,
+    y: u32,
+    pass: Pass,
+    counters: &mut Counters,
+) -> Rgb {
     let (w, _) = scene.camera.resolution();
     let pixel_index = y as u64 * w as u64 + x as u64;
     let spp = scene.settings.spp;
@@ -489,7 +528,7 @@ fn render_pixel(scene: &Scene, x: u32, y: u32, pass: Pass, counters: &mut Counte
         let in_pixel = sampler.next_2d();
         let film = Vec2::new(x as f32, y as f32) + in_pixel;
         let u_lens = sampler.next_2d();
-        let l = if pass.differentials {
+        let l = if DIFFERENTIALS {
             let (ray, rd) = scene.camera.generate_ray(film, u_lens);
             let pixel = (pass.id, pixel_index, in_pixel - Vec2::splat(0.5));
             radiance::<true>(scene, ray, rd, pixel, &mut sampler, counters)
@@ -614,7 +653,7 @@ fn radiance<const DIFFERENTIALS: bool>(
         // The footprint is worked out only where the material reads it.
         let rd_here =
             (DIFFERENTIALS && u_layer.is_some()).then(|| differentials.resolve(&scene.geometry));
-        let Shaded { ctx, bsdf } = shade_with(
+        let (frame, bsdf) = shade_with(
             material,
             &hit,
             rd_here.as_ref(),
@@ -628,7 +667,6 @@ fn radiance<const DIFFERENTIALS: bool>(
                 offset,
             }),
         );
-        let frame = ctx.frame;
         let wo = frame.to_local(wo_world);
 
         // Next-event estimation: one light, chosen uniformly (a constant environment, left to
