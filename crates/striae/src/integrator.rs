@@ -253,9 +253,8 @@ pub fn shade<'a>(
 /// ([`Material::reads_hit_context`]: the scratched material, not glass seen from inside);
 /// elsewhere the context's `u_layer` is 0.5. `pixel` tells a hit reached from the camera by
 /// delta bounces only ([`ShadingContext::pixel`]); only meaningful with `rd`. Returns the
-/// shading frame and the BSDF only: the render loop reads nothing else of the context, and
-/// moving the whole context out with the BSDF (about 400 bytes, partly written field by
-/// field) cost the scratched renders store-forwarding stalls (`BENCHMARKS.md`, "Session 11").
+/// shading frame and the BSDF only: the render loop reads nothing else of the context (about
+/// 400 bytes), so it is not moved out (part of `2d3be19`, `BENCHMARKS.md`, "Session 11").
 #[inline(always)]
 pub fn shade_with<'a>(
     material: &'a Material,
@@ -440,9 +439,9 @@ fn render_tile(
     wide: bool,
     counters: &mut Counters,
 ) -> Vec<Rgb> {
-    // One compiled loop per case, each with only its own state to keep in registers: the
-    // loop that carries ray differentials ran about 20 % slower for the same work when both
-    // were inlined into one function (`BENCHMARKS.md`, "Session 11").
+    // One compiled loop per case, each with only its own state to keep in registers (with
+    // the two changes beside it, -1.7 % instructions on the setting-1 teapot and -1.0 % on
+    // the close-up, same images bit for bit: `BENCHMARKS.md`, "Session 11").
     #[cfg(target_arch = "x86_64")]
     if wide && wide_simd_available() {
         // SAFETY: the CPU supports the features `render_tile_avx2` is compiled for.
