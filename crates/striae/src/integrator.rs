@@ -189,8 +189,11 @@ struct PathDifferentials {
 }
 
 impl PathDifferentials {
-    /// Bounces kept pending at most; a longer run is worked out as it fills up.
-    const CAPACITY: usize = 8;
+    /// Bounces kept pending at most; a longer run is worked out as it fills up. 16: paths of
+    /// the usual `max_depth = 16` never fill it, so no bounce is worked out that no hit reads
+    /// (8 flushed on long paths inside glass: +50 instructions per sample on the smooth glass
+    /// teapot, `BENCHMARKS.md`, "Session 12").
+    const CAPACITY: usize = 16;
 
     #[inline(always)]
     fn new(rd: RayDifferential) -> Self {
@@ -241,8 +244,14 @@ pub fn shade<'a>(
     wo_world: Vec3,
     u_layer: f32,
 ) -> Shaded<'a> {
-    let (ctx, bsdf) = shade_impl(material, hit, Some(rd), wo_world, Some(u_layer), None);
-    Shaded { ctx, bsdf }
+    let context = |frame| hit_context(hit, Some(rd), frame, wo_world, Some(u_layer), None);
+    let (frame, bsdf) = shade_frame(hit, wo_world, |frame| {
+        material_bsdf(material, &context(frame))
+    });
+    Shaded {
+        ctx: context(frame),
+        bsdf,
+    }
 }
 
 /// [`shade`] for the render loop, with a footprint only when `rd` is given: without
@@ -253,8 +262,8 @@ pub fn shade<'a>(
 /// ([`Material::reads_hit_context`]: the scratched material, not glass seen from inside);
 /// elsewhere the context's `u_layer` is 0.5. `pixel` tells a hit reached from the camera by
 /// delta bounces only ([`ShadingContext::pixel`]); only meaningful with `rd`. Returns the
-/// shading frame and the BSDF only: the render loop reads nothing else of the context (about
-/// 400 bytes), so it is not moved out (part of `2d3be19`, `BENCHMARKS.md`, "Session 11").
+/// shading frame and the BSDF only: the context (about 200 bytes) is built only where the
+/// material reads it, so the other hits never store it (`BENCHMARKS.md`, "Session 12").
 #[inline(always)]
 pub fn shade_with<'a>(
     material: &'a Material,
@@ -264,33 +273,50 @@ pub fn shade_with<'a>(
     u_layer: Option<f32>,
     pixel: Option<PixelHit>,
 ) -> (Frame, Bsdf<'a>) {
-    let (ctx, bsdf) = shade_impl(material, hit, rd, wo_world, u_layer, pixel);
-    (ctx.frame, bsdf)
+    shade_frame(hit, wo_world, |frame| match material {
+        Material::Scratched(m) if u_layer.is_some() => {
+            m.bsdf(&hit_context(hit, rd, frame, wo_world, u_layer, pixel))
+        }
+        // Scratched glass seen from inside: its smooth base, whatever the context.
+        Material::Scratched(m) => m.base_bsdf(),
+        _ => material.bsdf_at(hit.uv),
+    })
 }
 
-/// [`shade`] and [`shade_with`]: the context and the BSDF.
+/// The shading context at `hit` in `frame` (see [`shade_with`] for the options).
 #[inline(always)]
-fn shade_impl<'a>(
-    material: &'a Material,
+fn hit_context(
     hit: &SurfaceHit,
     rd: Option<&RayDifferential>,
+    frame: Frame,
     wo_world: Vec3,
     u_layer: Option<f32>,
     pixel: Option<PixelHit>,
-) -> (ShadingContext, Bsdf<'a>) {
-    let mut ctx = ShadingContext {
+) -> ShadingContext {
+    ShadingContext {
         p: hit.p,
         uv: hit.uv,
         rd: rd.copied(),
         dpdu: hit.dpdu,
         dpdv: hit.dpdv,
-        frame: Frame::from_normal_tangent(hit.ns, hit.dpdu),
+        frame,
         ng: hit.ng,
         u_layer: u_layer.unwrap_or(0.5),
         wo: wo_world,
         pixel: pixel.filter(|_| rd.is_some()),
-    };
-    let mut bsdf = material_bsdf(material, &ctx);
+    }
+}
+
+/// The final shading frame at `hit` seen from `wo_world` and the BSDF `bsdf_in` gives in it
+/// (see [`shade`]).
+#[inline(always)]
+fn shade_frame<'a>(
+    hit: &SurfaceHit,
+    wo_world: Vec3,
+    bsdf_in: impl Fn(Frame) -> Bsdf<'a>,
+) -> (Frame, Bsdf<'a>) {
+    let mut frame = Frame::from_normal_tangent(hit.ns, hit.dpdu);
+    let mut bsdf = bsdf_in(frame);
     let (mut ng, mut ns) = (hit.ng, hit.ns);
     if !bsdf.has_transmission() && wo_world.dot(ng) < 0.0 {
         // Opaque surfaces are two-sided: shade on wo's side.
@@ -299,10 +325,10 @@ fn shade_impl<'a>(
     }
     let guarded = guard_shading_normal(ns, ng, wo_world);
     if guarded != hit.ns {
-        ctx.frame = Frame::from_normal_tangent(guarded, hit.dpdu);
-        bsdf = material_bsdf(material, &ctx);
+        frame = Frame::from_normal_tangent(guarded, hit.dpdu);
+        bsdf = bsdf_in(frame);
     }
-    (ctx, bsdf)
+    (frame, bsdf)
 }
 
 /// The shading contexts along the camera ray through film position `film` (pinhole centre of
@@ -858,7 +884,7 @@ mod tests {
                         assert_eq!(bits(&lazy.resolve(g)), bits(&eager), "path {path}");
                         compared += 1;
                     }
-                    if bounces == 24 {
+                    if bounces == 3 * PathDifferentials::CAPACITY {
                         break;
                     }
                     ray = Ray::new(offset_origin(hit.p, hit.ng, wi), wi);
