@@ -235,8 +235,8 @@ pub struct Shaded<'a> {
 
 /// Build the shading context at `hit` seen from `wo_world` and ask the material for its BSDF.
 /// The frame handed to the material is the final one: flipped to `wo`'s side for opaque
-/// BSDFs and guarded against `wo` falling behind the shading normal (the material is asked
-/// again in those rare cases, so its BSDF always lives in `ctx.frame`).
+/// BSDFs and guarded against `wo` falling behind the shading normal ([`shading_frame`]), so
+/// the BSDF lives in `ctx.frame`.
 pub fn shade<'a>(
     material: &'a Material,
     hit: &SurfaceHit,
@@ -244,13 +244,11 @@ pub fn shade<'a>(
     wo_world: Vec3,
     u_layer: f32,
 ) -> Shaded<'a> {
-    let context = |frame| hit_context(hit, Some(rd), frame, wo_world, Some(u_layer), None);
-    let (frame, bsdf) = shade_frame(hit, wo_world, |frame| {
-        material_bsdf(material, &context(frame))
-    });
+    let frame = shading_frame(hit, wo_world, material.has_transmission());
+    let ctx = hit_context(hit, Some(rd), frame, wo_world, Some(u_layer), None);
     Shaded {
-        ctx: context(frame),
-        bsdf,
+        bsdf: material_bsdf(material, &ctx),
+        ctx,
     }
 }
 
@@ -263,7 +261,7 @@ pub fn shade<'a>(
 /// elsewhere the context's `u_layer` is 0.5. `pixel` tells a hit reached from the camera by
 /// delta bounces only ([`ShadingContext::pixel`]); only meaningful with `rd`. Returns the
 /// shading frame and the BSDF only: the context (about 200 bytes) is built only where the
-/// material reads it, so the other hits never store it (`BENCHMARKS.md`, "Session 12").
+/// material reads it (`BENCHMARKS.md`, "Session 12").
 #[inline(always)]
 pub fn shade_with<'a>(
     material: &'a Material,
@@ -273,14 +271,22 @@ pub fn shade_with<'a>(
     u_layer: Option<f32>,
     pixel: Option<PixelHit>,
 ) -> (Frame, Bsdf<'a>) {
-    shade_frame(hit, wo_world, |frame| match material {
-        Material::Scratched(m) if u_layer.is_some() => {
-            m.bsdf(&hit_context(hit, rd, frame, wo_world, u_layer, pixel))
+    match material {
+        Material::Scratched(m) => {
+            let frame = shading_frame(hit, wo_world, material.has_transmission());
+            let bsdf = match u_layer {
+                Some(_) => m.bsdf(&hit_context(hit, rd, frame, wo_world, u_layer, pixel)),
+                // Glass seen from inside: its smooth base, whatever the context.
+                None => m.base_bsdf(),
+            };
+            (frame, bsdf)
         }
-        // Scratched glass seen from inside: its smooth base, whatever the context.
-        Material::Scratched(m) => m.base_bsdf(),
-        _ => material.bsdf_at(hit.uv),
-    })
+        // The other materials' BSDFs do not depend on the frame.
+        _ => {
+            let bsdf = material.bsdf_at(hit.uv);
+            (shading_frame(hit, wo_world, bsdf.has_transmission()), bsdf)
+        }
+    }
 }
 
 /// The shading context at `hit` in `frame` (see [`shade_with`] for the options).
@@ -307,28 +313,22 @@ fn hit_context(
     }
 }
 
-/// The final shading frame at `hit` seen from `wo_world` and the BSDF `bsdf_in` gives in it
-/// (see [`shade`]).
+/// The shading frame at `hit` seen from `wo_world` for a material that transmits or not
+/// ([`Material::has_transmission`]): the shading normal and `dP/du`, the normal flipped to
+/// `wo`'s side for opaque materials (two-sided), then guarded against `wo` falling behind it
+/// ([`guard_shading_normal`]). Worked out before the material's BSDF, which is then built
+/// once, in its final frame.
 #[inline(always)]
-fn shade_frame<'a>(
-    hit: &SurfaceHit,
-    wo_world: Vec3,
-    bsdf_in: impl Fn(Frame) -> Bsdf<'a>,
-) -> (Frame, Bsdf<'a>) {
-    let mut frame = Frame::from_normal_tangent(hit.ns, hit.dpdu);
-    let mut bsdf = bsdf_in(frame);
+fn shading_frame(hit: &SurfaceHit, wo_world: Vec3, transmits: bool) -> Frame {
     let (mut ng, mut ns) = (hit.ng, hit.ns);
-    if !bsdf.has_transmission() && wo_world.dot(ng) < 0.0 {
+    if !transmits && wo_world.dot(ng) < 0.0 {
         // Opaque surfaces are two-sided: shade on wo's side.
         ng = -ng;
         ns = -ns;
     }
     let guarded = guard_shading_normal(ns, ng, wo_world);
-    if guarded != hit.ns {
-        frame = Frame::from_normal_tangent(guarded, hit.dpdu);
-        bsdf = bsdf_in(frame);
-    }
-    (frame, bsdf)
+    let n = if guarded != hit.ns { guarded } else { hit.ns };
+    Frame::from_normal_tangent(n, hit.dpdu)
 }
 
 /// The shading contexts along the camera ray through film position `film` (pinhole centre of

@@ -177,6 +177,18 @@ fn fmt3(v: [f32; 3]) -> String {
 }
 
 impl Material {
+    /// Whether the material's BSDF transmits: [`Bsdf::has_transmission`] of the BSDF it gives at
+    /// any hit, known before that BSDF is built (the integrator chooses the shading frame's
+    /// side with it).
+    #[inline]
+    pub fn has_transmission(&self) -> bool {
+        match self {
+            Material::Dielectric { .. } => true,
+            Material::Diffuse { .. } | Material::Conductor { .. } => false,
+            Material::Scratched(m) => m.base_bsdf().has_transmission(),
+        }
+    }
+
     /// Whether the material's BSDF reads the pixel footprint (`ShadingContext::duvdx`,
     /// `duvdy`): only the scratched material filters over it (not with `coverage = "point"`).
     /// When no material of a scene does, the integrator skips ray differentials altogether.

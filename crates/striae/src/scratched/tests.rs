@@ -509,6 +509,65 @@ fn layer_choice_frames_and_ties() {
     }
 }
 
+/// The integrator chooses the shading frame's side from [`Material::has_transmission`] before it
+/// builds the BSDF (`integrator::shade_with`): that must agree with the BSDF every material
+/// gives, scratched glass and metal seen from either side, on and off their scratches.
+#[test]
+fn material_transmission_matches_its_bsdf() {
+    use crate::material::Material;
+    use crate::scene::material_bsdf;
+    let uv = Vec2::new(0.3, 0.6);
+    for text in [
+        "type = \"dielectric\"\nior = 1.5",
+        "type = \"dielectric\"\nior = 1.5\nroughness = 0.2",
+        "type = \"conductor\"\npreset = \"gold\"",
+        "type = \"conductor\"\npreset = \"Al\"\nroughness = 0.3",
+        "type = \"diffuse\"",
+    ] {
+        let m: Material = toml::from_str(text).unwrap();
+        assert_eq!(
+            m.has_transmission(),
+            m.bsdf_at(uv).has_transmission(),
+            "{text}"
+        );
+    }
+    let mirror = ConductorIor {
+        eta: Rgb::ZERO,
+        k: Rgb::ONE,
+    };
+    let layers = wide_layers(4, 7);
+    let mut rng = Pcg64::seed_from_u64(31);
+    for (base, transmits) in [
+        (ScratchedBase::Glass { eta: 1.5 }, true),
+        (ScratchedBase::Metal { ior: mirror }, false),
+    ] {
+        let m = Material::Scratched(ScratchedMaterial::from_parts(
+            base,
+            Rgb::ONE,
+            lossless_diffuse(),
+            layers.clone(),
+            LayerMix::Max,
+            CoverageMode::Footprint,
+        ));
+        assert_eq!(m.has_transmission(), transmits);
+        let mut scratched = 0;
+        for _ in 0..400 {
+            let uv = Vec2::new(rng.random(), rng.random());
+            let wo = dir(80.0 * rng.random::<f32>(), 360.0 * rng.random::<f32>());
+            for wo in [wo, -wo] {
+                let bsdf = material_bsdf(&m, &flat_ctx(uv, 0.0, wo, 0.5));
+                scratched += matches!(bsdf, Bsdf::Scratched(_)) as usize;
+                assert_eq!(
+                    bsdf.has_transmission(),
+                    transmits,
+                    "{base:?} at {uv}, wo {wo}"
+                );
+            }
+        }
+        assert!(scratched > 20, "{base:?}: {scratched} scratched hits");
+    }
+}
+
 #[test]
 fn scratch_frame_follows_dpdu_dpdv() {
     // A sheared parametrisation: t = d.x dP/du + d.y dP/dv, projected and normalised.
