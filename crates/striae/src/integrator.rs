@@ -191,8 +191,8 @@ struct PathDifferentials {
 impl PathDifferentials {
     /// Bounces kept pending at most; a longer run is worked out as it fills up. 16: paths of
     /// the usual `max_depth = 16` never fill it, so no bounce is worked out that no hit reads
-    /// (8 flushed on long paths inside glass: +50 instructions per sample on the smooth glass
-    /// teapot, `BENCHMARKS.md`, "Session 12").
+    /// (with 8, the flushes on long paths inside glass cost 50 instructions a sample on the
+    /// glass teapot carrying differentials, `BENCHMARKS.md`, "Session 12").
     const CAPACITY: usize = 16;
 
     #[inline(always)]
