@@ -327,6 +327,7 @@ fn shading_frame(hit: &SurfaceHit, wo_world: Vec3, transmits: bool) -> Frame {
         ns = -ns;
     }
     let guarded = guard_shading_normal(ns, ng, wo_world);
+    // `hit.ns` itself where the guard left it equal (a zero's sign aside), as before.
     let n = if guarded != hit.ns { guarded } else { hit.ns };
     Frame::from_normal_tangent(n, hit.dpdu)
 }
