@@ -150,6 +150,8 @@ struct DeferredBounce {
     d_in: Vec3,
     wi: Vec3,
     delta: bool,
+    /// Whether the ray left through the surface (refracted) rather than reflected.
+    transmitted: bool,
     /// `n_incident / n_transmitted` along the path (1 for a reflection).
     eta: f32,
 }
@@ -178,11 +180,16 @@ impl DeferredBounce {
 /// a path through glass: the hits inside, the floor, the sky) cost a copy instead of the
 /// bending. The same operations run in the same order as when every bounce is worked out at
 /// once, so every footprint, and the image, is the same bit for bit (test
-/// `deferred_differentials_equal_eager_ones`; `BENCHMARKS.md`, "Session 10").
+/// `deferred_differentials_equal_eager_ones`; `BENCHMARKS.md`, "Session 10"). The path's
+/// chain of delta bounces ([`PixelHit::chain`]), read at the same hits, is folded in the same
+/// way (`BENCHMARKS.md`, "Session 13").
 struct PathDifferentials {
     /// Differentials of the ray that arrived at the first pending bounce (of the path's current
     /// ray when none is pending).
     rd: RayDifferential,
+    /// The chain of delta bounces up to the first pending bounce; `None` once a bounce was not
+    /// a delta one.
+    chain: Option<u64>,
     /// The first `len` entries are initialised.
     pending: [MaybeUninit<DeferredBounce>; PathDifferentials::CAPACITY],
     len: usize,
@@ -199,7 +206,8 @@ impl PathDifferentials {
     fn new(rd: RayDifferential) -> Self {
         PathDifferentials {
             rd,
-            pending: [MaybeUninit::uninit(); Self::CAPACITY],
+            chain: Some(0),
+            pending: [const { MaybeUninit::uninit() }; Self::CAPACITY],
             len: 0,
         }
     }
@@ -214,16 +222,21 @@ impl PathDifferentials {
         self.len += 1;
     }
 
-    /// The differentials of the path's current ray.
+    /// The differentials of the path's current ray, and its chain of delta bounces (`None`
+    /// after a non-delta bounce).
     #[inline(always)]
-    fn resolve(&mut self, geometry: &Geometry) -> RayDifferential {
+    fn resolve(&mut self, geometry: &Geometry) -> (RayDifferential, Option<u64>) {
         for entry in &self.pending[..self.len] {
             // SAFETY: the first `len` entries were written by `push`.
             let bounce = unsafe { entry.assume_init_ref() };
             self.rd = bounce.spawn(geometry, &self.rd);
+            self.chain = self
+                .chain
+                .filter(|_| bounce.delta)
+                .map(|chain| PixelHit::chain_after(chain, bounce.hit.shape, bounce.transmitted));
         }
         self.len = 0;
-        self.rd
+        (self.rd, self.chain)
     }
 }
 
@@ -366,18 +379,15 @@ pub fn trace_contexts(scene: &Scene, film: Vec2, max_hits: usize) -> Vec<Shading
             break;
         }
         let wi = sh.ctx.frame.to_world(bs.wi);
-        let eta_path = if bs.wi.z * wo.z < 0.0 {
-            1.0 / bs.eta
-        } else {
-            1.0
-        };
+        let transmitted = bs.wi.z * wo.z < 0.0;
         let bounce = DeferredBounce {
             hit,
             n: sh.ctx.frame.n,
             d_in: ray.d,
             wi,
             delta: true,
-            eta: eta_path,
+            transmitted,
+            eta: if transmitted { 1.0 / bs.eta } else { 1.0 },
         };
         rd = bounce.spawn(&scene.geometry, &rd);
         ray = Ray::new(offset_origin(hit.p, hit.ng, wi), wi);
@@ -619,9 +629,6 @@ fn radiance<const DIFFERENTIALS: bool>(
     // The camera acts like a delta bounce: emitters seen directly count fully.
     let mut specular = true;
     let mut prev_pdf = 0.0f32;
-    // While every bounce so far was a delta one: the chain of bounces ([`PixelHit::chain`]).
-    let mut delta_chain = Some(0u64);
-
     let mut differentials = PathDifferentials::new(rd);
 
     let mut depth = 0u32;
@@ -678,16 +685,21 @@ fn radiance<const DIFFERENTIALS: bool>(
             sampler.seek(depth, 1);
             None
         };
-        // The footprint is worked out only where the material reads it.
-        let rd_here =
-            (DIFFERENTIALS && u_layer.is_some()).then(|| differentials.resolve(&scene.geometry));
+        // The footprint, and the chain of delta bounces that led here, are worked out only
+        // where the material reads them.
+        let (rd_here, chain) = if DIFFERENTIALS && u_layer.is_some() {
+            let (rd, chain) = differentials.resolve(&scene.geometry);
+            (Some(rd), chain)
+        } else {
+            (None, None)
+        };
         let (frame, bsdf) = shade_with(
             material,
             &hit,
             rd_here.as_ref(),
             wo_world,
             u_layer,
-            delta_chain.filter(|_| DIFFERENTIALS).map(|chain| PixelHit {
+            chain.map(|chain| PixelHit {
                 render,
                 pixel,
                 shape: hit.shape,
@@ -753,9 +765,6 @@ fn radiance<const DIFFERENTIALS: bool>(
         let transmitted = bs.wi.z * wo.z < 0.0;
         let eta_path = if transmitted { 1.0 / bs.eta } else { 1.0 };
         if DIFFERENTIALS {
-            delta_chain = delta_chain
-                .filter(|_| bs.delta)
-                .map(|chain| PixelHit::chain_after(chain, hit.shape, transmitted));
             differentials.push(
                 &scene.geometry,
                 DeferredBounce {
@@ -764,6 +773,7 @@ fn radiance<const DIFFERENTIALS: bool>(
                     d_in: ray.d,
                     wi: wi_world,
                     delta: bs.delta,
+                    transmitted,
                     eta: eta_path,
                 },
             );
@@ -810,7 +820,7 @@ mod tests {
     }
 
     /// Deferred differentials ([`PathDifferentials`]) equal the ones worked out at every
-    /// bounce, bit for bit, whenever a hit asks for them: along paths of reflections,
+    /// bounce, bit for bit, and so do the chains of delta bounces, whenever a hit asks for them: along paths of reflections,
     /// refractions and diffuse bounces inside and around the teapot and a sphere, asked at
     /// irregular bounces and longer than the pending capacity (so the records also flush as
     /// they fill up).
@@ -823,7 +833,7 @@ mod tests {
         let bits = |rd: &RayDifferential| {
             [rd.rx_o, rd.rx_d, rd.ry_o, rd.ry_d].map(|v| v.to_array().map(f32::to_bits))
         };
-        let (mut compared, mut longest) = (0, 0);
+        let (mut compared, mut longest, mut chains) = (0, 0, 0);
         for g in &shapes {
             for path in 0..30u32 {
                 let a = path as f32 * 0.73;
@@ -838,6 +848,7 @@ mod tests {
                     ry_d: (d + 1e-3 * ey).normalize(),
                 };
                 let mut eager = camera;
+                let mut eager_chain = Some(0u64);
                 let mut lazy = PathDifferentials::new(camera);
                 let mut ray = Ray::new(o, d);
                 let mut bounces = 0;
@@ -870,6 +881,11 @@ mod tests {
                     eager = spawn_differentials(
                         hit.p, dpdx, dpdy, ray.d, &eager, n, normals, wi, delta, eta_path,
                     );
+                    // The render loop's chain of delta bounces (before it moved into
+                    // `PathDifferentials`).
+                    eager_chain = eager_chain
+                        .filter(|_| delta)
+                        .map(|chain| PixelHit::chain_after(chain, hit.shape, refracted.is_some()));
                     lazy.push(
                         g,
                         DeferredBounce {
@@ -878,13 +894,17 @@ mod tests {
                             d_in: ray.d,
                             wi,
                             delta,
+                            transmitted: refracted.is_some(),
                             eta: eta_path,
                         },
                     );
                     bounces += 1;
                     // Ask at irregular bounces, and never for some paths' first 12.
                     if k.wrapping_mul(2_654_435_761) % 7 < 2 && (path % 3 != 0 || bounces > 12) {
-                        assert_eq!(bits(&lazy.resolve(g)), bits(&eager), "path {path}");
+                        let (rd, chain) = lazy.resolve(g);
+                        assert_eq!(bits(&rd), bits(&eager), "path {path}");
+                        assert_eq!(chain, eager_chain, "path {path}");
+                        chains += chain.is_some_and(|c| c != 0) as usize;
                         compared += 1;
                     }
                     if bounces == 3 * PathDifferentials::CAPACITY {
@@ -892,13 +912,16 @@ mod tests {
                     }
                     ray = Ray::new(offset_origin(hit.p, hit.ng, wi), wi);
                 }
-                assert_eq!(bits(&lazy.resolve(g)), bits(&eager), "path {path}, end");
+                let (rd, chain) = lazy.resolve(g);
+                assert_eq!(bits(&rd), bits(&eager), "path {path}, end");
+                assert_eq!(chain, eager_chain, "path {path}, end");
                 compared += 1;
                 longest = longest.max(bounces);
             }
         }
         assert!(longest > 2 * PathDifferentials::CAPACITY, "{longest}");
         assert!(compared > 100, "{compared}");
+        assert!(chains >= 10, "{chains} non-trivial chains compared");
     }
 
     /// A delta bounce's offset rays follow their neighbours: a ray offset by a small step
