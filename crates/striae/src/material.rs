@@ -185,7 +185,7 @@ impl Material {
         match self {
             Material::Dielectric { .. } => true,
             Material::Diffuse { .. } | Material::Conductor { .. } => false,
-            Material::Scratched(m) => m.base_bsdf().has_transmission(),
+            Material::Scratched(m) => m.has_transmission(),
         }
     }
 

@@ -581,7 +581,15 @@ impl ScratchedMaterial {
         self.prepared.as_deref()
     }
 
+    /// Whether its BSDF transmits, at every hit: glass does (scratched or not, from either
+    /// side), metal does not. Read from the scene's `base`, without building the BSDF.
+    #[inline]
+    pub fn has_transmission(&self) -> bool {
+        self.base == BaseKind::Glass
+    }
+
     /// The smooth base's BSDF (also what an unprepared material renders as).
+    #[inline]
     pub fn base_bsdf(&self) -> Bsdf<'static> {
         let base = match &self.prepared {
             Some(p) => p.base,
@@ -696,11 +704,23 @@ impl ScratchedMaterial {
                 }
                 // Ties (several scratches crossing the footprint equally): one at random.
                 // `c > 0`: with a tiny best (a disc grazing the footprint) an uncovered layer
-                // must not count as a tie.
-                let tie = |c: f32| c > 0.0 && c >= best - 1e-6;
-                let ties = cov[..k].iter().filter(|&&c| tie(c)).count();
-                let pick = ((ctx.u_layer * ties as f32) as usize).min(ties - 1);
-                let layer = (0..k).filter(|&i| tie(cov[i])).nth(pick).unwrap_or(0);
+                // must not count as a tie. The ties as a bit mask (one pass, no branch per
+                // layer), the pick as its `pick`-th set bit.
+                const _: () = assert!(MAX_LAYERS <= 64);
+                let ties = cov[..k].iter().enumerate().fold(0u64, |mask, (i, &c)| {
+                    mask | (((c > 0.0) & (c >= best - 1e-6)) as u64) << i
+                });
+                let count = ties.count_ones();
+                let layer = if count == 1 {
+                    ties.trailing_zeros() as usize
+                } else {
+                    let pick = ((ctx.u_layer * count as f32) as u32).min(count - 1);
+                    let mut rest = ties;
+                    for _ in 0..pick {
+                        rest &= rest - 1;
+                    }
+                    rest.trailing_zeros() as usize
+                };
                 lobes[0] = lobe(p, ctx, layer, cov[layer]);
                 1
             }
