@@ -286,7 +286,7 @@ pub fn shade_with<'a>(
 ) -> (Frame, Bsdf<'a>) {
     match material {
         Material::Scratched(m) => {
-            let frame = shading_frame(hit, wo_world, material.has_transmission());
+            let frame = shading_frame(hit, wo_world, m.has_transmission());
             let bsdf = match u_layer {
                 Some(_) => m.bsdf(&hit_context(hit, rd, frame, wo_world, u_layer, pixel)),
                 // Glass seen from inside: its smooth base, whatever the context.
@@ -820,10 +820,10 @@ mod tests {
     }
 
     /// Deferred differentials ([`PathDifferentials`]) equal the ones worked out at every
-    /// bounce, bit for bit, and so do the chains of delta bounces, whenever a hit asks for them: along paths of reflections,
-    /// refractions and diffuse bounces inside and around the teapot and a sphere, asked at
-    /// irregular bounces and longer than the pending capacity (so the records also flush as
-    /// they fill up).
+    /// bounce, bit for bit, and so do the chains of delta bounces, whenever a hit asks for
+    /// them: along paths of reflections, refractions and diffuse bounces inside and around the
+    /// teapot and a sphere, asked at irregular bounces and longer than the pending capacity (so
+    /// the records also flush as they fill up).
     #[test]
     fn deferred_differentials_equal_eager_ones() {
         let shapes = [
