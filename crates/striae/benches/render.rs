@@ -2,8 +2,9 @@
 //! second; the CLI prints the same figure plus rays/s for a full 512 x 384 render). Also the
 //! cost of one pixel sample's random numbers. The built-in scene is now the scratched teapot
 //! (setting 1); the smooth glass teapot of `scenes/glass-teapot.toml` (issue 4's speed target)
-//! runs at 128 x 96 x 4 spp with the default render loop and with its portable copy
-//! (`Simd::Portable`: no AVX2, what a CPU without it runs). Run:
+//! runs at 128 x 96 x 4 spp with the default render loop (the widest copy the CPU runs), its
+//! AVX2 copy (`Simd::Avx2`: what a CPU without AVX-512 runs) and its portable copy
+//! (`Simd::Portable`: no AVX2). Run:
 //! `cargo bench -p striae --bench render`.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
@@ -51,7 +52,11 @@ fn bench_render(c: &mut Criterion) {
     )
     .unwrap();
     g.throughput(Throughput::Elements(128 * 96 * 4));
-    for (name, simd) in [("auto", Simd::Auto), ("portable", Simd::Portable)] {
+    for (name, simd) in [
+        ("auto", Simd::Auto),
+        ("avx2", Simd::Avx2),
+        ("portable", Simd::Portable),
+    ] {
         g.bench_function(format!("smooth_glass_teapot_128x96_4spp_{name}"), |b| {
             b.iter(|| render_with(&smooth, &|_| {}, simd))
         });

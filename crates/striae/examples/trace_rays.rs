@@ -7,10 +7,11 @@
 //! ```
 //!
 //! `RAYS.f32` is little-endian `f32`, six per ray (origin, direction), `t_max` infinite. On one
-//! thread, in the AVX2 + FMA copy where the CPU has it (as the render loop), it runs
-//! `Geometry::intersect` (closest hit with the whole `SurfaceHit`) and `Geometry::occluded`
-//! (any hit) over all rays `REPEATS` times (default 7) and prints, per query, the median
-//! rate and the number of rays that hit, one `key=value` line each.
+//! thread, compiled like the render loop copy `striae render` runs on this CPU (AVX-512, AVX2 +
+//! FMA or portable, `LoopCopy::chosen`), it runs `Geometry::intersect` (closest hit with the
+//! whole `SurfaceHit`) and `Geometry::occluded` (any hit) over all rays `REPEATS` times
+//! (default 7) and prints, per query, the median rate and the number of rays that hit, one
+//! `key=value` line each.
 
 use std::error::Error;
 use std::path::Path;
@@ -48,14 +49,26 @@ unsafe fn run_avx2(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
     run(scene, rays, query)
 }
 
-fn run_best(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
-    #[cfg(target_arch = "x86_64")]
-    if striae::integrator::wide_simd_available() {
-        // SAFETY: the CPU has the features `run_avx2` is compiled for (the render loop's, which
-        // `wide_simd_available` checks).
-        return unsafe { run_avx2(scene, rays, query) };
-    }
+#[cfg(target_arch = "x86_64")]
+#[target_feature(
+    enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512vl,avx512bw,avx512dq,avx512cd"
+)]
+unsafe fn run_avx512(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
     run(scene, rays, query)
+}
+
+/// The queries compiled as the render loop's copy that `striae render` runs on this CPU.
+fn run_best(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
+    use striae::integrator::{LoopCopy, Simd};
+    match LoopCopy::chosen(Simd::Auto) {
+        // SAFETY: `chosen` picks only copies whose features the CPU has.
+        #[cfg(target_arch = "x86_64")]
+        LoopCopy::Avx512 => unsafe { run_avx512(scene, rays, query) },
+        // SAFETY: as above.
+        #[cfg(target_arch = "x86_64")]
+        LoopCopy::Avx2 => unsafe { run_avx2(scene, rays, query) },
+        _ => run(scene, rays, query),
+    }
 }
 
 fn main() -> Result<(), Box<dyn Error>> {

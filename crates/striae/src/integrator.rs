@@ -52,7 +52,7 @@ pub const TILE: u32 = 16;
 static NEXT_RENDER: AtomicU64 = AtomicU64::new(1);
 
 /// Counters of one render.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderStats {
     /// Camera samples traced (pixels x spp).
     pub samples: u64,
@@ -62,6 +62,8 @@ pub struct RenderStats {
     pub nonfinite: u64,
     /// Wall time in seconds.
     pub seconds: f64,
+    /// The compiled copy of the render loop that ran.
+    pub copy: LoopCopy,
 }
 
 impl RenderStats {
@@ -401,15 +403,86 @@ pub fn render(scene: &Scene, progress: &(dyn Fn(u64) + Sync)) -> (Image, RenderS
     render_with(scene, progress, Simd::Auto)
 }
 
-/// Which compiled copy of the render loop runs: the AVX2 one or the portable one.
+/// Which compiled copies of the render loop a render may use (the image does not depend on it).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Simd {
-    /// The AVX2 + FMA copy where the CPU has them (unless the environment variable
-    /// `STRIAE_PORTABLE` is set), the portable one elsewhere.
+    /// The widest copy the CPU runs ([`LoopCopy::available`]), capped by the environment
+    /// variable `STRIAE_SIMD` (`avx2` or `portable`; `STRIAE_PORTABLE` set also means
+    /// `portable`).
     Auto,
-    /// Always the portable copy (baseline x86-64 / any other target): for tests that check
-    /// both copies give the same image, and for benchmarks.
+    /// At most the AVX2 copy: for tests that check the copies give the same image, and for
+    /// benchmarks.
+    Avx2,
+    /// Always the portable copy (baseline x86-64 / any other target).
     Portable,
+}
+
+/// A compiled copy of the render loop (traversal, shading, sampling, all inlined into it), from
+/// the narrowest to the widest.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum LoopCopy {
+    /// Baseline x86-64 (SSE2) or any other target.
+    Portable,
+    /// AVX2, FMA, BMI1/2, LZCNT, POPCNT (x86-64-v3).
+    Avx2,
+    /// The AVX2 set plus AVX-512 F/VL/BW/DQ/CD (x86-64-v4): the same 256-bit box tests, but 32
+    /// vector registers, so the big render loop spills less (3-4 % faster on an AMD Zen 4,
+    /// `BENCHMARKS.md`, "Session 14").
+    Avx512,
+}
+
+impl LoopCopy {
+    /// The widest copy this CPU runs.
+    pub fn available() -> LoopCopy {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::is_x86_feature_detected as has;
+            let avx2 = has!("avx2")
+                && has!("fma")
+                && has!("bmi1")
+                && has!("bmi2")
+                && has!("lzcnt")
+                && has!("popcnt");
+            let avx512 = has!("avx512f")
+                && has!("avx512vl")
+                && has!("avx512bw")
+                && has!("avx512dq")
+                && has!("avx512cd");
+            match (avx2, avx512) {
+                (true, true) => LoopCopy::Avx512,
+                (true, false) => LoopCopy::Avx2,
+                _ => LoopCopy::Portable,
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            LoopCopy::Portable
+        }
+    }
+
+    /// The copy a render with `simd` runs on this CPU.
+    pub fn chosen(simd: Simd) -> LoopCopy {
+        let cap = match simd {
+            Simd::Portable => LoopCopy::Portable,
+            Simd::Avx2 => LoopCopy::Avx2,
+            Simd::Auto if std::env::var_os("STRIAE_PORTABLE").is_some() => LoopCopy::Portable,
+            Simd::Auto => match std::env::var("STRIAE_SIMD").as_deref() {
+                Ok("portable") => LoopCopy::Portable,
+                Ok("avx2") => LoopCopy::Avx2,
+                _ => LoopCopy::Avx512,
+            },
+        };
+        cap.min(Self::available())
+    }
+
+    /// The name the CLI prints: `portable`, `AVX2` or `AVX-512`.
+    pub fn name(self) -> &'static str {
+        match self {
+            LoopCopy::Portable => "portable",
+            LoopCopy::Avx2 => "AVX2",
+            LoopCopy::Avx512 => "AVX-512",
+        }
+    }
 }
 
 /// [`render`] with a choice of compiled render loop; the image does not depend on it.
@@ -418,9 +491,7 @@ pub fn render_with(
     progress: &(dyn Fn(u64) + Sync),
     simd: Simd,
 ) -> (Image, RenderStats) {
-    let wide = simd == Simd::Auto
-        && std::env::var_os("STRIAE_PORTABLE").is_none()
-        && wide_simd_available();
+    let copy = LoopCopy::chosen(simd);
     let start = std::time::Instant::now();
     let (w, h) = scene.camera.resolution();
     let tiles_x = w.div_ceil(TILE);
@@ -439,7 +510,7 @@ pub fn render_with(
             let (x0, y0) = (tx * TILE, ty * TILE);
             let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
             let mut counters = Counters::default();
-            let out = render_tile(scene, [x0, y0, x1, y1], pass, wide, &mut counters);
+            let out = render_tile(scene, [x0, y0, x1, y1], pass, copy, &mut counters);
             rays.fetch_add(counters.rays, Ordering::Relaxed);
             nonfinite.fetch_add(counters.nonfinite, Ordering::Relaxed);
             progress(out.len() as u64 * spp as u64);
@@ -462,37 +533,46 @@ pub fn render_with(
         rays: rays.into_inner(),
         nonfinite: nonfinite.into_inner(),
         seconds: start.elapsed().as_secs_f64(),
+        copy,
     };
     (image, stats)
 }
 
-/// The pixels of the tile `[x0, y0, x1, y1)` (row by row). On x86-64 machines with AVX2 and
-/// FMA the whole render loop (traversal, shading, sampling, all inlined into it) runs as a copy
-/// compiled for them, chosen at run time; the portable copy runs elsewhere. The two give the
-/// same image bit for bit: Rust never fuses a multiply and an add on its own, so the wider
-/// instructions compute the same IEEE operations.
+/// The pixels of the tile `[x0, y0, x1, y1)` (row by row), by the render loop's `copy`
+/// ([`LoopCopy::chosen`], which the CPU supports). The copies give the same image bit for bit:
+/// Rust never fuses a multiply and an add on its own, so the wider instructions compute the
+/// same IEEE operations.
 fn render_tile(
     scene: &Scene,
     rect: [u32; 4],
     pass: Pass,
-    wide: bool,
+    copy: LoopCopy,
     counters: &mut Counters,
 ) -> Vec<Rgb> {
     // One compiled loop per case, each with only its own state to keep in registers (with
     // the two changes beside it, -1.7 % instructions on the setting-1 teapot and -1.0 % on
     // the close-up, same images bit for bit: `BENCHMARKS.md`, "Session 11").
     #[cfg(target_arch = "x86_64")]
-    if wide && wide_simd_available() {
-        // SAFETY: the CPU supports the features `render_tile_avx2` is compiled for.
-        return unsafe {
-            if pass.differentials {
+    match copy {
+        // SAFETY: `copy` is at most `LoopCopy::available()`, so the CPU has the features.
+        LoopCopy::Avx512 => unsafe {
+            return if pass.differentials {
+                render_tile_avx512::<true>(scene, rect, pass, counters)
+            } else {
+                render_tile_avx512::<false>(scene, rect, pass, counters)
+            };
+        },
+        // SAFETY: as above.
+        LoopCopy::Avx2 => unsafe {
+            return if pass.differentials {
                 render_tile_avx2::<true>(scene, rect, pass, counters)
             } else {
                 render_tile_avx2::<false>(scene, rect, pass, counters)
-            }
-        };
+            };
+        },
+        LoopCopy::Portable => {}
     }
-    let _ = wide;
+    let _ = copy;
     if pass.differentials {
         render_tile_body::<true>(scene, rect, pass, counters)
     } else {
@@ -500,27 +580,22 @@ fn render_tile(
     }
 }
 
-/// Whether this CPU runs the AVX2 + FMA copy of the render loop (the features it is compiled
-/// for; benchmarks that time the same code outside the loop check them with this).
-pub fn wide_simd_available() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("fma")
-            && std::arch::is_x86_feature_detected!("bmi1")
-            && std::arch::is_x86_feature_detected!("bmi2")
-            && std::arch::is_x86_feature_detected!("lzcnt")
-            && std::arch::is_x86_feature_detected!("popcnt")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
-}
-
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
 unsafe fn render_tile_avx2<const DIFFERENTIALS: bool>(
+    scene: &Scene,
+    rect: [u32; 4],
+    pass: Pass,
+    counters: &mut Counters,
+) -> Vec<Rgb> {
+    render_tile_body::<DIFFERENTIALS>(scene, rect, pass, counters)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(
+    enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512vl,avx512bw,avx512dq,avx512cd"
+)]
+unsafe fn render_tile_avx512<const DIFFERENTIALS: bool>(
     scene: &Scene,
     rect: [u32; 4],
     pass: Pass,

@@ -4,6 +4,7 @@
 
 use std::path::Path;
 use striae::film::Image;
+use striae::integrator::{render_with, LoopCopy, Simd};
 use striae::scene::{Overrides, Scene, SceneError};
 use striae::testing::MeanEstimate;
 
@@ -266,8 +267,9 @@ fn image_is_bit_identical_across_thread_counts() {
 
 #[test]
 fn simd_and_portable_render_loops_give_the_same_image() {
-    // The render loop is compiled twice (AVX2 + FMA where the CPU has them, portable
-    // otherwise); both must give the same image bit for bit. The default scene (glass, a
+    // The render loop is compiled three times (AVX-512 and AVX2 + FMA where the CPU has them,
+    // portable everywhere); all must give the same image bit for bit (on a CPU without
+    // AVX-512 or AVX2, `Auto` and `Avx2` fall back to a narrower copy). The default scene (glass, a
     // textured diffuse floor, an area light, the sky) and one with rough and smooth metal,
     // rough glass and a sphere light cover the BVH, the triangle and sphere tests and the BSDFs.
     let rough = r#"
@@ -323,11 +325,13 @@ fn simd_and_portable_render_loops_give_the_same_image() {
     };
     for text in [striae::scene::DEFAULT_SCENE, rough] {
         let s = Scene::parse(text, Path::new("t.toml"), Path::new("."), &o).unwrap();
-        let (a, _) = striae::integrator::render_with(&s, &|_| {}, striae::integrator::Simd::Auto);
-        let (b, _) =
-            striae::integrator::render_with(&s, &|_| {}, striae::integrator::Simd::Portable);
+        let (a, _) = render_with(&s, &|_| {}, Simd::Auto);
+        let (b, _) = render_with(&s, &|_| {}, Simd::Avx2);
+        let (c, stats) = render_with(&s, &|_| {}, Simd::Portable);
+        assert_eq!(stats.copy, LoopCopy::Portable);
         assert!(a.pixels.iter().any(|p| p.max_element() > 0.0));
         assert_eq!(a.pixels, b.pixels);
+        assert_eq!(a.pixels, c.pixels);
     }
 }
 

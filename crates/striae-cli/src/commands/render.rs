@@ -168,11 +168,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .write_png(&png_path, scene.settings.exposure)
         .with_context(|| format!("writing {}", png_path.display()))?;
     eprintln!(
-        "done in {:.2} s: {:.3} M samples/s, {:.2} M rays/s ({} rays){}",
+        "done in {:.2} s: {:.3} M samples/s, {:.2} M rays/s ({} rays, {} render loop){}",
         stats.seconds,
         stats.samples_per_second() / 1e6,
         stats.rays_per_second() / 1e6,
         stats.rays,
+        stats.copy.name(),
         if stats.nonfinite > 0 {
             format!(", {} non-finite samples dropped", stats.nonfinite)
         } else {

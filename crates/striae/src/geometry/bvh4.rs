@@ -2,9 +2,10 @@
 //! the style of Embree's BVH4/BVH8 (Wald et al. 2014, "Embree: A Kernel Framework for Efficient
 //! CPU Ray Tracing"): every node stores its children's boxes as structure-of-arrays, one row
 //! of [`WIDTH`] = 8 lanes per slab, so one node visit tests all children at once: the lane
-//! loops of the box test compile to 256-bit AVX instructions in the AVX2 copy of the render
-//! loop and to pairs of SSE instructions in the portable copy (`BENCHMARKS.md`, "Renderer
-//! speed, session 3"; session 2's version tested two `Vec4` groups, which LLVM did not merge).
+//! loops of the box test compile to 256-bit AVX instructions in the AVX2 and AVX-512 copies of
+//! the render loop and to pairs of SSE instructions in the portable copy (`BENCHMARKS.md`,
+//! "Renderer speed, session 3"; session 2's version tested two `Vec4` groups, which LLVM did
+//! not merge).
 //! The type keeps its first name, `Bvh4`, from when nodes had four children.
 //!
 //! * **Collapse**: starting from a binary node's two children, the interior child of largest
