@@ -64,3 +64,40 @@ fn zero_threads_is_refused_by_every_subcommand() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn striae_simd_caps_the_render_loop_and_a_bad_value_is_named() {
+    const SCENE: &str = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../scenes/glass-teapot.toml"
+    );
+    let dir = std::env::temp_dir().join(format!("striae-simd-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("out");
+    let run = |value: &str| {
+        let o = Command::new(env!("CARGO_BIN_EXE_striae"))
+            .args(["render", SCENE, "--res", "16x12"])
+            .args(["--spp", "1", "-q", "-o"])
+            .arg(&out)
+            .env("STRIAE_SIMD", value)
+            .env_remove("STRIAE_PORTABLE")
+            .output()
+            .unwrap();
+        (
+            o.status.success(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let (ok, err) = run("avx3");
+    assert!(
+        !ok && err.contains("STRIAE_SIMD") && err.contains("avx3"),
+        "{err}"
+    );
+    assert!(
+        !out.with_extension("exr").exists(),
+        "a bad STRIAE_SIMD wrote an image"
+    );
+    let (ok, err) = run("portable");
+    assert!(ok && err.contains("portable render loop"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -407,8 +407,7 @@ pub fn render(scene: &Scene, progress: &(dyn Fn(u64) + Sync)) -> (Image, RenderS
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Simd {
     /// The widest copy the CPU runs ([`LoopCopy::available`]), capped by the environment
-    /// variable `STRIAE_SIMD` (`avx2` or `portable`; `STRIAE_PORTABLE` set also means
-    /// `portable`).
+    /// ([`LoopCopy::env_cap`]).
     Auto,
     /// At most the AVX2 copy: for tests that check the copies give the same image, and for
     /// benchmarks.
@@ -460,17 +459,31 @@ impl LoopCopy {
         }
     }
 
+    /// The widest copy the environment allows: `STRIAE_SIMD` = `avx512` (the default), `avx2`
+    /// or `portable`; `STRIAE_PORTABLE` set means `portable`. An error names a bad value (the
+    /// CLI reports it; [`Self::chosen`] ignores it).
+    pub fn env_cap() -> Result<LoopCopy, String> {
+        if std::env::var_os("STRIAE_PORTABLE").is_some() {
+            return Ok(LoopCopy::Portable);
+        }
+        match std::env::var("STRIAE_SIMD") {
+            Err(std::env::VarError::NotPresent) => Ok(LoopCopy::Avx512),
+            Ok(v) if v == "avx512" => Ok(LoopCopy::Avx512),
+            Ok(v) if v == "avx2" => Ok(LoopCopy::Avx2),
+            Ok(v) if v == "portable" => Ok(LoopCopy::Portable),
+            Ok(v) => Err(format!(
+                "environment variable STRIAE_SIMD = \"{v}\": expected \"avx512\", \"avx2\" or \"portable\""
+            )),
+            Err(_) => Err("environment variable STRIAE_SIMD is not valid UTF-8".into()),
+        }
+    }
+
     /// The copy a render with `simd` runs on this CPU.
     pub fn chosen(simd: Simd) -> LoopCopy {
         let cap = match simd {
             Simd::Portable => LoopCopy::Portable,
             Simd::Avx2 => LoopCopy::Avx2,
-            Simd::Auto if std::env::var_os("STRIAE_PORTABLE").is_some() => LoopCopy::Portable,
-            Simd::Auto => match std::env::var("STRIAE_SIMD").as_deref() {
-                Ok("portable") => LoopCopy::Portable,
-                Ok("avx2") => LoopCopy::Avx2,
-                _ => LoopCopy::Avx512,
-            },
+            Simd::Auto => Self::env_cap().unwrap_or(LoopCopy::Avx512),
         };
         cap.min(Self::available())
     }

@@ -112,6 +112,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(e) = args.exposure.filter(|e| !e.is_finite()) {
         bail!("--exposure {e}: must be finite");
     }
+    striae::integrator::LoopCopy::env_cap().map_err(anyhow::Error::msg)?;
     let mut scene = match &args.scene {
         Some(path) => Scene::load(path, &overrides).context("cannot load the scene")?,
         None => Scene::default_scene(&overrides).context("building the built-in default scene")?,
