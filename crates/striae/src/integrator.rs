@@ -425,8 +425,8 @@ pub enum LoopCopy {
     /// AVX2, FMA, BMI1/2, LZCNT, POPCNT (x86-64-v3).
     Avx2,
     /// The AVX2 set plus AVX-512 F/VL/BW/DQ/CD (x86-64-v4): the same 256-bit box tests, but 32
-    /// vector registers, so the big render loop spills less (3-4 % faster on an AMD Zen 4,
-    /// `BENCHMARKS.md`, "Session 14").
+    /// vector registers, so the big render loop spills less (on an AMD Zen 4, smooth glass
+    /// 2.6-5.7 % faster, scratched glass about the same: `BENCHMARKS.md`, "Session 14").
     Avx512,
 }
 
@@ -593,29 +593,28 @@ fn render_tile(
     }
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
-unsafe fn render_tile_avx2<const DIFFERENTIALS: bool>(
-    scene: &Scene,
-    rect: [u32; 4],
-    pass: Pass,
-    counters: &mut Counters,
-) -> Vec<Rgb> {
-    render_tile_body::<DIFFERENTIALS>(scene, rect, pass, counters)
+/// `$name`: [`render_tile_body`] compiled for the instruction sets `$features` (one copy of
+/// the render loop, [`LoopCopy`]); to be called only where the CPU has them.
+macro_rules! render_loop_copy {
+    ($name:ident, $features:literal) => {
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $features)]
+        unsafe fn $name<const DIFFERENTIALS: bool>(
+            scene: &Scene,
+            rect: [u32; 4],
+            pass: Pass,
+            counters: &mut Counters,
+        ) -> Vec<Rgb> {
+            render_tile_body::<DIFFERENTIALS>(scene, rect, pass, counters)
+        }
+    };
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(
-    enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512vl,avx512bw,avx512dq,avx512cd"
-)]
-unsafe fn render_tile_avx512<const DIFFERENTIALS: bool>(
-    scene: &Scene,
-    rect: [u32; 4],
-    pass: Pass,
-    counters: &mut Counters,
-) -> Vec<Rgb> {
-    render_tile_body::<DIFFERENTIALS>(scene, rect, pass, counters)
-}
+render_loop_copy!(render_tile_avx2, "avx2,fma,bmi1,bmi2,lzcnt,popcnt");
+render_loop_copy!(
+    render_tile_avx512,
+    "avx2,fma,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512vl,avx512bw,avx512dq,avx512cd"
+);
 
 /// The tile's pixels, with (`DIFFERENTIALS`, `pass.differentials`) or without ray
 /// differentials.
