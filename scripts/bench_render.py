@@ -58,7 +58,9 @@ def main():
                 out, cpu = timed([b, "render", a.scene, "--spp", str(a.spp), "--res", a.res, "-q",
                                   "--sampler", sampler, "-o", os.path.join(tmp, "st")])
                 m = re.search(r"done in ([0-9.]+) s: ([0-9.]+) M samples/s, ([0-9.]+) M rays/s", out)
-                runs.setdefault(f"striae {b} ({sampler})", []).append((float(m[2]), float(m[3]), cpu))
+                copy = re.search(r"rays, (.+?) render loop\)", out)
+                name = f"striae {b} ({sampler}, {copy[1] if copy else 'unknown'} render loop)"
+                runs.setdefault(name, []).append((float(m[2]), float(m[3]), cpu))
         for v in a.variants:
             for sampler in a.mitsuba_samplers:
                 out, cpu = timed([sys.executable, os.path.join(HERE, "mitsuba_scene.py"), a.scene, "-o",
@@ -76,7 +78,8 @@ def main():
         rps = statistics.median(x[1] for x in v)
         cpu = statistics.median(x[2] for x in v)
         rays = "-" if rps != rps else f"{rps:.2f} M"
-        print(f"| {k} | {sps:.3f} M | {rays} | {cpu:.2f} s | {n / cpu / 1e6:.3f} M |")
+        per_cpu = f"{n / cpu / 1e6:.3f} M" if cpu > 0 else "-"  # (too short to time)
+        print(f"| {k} | {sps:.3f} M | {rays} | {cpu:.2f} s | {per_cpu} |")
 
 
 if __name__ == "__main__":

@@ -6,7 +6,9 @@ script writes variants of it: `smooth` (the glass swapped for `type = "dielectri
 `ior`), and the scratched material with each coverage mode (`footprint`, the default; `sample`;
 `point`). It renders each with one thread and measures the CPU time (user + sys) of
 `--spp SPP` minus that of `--spp 1`, so that the set-up (table, layers, BVH) cancels, and prints
-the medians over interleaved rounds and the ratios to `smooth`.
+the medians over interleaved rounds and the ratios to `smooth`, with the compiled copy of the
+render loop that ran (the CPU's widest; `STRIAE_SIMD=avx2` or `portable` in the environment
+caps it).
 
     python3 scripts/scratched_cost.py scenes/glass-teapot-setting1.toml \\
         scenes/glass-plate-closeup.toml --spp 64 --rounds 2
@@ -37,12 +39,15 @@ def variant(text, kind):
     return text[: m.start(1)] + body + text[m.end(1):]
 
 
-def cpu(cmd, env):
+def cpu(cmd, env, output=None):
+    """CPU seconds (user + sys) of `cmd`; its stderr appended to the list `output` if given."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     p = subprocess.run(cmd, capture_output=True, text=True, env=env)
     if p.returncode != 0:
         sys.exit(f"failed: {' '.join(cmd)}\n{p.stdout}{p.stderr}")
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if output is not None:
+        output.append(p.stderr)
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
@@ -70,9 +75,12 @@ def main():
                 files[kind] = path
             try:
                 # Warm-up: the scratch table is computed (or read) once, outside the timings.
+                warm = []
                 for kind in args.kinds:
                     cpu([args.striae, "render", files[kind], "--threads", "1", "--res", "8x8", "--spp", "1",
-                         "-q", "-o", os.path.join(tmp, "warm.exr")], env)
+                         "-q", "-o", os.path.join(tmp, "warm.exr")], env, warm)
+                # Which compiled copy of the render loop ran (the CPU's widest, or STRIAE_SIMD's).
+                copies = sorted(set(re.findall(r"rays, (.+?) render loop\)", "".join(warm))))
                 times = {k: [] for k in args.kinds}
                 for _ in range(args.rounds):
                     for kind in args.kinds:
@@ -85,7 +93,9 @@ def main():
                     os.remove(path)
             med = {k: statistics.median(v) for k, v in times.items()}
             ref = med.get("smooth")
-            print(f"{name} ({args.res}, {args.spp} spp, 1 thread, CPU s over {args.rounds} rounds):")
+            loop = ", ".join(copies) or "unknown"
+            print(f"{name} ({args.res}, {args.spp} spp, 1 thread, {loop} render loop, "
+                  f"CPU s over {args.rounds} rounds):")
             for kind in args.kinds:
                 ratio = f" ({med[kind] / ref:.2f}x)" if ref else ""
                 print(f"  {kind:10s} {med[kind]:7.2f} s{ratio}")
