@@ -426,7 +426,10 @@ pub enum LoopCopy {
     Avx2,
     /// The AVX2 set plus AVX-512 F/VL/BW/DQ/CD (x86-64-v4): the same 256-bit box tests, but 32
     /// vector registers, so the big render loop spills less (on an AMD Zen 4, smooth glass
-    /// 2.6-5.7 % faster, scratched glass about the same: `BENCHMARKS.md`, "Session 14").
+    /// 2.6-5.7 % faster, scratched glass about the same: `BENCHMARKS.md`, "Session 14"). LLVM
+    /// also uses 512-bit moves and a few 512-bit compares in it, which lower the clock of
+    /// Intel's first AVX-512 server cores (Skylake-SP); not measured there (`STRIAE_SIMD=avx2`
+    /// caps the choice).
     Avx512,
 }
 
