@@ -99,5 +99,19 @@ fn striae_simd_caps_the_render_loop_and_a_bad_value_is_named() {
     );
     let (ok, err) = run("portable");
     assert!(ok && err.contains("portable render loop"), "{err}");
+    // `striae figures` renders too, and refuses the bad value before writing anything.
+    let figs = dir.join("figs");
+    let o = Command::new(env!("CARGO_BIN_EXE_striae"))
+        .args(["figures", "-o"])
+        .arg(&figs)
+        .env("STRIAE_SIMD", "avx3")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("STRIAE_SIMD") && err.contains("avx3"),
+        "{err}"
+    );
+    assert!(!figs.exists(), "a bad STRIAE_SIMD wrote figures");
     let _ = std::fs::remove_dir_all(&dir);
 }

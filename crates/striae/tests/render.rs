@@ -269,9 +269,11 @@ fn image_is_bit_identical_across_thread_counts() {
 fn simd_and_portable_render_loops_give_the_same_image() {
     // The render loop is compiled three times (AVX-512 and AVX2 + FMA where the CPU has them,
     // portable everywhere); all must give the same image bit for bit (on a CPU without
-    // AVX-512 or AVX2, `Auto` and `Avx2` fall back to a narrower copy). The default scene (glass, a
-    // textured diffuse floor, an area light, the sky) and one with rough and smooth metal,
-    // rough glass and a sphere light cover the BVH, the triangle and sphere tests and the BSDFs.
+    // AVX-512 or AVX2, `Auto` and `Avx2` fall back to a narrower copy). The default scene
+    // (scratched glass under a sun: the loop that carries ray differentials), the smooth glass
+    // teapot (a textured diffuse floor, an area light, the sky) and one with rough and smooth
+    // metal, rough glass and a sphere light cover both loops, the BVH, the triangle and
+    // sphere tests and the BSDFs.
     let rough = r#"
         [render]
         width = 24
@@ -323,7 +325,8 @@ fn simd_and_portable_render_loops_give_the_same_image() {
         max_depth: None,
         sampler: None,
     };
-    for text in [striae::scene::DEFAULT_SCENE, rough] {
+    let smooth = include_str!("../../../scenes/glass-teapot.toml");
+    for text in [striae::scene::DEFAULT_SCENE, smooth, rough] {
         let s = Scene::parse(text, Path::new("t.toml"), Path::new("."), &o).unwrap();
         let (a, _) = render_with(&s, &|_| {}, Simd::Auto);
         let (b, _) = render_with(&s, &|_| {}, Simd::Avx2);

@@ -31,6 +31,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.out.exists() && !args.out.is_dir() {
         bail!("output {} exists and is not a folder", args.out.display());
     }
+    // The figures are rendered: a bad `STRIAE_SIMD` stops them as it stops `striae render`.
+    striae::integrator::LoopCopy::env_cap().map_err(anyhow::Error::msg)?;
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
     let opts = FigureOptions {
         spp: args.spp,
