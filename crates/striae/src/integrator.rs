@@ -34,7 +34,7 @@
 
 use crate::bsdf::Bsdf;
 use crate::film::Image;
-use crate::geometry::{Geometry, SurfaceHit};
+use crate::geometry::{Geometry, SurfaceHit, PACKET};
 use crate::material::Material;
 use crate::math::{Frame, Ray, RayDifferential, Rgb, Vec2, Vec3};
 use crate::sampler::PixelSampler;
@@ -650,51 +650,60 @@ fn render_pixel<const DIFFERENTIALS: bool>(
     let pixel_index = y as u64 * w as u64 + x as u64;
     let spp = scene.settings.spp;
     let mut sum = Rgb::ZERO;
-    for s in 0..spp {
-        let mut sampler =
-            PixelSampler::with_kind(scene.settings.sampler, pixel_index, s, scene.settings.seed);
-        let in_pixel = sampler.next_2d();
-        let film = Vec2::new(x as f32, y as f32) + in_pixel;
-        let u_lens = sampler.next_2d();
-        let l = if DIFFERENTIALS {
-            let (ray, rd) = scene.camera.generate_ray(film, u_lens);
-            let pixel = (pass.id, pixel_index, in_pixel - Vec2::splat(0.5));
-            radiance::<true>(scene, ray, rd, pixel, &mut sampler, counters)
-        } else {
-            let ray = scene.camera.generate_ray_only(film, u_lens);
-            let rd = RayDifferential {
-                rx_o: ray.o,
-                rx_d: ray.d,
-                ry_o: ray.o,
-                ry_d: ray.d,
-            };
-            radiance::<false>(
-                scene,
-                ray,
-                rd,
-                (pass.id, pixel_index, Vec2::ZERO),
-                &mut sampler,
-                counters,
-            )
-        };
-        if l.is_finite() {
-            sum += l;
-        } else {
-            counters.nonfinite += 1;
+    // The samples in chunks of `PACKET`: a chunk's camera rays are traced together
+    // (`Geometry::intersect_coherent`), then its paths run one after another, in sample order.
+    let mut first = 0;
+    while first < spp {
+        let n = (spp - first).min(PACKET as u32) as usize;
+        let mut samplers: [PixelSampler; PACKET] = std::array::from_fn(|j| {
+            let s = first + (j as u32).min(n as u32 - 1);
+            PixelSampler::with_kind(scene.settings.sampler, pixel_index, s, scene.settings.seed)
+        });
+        let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); PACKET];
+        let mut rds = [RayDifferential::default(); PACKET];
+        let mut offsets = [Vec2::ZERO; PACKET];
+        for j in 0..n {
+            let sampler = &mut samplers[j];
+            let in_pixel = sampler.next_2d();
+            let film = Vec2::new(x as f32, y as f32) + in_pixel;
+            let u_lens = sampler.next_2d();
+            if DIFFERENTIALS {
+                (rays[j], rds[j]) = scene.camera.generate_ray(film, u_lens);
+                offsets[j] = in_pixel - Vec2::splat(0.5);
+            } else {
+                let ray = scene.camera.generate_ray_only(film, u_lens);
+                (rays[j], rds[j]) = (ray, RayDifferential::along(&ray));
+            }
         }
+        let mut hits = [None; PACKET];
+        scene
+            .geometry
+            .intersect_coherent(&rays[..n], &mut hits[..n]);
+        for j in 0..n {
+            let pixel = (pass.id, pixel_index, offsets[j]);
+            let camera = (rays[j], rds[j], hits[j]);
+            let l = radiance::<DIFFERENTIALS>(scene, camera, pixel, &mut samplers[j], counters);
+            if l.is_finite() {
+                sum += l;
+            } else {
+                counters.nonfinite += 1;
+            }
+        }
+        first += n as u32;
     }
     sum / spp as f32
 }
 
-/// Radiance arriving at the camera along `ray` (one path sample) through a pixel (the render's
-/// id, the pixel's index and the ray's offset from its centre, see [`PixelHit`]). With
+/// Radiance arriving at the camera along `ray` (one path sample), whose differentials are `rd`
+/// and whose closest hit is `hit` (the camera rays are traced beforehand, in packets), through
+/// a pixel (the render's id, the pixel's index and the ray's offset from its centre, see
+/// [`PixelHit`]). With
 /// `DIFFERENTIALS` false the ray differentials are neither used nor updated (no material of
 /// the scene reads them).
 #[inline(always)]
 fn radiance<const DIFFERENTIALS: bool>(
     scene: &Scene,
-    mut ray: Ray,
-    rd: RayDifferential,
+    (mut ray, rd, camera_hit): (Ray, RayDifferential, Option<SurfaceHit>),
     (render, pixel, offset): (u64, u64, Vec2),
     sampler: &mut PixelSampler,
     counters: &mut Counters,
@@ -725,7 +734,12 @@ fn radiance<const DIFFERENTIALS: bool>(
     loop {
         sampler.start_bounce(depth);
         counters.rays += 1;
-        let Some(hit) = scene.geometry.intersect(&ray) else {
+        let hit = if depth == 0 {
+            camera_hit
+        } else {
+            scene.geometry.intersect(&ray)
+        };
+        let Some(hit) = hit else {
             if let Some(env) = scene.environment() {
                 let le = env.eval(ray.d);
                 let w = if specular {

@@ -32,12 +32,25 @@ impl Ray {
 
 /// Offset rays for one pixel step in x and in y (pbrt's ray differentials), carried to every
 /// hit so texture lookups (the scratch layers) can filter over the pixel footprint.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub struct RayDifferential {
     pub rx_o: Vec3,
     pub rx_d: Vec3,
     pub ry_o: Vec3,
     pub ry_d: Vec3,
+}
+
+impl RayDifferential {
+    /// Both offset rays equal to `ray`: a zero footprint, for a path whose differentials no
+    /// material reads.
+    pub fn along(ray: &Ray) -> Self {
+        RayDifferential {
+            rx_o: ray.o,
+            rx_d: ray.d,
+            ry_o: ray.o,
+            ry_d: ray.d,
+        }
+    }
 }
 
 /// An orthonormal frame `(s, t, n)`; local coordinates are `(x, y, z)` along `(s, t, n)`.

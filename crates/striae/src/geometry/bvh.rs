@@ -23,7 +23,7 @@ use obvhs::cwbvh::CwBvh;
 use obvhs::ploc::PlocSearchDistance;
 use obvhs::BvhBuildParams;
 
-use super::bvh4::{Bvh4, Leaf, LeafTest, BLOCK};
+use super::bvh4::{AnyLeaf, Bvh4, ClosestLeaf, Leaf, BLOCK, PACKET};
 use super::sphere::{intersect_sphere, sphere_surface};
 use super::{Shape, ShapeGeometry, SurfaceHit};
 use crate::math::{Ray, Vec3};
@@ -568,6 +568,75 @@ impl Geometry {
         Some(self.surface_hit(ray, id, t, b1, b2))
     }
 
+    /// The closest hits of `rays` (at most [`PACKET`]) into `out[..rays.len()]`, as
+    /// [`Geometry::intersect`] finds them (but for exact ties in `t`, see `bvh4`). Rays that
+    /// share their origin, their dominant axis and the signs of their directions (a pixel's
+    /// camera rays through a pinhole) are traversed as one packet ([`Bvh4::closest_packet`]),
+    /// other rays one by one. Returns whether they were traced as a packet.
+    #[inline(always)]
+    pub fn intersect_coherent(&self, rays: &[Ray], out: &mut [Option<SurfaceHit>]) -> bool {
+        let n = rays.len();
+        assert!(n <= PACKET && out.len() >= n);
+        if let (Accel::Bvh4(bvh), 2..) = (&self.accel, n) {
+            let wrays: [WatertightRay; PACKET] =
+                std::array::from_fn(|i| WatertightRay::new(&rays[i.min(n - 1)]));
+            let origin = rays[0].o.to_array().map(f32::to_bits);
+            let kz = wrays[0].kz;
+            let shared = rays
+                .iter()
+                .zip(&wrays)
+                .all(|(r, w)| w.kz == kz && r.o.to_array().map(f32::to_bits) == origin);
+            let traced = shared
+                && match kz {
+                    0 => self.closest_packet::<0>(bvh, &wrays[..n], rays, out),
+                    1 => self.closest_packet::<1>(bvh, &wrays[..n], rays, out),
+                    _ => self.closest_packet::<2>(bvh, &wrays[..n], rays, out),
+                };
+            if traced {
+                return true;
+            }
+        }
+        for (ray, hit) in rays.iter().zip(out) {
+            *hit = self.intersect(ray);
+        }
+        false
+    }
+
+    /// [`Geometry::intersect_coherent`]'s packet of rays of dominant axis `KZ` with one origin;
+    /// `false`, with nothing written, when their directions' signs differ.
+    #[inline(always)]
+    fn closest_packet<const KZ: usize>(
+        &self,
+        bvh: &Bvh4,
+        wrays: &[WatertightRay],
+        rays: &[Ray],
+        out: &mut [Option<SurfaceHit>],
+    ) -> bool {
+        let n = rays.len();
+        let mut leaves: [Bvh4Leaves<KZ>; PACKET] = std::array::from_fn(|i| Bvh4Leaves {
+            geometry: self,
+            wray: &wrays[i.min(n - 1)],
+            ray: &rays[i.min(n - 1)],
+            best: None,
+        });
+        let dirs: [Vec3; PACKET] = std::array::from_fn(|i| rays[i.min(n - 1)].d);
+        let t_max: [f32; PACKET] = std::array::from_fn(|i| rays[i.min(n - 1)].t_max);
+        let largest = t_max[..n].iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        let mut packet = PacketLeaves {
+            rays: &mut leaves[..n],
+            t_max,
+        };
+        if !bvh.closest_packet(rays[0].o, &dirs[..n], largest, &mut packet) {
+            return false;
+        }
+        for ((ray, leaf), hit) in rays.iter().zip(&leaves).zip(out) {
+            *hit = leaf
+                .best
+                .map(|(id, t, b1, b2)| self.surface_hit(ray, id, t, b1, b2));
+        }
+        true
+    }
+
     /// [`Geometry::intersect`] for every kind of hierarchy.
     #[inline(never)]
     fn intersect_obvhs(&self, ray: &Ray) -> Option<SurfaceHit> {
@@ -725,7 +794,7 @@ struct Bvh4Leaves<'a, const KZ: usize> {
     best: Option<(usize, f32, f32, f32)>,
 }
 
-impl<const KZ: usize> LeafTest for Bvh4Leaves<'_, KZ> {
+impl<const KZ: usize> ClosestLeaf for Bvh4Leaves<'_, KZ> {
     #[inline(always)]
     fn closest(&mut self, leaf: Leaf, t_max: &mut f32) {
         let first = BLOCK * leaf.block;
@@ -747,7 +816,9 @@ impl<const KZ: usize> LeafTest for Bvh4Leaves<'_, KZ> {
             *t_max = t;
         }
     }
+}
 
+impl<const KZ: usize> AnyLeaf for Bvh4Leaves<'_, KZ> {
     #[inline(always)]
     fn any(&mut self, leaf: Leaf, t_max: f32) -> bool {
         let first = BLOCK * leaf.block;
@@ -761,6 +832,26 @@ impl<const KZ: usize> LeafTest for Bvh4Leaves<'_, KZ> {
             self.wray
                 .occluded4::<KZ>(&self.geometry.tri4[leaf.block], t_max)
         }
+    }
+}
+
+/// The primitive tests of a packet ([`Bvh4::closest_packet`]): each ray's own
+/// [`Bvh4Leaves`], with its own closest `t`.
+struct PacketLeaves<'a, 'b, const KZ: usize> {
+    rays: &'b mut [Bvh4Leaves<'a, KZ>],
+    t_max: [f32; PACKET],
+}
+
+impl<const KZ: usize> ClosestLeaf for PacketLeaves<'_, '_, KZ> {
+    /// Every ray tests the leaf against its own closest `t`; `t_max` becomes the largest.
+    #[inline(always)]
+    fn closest(&mut self, leaf: Leaf, t_max: &mut f32) {
+        let mut largest = f32::NEG_INFINITY;
+        for (ray, t) in self.rays.iter_mut().zip(&mut self.t_max) {
+            ray.closest(leaf, t);
+            largest = largest.max(*t);
+        }
+        *t_max = largest;
     }
 }
 

@@ -20,6 +20,13 @@
 //! * **Traversal**: closest-hit front to back (children sorted by entry distance, a stack of
 //!   `(node, entry distance)` pairs culled against the current closest `t`); any-hit with an
 //!   early exit.
+//! * **Packets** ([`Bvh4::closest_packet`]): the camera rays of one pixel share their origin
+//!   and nearly their direction, so they are traversed together, once, with the interval of
+//!   their inverse directions (Wald et al. 2007, "Ray Tracing Deformable Scenes Using Dynamic
+//!   Bounding Volume Hierarchies": the interval-arithmetic test of a packet against a box); each ray then
+//!   tests the leaves on its own. Rounding is monotone, so the interval test accepts every box
+//!   any of the rays' own tests accepts, bit for bit, and every ray finds its closest hit: the
+//!   one its own traversal finds, but for exact ties in `t`, which the visiting order breaks.
 //! * **Leaves**: every binary subtree of at most four primitives becomes one leaf block, whose
 //!   four triangles the caller stores as structure of arrays (`bvh::Tri4`) and tests at once
 //!   with SSE (Embree's `Triangle4` leaves, Wald et al. 2014); a leaf with a sphere is tested
@@ -59,11 +66,15 @@ pub(crate) struct Leaf {
     pub scalar: bool,
 }
 
-/// The caller's primitive tests (a trait rather than closures so that they can be forced
-/// inline into the traversal loop).
-pub(crate) trait LeafTest {
+/// The caller's primitive test for the closest hit (a trait rather than a closure so that it
+/// can be forced inline into the traversal loop).
+pub(crate) trait ClosestLeaf {
     /// Test the leaf's primitives for the closest hit, lowering `t_max` to any hit found.
     fn closest(&mut self, leaf: Leaf, t_max: &mut f32);
+}
+
+/// The caller's primitive test for any hit.
+pub(crate) trait AnyLeaf {
     /// Whether any primitive of the leaf is hit before `t_max`.
     fn any(&mut self, leaf: Leaf, t_max: f32) -> bool;
 }
@@ -94,6 +105,33 @@ struct Node4 {
 #[derive(Clone, Debug)]
 pub(crate) struct Bvh4 {
     nodes: Vec<Node4>,
+}
+
+/// A box test of the closest-hit traversal: `(entry distances, hit mask)` of a node's children
+/// for `t` in `[0, t_max]`.
+trait NodeTest {
+    fn test(&self, node: &Node4, t_max: f32) -> ([f32; WIDTH], u32);
+}
+
+/// `1 / d` with zero components replaced by `+-1e-30` (no `0 * inf` NaN in the slab test), and
+/// the index of the near and far slab of the axis.
+#[inline(always)]
+fn slab_inverse(d: f32, a: usize) -> (f32, usize, usize) {
+    let da = if d.abs() < 1e-30 {
+        if d.is_sign_negative() {
+            -1e-30
+        } else {
+            1e-30
+        }
+    } else {
+        d
+    };
+    let inv = 1.0 / da;
+    if inv < 0.0 {
+        (inv, a + 3, a)
+    } else {
+        (inv, a, a + 3)
+    }
 }
 
 /// Per-ray constants of the box test.
@@ -136,23 +174,7 @@ impl BoxRay {
         let mut near = [0usize; 3];
         let mut far = [0usize; 3];
         for a in 0..3 {
-            let da = if d[a].abs() < 1e-30 {
-                if d[a].is_sign_negative() {
-                    -1e-30
-                } else {
-                    1e-30
-                }
-            } else {
-                d[a]
-            };
-            inv[a] = 1.0 / da;
-            if inv[a] < 0.0 {
-                near[a] = a + 3;
-                far[a] = a;
-            } else {
-                near[a] = a;
-                far[a] = a + 3;
-            }
+            (inv[a], near[a], far[a]) = slab_inverse(d[a], a);
         }
         BoxRay {
             o: o.to_array(),
@@ -161,10 +183,23 @@ impl BoxRay {
             far,
         }
     }
+}
 
-    /// `(entry distances, hit mask)` of the children for `t` in `[0, t_max]`. Written as loops
-    /// over the [`WIDTH`] lanes: the AVX2 copy of the render loop runs each step as one 256-bit
-    /// instruction, the portable copy as two SSE ones; both compute the same IEEE operations.
+/// `cmpleps` + `movmskps` per half of the lanes (a lane loop would build the mask bit by bit).
+#[inline(always)]
+fn lanes_le(a: &[f32; WIDTH], b: &[f32; WIDTH]) -> u32 {
+    let half = |k: usize| {
+        Vec4::from_slice(&a[k..k + 4])
+            .cmple(Vec4::from_slice(&b[k..k + 4]))
+            .bitmask()
+    };
+    half(0) | half(4) << 4
+}
+
+impl NodeTest for BoxRay {
+    /// Written as loops over the [`WIDTH`] lanes: the AVX2 copy of the render loop runs each
+    /// step as one 256-bit instruction, the portable copy as two SSE ones; both compute the
+    /// same IEEE operations.
     #[inline(always)]
     fn test(&self, node: &Node4, t_max: f32) -> ([f32; WIDTH], u32) {
         let b = &node.bounds;
@@ -186,13 +221,79 @@ impl BoxRay {
             t_near[k] = tn;
             t_far[k] = tf;
         }
-        // `cmpleps` + `movmskps` per half (the lane loop would build the mask bit by bit).
-        let half = |k: usize| {
-            Vec4::from_slice(&t_near[k..k + 4])
-                .cmple(Vec4::from_slice(&t_far[k..k + 4]))
-                .bitmask()
-        };
-        (t_near, half(0) | half(4) << 4)
+        (t_near, lanes_le(&t_near, &t_far))
+    }
+}
+
+/// Most rays of a packet ([`Bvh4::closest_packet`]).
+pub const PACKET: usize = 8;
+
+/// The box test of a packet of rays with one origin and the same sign of each direction
+/// component: the slab distances with each axis's inverse direction in `[inv_lo, inv_hi]`.
+struct PacketBoxRay {
+    o: [f32; 3],
+    inv_lo: [f32; 3],
+    inv_hi: [f32; 3],
+    near: [usize; 3],
+    far: [usize; 3],
+}
+
+impl PacketBoxRay {
+    /// `None` when the directions' signs differ on some axis (the near slab differs).
+    #[inline(always)]
+    fn new(o: Vec3, dirs: &[Vec3]) -> Option<PacketBoxRay> {
+        let first = BoxRay::new(o, dirs[0]);
+        let (mut lo, mut hi) = (first.inv_d, first.inv_d);
+        for &d in &dirs[1..] {
+            for a in 0..3 {
+                let (inv, near, _) = slab_inverse(d[a], a);
+                if near != first.near[a] {
+                    return None;
+                }
+                lo[a] = lo[a].min(inv);
+                hi[a] = hi[a].max(inv);
+            }
+        }
+        Some(PacketBoxRay {
+            o: first.o,
+            inv_lo: lo,
+            inv_hi: hi,
+            near: first.near,
+            far: first.far,
+        })
+    }
+}
+
+impl NodeTest for PacketBoxRay {
+    /// [`BoxRay`]'s test with each product `(b - o) inv` replaced by its least (near slabs) or
+    /// greatest (far slabs) value over `inv` in `[inv_lo, inv_hi]`: a product rounds
+    /// monotonically in `inv`, so every ray's own `t_near` is at least, and its `t_far` at
+    /// most, what this gives, and every child any ray's test accepts is accepted.
+    #[inline(always)]
+    fn test(&self, node: &Node4, t_max: f32) -> ([f32; WIDTH], u32) {
+        let b = &node.bounds;
+        let (bn0, bn1, bn2) = (&b[self.near[0]], &b[self.near[1]], &b[self.near[2]]);
+        let (bf0, bf1, bf2) = (&b[self.far[0]], &b[self.far[1]], &b[self.far[2]]);
+        let [o0, o1, o2] = self.o;
+        let [l0, l1, l2] = self.inv_lo;
+        let [h0, h1, h2] = self.inv_hi;
+        let mut t_near = [0.0f32; WIDTH];
+        let mut t_far = [0.0f32; WIDTH];
+        for k in 0..WIDTH {
+            let (dn0, dn1, dn2) = (bn0[k] - o0, bn1[k] - o1, bn2[k] - o2);
+            let (df0, df1, df2) = (bf0[k] - o0, bf1[k] - o1, bf2[k] - o2);
+            let tn0 = min_ps(dn0 * l0, dn0 * h0);
+            let tn1 = min_ps(dn1 * l1, dn1 * h1);
+            let tn2 = min_ps(dn2 * l2, dn2 * h2);
+            let tf0 = max_ps(df0 * l0, df0 * h0);
+            let tf1 = max_ps(df1 * l1, df1 * h1);
+            let tf2 = max_ps(df2 * l2, df2 * h2);
+            let tn = max_ps(max_ps(tn0, tn1), max_ps(tn2, 0.0));
+            let tf = min_ps(min_ps(min_ps(tf0, tf1), tf2) * T_FAR_SCALE, t_max);
+            t_near[k] = tn;
+            t_far[k] = tf;
+        }
+        (t_near, lanes_le(&t_near, &t_far))
     }
 }
 
@@ -363,8 +464,36 @@ impl Bvh4 {
     /// Closest-hit traversal: `leaf.closest(leaf, &mut t_max)` tests a leaf block and lowers
     /// `t_max` to any hit it finds.
     #[inline(always)]
-    pub(crate) fn closest(&self, o: Vec3, d: Vec3, mut t_max: f32, leaf: &mut impl LeafTest) {
-        let ray = BoxRay::new(o, d);
+    pub(crate) fn closest(&self, o: Vec3, d: Vec3, t_max: f32, leaf: &mut impl ClosestLeaf) {
+        self.traverse_closest(&BoxRay::new(o, d), t_max, leaf);
+    }
+
+    /// Closest-hit traversal of a packet of at most [`PACKET`] rays from origin `o` along
+    /// `dirs`: the nodes any of them enters are visited once, front to back by the packet's
+    /// entry distance, and culled against the largest of the rays' closest hits so far.
+    /// `leaf.closest(leaf, &mut t_max)` tests a leaf block for every ray, lowering each ray's
+    /// own closest `t`, and sets `t_max` to the largest of them. Returns `false`, having
+    /// traversed nothing, when the directions' signs differ on some axis (the caller then
+    /// traces the rays one by one).
+    #[inline(always)]
+    pub(crate) fn closest_packet(
+        &self,
+        o: Vec3,
+        dirs: &[Vec3],
+        t_max: f32,
+        leaf: &mut impl ClosestLeaf,
+    ) -> bool {
+        debug_assert!(!dirs.is_empty() && dirs.len() <= PACKET);
+        let Some(ray) = PacketBoxRay::new(o, dirs) else {
+            return false;
+        };
+        self.traverse_closest(&ray, t_max, leaf);
+        true
+    }
+
+    /// The closest-hit traversal of [`Self::closest`] with the box test `ray`.
+    #[inline(always)]
+    fn traverse_closest(&self, ray: &impl NodeTest, mut t_max: f32, leaf: &mut impl ClosestLeaf) {
         let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
         let mut sp = 0usize;
         let mut cur = 0u32;
@@ -438,7 +567,7 @@ impl Bvh4 {
     /// Any-hit traversal: `leaf.any(leaf, t_max)` returns whether a primitive of the leaf
     /// block is hit; the first `true` ends the traversal.
     #[inline(always)]
-    pub(crate) fn any(&self, o: Vec3, d: Vec3, t_max: f32, leaf: &mut impl LeafTest) -> bool {
+    pub(crate) fn any(&self, o: Vec3, d: Vec3, t_max: f32, leaf: &mut impl AnyLeaf) -> bool {
         let ray = BoxRay::new(o, d);
         let mut stack = [MaybeUninit::<u32>::uninit(); STACK];
         let mut sp = 0usize;

@@ -24,6 +24,7 @@ pub mod transform;
 use std::path::PathBuf;
 
 pub use bvh::{BvhKind, Geometry};
+pub use bvh4::PACKET;
 pub use mesh::TriangleMesh;
 pub use transform::Transform;
 

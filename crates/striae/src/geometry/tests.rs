@@ -266,6 +266,81 @@ fn bvh_closest_hit_equals_brute_force_on_the_teapot() {
 }
 
 #[test]
+fn packets_of_rays_find_what_single_rays_find() {
+    // Packets as a pinhole camera makes them: up to PACKET rays from one origin through
+    // jittered points of one "pixel" around a random target, some with a short `t_max`. Every
+    // ray's hit must be bit for bit the single-ray query's, and agree with brute force. Packets
+    // whose directions straddle an axis, or whose origins differ, fall back to single rays.
+    let teapot = vec![shape(ShapeGeometry::Mesh(TriangleMesh::teapot(6)))];
+    for (name, shapes, centre) in [
+        ("test scene", test_scene(), Vec3::ZERO),
+        ("teapot", teapot, Vec3::new(0.0, 0.0, 1.5)),
+    ] {
+        let geometry = Geometry::new(shapes.clone());
+        let mut rng = Pcg64::seed_from_u64(13);
+        let (mut hits, mut packets, mut fallbacks) = (0, 0, 0);
+        for k in 0..3000 {
+            let o = centre + 6.0 * random_unit(&mut rng);
+            let target = centre + 1.5 * random_unit(&mut rng) * rng.random::<f32>();
+            let pixel = 10f32.powf(rng.random_range(-4.0..-1.0));
+            let n = 1 + k % PACKET;
+            let straddle = k % 10 == 0;
+            let moved = k % 10 == 5;
+            let rays: Vec<Ray> = (0..n)
+                .map(|j| {
+                    let mut d = (target - o).normalize() + pixel * random_unit(&mut rng);
+                    if straddle {
+                        // One ray on each side of the x = 0 plane (a direction's sign).
+                        d.x = if j % 2 == 0 { 1e-3 } else { -1e-3 };
+                    }
+                    let origin = if moved && j == n - 1 {
+                        o + Vec3::X * 1e-3
+                    } else {
+                        o
+                    };
+                    let mut ray = Ray::new(origin, d.normalize());
+                    if k % 3 == 0 {
+                        ray.t_max = 8.0 * rng.random::<f32>();
+                    }
+                    ray
+                })
+                .collect();
+            let mut out = [None; PACKET];
+            let packet = geometry.intersect_coherent(&rays, &mut out[..n]);
+            if packet {
+                packets += 1;
+                assert!(
+                    n > 1 && !(straddle || moved),
+                    "{name}: packet {k} can't be one"
+                );
+            } else if n > 1 && !(straddle || moved) {
+                fallbacks += 1;
+            }
+            for (ray, got) in rays.iter().zip(&out) {
+                let single = geometry.intersect(ray);
+                assert_eq!(
+                    format!("{got:?}"),
+                    format!("{single:?}"),
+                    "{name}: packet {k} ray {ray:?}"
+                );
+                let brute = intersect_brute_force(&shapes, ray);
+                assert_eq!(
+                    got.map(|h| (h.t, h.shape, h.prim)),
+                    brute,
+                    "{name}: {ray:?}"
+                );
+                hits += got.is_some() as usize;
+            }
+        }
+        assert!(hits > 3000, "{name}: only {hits} hits");
+        assert!(
+            packets > 2000,
+            "{name}: only {packets} packets, {fallbacks} fell back"
+        );
+    }
+}
+
+#[test]
 fn hits_very_close_to_the_origin_are_found() {
     // obvhs' CWBVH node test ignores boxes closer than 1e-4: a small triangle 3e-5 ahead must still
     // be hit (and occlude).
