@@ -113,7 +113,7 @@ impl PerspectiveCamera {
     }
 
     /// Direction (camera space, unnormalised, z = 1) through continuous film position `film`.
-    #[inline]
+    #[inline(always)]
     fn camera_dir(&self, film: Vec2) -> Vec3 {
         let sx = (2.0 * film.x / self.width as f32 - 1.0) * self.tan_half_x;
         let sy = (1.0 - 2.0 * film.y / self.height as f32) * self.tan_half_y;
@@ -121,7 +121,7 @@ impl PerspectiveCamera {
     }
 
     /// Ray through `film` with the lens sample `u_lens` (ignored for a pinhole).
-    #[inline]
+    #[inline(always)]
     fn ray_through(&self, film: Vec2, lens: Vec2) -> Ray {
         let d = self.camera_dir(film);
         if self.lens_radius > 0.0 {
@@ -184,7 +184,7 @@ impl PerspectiveCamera {
 
     /// The primary ray of [`PerspectiveCamera::generate_ray`] without its differentials (the
     /// same ray, bit for bit).
-    #[inline]
+    #[inline(always)]
     pub fn generate_ray_only(&self, film: Vec2, u_lens: Vec2) -> Ray {
         let lens = if self.lens_radius > 0.0 {
             self.lens_radius * square_to_concentric_disk(u_lens)

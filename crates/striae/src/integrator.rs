@@ -41,6 +41,7 @@ use crate::sampler::PixelSampler;
 use crate::sampling::power_heuristic;
 use crate::scene::{material_bsdf, Scene, NO_MATERIAL};
 use crate::shading::{footprint_dp, spawn_differentials, PixelHit, ShadingContext};
+use arrayvec::ArrayVec;
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -637,7 +638,48 @@ fn render_tile_body<const DIFFERENTIALS: bool>(
     out
 }
 
+/// A camera ray's closest hit, found before its path runs (in a packet), or not yet.
+#[derive(Clone, Copy)]
+enum CameraHit {
+    Traced(Option<SurfaceHit>),
+    Untraced,
+}
+
+/// Sample `s` of pixel `(x, y)` (index `pixel_index`) up to its camera ray: the sampler, past
+/// the camera's dimensions, the ray and its differentials, and the pixel as [`radiance`] takes
+/// it. (Forced inline, with what it calls, into the render loop's copies: out of line it ran
+/// without their instruction sets, and the sampler with it, 10 % slower.)
+#[inline(always)]
+fn camera_sample<const DIFFERENTIALS: bool>(
+    scene: &Scene,
+    (x, y): (u32, u32),
+    pixel_index: u64,
+    pass: Pass,
+    s: u32,
+) -> (PixelSampler, Ray, RayDifferential, (u64, u64, Vec2)) {
+    let mut sampler =
+        PixelSampler::with_kind(scene.settings.sampler, pixel_index, s, scene.settings.seed);
+    let in_pixel = sampler.next_2d();
+    let film = Vec2::new(x as f32, y as f32) + in_pixel;
+    let u_lens = sampler.next_2d();
+    let (ray, rd, offset) = if DIFFERENTIALS {
+        let (ray, rd) = scene.camera.generate_ray(film, u_lens);
+        (ray, rd, in_pixel - Vec2::splat(0.5))
+    } else {
+        let ray = scene.camera.generate_ray_only(film, u_lens);
+        (ray, RayDifferential::along(&ray), Vec2::ZERO)
+    };
+    (sampler, ray, rd, (pass.id, pixel_index, offset))
+}
+
+/// Pixels with at least this many samples trace their camera rays in packets: with fewer, the
+/// chunks cost more than the shared traversal saves (`BENCHMARKS.md`, "Session 15").
+const PACKET_MIN_SPP: u32 = 8;
+
 /// The mean of `spp` samples of pixel `(x, y)` (box filter: uniform positions in the pixel).
+/// From [`PACKET_MIN_SPP`] samples on, in chunks of up to [`PACKET`]: a chunk's camera rays
+/// are traced together (`Geometry::intersect_coherent`), then its paths run one after another,
+/// in sample order. The hits are the same, so the image is too.
 #[inline(always)]
 fn render_pixel<const DIFFERENTIALS: bool>(
     scene: &Scene,
@@ -650,52 +692,52 @@ fn render_pixel<const DIFFERENTIALS: bool>(
     let pixel_index = y as u64 * w as u64 + x as u64;
     let spp = scene.settings.spp;
     let mut sum = Rgb::ZERO;
-    // The samples in chunks of `PACKET`: a chunk's camera rays are traced together
-    // (`Geometry::intersect_coherent`), then its paths run one after another, in sample order.
+    let mut add = |l: Rgb, counters: &mut Counters| {
+        if l.is_finite() {
+            sum += l;
+        } else {
+            counters.nonfinite += 1;
+        }
+    };
+    if spp < PACKET_MIN_SPP {
+        for s in 0..spp {
+            let (mut sampler, ray, rd, pixel) =
+                camera_sample::<DIFFERENTIALS>(scene, (x, y), pixel_index, pass, s);
+            let camera = (ray, rd, CameraHit::Untraced);
+            add(
+                radiance::<DIFFERENTIALS>(scene, camera, pixel, &mut sampler, counters),
+                counters,
+            );
+        }
+        return sum / spp as f32;
+    }
     let mut first = 0;
     while first < spp {
-        let n = (spp - first).min(PACKET as u32) as usize;
-        let mut samplers: [PixelSampler; PACKET] = std::array::from_fn(|j| {
-            let s = first + (j as u32).min(n as u32 - 1);
-            PixelSampler::with_kind(scene.settings.sampler, pixel_index, s, scene.settings.seed)
-        });
-        let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); PACKET];
-        let mut rds = [RayDifferential::default(); PACKET];
-        let mut offsets = [Vec2::ZERO; PACKET];
-        for j in 0..n {
-            let sampler = &mut samplers[j];
-            let in_pixel = sampler.next_2d();
-            let film = Vec2::new(x as f32, y as f32) + in_pixel;
-            let u_lens = sampler.next_2d();
-            if DIFFERENTIALS {
-                (rays[j], rds[j]) = scene.camera.generate_ray(film, u_lens);
-                offsets[j] = in_pixel - Vec2::splat(0.5);
-            } else {
-                let ray = scene.camera.generate_ray_only(film, u_lens);
-                (rays[j], rds[j]) = (ray, RayDifferential::along(&ray));
-            }
+        let n = (spp - first).min(PACKET as u32);
+        // (`ArrayVec`: only what the chunk holds is written.)
+        let mut samples = ArrayVec::<_, PACKET>::new();
+        let mut rays = ArrayVec::<Ray, PACKET>::new();
+        for s in first..first + n {
+            let (sampler, ray, rd, pixel) =
+                camera_sample::<DIFFERENTIALS>(scene, (x, y), pixel_index, pass, s);
+            samples.push((sampler, rd, pixel));
+            rays.push(ray);
         }
-        let mut hits = [None; PACKET];
-        scene
-            .geometry
-            .intersect_coherent(&rays[..n], &mut hits[..n]);
-        for j in 0..n {
-            let pixel = (pass.id, pixel_index, offsets[j]);
-            let camera = (rays[j], rds[j], hits[j]);
-            let l = radiance::<DIFFERENTIALS>(scene, camera, pixel, &mut samplers[j], counters);
-            if l.is_finite() {
-                sum += l;
-            } else {
-                counters.nonfinite += 1;
-            }
+        let hits = scene.geometry.intersect_coherent(&rays);
+        for (((sampler, rd, pixel), ray), hit) in samples.iter_mut().zip(rays).zip(hits) {
+            let camera = (ray, *rd, CameraHit::Traced(hit));
+            add(
+                radiance::<DIFFERENTIALS>(scene, camera, *pixel, sampler, counters),
+                counters,
+            );
         }
-        first += n as u32;
+        first += n;
     }
     sum / spp as f32
 }
 
 /// Radiance arriving at the camera along `ray` (one path sample), whose differentials are `rd`
-/// and whose closest hit is `hit` (the camera rays are traced beforehand, in packets), through
+/// and whose closest hit is `camera_hit` where traced beforehand (in a packet), through
 /// a pixel (the render's id, the pixel's index and the ray's offset from its centre, see
 /// [`PixelHit`]). With
 /// `DIFFERENTIALS` false the ray differentials are neither used nor updated (no material of
@@ -703,7 +745,7 @@ fn render_pixel<const DIFFERENTIALS: bool>(
 #[inline(always)]
 fn radiance<const DIFFERENTIALS: bool>(
     scene: &Scene,
-    (mut ray, rd, camera_hit): (Ray, RayDifferential, Option<SurfaceHit>),
+    (mut ray, rd, camera_hit): (Ray, RayDifferential, CameraHit),
     (render, pixel, offset): (u64, u64, Vec2),
     sampler: &mut PixelSampler,
     counters: &mut Counters,
@@ -734,10 +776,9 @@ fn radiance<const DIFFERENTIALS: bool>(
     loop {
         sampler.start_bounce(depth);
         counters.rays += 1;
-        let hit = if depth == 0 {
-            camera_hit
-        } else {
-            scene.geometry.intersect(&ray)
+        let hit = match camera_hit {
+            CameraHit::Traced(hit) if depth == 0 => hit,
+            _ => scene.geometry.intersect(&ray),
         };
         let Some(hit) = hit else {
             if let Some(env) = scene.environment() {

@@ -139,8 +139,8 @@ impl PixelSampler {
         self.dimension = CAMERA_DIMS + depth * BOUNCE_DIMS + offset;
     }
 
-    /// The next number in `[0, 1)`.
-    #[inline]
+    /// The next number in `[0, 1)`. (Forced inline: the render loop's copies must hold it.)
+    #[inline(always)]
     pub fn next_1d(&mut self) -> f32 {
         if self.kind == SamplerKind::Independent {
             return self.next_1d_hashed();
@@ -176,7 +176,7 @@ impl PixelSampler {
     }
 
     /// The next two numbers in `[0, 1)^2`.
-    #[inline]
+    #[inline(always)]
     pub fn next_2d(&mut self) -> Vec2 {
         let x = self.next_1d();
         let y = self.next_1d();

@@ -27,6 +27,7 @@ use super::bvh4::{AnyLeaf, Bvh4, ClosestLeaf, Leaf, BLOCK, PACKET};
 use super::sphere::{intersect_sphere, sphere_surface};
 use super::{Shape, ShapeGeometry, SurfaceHit};
 use crate::math::{Ray, Vec3};
+use arrayvec::ArrayVec;
 
 /// One BVH primitive, stored in BVH order (no index indirection at traversal).
 #[derive(Clone, Copy, Debug)]
@@ -568,73 +569,95 @@ impl Geometry {
         Some(self.surface_hit(ray, id, t, b1, b2))
     }
 
-    /// The closest hits of `rays` (at most [`PACKET`]) into `out[..rays.len()]`, as
-    /// [`Geometry::intersect`] finds them (but for exact ties in `t`, see `bvh4`). Rays that
-    /// share their origin, their dominant axis and the signs of their directions (a pixel's
-    /// camera rays through a pinhole) are traversed as one packet ([`Bvh4::closest_packet`]),
-    /// other rays one by one. Returns whether they were traced as a packet.
+    /// The closest hits of `rays` (at most [`PACKET`]), as [`Geometry::intersect`] finds them
+    /// (but for exact ties in `t`, see `bvh4`). Rays that share their origin, their dominant
+    /// axis and the signs of their directions (a pixel's camera rays through a pinhole) are
+    /// traversed as one packet ([`Bvh4::closest_packet`]), other rays one by one.
     #[inline(always)]
-    pub fn intersect_coherent(&self, rays: &[Ray], out: &mut [Option<SurfaceHit>]) -> bool {
-        let n = rays.len();
-        assert!(n <= PACKET && out.len() >= n);
-        if let (Accel::Bvh4(bvh), 2..) = (&self.accel, n) {
-            let wrays: [WatertightRay; PACKET] =
-                std::array::from_fn(|i| WatertightRay::new(&rays[i.min(n - 1)]));
+    pub fn intersect_coherent(&self, rays: &[Ray]) -> ArrayVec<Option<SurfaceHit>, PACKET> {
+        self.intersect_coherent_counted(rays).0
+    }
+
+    /// [`Geometry::intersect_coherent`], and whether the rays were traced as a packet.
+    #[inline(always)]
+    pub(crate) fn intersect_coherent_counted(
+        &self,
+        rays: &[Ray],
+    ) -> (ArrayVec<Option<SurfaceHit>, PACKET>, bool) {
+        assert!(rays.len() <= PACKET);
+        if let (Accel::Bvh4(bvh), 2..) = (&self.accel, rays.len()) {
+            let wrays: ArrayVec<WatertightRay, PACKET> =
+                rays.iter().map(WatertightRay::new).collect();
             let origin = rays[0].o.to_array().map(f32::to_bits);
             let kz = wrays[0].kz;
             let shared = rays
                 .iter()
                 .zip(&wrays)
                 .all(|(r, w)| w.kz == kz && r.o.to_array().map(f32::to_bits) == origin);
-            let traced = shared
-                && match kz {
-                    0 => self.closest_packet::<0>(bvh, &wrays[..n], rays, out),
-                    1 => self.closest_packet::<1>(bvh, &wrays[..n], rays, out),
-                    _ => self.closest_packet::<2>(bvh, &wrays[..n], rays, out),
-                };
-            if traced {
-                return true;
+            let traced = match kz {
+                _ if !shared => None,
+                0 => self.closest_packet::<0>(bvh, &wrays, rays),
+                1 => self.closest_packet::<1>(bvh, &wrays, rays),
+                _ => self.closest_packet::<2>(bvh, &wrays, rays),
+            };
+            if let Some(hits) = traced {
+                return (hits, true);
             }
         }
-        for (ray, hit) in rays.iter().zip(out) {
-            *hit = self.intersect(ray);
-        }
-        false
+        (self.intersect_each(rays), false)
+    }
+
+    /// [`Geometry::intersect`] of each ray (out of line: [`Geometry::intersect_coherent`]'s
+    /// fallback, for rays that are no packet).
+    #[inline(never)]
+    fn intersect_each(&self, rays: &[Ray]) -> ArrayVec<Option<SurfaceHit>, PACKET> {
+        rays.iter().map(|ray| self.intersect(ray)).collect()
     }
 
     /// [`Geometry::intersect_coherent`]'s packet of rays of dominant axis `KZ` with one origin;
-    /// `false`, with nothing written, when their directions' signs differ.
+    /// `None` when their directions' signs differ.
     #[inline(always)]
     fn closest_packet<const KZ: usize>(
         &self,
         bvh: &Bvh4,
         wrays: &[WatertightRay],
         rays: &[Ray],
-        out: &mut [Option<SurfaceHit>],
-    ) -> bool {
-        let n = rays.len();
-        let mut leaves: [Bvh4Leaves<KZ>; PACKET] = std::array::from_fn(|i| Bvh4Leaves {
-            geometry: self,
-            wray: &wrays[i.min(n - 1)],
-            ray: &rays[i.min(n - 1)],
-            best: None,
-        });
-        let dirs: [Vec3; PACKET] = std::array::from_fn(|i| rays[i.min(n - 1)].d);
-        let t_max: [f32; PACKET] = std::array::from_fn(|i| rays[i.min(n - 1)].t_max);
-        let largest = t_max[..n].iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    ) -> Option<ArrayVec<Option<SurfaceHit>, PACKET>> {
         let mut packet = PacketLeaves {
-            rays: &mut leaves[..n],
-            t_max,
+            rays: rays
+                .iter()
+                .zip(wrays)
+                .map(|(ray, wray)| {
+                    let leaves = Bvh4Leaves::<KZ> {
+                        geometry: self,
+                        wray,
+                        ray,
+                        best: None,
+                    };
+                    (leaves, ray.t_max)
+                })
+                .collect(),
         };
-        if !bvh.closest_packet(rays[0].o, &dirs[..n], largest, &mut packet) {
-            return false;
+        let dirs: ArrayVec<Vec3, PACKET> = rays.iter().map(|r| r.d).collect();
+        let largest = rays
+            .iter()
+            .map(|r| r.t_max)
+            .fold(f32::NEG_INFINITY, f32::max);
+        if !bvh.closest_packet(rays[0].o, &dirs, largest, &mut packet) {
+            return None;
         }
-        for ((ray, leaf), hit) in rays.iter().zip(&leaves).zip(out) {
-            *hit = leaf
-                .best
-                .map(|(id, t, b1, b2)| self.surface_hit(ray, id, t, b1, b2));
-        }
-        true
+        Some(
+            packet
+                .rays
+                .iter()
+                .map(|(leaves, _)| {
+                    let ray = leaves.ray;
+                    leaves
+                        .best
+                        .map(|(id, t, b1, b2)| self.surface_hit(ray, id, t, b1, b2))
+                })
+                .collect(),
+        )
     }
 
     /// [`Geometry::intersect`] for every kind of hierarchy.
@@ -837,17 +860,16 @@ impl<const KZ: usize> AnyLeaf for Bvh4Leaves<'_, KZ> {
 
 /// The primitive tests of a packet ([`Bvh4::closest_packet`]): each ray's own
 /// [`Bvh4Leaves`], with its own closest `t`.
-struct PacketLeaves<'a, 'b, const KZ: usize> {
-    rays: &'b mut [Bvh4Leaves<'a, KZ>],
-    t_max: [f32; PACKET],
+struct PacketLeaves<'a, const KZ: usize> {
+    rays: ArrayVec<(Bvh4Leaves<'a, KZ>, f32), PACKET>,
 }
 
-impl<const KZ: usize> ClosestLeaf for PacketLeaves<'_, '_, KZ> {
+impl<const KZ: usize> ClosestLeaf for PacketLeaves<'_, KZ> {
     /// Every ray tests the leaf against its own closest `t`; `t_max` becomes the largest.
     #[inline(always)]
     fn closest(&mut self, leaf: Leaf, t_max: &mut f32) {
         let mut largest = f32::NEG_INFINITY;
-        for (ray, t) in self.rays.iter_mut().zip(&mut self.t_max) {
+        for (ray, t) in &mut self.rays {
             ray.closest(leaf, t);
             largest = largest.max(*t);
         }

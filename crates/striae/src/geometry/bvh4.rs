@@ -226,7 +226,7 @@ impl NodeTest for BoxRay {
 }
 
 /// Most rays of a packet ([`Bvh4::closest_packet`]).
-pub const PACKET: usize = 8;
+pub const PACKET: usize = 32;
 
 /// The box test of a packet of rays with one origin and the same sign of each direction
 /// component: the slab distances with each axis's inverse direction in `[inv_lo, inv_hi]`.

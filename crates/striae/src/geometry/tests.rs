@@ -305,8 +305,8 @@ fn packets_of_rays_find_what_single_rays_find() {
                     ray
                 })
                 .collect();
-            let mut out = [None; PACKET];
-            let packet = geometry.intersect_coherent(&rays, &mut out[..n]);
+            let (out, packet) = geometry.intersect_coherent_counted(&rays);
+            assert_eq!(out.len(), n);
             if packet {
                 packets += 1;
                 assert!(
