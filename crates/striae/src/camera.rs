@@ -112,6 +112,11 @@ impl PerspectiveCamera {
         self.position
     }
 
+    /// Whether every ray leaves from [`Self::position`] (no thin lens).
+    pub fn is_pinhole(&self) -> bool {
+        self.lens_radius == 0.0
+    }
+
     /// Direction (camera space, unnormalised, z = 1) through continuous film position `film`.
     #[inline(always)]
     fn camera_dir(&self, film: Vec2) -> Vec3 {

@@ -672,8 +672,9 @@ fn camera_sample<const DIFFERENTIALS: bool>(
     (sampler, ray, rd, (pass.id, pixel_index, offset))
 }
 
-/// Pixels with at least this many samples trace their camera rays in packets: with fewer, the
-/// chunks cost more than the shared traversal saves (`BENCHMARKS.md`, "Session 15").
+/// Pixels with at least this many samples trace their camera rays in packets (through a
+/// pinhole): with fewer, the chunks cost more than the shared traversal saves (`BENCHMARKS.md`,
+/// "Session 15").
 const PACKET_MIN_SPP: u32 = 8;
 
 /// The mean of `spp` samples of pixel `(x, y)` (box filter: uniform positions in the pixel).
@@ -699,7 +700,8 @@ fn render_pixel<const DIFFERENTIALS: bool>(
             counters.nonfinite += 1;
         }
     };
-    if spp < PACKET_MIN_SPP {
+    // (A thin lens's rays share no origin: no packet.)
+    if spp < PACKET_MIN_SPP || !scene.camera.is_pinhole() {
         for s in 0..spp {
             let (mut sampler, ray, rd, pixel) =
                 camera_sample::<DIFFERENTIALS>(scene, (x, y), pixel_index, pass, s);

@@ -573,6 +573,8 @@ impl Geometry {
     /// (but for exact ties in `t`, see `bvh4`). Rays that share their origin, their dominant
     /// axis and the signs of their directions (a pixel's camera rays through a pinhole) are
     /// traversed as one packet ([`Bvh4::closest_packet`]), other rays one by one.
+    /// # Panics
+    /// If there are more than [`PACKET`] rays.
     #[inline(always)]
     pub fn intersect_coherent(&self, rays: &[Ray]) -> ArrayVec<Option<SurfaceHit>, PACKET> {
         self.intersect_coherent_counted(rays).0
