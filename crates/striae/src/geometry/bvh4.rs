@@ -197,32 +197,48 @@ fn lanes_le(a: &[f32; WIDTH], b: &[f32; WIDTH]) -> u32 {
 }
 
 impl NodeTest for BoxRay {
-    /// Written as loops over the [`WIDTH`] lanes: the AVX2 copy of the render loop runs each
-    /// step as one 256-bit instruction, the portable copy as two SSE ones; both compute the
-    /// same IEEE operations.
     #[inline(always)]
     fn test(&self, node: &Node4, t_max: f32) -> ([f32; WIDTH], u32) {
-        let b = &node.bounds;
-        let (bn0, bn1, bn2) = (&b[self.near[0]], &b[self.near[1]], &b[self.near[2]]);
-        let (bf0, bf1, bf2) = (&b[self.far[0]], &b[self.far[1]], &b[self.far[2]]);
-        let [o0, o1, o2] = self.o;
-        let [i0, i1, i2] = self.inv_d;
-        let mut t_near = [0.0f32; WIDTH];
-        let mut t_far = [0.0f32; WIDTH];
-        for k in 0..WIDTH {
-            let tn0 = (bn0[k] - o0) * i0;
-            let tn1 = (bn1[k] - o1) * i1;
-            let tn2 = (bn2[k] - o2) * i2;
-            let tf0 = (bf0[k] - o0) * i0;
-            let tf1 = (bf1[k] - o1) * i1;
-            let tf2 = (bf2[k] - o2) * i2;
-            let tn = max_ps(max_ps(tn0, tn1), max_ps(tn2, 0.0));
-            let tf = min_ps(min_ps(min_ps(tf0, tf1), tf2) * T_FAR_SCALE, t_max);
-            t_near[k] = tn;
-            t_far[k] = tf;
-        }
-        (t_near, lanes_le(&t_near, &t_far))
+        let inv = self.inv_d;
+        let t = |a: usize, d: f32| d * inv[a];
+        slab_test(node, self.o, self.near, self.far, t_max, t, t)
     }
+}
+
+/// The slab test of [`BoxRay`] and [`PacketBoxRay`]: per child, the distances
+/// `near_t(axis, b - o)` to its near slabs and `far_t(axis, b - o)` to its far slabs, entered at
+/// the largest near one (at least 0) and left at the smallest far one (scaled by
+/// [`T_FAR_SCALE`], at most `t_max`); `(entry distances, hit mask)`. Written as loops over the
+/// [`WIDTH`] lanes: the AVX2 copy of the render loop runs each step as one 256-bit
+/// instruction, the portable copy as two SSE ones; both compute the same IEEE operations.
+#[inline(always)]
+fn slab_test(
+    node: &Node4,
+    [o0, o1, o2]: [f32; 3],
+    near: [usize; 3],
+    far: [usize; 3],
+    t_max: f32,
+    near_t: impl Fn(usize, f32) -> f32,
+    far_t: impl Fn(usize, f32) -> f32,
+) -> ([f32; WIDTH], u32) {
+    let b = &node.bounds;
+    let (bn0, bn1, bn2) = (&b[near[0]], &b[near[1]], &b[near[2]]);
+    let (bf0, bf1, bf2) = (&b[far[0]], &b[far[1]], &b[far[2]]);
+    let mut t_near = [0.0f32; WIDTH];
+    let mut t_far = [0.0f32; WIDTH];
+    for k in 0..WIDTH {
+        let tn0 = near_t(0, bn0[k] - o0);
+        let tn1 = near_t(1, bn1[k] - o1);
+        let tn2 = near_t(2, bn2[k] - o2);
+        let tf0 = far_t(0, bf0[k] - o0);
+        let tf1 = far_t(1, bf1[k] - o1);
+        let tf2 = far_t(2, bf2[k] - o2);
+        let tn = max_ps(max_ps(tn0, tn1), max_ps(tn2, 0.0));
+        let tf = min_ps(min_ps(min_ps(tf0, tf1), tf2) * T_FAR_SCALE, t_max);
+        t_near[k] = tn;
+        t_far[k] = tf;
+    }
+    (t_near, lanes_le(&t_near, &t_far))
 }
 
 /// Most rays of a packet ([`Bvh4::closest_packet`]).
@@ -271,29 +287,10 @@ impl NodeTest for PacketBoxRay {
     /// most, what this gives, and every child any ray's test accepts is accepted.
     #[inline(always)]
     fn test(&self, node: &Node4, t_max: f32) -> ([f32; WIDTH], u32) {
-        let b = &node.bounds;
-        let (bn0, bn1, bn2) = (&b[self.near[0]], &b[self.near[1]], &b[self.near[2]]);
-        let (bf0, bf1, bf2) = (&b[self.far[0]], &b[self.far[1]], &b[self.far[2]]);
-        let [o0, o1, o2] = self.o;
-        let [l0, l1, l2] = self.inv_lo;
-        let [h0, h1, h2] = self.inv_hi;
-        let mut t_near = [0.0f32; WIDTH];
-        let mut t_far = [0.0f32; WIDTH];
-        for k in 0..WIDTH {
-            let (dn0, dn1, dn2) = (bn0[k] - o0, bn1[k] - o1, bn2[k] - o2);
-            let (df0, df1, df2) = (bf0[k] - o0, bf1[k] - o1, bf2[k] - o2);
-            let tn0 = min_ps(dn0 * l0, dn0 * h0);
-            let tn1 = min_ps(dn1 * l1, dn1 * h1);
-            let tn2 = min_ps(dn2 * l2, dn2 * h2);
-            let tf0 = max_ps(df0 * l0, df0 * h0);
-            let tf1 = max_ps(df1 * l1, df1 * h1);
-            let tf2 = max_ps(df2 * l2, df2 * h2);
-            let tn = max_ps(max_ps(tn0, tn1), max_ps(tn2, 0.0));
-            let tf = min_ps(min_ps(min_ps(tf0, tf1), tf2) * T_FAR_SCALE, t_max);
-            t_near[k] = tn;
-            t_far[k] = tf;
-        }
-        (t_near, lanes_le(&t_near, &t_far))
+        let (lo, hi) = (self.inv_lo, self.inv_hi);
+        let near_t = |a: usize, d: f32| min_ps(d * lo[a], d * hi[a]);
+        let far_t = |a: usize, d: f32| max_ps(d * lo[a], d * hi[a]);
+        slab_test(node, self.o, self.near, self.far, t_max, near_t, far_t)
     }
 }
 
