@@ -32,7 +32,7 @@ impl Ray {
 
 /// Offset rays for one pixel step in x and in y (pbrt's ray differentials), carried to every
 /// hit so texture lookups (the scratch layers) can filter over the pixel footprint.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 pub struct RayDifferential {
     pub rx_o: Vec3,
     pub rx_d: Vec3,
