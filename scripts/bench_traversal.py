@@ -12,7 +12,11 @@ triangles: teapots and meshes go through striae's `--export-meshes`). Two ray se
 Both renderers run every query on the same rays, on one thread, `--repeats` times; the median
 is quoted. Mitsuba's `intersect` builds the full `SurfaceInteraction` (striae's the full
 `SurfaceHit`), its `preliminary` only the hit distance and primitive, `occluded` is the any-hit
-query (`ray_test`). The hit counts must agree; the script stops if they do not.
+query (`ray_test`). striae's `intersect_packets` is its `intersect` on runs of 32 consecutive
+rays traced together where they share an origin (`Geometry::intersect_coherent`, what the
+render loop does with a pixel's camera rays; here a row of 32 pixels), set against Mitsuba's
+`intersect`; secondary rays share no origin and fall back to one at a time. The hit counts must
+agree; the script stops if they do not.
 
     cargo build --release && cargo build --release -p striae --example trace_rays
     DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM-19.so \\
@@ -121,23 +125,23 @@ def main():
     dr.set_thread_count(1)
     tmp = tempfile.mkdtemp()
     print(f"{a.scene}, one thread, medians of {a.repeats}; Mitsuba {mi.__version__} {a.variant}")
-    print(f"{'rays':10s} {'query':12s} {'count':>8s} {'hits':>8s} {'striae Mrays/s':>15s} "
+    print(f"{'rays':10s} {'query':18s} {'count':>8s} {'hits':>8s} {'striae Mrays/s':>15s} "
           f"{'Mitsuba Mrays/s':>16s} {'striae/Mitsuba':>15s}")
     for name, (o, d) in rays_of(scene, mi, res, a.seed).items():
         m = time_mitsuba(scene, mi, dr, o, d, a.repeats)
         s = time_striae(a.example, a.scene, o, d, a.repeats, tmp)
         n = len(o)
-        for query in ("preliminary", "intersect", "occluded"):
-            mt, mh = m[query]
+        for query in ("preliminary", "intersect", "intersect_packets", "occluded"):
+            mt, mh = m["intersect" if query == "intersect_packets" else query]
             rate_m = n / mt / 1e6
             if query in s:
                 st, sh = s[query]
                 if sh != mh:
                     sys.exit(f"{name} {query}: striae hits {sh} rays, Mitsuba {mh}: not the same scene")
                 rate_s = n / st / 1e6
-                print(f"{name:10s} {query:12s} {n:8d} {mh:8d} {rate_s:15.2f} {rate_m:16.2f} {rate_s / rate_m:15.2f}")
+                print(f"{name:10s} {query:18s} {n:8d} {mh:8d} {rate_s:15.2f} {rate_m:16.2f} {rate_s / rate_m:15.2f}")
             else:
-                print(f"{name:10s} {query:12s} {n:8d} {mh:8d} {'-':>15s} {rate_m:16.2f} {'-':>15s}")
+                print(f"{name:10s} {query:18s} {n:8d} {mh:8d} {'-':>15s} {rate_m:16.2f} {'-':>15s}")
 
 
 if __name__ == "__main__":

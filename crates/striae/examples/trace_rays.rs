@@ -9,19 +9,24 @@
 //! `RAYS.f32` is little-endian `f32`, six per ray (origin, direction), `t_max` infinite. On one
 //! thread, compiled like the render loop copy `striae render` runs on this CPU (AVX-512, AVX2 +
 //! FMA or portable, `LoopCopy::chosen`), it runs `Geometry::intersect` (closest hit with the
-//! whole `SurfaceHit`) and `Geometry::occluded` (any hit) over all rays `REPEATS` times
-//! (default 7) and prints, per query, the median rate and the number of rays that hit, one
-//! `key=value` line each.
+//! whole `SurfaceHit`), `Geometry::intersect_coherent` on runs of [`PACKET`] consecutive rays
+//! (`intersect_packets`: as the render loop traces a pixel's camera rays; rays that share no
+//! origin, such as secondary rays, fall back to one by one) and `Geometry::occluded` (any hit)
+//! over all rays `REPEATS` times (default 7) and prints, per query, the median rate and the
+//! number of rays that hit, one `key=value` line each.
 
+use arrayvec::ArrayVec;
 use std::error::Error;
 use std::path::Path;
 use std::time::Instant;
+use striae::geometry::PACKET;
 use striae::math::{Ray, Vec3};
 use striae::scene::{Overrides, Scene};
 
 #[derive(Clone, Copy, PartialEq)]
 enum Query {
     Intersect,
+    IntersectPackets,
     Occluded,
 }
 
@@ -29,6 +34,17 @@ enum Query {
 #[inline(always)]
 fn run(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
     let (mut hits, mut sum) = (0usize, 0.0f32);
+    if query == Query::IntersectPackets {
+        let mut out = ArrayVec::new();
+        for chunk in rays.chunks(PACKET) {
+            scene.geometry.intersect_coherent(chunk, &mut out);
+            for hit in out.iter().flatten() {
+                hits += 1;
+                sum += hit.t + hit.uv.x + hit.ns.x;
+            }
+        }
+        return (hits, sum);
+    }
     for ray in rays {
         match query {
             Query::Intersect => {
@@ -38,6 +54,7 @@ fn run(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
                 }
             }
             Query::Occluded => hits += scene.geometry.occluded(ray) as usize,
+            Query::IntersectPackets => unreachable!("traced above"),
         }
     }
     (hits, sum)
@@ -97,6 +114,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         .collect();
     for (query, name) in [
         (Query::Intersect, "intersect"),
+        (Query::IntersectPackets, "intersect_packets"),
         (Query::Occluded, "occluded"),
     ] {
         let mut seconds = Vec::with_capacity(repeats.max(1));

@@ -713,21 +713,24 @@ fn render_pixel<const DIFFERENTIALS: bool>(
         }
         return sum / spp as f32;
     }
+    // (`ArrayVec`s: only what a chunk holds is written.)
+    let mut samples = ArrayVec::<_, PACKET>::new();
+    let mut rays = ArrayVec::<Ray, PACKET>::new();
+    let mut hits = ArrayVec::<Option<SurfaceHit>, PACKET>::new();
     let mut first = 0;
     while first < spp {
         let n = (spp - first).min(PACKET as u32);
-        // (`ArrayVec`: only what the chunk holds is written.)
-        let mut samples = ArrayVec::<_, PACKET>::new();
-        let mut rays = ArrayVec::<Ray, PACKET>::new();
+        samples.clear();
+        rays.clear();
         for s in first..first + n {
             let (sampler, ray, rd, pixel) =
                 camera_sample::<DIFFERENTIALS>(scene, (x, y), pixel_index, pass, s);
             samples.push((sampler, rd, pixel));
             rays.push(ray);
         }
-        let hits = scene.geometry.intersect_coherent(&rays);
-        for (((sampler, rd, pixel), ray), hit) in samples.iter_mut().zip(rays).zip(hits) {
-            let camera = (ray, *rd, CameraHit::Traced(hit));
+        scene.geometry.intersect_coherent(&rays, &mut hits);
+        for (((sampler, rd, pixel), ray), hit) in samples.iter_mut().zip(&rays).zip(&hits) {
+            let camera = (*ray, *rd, CameraHit::Traced(*hit));
             add(
                 radiance::<DIFFERENTIALS>(scene, camera, *pixel, sampler, counters),
                 counters,

@@ -569,24 +569,33 @@ impl Geometry {
         Some(self.surface_hit(ray, id, t, b1, b2))
     }
 
-    /// The closest hits of `rays` (at most [`PACKET`]), as [`Geometry::intersect`] finds them
-    /// (but for exact ties in `t`, see `bvh4`). Rays that share their origin, their dominant
-    /// axis and the signs of their directions (a pixel's camera rays through a pinhole) are
-    /// traversed as one packet ([`Bvh4::closest_packet`]), other rays one by one.
+    /// The closest hits of `rays` (at most [`PACKET`]) into `hits` (cleared first), as
+    /// [`Geometry::intersect`] finds them (but for exact ties in `t`, see `bvh4`). Rays that
+    /// share their origin, their dominant axis and the signs of their directions (a pixel's
+    /// camera rays through a pinhole) are traversed as one packet ([`Bvh4::closest_packet`]),
+    /// other rays one by one. (The hits go to the caller's array rather than being returned:
+    /// at 84 bytes a hit, a returned array was copied several times on its way out,
+    /// `BENCHMARKS.md`, "Session 16".)
     /// # Panics
     /// If there are more than [`PACKET`] rays.
     #[inline(always)]
-    pub fn intersect_coherent(&self, rays: &[Ray]) -> ArrayVec<Option<SurfaceHit>, PACKET> {
-        self.intersect_coherent_counted(rays).0
+    pub fn intersect_coherent(
+        &self,
+        rays: &[Ray],
+        hits: &mut ArrayVec<Option<SurfaceHit>, PACKET>,
+    ) {
+        self.intersect_coherent_counted(rays, hits);
     }
 
-    /// [`Geometry::intersect_coherent`], and whether the rays were traced as a packet.
+    /// [`Geometry::intersect_coherent`]; whether the rays were traced as a packet.
     #[inline(always)]
     pub(crate) fn intersect_coherent_counted(
         &self,
         rays: &[Ray],
-    ) -> (ArrayVec<Option<SurfaceHit>, PACKET>, bool) {
+        hits: &mut ArrayVec<Option<SurfaceHit>, PACKET>,
+    ) -> bool {
         assert!(rays.len() <= PACKET);
+        hits.clear();
         if let (Accel::Bvh4(bvh), 2..) = (&self.accel, rays.len()) {
             let wrays: ArrayVec<WatertightRay, PACKET> =
                 rays.iter().map(WatertightRay::new).collect();
@@ -597,34 +606,36 @@ impl Geometry {
                 .zip(&wrays)
                 .all(|(r, w)| w.kz == kz && r.o.to_array().map(f32::to_bits) == origin);
             let traced = match kz {
-                _ if !shared => None,
-                0 => self.closest_packet::<0>(bvh, &wrays, rays),
-                1 => self.closest_packet::<1>(bvh, &wrays, rays),
-                _ => self.closest_packet::<2>(bvh, &wrays, rays),
+                _ if !shared => false,
+                0 => self.closest_packet::<0>(bvh, &wrays, rays, hits),
+                1 => self.closest_packet::<1>(bvh, &wrays, rays, hits),
+                _ => self.closest_packet::<2>(bvh, &wrays, rays, hits),
             };
-            if let Some(hits) = traced {
-                return (hits, true);
+            if traced {
+                return true;
             }
         }
-        (self.intersect_each(rays), false)
+        self.intersect_each(rays, hits);
+        false
     }
 
     /// [`Geometry::intersect`] of each ray (out of line: [`Geometry::intersect_coherent`]'s
     /// fallback, for rays that are no packet).
     #[inline(never)]
-    fn intersect_each(&self, rays: &[Ray]) -> ArrayVec<Option<SurfaceHit>, PACKET> {
-        rays.iter().map(|ray| self.intersect(ray)).collect()
+    fn intersect_each(&self, rays: &[Ray], hits: &mut ArrayVec<Option<SurfaceHit>, PACKET>) {
+        hits.extend(rays.iter().map(|ray| self.intersect(ray)));
     }
 
-    /// [`Geometry::intersect_coherent`]'s packet of rays of dominant axis `KZ` with one origin;
-    /// `None` when their directions' signs differ.
+    /// [`Geometry::intersect_coherent`]'s packet of rays of dominant axis `KZ` with one origin,
+    /// into `hits`; false (and `hits` left empty) when their directions' signs differ.
     #[inline(always)]
     fn closest_packet<const KZ: usize>(
         &self,
         bvh: &Bvh4,
         wrays: &[WatertightRay],
         rays: &[Ray],
-    ) -> Option<ArrayVec<Option<SurfaceHit>, PACKET>> {
+        hits: &mut ArrayVec<Option<SurfaceHit>, PACKET>,
+    ) -> bool {
         let mut packet = PacketLeaves {
             rays: rays
                 .iter()
@@ -646,20 +657,15 @@ impl Geometry {
             .map(|r| r.t_max)
             .fold(f32::NEG_INFINITY, f32::max);
         if !bvh.closest_packet(rays[0].o, &dirs, largest, &mut packet) {
-            return None;
+            return false;
         }
-        Some(
-            packet
-                .rays
-                .iter()
-                .map(|(leaves, _)| {
-                    let ray = leaves.ray;
-                    leaves
-                        .best
-                        .map(|(id, t, b1, b2)| self.surface_hit(ray, id, t, b1, b2))
-                })
-                .collect(),
-        )
+        hits.extend(packet.rays.iter().map(|(leaves, _)| {
+            let ray = leaves.ray;
+            leaves
+                .best
+                .map(|(id, t, b1, b2)| self.surface_hit(ray, id, t, b1, b2))
+        }));
+        true
     }
 
     /// [`Geometry::intersect`] for every kind of hierarchy.

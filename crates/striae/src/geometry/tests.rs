@@ -6,6 +6,7 @@ use super::bvh::{intersect_brute_force, WatertightRay};
 use super::*;
 use crate::math::Ray;
 use crate::testing::{chi2_discrete, MeanEstimate};
+use arrayvec::ArrayVec;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
@@ -305,7 +306,8 @@ fn packets_of_rays_find_what_single_rays_find() {
                     ray
                 })
                 .collect();
-            let (out, packet) = geometry.intersect_coherent_counted(&rays);
+            let mut out = ArrayVec::new();
+            let packet = geometry.intersect_coherent_counted(&rays, &mut out);
             assert_eq!(out.len(), n);
             if packet {
                 packets += 1;
