@@ -673,9 +673,9 @@ fn camera_sample<const DIFFERENTIALS: bool>(
 }
 
 /// Pixels with at least this many samples trace their camera rays in packets (through a
-/// pinhole): with fewer, the chunks cost more than the shared traversal saves (`BENCHMARKS.md`,
-/// "Session 15").
-const PACKET_MIN_SPP: u32 = 8;
+/// pinhole): with fewer, the chunks save nothing (`BENCHMARKS.md`, "Session 16": 4-8 % faster
+/// at 4 spp, even at 2).
+const PACKET_MIN_SPP: u32 = 4;
 
 /// The mean of `spp` samples of pixel `(x, y)` (box filter: uniform positions in the pixel).
 /// From [`PACKET_MIN_SPP`] samples on, in chunks of up to [`PACKET`]: a chunk's camera rays
