@@ -3,9 +3,11 @@
 
 `scripts/bench_render.py` compares whole renders; this separates the BVH from the rest of the
 path tracer. The scene is described to Mitsuba by `scripts/mitsuba_scene.py` (the same
-triangles: teapots and meshes go through striae's `--export-meshes`). Two ray sets:
+triangles: teapots and meshes go through striae's `--export-meshes`). Three ray sets:
 
-* camera: one jittered camera ray per pixel (coherent);
+* camera: one jittered camera ray per pixel (coherent), listed by blocks of 8 x 4 pixels;
+* pixels: as many camera rays, 32 through each of the pixels at those blocks' centres (the
+  samples of a pixel, as the render loop traces them);
 * secondary: from each camera ray's first hit, a uniformly random direction, the origin pushed
   off the surface as striae's `offset_origin` does (incoherent, like a path's later bounces).
 
@@ -14,7 +16,8 @@ is quoted. Mitsuba's `intersect` builds the full `SurfaceInteraction` (striae's 
 `SurfaceHit`), its `preliminary` only the hit distance and primitive, `occluded` is the any-hit
 query (`ray_test`). striae's `intersect_packets` is its `intersect` on runs of 32 consecutive
 rays traced together where they share an origin (`Geometry::intersect_coherent`, what the
-render loop does with a pixel's camera rays; here a row of 32 pixels), set against Mitsuba's
+render loop does with a pixel's camera rays: in the `pixels` set, one pixel; in `camera`, a
+block of 8 x 4 pixels), set against Mitsuba's
 `intersect`; secondary rays share no origin and fall back to one at a time. The hit counts must
 agree; the script stops if they do not.
 
@@ -38,18 +41,33 @@ ROOT = os.path.join(HERE, "..")
 
 
 def rays_of(scene, mi, res, seed):
-    """The camera and secondary ray sets, as (origins, directions) float32 arrays."""
+    """The ray sets, as (origins, directions) float32 arrays: `camera`, `pixels`, `secondary`."""
     w, h = res
     n = w * h
     rng = np.random.default_rng(seed)
-    idx = np.arange(n)
-    fx = ((idx % w) + rng.random(n)) / w
-    fy = ((idx // w) + rng.random(n)) / h
     sensor = scene.sensors()[0]
-    ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(fx.astype(np.float32), fy.astype(np.float32)),
-                               mi.Point2f(0.5, 0.5))
-    o = np.stack([np.array(ray.o.x), np.array(ray.o.y), np.array(ray.o.z)], 1)
-    d = np.stack([np.array(ray.d.x), np.array(ray.d.y), np.array(ray.d.z)], 1)
+
+    def camera(px, py):
+        """Camera rays through the pixels (px, py), each at a uniform point of its pixel."""
+        fx = (px + rng.random(len(px))) / w
+        fy = (py + rng.random(len(py))) / h
+        ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(fx.astype(np.float32), fy.astype(np.float32)),
+                                   mi.Point2f(0.5, 0.5))
+        o = np.stack([np.array(ray.o.x), np.array(ray.o.y), np.array(ray.o.z)], 1)
+        d = np.stack([np.array(ray.d.x), np.array(ray.d.y), np.array(ray.d.z)], 1)
+        return o.astype(np.float32), d.astype(np.float32)
+
+    # One ray per pixel, the pixels in blocks of 8 x 4, so that runs of 32 rays are blocks.
+    idx = np.arange(n)
+    x, y = idx % w, idx // w
+    idx = idx[np.lexsort((x % 8, y % 4, x // 8, y // 4))]
+    o, d = camera(idx % w, idx // w)
+    # 32 rays through each of the pixels at the centres of those blocks (as many rays): a run
+    # of 32 is one pixel's, the render loop's packet.
+    cx = np.repeat(np.arange(w // 8) * 8 + 4, 32)
+    cy = np.arange(h // 4) * 4 + 2
+    px, py = np.tile(cx, len(cy)), np.repeat(cy, len(cx))
+    op, dp = camera(px, py)
     si = scene.ray_intersect(mi.Ray3f(mi.Point3f(*o.T), mi.Vector3f(*d.T)))
     valid = np.array(si.is_valid())
     p = np.stack([np.array(si.p.x), np.array(si.p.y), np.array(si.p.z)], 1)[valid]
@@ -59,7 +77,7 @@ def rays_of(scene, mi, res, seed):
     side = np.where(np.sum(v * ng, 1, keepdims=True) >= 0.0, 1.0, -1.0)
     eps = 1e-4 * (1.0 + np.abs(p).max(1, keepdims=True))
     o2 = p + eps * ng * side
-    return {"camera": (o.astype(np.float32), d.astype(np.float32)),
+    return {"camera": (o, d), "pixels": (op, dp),
             "secondary": (o2.astype(np.float32), v.astype(np.float32))}
 
 
