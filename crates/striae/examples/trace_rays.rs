@@ -34,27 +34,28 @@ enum Query {
 #[inline(always)]
 fn run(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
     let (mut hits, mut sum) = (0usize, 0.0f32);
-    if query == Query::IntersectPackets {
-        let mut out = ArrayVec::new();
-        for chunk in rays.chunks(PACKET) {
-            scene.geometry.intersect_coherent(chunk, &mut out);
-            for hit in out.iter().flatten() {
+    match query {
+        Query::Intersect => {
+            for hit in rays.iter().filter_map(|ray| scene.geometry.intersect(ray)) {
                 hits += 1;
                 sum += hit.t + hit.uv.x + hit.ns.x;
             }
         }
-        return (hits, sum);
-    }
-    for ray in rays {
-        match query {
-            Query::Intersect => {
-                if let Some(hit) = scene.geometry.intersect(ray) {
+        Query::IntersectPackets => {
+            let mut out = ArrayVec::new();
+            for chunk in rays.chunks(PACKET) {
+                scene.geometry.intersect_coherent(chunk, &mut out);
+                for hit in out.iter().flatten() {
                     hits += 1;
                     sum += hit.t + hit.uv.x + hit.ns.x;
                 }
             }
-            Query::Occluded => hits += scene.geometry.occluded(ray) as usize,
-            Query::IntersectPackets => unreachable!("traced above"),
+        }
+        Query::Occluded => {
+            hits = rays
+                .iter()
+                .filter(|ray| scene.geometry.occluded(ray))
+                .count();
         }
     }
     (hits, sum)

@@ -673,8 +673,8 @@ fn camera_sample<const DIFFERENTIALS: bool>(
 }
 
 /// Pixels with at least this many samples trace their camera rays in packets (through a
-/// pinhole): with fewer, the chunks save nothing (`BENCHMARKS.md`, "Session 16": 4-8 % faster
-/// at 4 spp, even at 2).
+/// pinhole): with fewer they save nothing (`BENCHMARKS.md`, "Session 16": 4-7 % faster at
+/// 4 spp, no faster or slower at 2).
 const PACKET_MIN_SPP: u32 = 4;
 
 /// The mean of `spp` samples of pixel `(x, y)` (box filter: uniform positions in the pixel).
