@@ -742,11 +742,10 @@ fn render_pixel<const DIFFERENTIALS: bool>(
 }
 
 /// Radiance arriving at the camera along `ray` (one path sample), whose differentials are `rd`
-/// and whose closest hit is `camera_hit` where traced beforehand (in a packet), through
-/// a pixel (the render's id, the pixel's index and the ray's offset from its centre, see
-/// [`PixelHit`]). With
-/// `DIFFERENTIALS` false the ray differentials are neither used nor updated (no material of
-/// the scene reads them).
+/// and whose closest hit is `camera_hit` where traced beforehand (in a packet), through a pixel
+/// (the render's id, the pixel's index and the ray's offset from its centre, see
+/// [`PixelHit`]). With `DIFFERENTIALS` false the ray differentials are neither used nor updated
+/// (no material of the scene reads them).
 #[inline(always)]
 fn radiance<const DIFFERENTIALS: bool>(
     scene: &Scene,
