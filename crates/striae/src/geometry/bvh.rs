@@ -560,11 +560,16 @@ impl Geometry {
         let Accel::Bvh4(bvh) = &self.accel else {
             return self.intersect_obvhs(ray);
         };
-        let wray = WatertightRay::new(ray);
+        self.intersect_bvh4(bvh, &WatertightRay::new(ray), ray)
+    }
+
+    /// [`Geometry::intersect`] in the [`Bvh4`] with the ray's watertight constants `wray`.
+    #[inline(always)]
+    fn intersect_bvh4(&self, bvh: &Bvh4, wray: &WatertightRay, ray: &Ray) -> Option<SurfaceHit> {
         let (id, t, b1, b2) = match wray.kz {
-            0 => self.closest_bvh4::<0>(bvh, &wray, ray),
-            1 => self.closest_bvh4::<1>(bvh, &wray, ray),
-            _ => self.closest_bvh4::<2>(bvh, &wray, ray),
+            0 => self.closest_bvh4::<0>(bvh, wray, ray),
+            1 => self.closest_bvh4::<1>(bvh, wray, ray),
+            _ => self.closest_bvh4::<2>(bvh, wray, ray),
         }?;
         Some(self.surface_hit(ray, id, t, b1, b2))
     }
@@ -611,19 +616,33 @@ impl Geometry {
                 1 => self.closest_packet::<1>(bvh, &wrays, rays, hits),
                 _ => self.closest_packet::<2>(bvh, &wrays, rays, hits),
             };
-            if traced {
-                return true;
+            if !traced {
+                self.intersect_each(rays, &wrays, hits);
             }
+            return traced;
         }
-        self.intersect_each(rays, hits);
+        self.intersect_each(rays, &[], hits);
         false
     }
 
     /// [`Geometry::intersect`] of each ray (out of line: [`Geometry::intersect_coherent`]'s
-    /// fallback, for rays that are no packet).
+    /// fallback, for rays that are no packet), with the rays' watertight constants where the
+    /// packet attempt already made them (`wrays`, else empty).
     #[inline(never)]
-    fn intersect_each(&self, rays: &[Ray], hits: &mut ArrayVec<Option<SurfaceHit>, PACKET>) {
-        hits.extend(rays.iter().map(|ray| self.intersect(ray)));
+    fn intersect_each(
+        &self,
+        rays: &[Ray],
+        wrays: &[WatertightRay],
+        hits: &mut ArrayVec<Option<SurfaceHit>, PACKET>,
+    ) {
+        match &self.accel {
+            Accel::Bvh4(bvh) if wrays.len() == rays.len() => hits.extend(
+                rays.iter()
+                    .zip(wrays)
+                    .map(|(ray, wray)| self.intersect_bvh4(bvh, wray, ray)),
+            ),
+            _ => hits.extend(rays.iter().map(|ray| self.intersect(ray))),
+        }
     }
 
     /// [`Geometry::intersect_coherent`]'s packet of rays of dominant axis `KZ` with one origin,

@@ -24,9 +24,10 @@
 //!   and nearly their direction, so they are traversed together, once, with the interval of
 //!   their inverse directions (Wald et al. 2007, "Ray Tracing Deformable Scenes Using Dynamic
 //!   Bounding Volume Hierarchies": the interval-arithmetic test of a packet against a box);
-//!   each ray then tests the leaves on its own. Rounding is monotone, so the interval test accepts every box
-//!   any of the rays' own tests accepts, bit for bit, and every ray finds its closest hit: the
-//!   one its own traversal finds, but for exact ties in `t`, which the visiting order breaks.
+//!   each ray then tests the leaves on its own. Rounding is monotone, so the interval test
+//!   accepts every box any of the rays' own tests accepts, bit for bit, and every ray finds its
+//!   closest hit: the one its own traversal finds, but for exact ties in `t`, which the
+//!   visiting order breaks.
 //! * **Leaves**: every binary subtree of at most four primitives becomes one leaf block, whose
 //!   four triangles the caller stores as structure of arrays (`bvh::Tri4`) and tests at once
 //!   with SSE (Embree's `Triangle4` leaves, Wald et al. 2014); a leaf with a sphere is tested
