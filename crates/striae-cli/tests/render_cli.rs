@@ -1,5 +1,5 @@
 //! `striae render` flags: bad values are usage errors that name the flag, and nothing is written.
-//! `--threads` means the same in every subcommand: 1 or more, all cores when left out.
+//! `--threads` means the same in every subcommand: 1 to 4096, all cores when left out.
 
 use std::path::Path;
 use std::process::Command;
@@ -46,15 +46,23 @@ fn bad_render_flags_name_the_flag_and_write_nothing() {
 }
 
 #[test]
-fn zero_threads_is_refused_by_every_subcommand() {
+fn thread_counts_out_of_range_are_refused_by_every_subcommand() {
     let dir = std::env::temp_dir().join(format!("striae-threads-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let out = dir.join("out");
-    for command in ["render", "figures", "precompute"] {
-        let (ok, err) = striae(&[command, "--threads", "0"], &out);
-        assert!(!ok, "{command} --threads 0 should fail");
+    // (A million threads took minutes to start before they were refused.)
+    for (command, n) in [
+        ("render", "0"),
+        ("figures", "0"),
+        ("precompute", "0"),
+        ("render", "1000000"),
+        ("figures", "4097"),
+        ("precompute", "1000000"),
+    ] {
+        let (ok, err) = striae(&[command, "--threads", n], &out);
+        assert!(!ok, "{command} --threads {n} should fail");
         assert!(
-            err.contains("--threads") && err.contains("1 or more"),
+            err.contains("--threads") && err.contains(n) && err.contains("1 to 4096"),
             "{command}: {err}"
         );
         assert!(

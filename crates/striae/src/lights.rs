@@ -318,7 +318,7 @@ mod tests {
             .unwrap()
             .then(&Transform::translate(Vec3::new(0.5, 1.5, 0.0)));
         check_light(
-            ShapeGeometry::Mesh(TriangleMesh::rectangle().transformed(&t)),
+            ShapeGeometry::Mesh(TriangleMesh::rectangle().transformed(&t).unwrap()),
             Vec3::ZERO,
         );
     }

@@ -457,6 +457,26 @@ fn bad_scene_files_give_clear_errors() {
         "{CAMERA}[[shapes]]\ntype = \"rectangle\"\nradius = 2\nemission = 1\n"
     ));
     assert!(msg.contains("shapes[0].radius"), "{msg}");
+    // Transforms that leave the finite floats: a non-finite translation, and regular
+    // operations whose product overflows (a panic while transforming the mesh, before).
+    let msg = parse_err(&format!(
+        "{CAMERA}[[shapes]]\ntype = \"rectangle\"\nemission = 1\ntransform = [{{ translate = [0, nan, 0] }}]\n"
+    ));
+    assert!(
+        msg.contains("transform = [{ translate") && msg.contains("not finite"),
+        "{msg}"
+    );
+    let msg = parse_err(&format!(
+        "{CAMERA}[[shapes]]\ntype = \"box\"\nemission = 1\ntransform = [{{ translate = [3e38, 0, 0] }}, {{ scale = 10 }}]\n"
+    ));
+    assert!(
+        msg.contains("transform = [{ translate") && msg.contains("overflows"),
+        "{msg}"
+    );
+    let msg = parse_err(&format!(
+        "{CAMERA}[[shapes]]\ntype = \"box\"\nemission = 1\ntransform = {{ scale = 1e30 }}\n"
+    ));
+    assert!(msg.contains("single precision"), "{msg}");
     // Missing file.
     let err = Scene::load(Path::new("no/such/scene.toml"), &Overrides::default()).unwrap_err();
     assert!(

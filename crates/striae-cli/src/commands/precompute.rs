@@ -51,7 +51,7 @@ pub struct Args {
     /// convex profiles (see docs/table-format.md).
     #[arg(long, value_enum, default_value_t = EstimatorArg::Walks)]
     estimator: EstimatorArg,
-    /// Worker threads, 1 or more (default: all cores).
+    /// Worker threads, 1 to 4096 (default: all cores).
     #[arg(long, value_parser = super::render::parse_threads)]
     threads: Option<usize>,
     /// Output table (.npz).

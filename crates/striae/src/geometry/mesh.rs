@@ -188,8 +188,9 @@ impl TriangleMesh {
     }
 
     /// The mesh with every vertex, normal and tangent transformed; windings are reversed under
-    /// a mirroring transform so geometric normals keep their side.
-    pub fn transformed(&self, t: &Transform) -> TriangleMesh {
+    /// a mirroring transform so geometric normals keep their side. An error where the
+    /// transform takes a vertex out of the finite floats (a huge scale of a large mesh).
+    pub fn transformed(&self, t: &Transform) -> Result<TriangleMesh, GeometryError> {
         let positions = self.positions.iter().map(|&p| t.point(p)).collect();
         let normals = self.normals.as_ref().map(|ns| {
             ns.iter()
@@ -208,7 +209,6 @@ impl TriangleMesh {
             self.indices.clone()
         };
         TriangleMesh::new(positions, indices, normals, self.uvs.clone(), tangents)
-            .expect("a regular transform keeps a mesh valid")
     }
 
     pub fn positions(&self) -> &[Vec3] {
@@ -416,9 +416,26 @@ mod tests {
     }
 
     #[test]
+    fn transform_out_of_the_finite_floats_is_an_error() {
+        let far = TriangleMesh::new(
+            vec![Vec3::new(3e38, 0.0, 0.0), Vec3::Y, Vec3::Z],
+            vec![[0, 1, 2]],
+            None,
+            None,
+            None,
+        )
+        .unwrap();
+        let t = Transform::scale(Vec3::splat(10.0)).unwrap();
+        assert!(matches!(
+            far.transformed(&t),
+            Err(GeometryError::BadMesh { .. })
+        ));
+    }
+
+    #[test]
     fn mirroring_transform_keeps_normals_outward() {
         let t = Transform::scale(Vec3::new(-1.0, 2.0, 0.5)).unwrap();
-        let b = TriangleMesh::cuboid().transformed(&t);
+        let b = TriangleMesh::cuboid().transformed(&t).unwrap();
         for i in 0..12 {
             let (p, ng, ..) = b.surface(i, 0.3, 0.3);
             assert!(ng.dot(p) > 0.0, "face {i}: p {p:?} ng {ng:?}");

@@ -93,7 +93,7 @@ impl ShapeGeometry {
     /// translation, uniform scale): anything else is an error, as an ellipsoid is not a sphere.
     pub fn transformed(&self, t: &Transform) -> Result<ShapeGeometry, GeometryError> {
         match self {
-            ShapeGeometry::Mesh(m) => Ok(ShapeGeometry::Mesh(m.transformed(t))),
+            ShapeGeometry::Mesh(m) => Ok(ShapeGeometry::Mesh(m.transformed(t)?)),
             ShapeGeometry::Sphere { centre, radius } => {
                 let axes = [t.vector(Vec3::X), t.vector(Vec3::Y), t.vector(Vec3::Z)];
                 let s = axes[0].length();

@@ -160,22 +160,26 @@ fn test_scene() -> Vec<Shape> {
         .then(&Transform::translate(Vec3::new(0.5, 0.0, 0.2)));
     vec![
         shape(ShapeGeometry::Mesh(
-            uv_sphere_mesh(12, 20, 1.0).transformed(&t),
+            uv_sphere_mesh(12, 20, 1.0).transformed(&t).unwrap(),
         )),
         shape(ShapeGeometry::sphere(Vec3::new(-1.5, 0.5, 0.0), 0.7).unwrap()),
         shape(ShapeGeometry::Mesh(
-            TriangleMesh::rectangle().transformed(
-                &Transform::scale(Vec3::splat(3.0))
-                    .unwrap()
-                    .then(&Transform::translate(Vec3::new(0.0, 0.0, -1.0))),
-            ),
+            TriangleMesh::rectangle()
+                .transformed(
+                    &Transform::scale(Vec3::splat(3.0))
+                        .unwrap()
+                        .then(&Transform::translate(Vec3::new(0.0, 0.0, -1.0))),
+                )
+                .unwrap(),
         )),
         shape(ShapeGeometry::Mesh(
-            TriangleMesh::cuboid().transformed(
-                &Transform::scale(Vec3::new(0.5, 0.2, 0.4))
-                    .unwrap()
-                    .then(&Transform::translate(Vec3::new(1.0, 1.5, 0.0))),
-            ),
+            TriangleMesh::cuboid()
+                .transformed(
+                    &Transform::scale(Vec3::new(0.5, 0.2, 0.4))
+                        .unwrap()
+                        .then(&Transform::translate(Vec3::new(1.0, 1.5, 0.0))),
+                )
+                .unwrap(),
         )),
     ]
 }
@@ -373,8 +377,9 @@ fn hits_very_close_to_the_origin_are_found() {
         indices.push([base, base + 1, base + 2]);
     }
     let tri = TriangleMesh::new(positions, indices, None, None, None).unwrap();
-    let far =
-        TriangleMesh::rectangle().transformed(&Transform::translate(Vec3::new(0.0, 0.0, 5.0)));
+    let far = TriangleMesh::rectangle()
+        .transformed(&Transform::translate(Vec3::new(0.0, 0.0, 5.0)))
+        .unwrap();
     for kind in [BvhKind::Bvh4, BvhKind::Cwbvh, BvhKind::Bvh2] {
         let g = Geometry::with_bvh(
             vec![
@@ -452,8 +457,9 @@ fn smooth_normals_are_interpolated_onto_the_geometric_side() {
 #[test]
 fn mesh_area_sampling_is_uniform_per_face() {
     // A box with unequal faces: the face hit by each sample must follow area / total (chi-square).
-    let mesh =
-        TriangleMesh::cuboid().transformed(&Transform::scale(Vec3::new(0.5, 1.0, 2.0)).unwrap());
+    let mesh = TriangleMesh::cuboid()
+        .transformed(&Transform::scale(Vec3::new(0.5, 1.0, 2.0)).unwrap())
+        .unwrap();
     let s = shape(ShapeGeometry::Mesh(mesh.clone()));
     let area = s.area();
     assert!((area - 2.0 * (1.0 * 2.0 + 1.0 * 4.0 + 2.0 * 4.0)).abs() < 1e-4);
@@ -506,7 +512,9 @@ fn uv_footprint_on_a_plane_matches_the_pinhole_value() {
     // The rectangle scaled by 5: uv = (x + 5) / 10, so du = dx / 10. A pinhole at height h looking
     // down with directions (x, y, -1): a pixel step delta in x moves the hit by h delta.
     let g = Geometry::new(vec![shape(ShapeGeometry::Mesh(
-        TriangleMesh::rectangle().transformed(&Transform::scale(Vec3::splat(5.0)).unwrap()),
+        TriangleMesh::rectangle()
+            .transformed(&Transform::scale(Vec3::splat(5.0)).unwrap())
+            .unwrap(),
     ))]);
     let (h, delta) = (3.0f32, 0.01f32);
     let o = Vec3::new(0.0, 0.0, h);

@@ -55,7 +55,8 @@ impl Transform {
         if m.row(3) != Vec4::new(0.0, 0.0, 0.0, 1.0) {
             return Err(bad("not affine (bottom row must be 0 0 0 1)"));
         }
-        let lin = Mat3::from_mat4(m);
+        // In f64, so that the determinant of a large but regular matrix does not overflow.
+        let lin = Mat3::from_mat4(m).as_dmat3();
         let det = lin.determinant();
         // Relative to the scale of the matrix, so tiny but regular scales are accepted.
         let scale = lin.x_axis.length() * lin.y_axis.length() * lin.z_axis.length();
@@ -64,7 +65,7 @@ impl Transform {
         }
         let inv = m.inverse();
         if !inv.is_finite() {
-            return Err(bad("singular"));
+            return Err(bad("too large or too small to invert in single precision"));
         }
         Ok(Transform { m, inv })
     }
@@ -213,7 +214,15 @@ pub enum ScaleSpec {
 impl TransformOp {
     pub fn to_transform(&self) -> Result<Transform, GeometryError> {
         match self {
-            TransformOp::Translate(t) => Ok(Transform::translate(Vec3::from(*t))),
+            TransformOp::Translate(t) => {
+                let t = Vec3::from(*t);
+                if !t.is_finite() {
+                    return Err(GeometryError::BadTransform {
+                        reason: format!("translation {t:?} is not finite"),
+                    });
+                }
+                Ok(Transform::translate(t))
+            }
             TransformOp::Scale(ScaleSpec::Uniform(s)) => Transform::scale(Vec3::splat(*s)),
             TransformOp::Scale(ScaleSpec::PerAxis(s)) => Transform::scale(Vec3::from(*s)),
             TransformOp::Rotate { axis, angle } => Transform::rotate(Vec3::from(*axis), *angle),
@@ -225,11 +234,21 @@ impl TransformOp {
     }
 }
 
-/// Applies the operations in the order listed (the first acts on the object first).
+/// Applies the operations in the order listed (the first acts on the object first). Each
+/// operation is regular on its own; their product must also stay finite (two scales of 1e30
+/// overflow).
 pub fn transform_from_ops(ops: &[TransformOp]) -> Result<Transform, GeometryError> {
     let mut t = Transform::IDENTITY;
     for op in ops {
         t = t.then(&op.to_transform()?);
+    }
+    if !(t.m.is_finite() && t.inv.is_finite()) {
+        return Err(GeometryError::BadTransform {
+            reason: format!(
+                "the operations' product overflows: matrix (row-major) {:?}",
+                t.m.transpose().to_cols_array_2d()
+            ),
+        });
     }
     Ok(t)
 }

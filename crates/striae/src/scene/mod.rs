@@ -567,7 +567,11 @@ fn shape_geometry(
             // Newell's teapot is z-up with its base at z = 0; scenes are y-up.
             let z_up_to_y_up =
                 crate::geometry::Transform::rotate(Vec3::X, -90.0).expect("valid rotation");
-            ShapeGeometry::Mesh(TriangleMesh::teapot(n).transformed(&z_up_to_y_up))
+            ShapeGeometry::Mesh(
+                TriangleMesh::teapot(n)
+                    .transformed(&z_up_to_y_up)
+                    .expect("a rotation keeps the built-in teapot finite"),
+            )
         }
         ShapeType::Rectangle => ShapeGeometry::Mesh(TriangleMesh::rectangle()),
         ShapeType::Box => ShapeGeometry::Mesh(TriangleMesh::cuboid()),
