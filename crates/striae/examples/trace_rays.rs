@@ -61,18 +61,16 @@ fn run(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
     (hits, sum)
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
-unsafe fn run_avx2(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
-    run(scene, rays, query)
+striae::loop_copy_avx2! {
+    unsafe fn run_avx2(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
+        run(scene, rays, query)
+    }
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(
-    enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512vl,avx512bw,avx512dq,avx512cd"
-)]
-unsafe fn run_avx512(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
-    run(scene, rays, query)
+striae::loop_copy_avx512! {
+    unsafe fn run_avx512(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
+        run(scene, rays, query)
+    }
 }
 
 /// The queries compiled as the render loop's copy that `striae render` runs on this CPU.

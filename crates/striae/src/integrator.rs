@@ -597,28 +597,51 @@ fn render_tile(
     }
 }
 
-/// `$name`: [`render_tile_body`] compiled for the instruction sets `$features` (one copy of
-/// the render loop, [`LoopCopy`]); to be called only where the CPU has them.
-macro_rules! render_loop_copy {
-    ($name:ident, $features:literal) => {
+/// Items compiled for the AVX2 copy of the render loop ([`LoopCopy::Avx2`]; `x86_64` only):
+/// to be called only where the CPU has its instruction sets. Exported so that tools run code as
+/// the render loop does (the `trace_rays` example) without repeating the feature lists.
+#[macro_export]
+macro_rules! loop_copy_avx2 {
+    ($($item:item)*) => {$(
         #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = $features)]
-        unsafe fn $name<const DIFFERENTIALS: bool>(
-            scene: &Scene,
-            rect: [u32; 4],
-            pass: Pass,
-            counters: &mut Counters,
-        ) -> Vec<Rgb> {
-            render_tile_body::<DIFFERENTIALS>(scene, rect, pass, counters)
+        #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+        $item
+    )*};
+}
+
+/// Items compiled for the AVX-512 copy of the render loop ([`LoopCopy::Avx512`]), as
+/// [`loop_copy_avx2!`].
+#[macro_export]
+macro_rules! loop_copy_avx512 {
+    ($($item:item)*) => {$(
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(
+            enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512vl,avx512bw,avx512dq,avx512cd"
+        )]
+        $item
+    )*};
+}
+
+/// `$name`: [`render_tile_body`] compiled by `$copy` ([`loop_copy_avx2!`] or
+/// [`loop_copy_avx512!`]) for the instruction sets of one copy of the render loop
+/// ([`LoopCopy`]).
+macro_rules! render_loop_copy {
+    ($copy:ident, $name:ident) => {
+        $copy! {
+            unsafe fn $name<const DIFFERENTIALS: bool>(
+                scene: &Scene,
+                rect: [u32; 4],
+                pass: Pass,
+                counters: &mut Counters,
+            ) -> Vec<Rgb> {
+                render_tile_body::<DIFFERENTIALS>(scene, rect, pass, counters)
+            }
         }
     };
 }
 
-render_loop_copy!(render_tile_avx2, "avx2,fma,bmi1,bmi2,lzcnt,popcnt");
-render_loop_copy!(
-    render_tile_avx512,
-    "avx2,fma,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512vl,avx512bw,avx512dq,avx512cd"
-);
+render_loop_copy!(loop_copy_avx2, render_tile_avx2);
+render_loop_copy!(loop_copy_avx512, render_tile_avx512);
 
 /// The tile's pixels, with (`DIFFERENTIALS`, `pass.differentials`) or without ray
 /// differentials.
