@@ -89,6 +89,82 @@ impl TableParams {
     }
 }
 
+/// Check that every `.npy` array of a `.npz` archive declares no more data (its header's shape
+/// times its item size) than the archive entry holds, so that a corrupt or hostile header
+/// (shape `(3, 100000, 100000)` in a small file) is an error instead of a 240 GB allocation
+/// that aborts the process: ndarray-npy allocates what the header declares before it reads.
+fn check_npz_sizes(file: std::fs::File) -> Result<(), String> {
+    use std::io::Read;
+    let mut zip = zip::ZipArchive::new(std::io::BufReader::new(file)).map_err(|e| e.to_string())?;
+    for i in 0..zip.len() {
+        let mut entry = zip.by_index(i).map_err(|e| e.to_string())?;
+        let name = entry.name().to_string();
+        if !name.ends_with(".npy") {
+            continue;
+        }
+        let size = entry.size();
+        // Magic, version, header length (2 bytes in format 1.0, 4 in 2.0 and 3.0).
+        let mut lead = [0u8; 12];
+        entry
+            .read_exact(&mut lead[..10])
+            .map_err(|e| format!("`{name}`: {e}"))?;
+        if &lead[..6] != b"\x93NUMPY" {
+            return Err(format!("`{name}` is not an .npy array"));
+        }
+        let (header_len, start) = if lead[6] == 1 {
+            (u16::from_le_bytes([lead[8], lead[9]]) as u64, 10)
+        } else {
+            entry
+                .read_exact(&mut lead[10..])
+                .map_err(|e| format!("`{name}`: {e}"))?;
+            (
+                u32::from_le_bytes([lead[8], lead[9], lead[10], lead[11]]) as u64,
+                12,
+            )
+        };
+        if start + header_len > size {
+            return Err(format!(
+                "`{name}`: header longer than the array's {size} bytes"
+            ));
+        }
+        let mut header = String::new();
+        entry
+            .by_ref()
+            .take(header_len)
+            .read_to_string(&mut header)
+            .map_err(|e| format!("`{name}`: {e}"))?;
+        let declared = npy_header_bytes(&header)
+            .ok_or_else(|| {
+                format!("`{name}`: no readable item size and shape (or their product overflows) in header {header:?}")
+            })?;
+        if declared > size - start - header_len {
+            return Err(format!(
+                "`{name}` declares {declared} bytes of data in header {:?} but holds {}",
+                header.trim_end(),
+                size - start - header_len
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The data size an `.npy` header declares: the product of its `shape` times the item size at
+/// the end of its `descr` (`'<f8'`: 8); `None` if either cannot be read or the product overflows.
+fn npy_header_bytes(header: &str) -> Option<u64> {
+    let after = |key: &str| header.split_once(key).map(|(_, rest)| rest);
+    let descr = after("'descr':")?.trim_start().strip_prefix('\'')?;
+    let descr = &descr[..descr.find('\'')?];
+    let digits = descr.trim_start_matches(|c: char| !c.is_ascii_digit());
+    let item: u64 = digits.parse().ok()?;
+    let shape = after("'shape':")?.trim_start().strip_prefix('(')?;
+    let shape = &shape[..shape.find(')')?];
+    shape
+        .split(',')
+        .map(str::trim)
+        .filter(|d| !d.is_empty())
+        .try_fold(item, |acc, d| acc.checked_mul(d.parse::<u64>().ok()?))
+}
+
 /// Errors computing, reading or writing a table.
 #[derive(Debug, thiserror::Error)]
 pub enum TableError {
@@ -267,10 +343,14 @@ impl ScratchTable {
     /// Read and validate a table written by [`ScratchTable::save`].
     pub fn load(path: &Path) -> Result<Self, TableError> {
         let p = || path.to_path_buf();
-        let file = std::fs::File::open(path).map_err(|e| TableError::Io {
-            path: p(),
-            source: e,
-        })?;
+        let open = || {
+            std::fs::File::open(path).map_err(|e| TableError::Io {
+                path: p(),
+                source: e,
+            })
+        };
+        check_npz_sizes(open()?).map_err(|why| TableError::Npz { path: p(), why })?;
+        let file = open()?;
         let mut npz =
             NpzReader::new(std::io::BufReader::new(file)).map_err(|e| TableError::Npz {
                 path: p(),
@@ -1152,6 +1232,28 @@ mod tests {
         let f = dir.join("trunc.npz");
         std::fs::write(&f, &bytes[..bytes.len() / 2]).unwrap();
         assert!(ScratchTable::load(&f).is_err());
+        // A header declaring far more data than the file holds (240 GB): an error, not an
+        // allocation that aborts. The entries are stored uncompressed, so the header is edited
+        // in place, its padding absorbing the longer shape.
+        let at = |needle: &[u8], from: usize| {
+            from + bytes[from..]
+                .windows(needle.len())
+                .position(|w| w == needle)
+                .unwrap()
+        };
+        let start = at(b"'shape': (3, ", 0);
+        let end = at(b"\n", start);
+        let mut huge = bytes.clone();
+        let mut header = b"'shape': (3, 100000, 100000)}".to_vec();
+        header.resize(end - start, b' ');
+        huge[start..end].copy_from_slice(&header);
+        let f = dir.join("huge.npz");
+        std::fs::write(&f, &huge).unwrap();
+        let err = ScratchTable::load(&f).unwrap_err();
+        assert!(
+            matches!(err, TableError::Npz { .. }) && err.to_string().contains("240000000000"),
+            "{err}"
+        );
         // Hand-made incompatible files.
         let write = |name: &str, edit: &dyn Fn(&mut NpzWriter<std::fs::File>)| {
             let f = dir.join(name);
