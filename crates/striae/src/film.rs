@@ -19,6 +19,10 @@ pub struct Image {
 pub enum FilmError {
     #[error("cannot write {path}: {message}")]
     Write { path: PathBuf, message: String },
+    /// A failure of a set of outputs as a whole (a destination that is a folder, a rename);
+    /// the message names the file.
+    #[error("{0}")]
+    Outputs(String),
 }
 
 impl From<std::io::Error> for FilmError {
@@ -73,22 +77,49 @@ impl Image {
     /// compressed and written in order on the calling thread, so the same image always gives
     /// the same bytes (the crate's parallel writer stores them in the order they finish).
     pub fn write_exr(&self, path: &Path) -> Result<(), FilmError> {
-        use exr::prelude::{Image, SpecificChannels, WritableImage};
-        crate::io::write_atomically(path, |tmp| {
-            let channels = SpecificChannels::rgb(|pos: exr::math::Vec2<usize>| {
-                let p = self.pixels[pos.1 * self.width as usize + pos.0];
-                (p.x, p.y, p.z)
-            });
-            Image::from_channels((self.width as usize, self.height as usize), channels)
-                .write()
-                .non_parallel()
-                .to_file(tmp)
-                .map_err(|e| FilmError::Write {
-                    path: path.to_path_buf(),
-                    message: e.to_string(),
-                })
+        crate::io::write_atomically(path, |tmp| self.exr_into(tmp, path))
+            .map_err(|e| with_path(path, e))
+    }
+
+    /// Write the EXR and the PNG preview together: both or neither
+    /// ([`crate::io::write_all_atomically`]).
+    pub fn write_exr_and_png(
+        &self,
+        exr: &Path,
+        png: &Path,
+        exposure: f32,
+    ) -> Result<(), FilmError> {
+        crate::io::write_all_atomically(vec![
+            (exr, Box::new(|tmp: &Path| self.exr_into(tmp, exr))),
+            (
+                png,
+                Box::new(|tmp: &Path| self.png_into(tmp, png, exposure)),
+            ),
+        ])
+        .map_err(|e| match e {
+            // A folder or rename error of the pair, which names its file.
+            FilmError::Write { path, message } if path.as_os_str().is_empty() => {
+                FilmError::Outputs(message)
+            }
+            other => other,
         })
-        .map_err(|e| with_path(path, e))
+    }
+
+    /// The EXR of [`Self::write_exr`] into `tmp`, errors naming `path`.
+    fn exr_into(&self, tmp: &Path, path: &Path) -> Result<(), FilmError> {
+        use exr::prelude::{Image, SpecificChannels, WritableImage};
+        let channels = SpecificChannels::rgb(|pos: exr::math::Vec2<usize>| {
+            let p = self.pixels[pos.1 * self.width as usize + pos.0];
+            (p.x, p.y, p.z)
+        });
+        Image::from_channels((self.width as usize, self.height as usize), channels)
+            .write()
+            .non_parallel()
+            .to_file(tmp)
+            .map_err(|e| FilmError::Write {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })
     }
 
     /// The 8-bit sRGB preview: scaled by `2^exposure`, clamped, sRGB-encoded, rounded.
@@ -106,22 +137,22 @@ impl Image {
 
     /// Write the PNG preview (see [`Image::to_srgb8`]).
     pub fn write_png(&self, path: &Path, exposure: f32) -> Result<(), FilmError> {
-        let bytes = self.to_srgb8(exposure);
-        crate::io::write_atomically(path, |tmp| {
-            let img =
-                image::RgbImage::from_raw(self.width, self.height, bytes).ok_or_else(|| {
-                    FilmError::Write {
-                        path: path.to_path_buf(),
-                        message: "image buffer size mismatch".into(),
-                    }
-                })?;
-            img.save_with_format(tmp, image::ImageFormat::Png)
-                .map_err(|e| FilmError::Write {
-                    path: path.to_path_buf(),
-                    message: e.to_string(),
-                })
-        })
-        .map_err(|e| with_path(path, e))
+        crate::io::write_atomically(path, |tmp| self.png_into(tmp, path, exposure))
+            .map_err(|e| with_path(path, e))
+    }
+
+    /// The PNG of [`Self::write_png`] into `tmp`, errors naming `path`.
+    fn png_into(&self, tmp: &Path, path: &Path, exposure: f32) -> Result<(), FilmError> {
+        let img = image::RgbImage::from_raw(self.width, self.height, self.to_srgb8(exposure))
+            .ok_or_else(|| FilmError::Write {
+                path: path.to_path_buf(),
+                message: "image buffer size mismatch".into(),
+            })?;
+        img.save_with_format(tmp, image::ImageFormat::Png)
+            .map_err(|e| FilmError::Write {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })
     }
 }
 
@@ -163,6 +194,17 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("b.png"), "{err}");
+        // The pair: a PNG that cannot be written leaves no EXR either.
+        std::fs::create_dir(dir.join("c.png")).unwrap();
+        let err = img
+            .write_exr_and_png(&dir.join("c.exr"), &dir.join("c.png"), 0.0)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("c.png"), "{err}");
+        assert!(!dir.join("c.exr").exists());
+        img.write_exr_and_png(&dir.join("d.exr"), &dir.join("d.png"), 0.0)
+            .unwrap();
+        assert!(dir.join("d.exr").is_file() && dir.join("d.png").is_file());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -23,17 +23,49 @@ pub fn write_atomically<E>(path: &Path, write: impl FnOnce(&Path) -> Result<(), 
 where
     E: From<std::io::Error>,
 {
-    let tmp = temp_path(path);
-    match write(&tmp) {
-        Ok(()) => std::fs::rename(&tmp, path).map_err(|e| {
+    write_all_atomically(vec![(path, Box::new(write))])
+}
+
+/// One file of [`write_all_atomically`]: where it goes, and what fills a temporary file.
+pub type Output<'a, E> = (&'a Path, Box<dyn FnOnce(&Path) -> Result<(), E> + 'a>);
+
+/// Write several files as one (a render's EXR and PNG): every temporary file is filled first,
+/// and only when all are complete, and no destination is a folder, are they renamed into
+/// place. A failure before the renames leaves every destination untouched and no temporary
+/// file behind; only a rename failing midway (the filesystem itself failing) can leave some
+/// files renamed and not others.
+pub fn write_all_atomically<E>(outputs: Vec<Output<'_, E>>) -> Result<(), E>
+where
+    E: From<std::io::Error>,
+{
+    let remove = |written: &[(PathBuf, &Path)]| {
+        for (tmp, _) in written {
+            let _ = std::fs::remove_file(tmp);
+        }
+    };
+    let mut written = Vec::with_capacity(outputs.len());
+    for (path, write) in outputs {
+        let tmp = temp_path(path);
+        if let Err(e) = write(&tmp) {
             let _ = std::fs::remove_file(&tmp);
-            E::from(e)
-        }),
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            Err(e)
+            remove(&written);
+            return Err(e);
+        }
+        written.push((tmp, path));
+    }
+    if let Some((_, path)) = written.iter().find(|(_, path)| path.is_dir()) {
+        let e = std::io::Error::other(format!("{} is a folder", path.display()));
+        remove(&written);
+        return Err(E::from(e));
+    }
+    for (i, (tmp, path)) in written.iter().enumerate() {
+        if let Err(e) = std::fs::rename(tmp, path) {
+            remove(&written[i..]);
+            let e = std::io::Error::new(e.kind(), format!("renaming to {}: {e}", path.display()));
+            return Err(E::from(e));
         }
     }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -58,6 +90,45 @@ mod tests {
         );
         write_atomically::<std::io::Error>(&out, |p| std::fs::write(p, b"done")).unwrap();
         assert_eq!(std::fs::read(&out).unwrap(), b"done");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_set_of_files_is_written_whole_or_not_at_all() {
+        let dir = std::env::temp_dir().join(format!("striae-io-set-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (a, b) = (dir.join("a.bin"), dir.join("b.bin"));
+        std::fs::write(&a, b"old").unwrap();
+        let write = |text: &'static [u8]| -> Box<dyn FnOnce(&Path) -> std::io::Result<()>> {
+            Box::new(move |p| std::fs::write(p, text))
+        };
+        // The second file fails: the first keeps its old content, no temporary file is left.
+        let fail: Box<dyn FnOnce(&Path) -> std::io::Result<()>> =
+            Box::new(|_| Err(std::io::Error::other("boom")));
+        assert!(
+            write_all_atomically(vec![(a.as_path(), write(b"new")), (b.as_path(), fail)]).is_err()
+        );
+        assert_eq!(std::fs::read(&a).unwrap(), b"old");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+        // A destination that is a folder: nothing renamed, nothing left.
+        std::fs::create_dir(&b).unwrap();
+        let err = write_all_atomically(vec![
+            (a.as_path(), write(b"new")),
+            (b.as_path(), write(b"x")),
+        ])
+        .unwrap_err();
+        assert!(err.to_string().contains("b.bin is a folder"), "{err}");
+        assert_eq!(std::fs::read(&a).unwrap(), b"old");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 2);
+        // Both written.
+        std::fs::remove_dir(&b).unwrap();
+        write_all_atomically(vec![
+            (a.as_path(), write(b"new")),
+            (b.as_path(), write(b"x")),
+        ])
+        .unwrap();
+        assert_eq!(std::fs::read(&a).unwrap(), b"new");
+        assert_eq!(std::fs::read(&b).unwrap(), b"x");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -167,11 +167,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.finish_and_clear();
 
     image
-        .write_exr(&exr_path)
-        .with_context(|| format!("writing {}", exr_path.display()))?;
-    image
-        .write_png(&png_path, scene.settings.exposure)
-        .with_context(|| format!("writing {}", png_path.display()))?;
+        .write_exr_and_png(&exr_path, &png_path, scene.settings.exposure)
+        .with_context(|| format!("writing {} and {}", exr_path.display(), png_path.display()))?;
     eprintln!(
         "done in {:.2} s: {:.3} M samples/s, {:.2} M rays/s ({} rays, {} render loop){}",
         stats.seconds,
