@@ -99,12 +99,10 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let (a, b) = (dir.join("a.bin"), dir.join("b.bin"));
         std::fs::write(&a, b"old").unwrap();
-        let write = |text: &'static [u8]| -> Box<dyn FnOnce(&Path) -> std::io::Result<()>> {
-            Box::new(move |p| std::fs::write(p, text))
-        };
+        type Writer = Box<dyn FnOnce(&Path) -> std::io::Result<()>>;
+        let write = |text: &'static [u8]| -> Writer { Box::new(move |p| std::fs::write(p, text)) };
         // The second file fails: the first keeps its old content, no temporary file is left.
-        let fail: Box<dyn FnOnce(&Path) -> std::io::Result<()>> =
-            Box::new(|_| Err(std::io::Error::other("boom")));
+        let fail: Writer = Box::new(|_| Err(std::io::Error::other("boom")));
         assert!(
             write_all_atomically(vec![(a.as_path(), write(b"new")), (b.as_path(), fail)]).is_err()
         );
