@@ -1,6 +1,7 @@
 //! Bad values never panic: every number of two scene files (one with every shape, material,
 //! light and transform kind, one scratched) is replaced in turn by NaN, infinities, zero, -1 and
-//! extremes; each variant must load and render, or fail with an error naming the file. (A
+//! extremes, and every quoted value by an empty, an unknown and a missing-file one; each variant
+//! must load and render, or fail with an error naming the file. (A
 //! random fuzzer over the shipped scenes found non-finite translations panicking at load;
 //! this sweep covers that class systematically.) Tiny images, about a second in all.
 
@@ -162,13 +163,32 @@ fn numbers(text: &str) -> Vec<(usize, usize)> {
     out
 }
 
-fn sweep(name: &str, text: &str, dir: &Path) -> usize {
+/// Byte ranges of the quoted values in `text` (quotes included): the strings after a `=`.
+fn strings(text: &str) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut from = 0;
+    while let Some(k) = text[from..].find("= \"") {
+        let start = from + k + 2;
+        let end = start + 1 + text[start + 1..].find('"').unwrap() + 1;
+        out.push((start, end));
+        from = end;
+    }
+    out
+}
+
+/// Each span of `text` replaced in turn by each of `replacements`: every variant must load and
+/// render, or fail with an error naming the file. Returns how many loaded.
+fn sweep(
+    name: &str,
+    text: &str,
+    dir: &Path,
+    spans: &[(usize, usize)],
+    replacements: &[&str],
+) -> usize {
     let file = dir.join(name);
-    let spans = numbers(text);
-    assert!(spans.len() > 20, "{name}: only {} numbers", spans.len());
     let mut loaded = 0;
-    for &(a, b) in &spans {
-        for r in REPLACEMENTS {
+    for &(a, b) in spans {
+        for r in replacements {
             let variant = format!("{}{r}{}", &text[..a], &text[b..]);
             let outcome = catch_unwind(AssertUnwindSafe(|| {
                 match Scene::parse(&variant, &file, dir, &Overrides::default()) {
@@ -191,7 +211,7 @@ fn sweep(name: &str, text: &str, dir: &Path) -> usize {
 }
 
 #[test]
-fn every_number_of_a_scene_replaced_by_a_bad_value_loads_or_errors_without_panicking() {
+fn every_value_of_a_scene_replaced_by_a_bad_one_loads_or_errors_without_panicking() {
     let dir = std::env::temp_dir().join(format!("striae-robustness-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(
@@ -218,8 +238,26 @@ fn every_number_of_a_scene_replaced_by_a_bad_value_loads_or_errors_without_panic
         Scene::parse(text, &dir.join(name), &dir, &Overrides::default())
             .unwrap_or_else(|e| panic!("{e}"));
     }
-    let loaded =
-        sweep("everything.toml", EVERYTHING, &dir) + sweep("scratched.toml", SCRATCHED, &dir);
+    let mut loaded = 0;
+    for (name, text) in [
+        ("everything.toml", EVERYTHING),
+        ("scratched.toml", SCRATCHED),
+    ] {
+        let spans = numbers(text);
+        assert!(spans.len() > 20, "{name}: only {} numbers", spans.len());
+        loaded += sweep(name, text, &dir, &spans, &REPLACEMENTS);
+        // Every quoted value (a type, a material name, a path, a preset, a profile) empty,
+        // unknown, or a file that does not exist.
+        let spans = strings(text);
+        assert!(spans.len() > 5, "{name}: only {} strings", spans.len());
+        loaded += sweep(
+            name,
+            text,
+            &dir,
+            &spans,
+            &["\"\"", "\"x\"", "\"missing.obj\""],
+        );
+    }
     // Many replacements are legal (0 seed, 1e30 radiance...) and rendered: the sweep reached
     // the render loop, not only the parser.
     assert!(loaded > 50, "only {loaded} variants loaded");
