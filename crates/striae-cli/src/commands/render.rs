@@ -49,11 +49,11 @@ pub struct Args {
     pub quiet: bool,
 }
 
-/// `--threads`: a count of at least 1.
 /// Most worker threads a command accepts: more than any machine's cores, and few enough that a
 /// typo (`--threads 1000000`) is an error instead of minutes spent starting threads.
 const MAX_THREADS: usize = 4096;
 
+/// `--threads`: a count from 1 to [`MAX_THREADS`].
 pub(crate) fn parse_threads(s: &str) -> Result<usize, String> {
     match s.parse::<usize>() {
         Ok(n) if (1..=MAX_THREADS).contains(&n) => Ok(n),
