@@ -7,9 +7,10 @@ runs past a time limit, any failure whose message does not name the file at faul
 failure that leaves an output file behind.
 
 * `scenes`: the shipped scenes (their scratch tables shrunk to M 32, N 300, N_r 5, so that
-  tables compute in milliseconds) and a scene using every shape, material, light and file kind,
-  with one to eight random mutations each: values replaced by NaN, infinities, extremes, wrong
-  types, empty or unknown strings; keys deleted, misspelt or added; lists cut or lengthened.
+  tables compute in milliseconds) and `crates/striae/tests/data/every-kind.toml` (every shape,
+  material, light and file kind), with one to eight random mutations each: values replaced by
+  NaN, infinities, extremes, wrong types, empty or unknown strings; keys deleted, misspelt or
+  added; lists cut or lengthened.
 * `files`: the OBJ mesh, the EXR environment map, the PNG texture, a scratch table (`.npz`) and
   a profile file, truncated, with bytes flipped or inserted, emptied or replaced, read by
   `render`, `plot` and `precompute`.
@@ -36,114 +37,8 @@ import tomllib
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.join(HERE, "..")
 
-EVERYTHING = """
-[render]
-width = 16
-height = 12
-spp = 2
-max_depth = 8
-rr_depth = 3
-seed = 2
-exposure = 0.5
-sampler = "independent"
-
-[camera]
-position = [0.0, 2.6, 6.0]
-look_at = [0.0, 0.7, 0.0]
-up = [0.0, 1.0, 0.0]
-fov = 30.0
-aperture_radius = 0.05
-focus_distance = 6.2
-
-[materials.floor]
-type = "diffuse"
-reflectance = { type = "checkerboard", color0 = [0.8, 0.8, 0.8], color1 = [0.1, 0.1, 0.1], scale = 8.0 }
-
-[materials.wood]
-type = "diffuse"
-reflectance = { type = "image", path = "wood.png", srgb = true, scale = 1.0 }
-
-[materials.rough]
-type = "dielectric"
-ior = 1.5
-ext_ior = 1.0
-roughness = 0.2
-
-[materials.gold]
-type = "conductor"
-preset = "gold"
-roughness = 0.1
-
-[materials.metal]
-type = "conductor"
-eta = [0.143, 0.375, 1.442]
-k = [3.983, 2.386, 1.603]
-
-[materials.scratched]
-type = "scratched"
-base = "glass"
-ior = 1.5
-
-[materials.scratched.scratches]
-table = "t.npz"
-setting = 1
-layers = 4
-seed = 1
-layer_mix = "sum"
-
-[[shapes]]
-type = "mesh"
-path = "tet.obj"
-material = "wood"
-transform = [{ scale = 0.5 }, { translate = [1, 0, 0] }]
-
-[[shapes]]
-type = "rectangle"
-material = "floor"
-transform = [{ scale = 6.0 }, { rotate = { axis = [1, 0, 0], angle = -90 } }]
-
-[[shapes]]
-type = "box"
-material = "scratched"
-transform = { scale = [0.5, 0.5, 0.1] }
-
-[[shapes]]
-type = "sphere"
-center = [-1.0, 1.0, 0.0]
-radius = 0.5
-material = "gold"
-
-[[shapes]]
-type = "teapot"
-subdivisions = 2
-material = "metal"
-transform = { matrix = [[0.2, 0, 0, 0], [0, 0.2, 0, 0], [0, 0, 0.2, 1], [0, 0, 0, 1]] }
-
-[[shapes]]
-type = "rectangle"
-emission = [12.0, 11.0, 10.0]
-transform = [{ look_at = { origin = [-1.5, 4.0, 1.5], target = [0, 0, 0], up = [0, 1, 0] } }]
-
-[[shapes]]
-type = "sphere"
-center = [2.0, 3.0, 0.0]
-radius = 0.3
-emission = 5.0
-
-[environment]
-type = "map"
-path = "sky.exr"
-scale = 1.0
-transform = { rotate = { axis = [0, 1, 0], angle = 90 } }
-
-[[lights]]
-type = "sun"
-direction = [0.3, 1.0, 0.2]
-irradiance = [3.0, 3.0, 3.0]
-"""
-
-TET = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nvt 0 0\nvt 1 0\nvt 0 1\nvn 0 0 -1\n" \
-      "f 1/1 3/3 2/2\nf 1/1 2/2 4/3\nf 1/1 4/3 3/2\nf 2/1 3/2 4/3\n"
+# Every shape, material, light, transform and input-file kind (shared with tests/robustness.rs).
+DATA = os.path.join(ROOT, "crates", "striae", "tests", "data")
 PROFILE = "# x z\n0 0\n1.2 -0.8\n2 -1.1\n3.1 -0.4\n4 0\n"
 
 
@@ -165,8 +60,8 @@ def prepare(striae, base, env):
             text = "\n".join(f"{key} = {small}" if line.startswith(f"{key} = ") else line
                              for line in text.split("\n"))
         open(os.path.join(base, name), "w").write(text)
-    open(os.path.join(base, "everything.toml"), "w").write(EVERYTHING)
-    open(os.path.join(base, "tet.obj"), "w").write(TET)
+    for name in ("every-kind.toml", "tet.obj"):
+        shutil.copy(os.path.join(DATA, name), os.path.join(base, name))
     open(os.path.join(base, "prof.txt"), "w").write(PROFILE)
     for cmd in ([striae, "precompute", "--m", "16", "--n", "100", "--nr", "4", "-o", "t.npz"],
                 [striae, "render", "glass-plate.toml", "--spp", "1", "--res", "8x4", "-q", "-o", "sky"]):
@@ -330,10 +225,10 @@ def corrupt_bytes(rng, data):
 
 OUTPUTS = ("out.exr", "out.png", "plot.png", "pout.npz")
 FILE_TARGETS = [
-    ("tet.obj", ["render", "everything.toml"]),
-    ("sky.exr", ["render", "everything.toml"]),
-    ("wood.png", ["render", "everything.toml"]),
-    ("t.npz", ["render", "everything.toml"]),
+    ("tet.obj", ["render", "every-kind.toml"]),
+    ("sky.exr", ["render", "every-kind.toml"]),
+    ("wood.png", ["render", "every-kind.toml"]),
+    ("t.npz", ["render", "every-kind.toml"]),
     ("t.npz", ["plot", "t.npz", "-o", "plot.png"]),
     ("prof.txt", ["precompute", "--profile", "file:prof.txt", "--m", "8", "--n", "50", "--nr", "2",
                   "-o", "pout.npz"]),

@@ -1,5 +1,5 @@
-//! Bad values never panic: every number of two scene files (one with every shape, material,
-//! light and transform kind, one scratched) is replaced in turn by NaN, infinities, zero, -1 and
+//! Bad values never panic: every number of two scene files (`data/every-kind.toml`, with every
+//! shape, material, light, transform and input-file kind, and a scratched plate) is replaced in turn by NaN, infinities, zero, -1 and
 //! extremes, and every quoted value by an empty, an unknown and a missing-file one; each variant
 //! must load and render, or fail with an error naming the file. (A
 //! random fuzzer over the shipped scenes found non-finite translations panicking at load;
@@ -7,98 +7,16 @@
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
+use striae::film::Image;
 use striae::integrator::render;
+use striae::math::Rgb;
 use striae::profile::Profile;
 use striae::scene::{Overrides, Scene};
 use striae::table::{ScratchTable, TableParams};
 use striae::trace2d::TraceSettings;
 
-const EVERYTHING: &str = r#"
-[render]
-width = 4
-height = 3
-spp = 1
-max_depth = 6
-rr_depth = 2
-seed = 3
-exposure = 0.5
-
-[camera]
-position = [0.0, 2.6, 6.0]
-look_at = [0.0, 0.7, 0.0]
-up = [0.0, 1.0, 0.0]
-fov = 30.0
-aperture_radius = 0.05
-focus_distance = 6.2
-
-[materials.floor]
-type = "diffuse"
-reflectance = { type = "checkerboard", color0 = [0.8, 0.8, 0.8], color1 = [0.1, 0.1, 0.1], scale = 8.0 }
-
-[materials.rough]
-type = "dielectric"
-ior = 1.5
-ext_ior = 1.0
-roughness = 0.2
-
-[materials.gold]
-type = "conductor"
-preset = "gold"
-roughness = 0.1
-
-[materials.metal]
-type = "conductor"
-eta = [0.143, 0.375, 1.442]
-k = [3.983, 2.386, 1.603]
-
-[[shapes]]
-type = "mesh"
-path = "tet.obj"
-material = "floor"
-transform = [{ scale = 0.5 }, { translate = [1.0, 0.0, 0.0] }]
-
-[[shapes]]
-type = "rectangle"
-material = "floor"
-transform = [{ scale = 6.0 }, { rotate = { axis = [1.0, 0.0, 0.0], angle = -90.0 } }]
-
-[[shapes]]
-type = "box"
-material = "rough"
-transform = { scale = [0.5, 0.5, 0.1] }
-
-[[shapes]]
-type = "sphere"
-center = [-1.0, 1.0, 0.0]
-radius = 0.5
-material = "gold"
-
-[[shapes]]
-type = "teapot"
-subdivisions = 2
-material = "metal"
-transform = { matrix = [[0.2, 0.0, 0.0, 0.0], [0.0, 0.2, 0.0, 0.0], [0.0, 0.0, 0.2, 1.0], [0.0, 0.0, 0.0, 1.0]] }
-
-[[shapes]]
-type = "rectangle"
-emission = [12.0, 11.0, 10.0]
-transform = [{ look_at = { origin = [-1.5, 4.0, 1.5], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] } }]
-
-[[shapes]]
-type = "sphere"
-center = [2.0, 3.0, 0.0]
-radius = 0.3
-emission = 5.0
-
-[environment]
-type = "constant"
-radiance = [0.25, 0.3, 0.4]
-
-[[lights]]
-type = "sun"
-direction = [0.3, 1.0, 0.2]
-irradiance = [3.0, 3.0, 3.0]
-"#;
+/// Every kind of shape, material, light, transform and input file.
+const EVERYTHING: &str = include_str!("data/every-kind.toml");
 
 const SCRATCHED: &str = r#"
 [render]
@@ -214,11 +132,14 @@ fn sweep(
 fn every_value_of_a_scene_replaced_by_a_bad_one_loads_or_errors_without_panicking() {
     let dir = std::env::temp_dir().join(format!("striae-robustness-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    std::fs::write(
-        dir.join("tet.obj"),
-        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
-    )
-    .unwrap();
+    // The files the scenes name.
+    std::fs::write(dir.join("tet.obj"), include_str!("data/tet.obj")).unwrap();
+    let mut image = Image::new(8, 4);
+    for (i, p) in image.pixels.iter_mut().enumerate() {
+        *p = Rgb::splat(0.1 + 0.05 * (i % 7) as f32);
+    }
+    image.write_exr(&dir.join("sky.exr")).unwrap();
+    image.write_png(&dir.join("wood.png"), 0.0).unwrap();
     let trace = TraceSettings {
         m: 8,
         n: 40,
