@@ -147,3 +147,24 @@ fn bad_input_is_a_clear_error_and_leaves_nothing() {
     .success());
     assert!(!out.exists());
 }
+
+#[test]
+fn a_file_that_cannot_be_written_leaves_the_folder_as_it_was() {
+    // `layer-3.png` is a folder and `layer-1.png` an old file: the run fails naming the
+    // folder, the old file keeps its content, and nothing else is written.
+    let out = tmp("partial-write");
+    std::fs::create_dir_all(out.join("layer-3.png")).unwrap();
+    std::fs::write(out.join("layer-1.png"), b"old").unwrap();
+    let o = striae(&["--res", "32", "-o", out.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("layer-3.png is a folder"), "{err}");
+    assert_eq!(std::fs::read(out.join("layer-1.png")).unwrap(), b"old");
+    let mut left: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    left.sort();
+    assert_eq!(left, ["layer-1.png", "layer-3.png"]);
+    let _ = std::fs::remove_dir_all(&out);
+}

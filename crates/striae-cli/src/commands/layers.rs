@@ -150,25 +150,31 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// Write every file atomically; on failure remove what this call wrote (and the folder if it
-/// created it).
+/// Write every file, all or none ([`striae::io::write_all_atomically`]: a failure leaves the
+/// folder's old files as they were), and remove the folder again if this call created it.
 fn write_all(dir: &Path, files: &[(String, Vec<u8>)]) -> Result<()> {
     let created = !dir.exists();
     std::fs::create_dir_all(dir).with_context(|| format!("could not create {}", dir.display()))?;
-    let mut written = Vec::new();
-    for (name, bytes) in files {
-        let path = dir.join(name);
-        let r = striae::io::write_atomically(&path, |tmp| std::fs::write(tmp, bytes));
-        if let Err(e) = r {
-            for p in &written {
-                let _ = std::fs::remove_file(p);
-            }
-            if created {
-                let _ = std::fs::remove_dir(dir);
-            }
-            return Err(e).with_context(|| format!("could not write {}", path.display()));
+    let paths: Vec<PathBuf> = files.iter().map(|(name, _)| dir.join(name)).collect();
+    let outputs: Vec<striae::io::Output<'_, std::io::Error>> = paths
+        .iter()
+        .zip(files)
+        .map(
+            |(path, (_, bytes))| -> striae::io::Output<'_, std::io::Error> {
+                let write = move |tmp: &Path| {
+                    std::fs::write(tmp, bytes).map_err(|e| {
+                        std::io::Error::new(e.kind(), format!("{}: {e}", path.display()))
+                    })
+                };
+                (path.as_path(), Box::new(write))
+            },
+        )
+        .collect();
+    if let Err(e) = striae::io::write_all_atomically(outputs) {
+        if created {
+            let _ = std::fs::remove_dir(dir);
         }
-        written.push(path);
+        return Err(e).with_context(|| format!("could not write the files to {}", dir.display()));
     }
     Ok(())
 }
