@@ -156,7 +156,7 @@ fn write_all(dir: &Path, files: &[(String, Vec<u8>)]) -> Result<()> {
     let created = !dir.exists();
     std::fs::create_dir_all(dir).with_context(|| format!("could not create {}", dir.display()))?;
     let paths: Vec<PathBuf> = files.iter().map(|(name, _)| dir.join(name)).collect();
-    let outputs: Vec<striae::io::Output<'_, std::io::Error>> = paths
+    let outputs = paths
         .iter()
         .zip(files)
         .map(
@@ -166,7 +166,7 @@ fn write_all(dir: &Path, files: &[(String, Vec<u8>)]) -> Result<()> {
                         std::io::Error::new(e.kind(), format!("{}: {e}", path.display()))
                     })
                 };
-                (path.as_path(), Box::new(write))
+                (path, Box::new(write))
             },
         )
         .collect();
