@@ -1,9 +1,10 @@
-//! Bad values never panic: every number of two scene files (`data/every-kind.toml`, with every
-//! shape, material, light, transform and input-file kind, and a scratched plate) is replaced in turn by NaN, infinities, zero, -1 and
-//! extremes, and every quoted value by an empty, an unknown and a missing-file one; each variant
-//! must load and render, or fail with an error naming the file. (A
-//! random fuzzer over the shipped scenes found non-finite translations panicking at load;
-//! this sweep covers that class systematically.) Tiny images, about a second in all.
+//! Bad values never panic: every number of two scene files (`data/every-kind.toml`, with
+//! every shape, material, light, transform and input-file kind, and a scratched plate) is
+//! replaced in turn by NaN, infinities, zero, -1 and extremes, and every quoted value by an
+//! empty, an unknown and a missing-file one; each variant must load and render, or fail with
+//! an error naming the file. (A random fuzzer over the shipped scenes found non-finite
+//! translations panicking at load; this sweep covers that class systematically.) Tiny images,
+//! about a second in all.
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
@@ -65,6 +66,10 @@ fn numbers(text: &str) -> Vec<(usize, usize)> {
         let c = b[i];
         if c == b'"' {
             in_string = !in_string;
+        } else if c == b'#' && !in_string {
+            // A comment: to the end of its line.
+            i += text[i..].find('\n').unwrap_or(text.len() - i);
+            continue;
         } else if !in_string
             && (c.is_ascii_digit() || c == b'-')
             && (i == 0 || b" =[,{".contains(&b[i - 1]))
@@ -81,14 +86,18 @@ fn numbers(text: &str) -> Vec<(usize, usize)> {
     out
 }
 
-/// Byte ranges of the quoted values in `text` (quotes included): the strings after a `=`.
+/// Byte ranges of the quoted values in `text` (quotes included): the strings after a `=`,
+/// outside comment lines.
 fn strings(text: &str) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     let mut from = 0;
     while let Some(k) = text[from..].find("= \"") {
         let start = from + k + 2;
         let end = start + 1 + text[start + 1..].find('"').unwrap() + 1;
-        out.push((start, end));
+        let line = text[..start].rfind('\n').map_or(0, |n| n + 1);
+        if !text[line..start].trim_start().starts_with('#') {
+            out.push((start, end));
+        }
         from = end;
     }
     out
