@@ -21,6 +21,12 @@ block of 8 x 4 pixels), set against Mitsuba's
 `intersect`; secondary rays share no origin and fall back to one at a time. The hit counts must
 agree; the script stops if they do not.
 
+With `--rays FILE` the sets are instead the rays of a file, in its order (`file`) and shuffled
+(`shuffled`): `scripts/mitsuba_rays.py --dump` keeps the rays of a Mitsuba render in the order
+its wavefront traces them (16 samples of one pixel a packet), so the two sets show how much
+each traversal gains from that order. Mitsuba's LLVM variants hand Embree the rays of an array
+in packets of 16 consecutive rays (`rtcIntersect16`), as in its renders.
+
     cargo build --release && cargo build --release -p striae --example trace_rays
     DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM-19.so \\
         python3 scripts/bench_traversal.py scenes/glass-teapot.toml [--variant llvm_ad_rgb]
@@ -125,6 +131,8 @@ def main():
     ap.add_argument("--variant", default="llvm_ad_rgb")
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--rays", help="instead, rays from this file (six little-endian f32 a ray, e.g. from "
+                    "`mitsuba_rays.py --dump`): set `file` in the file's order, set `shuffled` permuted")
     ap.add_argument("--striae", default=os.path.join(ROOT, "target", "release", "striae"))
     ap.add_argument("--example", default=os.path.join(ROOT, "target", "release", "examples", "trace_rays"))
     a = ap.parse_args()
@@ -145,7 +153,14 @@ def main():
     print(f"{a.scene}, one thread, medians of {a.repeats}; Mitsuba {mi.__version__} {a.variant}")
     print(f"{'rays':10s} {'query':18s} {'count':>8s} {'hits':>8s} {'striae Mrays/s':>15s} "
           f"{'Mitsuba Mrays/s':>16s} {'striae/Mitsuba':>15s}")
-    for name, (o, d) in rays_of(scene, mi, res, a.seed).items():
+    if a.rays:
+        r = np.fromfile(a.rays, dtype="<f4").reshape(-1, 6)
+        shuffled = r[np.random.default_rng(a.seed).permutation(len(r))]
+        sets = {name: (np.ascontiguousarray(x[:, :3]), np.ascontiguousarray(x[:, 3:]))
+                for name, x in (("file", r), ("shuffled", shuffled))}
+    else:
+        sets = rays_of(scene, mi, res, a.seed)
+    for name, (o, d) in sets.items():
         m = time_mitsuba(scene, mi, dr, o, d, a.repeats)
         s = time_striae(a.example, a.scene, o, d, a.repeats, tmp)
         n = len(o)
