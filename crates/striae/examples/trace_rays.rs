@@ -31,14 +31,19 @@ enum Query {
 }
 
 /// Runs `query` over `rays`: the number of hits and a checksum the optimiser cannot drop.
+/// Plain `for` loops: an iterator adapter (`filter_map`, `count`) is compiled out of line,
+/// and out of line the queries lose the copy's target features (they ran as baseline x86-64
+/// code before session 20, `BENCHMARKS.md`).
 #[inline(always)]
 fn run(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
     let (mut hits, mut sum) = (0usize, 0.0f32);
     match query {
         Query::Intersect => {
-            for hit in rays.iter().filter_map(|ray| scene.geometry.intersect(ray)) {
-                hits += 1;
-                sum += hit.t + hit.uv.x + hit.ns.x;
+            for ray in rays {
+                if let Some(hit) = scene.geometry.intersect(ray) {
+                    hits += 1;
+                    sum += hit.t + hit.uv.x + hit.ns.x;
+                }
             }
         }
         Query::IntersectPackets => {
@@ -52,10 +57,9 @@ fn run(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
             }
         }
         Query::Occluded => {
-            hits = rays
-                .iter()
-                .filter(|ray| scene.geometry.occluded(ray))
-                .count();
+            for ray in rays {
+                hits += scene.geometry.occluded(ray) as usize;
+            }
         }
     }
     (hits, sum)
