@@ -339,7 +339,7 @@ impl Material {
     /// conductor falls back to the perfect mirror).
     /// A scratched material gives its smooth base here (its scratches need the whole
     /// shading context: `scene::material_bsdf`).
-    #[inline]
+    #[inline(always)]
     pub fn bsdf_at(&self, uv: Vec2) -> Bsdf<'_> {
         match self {
             Material::Diffuse { reflectance } => Bsdf::Diffuse(Diffuse::new(reflectance.eval(uv))),

@@ -206,7 +206,7 @@ pub enum Texture {
 impl Texture {
     /// The texture's value at `uv`. An image texture not yet loaded evaluates to 0.5 grey
     /// (callers load images when they load the scene).
-    #[inline]
+    #[inline(always)]
     pub fn eval(&self, uv: Vec2) -> Rgb {
         match self {
             Texture::Constant(c) => *c,

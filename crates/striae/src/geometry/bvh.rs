@@ -602,8 +602,12 @@ impl Geometry {
         assert!(rays.len() <= PACKET);
         hits.clear();
         if let (Accel::Bvh4(bvh), 2..) = (&self.accel, rays.len()) {
-            let wrays: ArrayVec<WatertightRay, PACKET> =
-                rays.iter().map(WatertightRay::new).collect();
+            // (Loops of `push` rather than `collect` / `extend` here and below: those are
+            // compiled out of line, where the render loop's copy loses its target features.)
+            let mut wrays = ArrayVec::<WatertightRay, PACKET>::new();
+            for ray in rays {
+                wrays.push(WatertightRay::new(ray));
+            }
             let origin = rays[0].o.to_array().map(f32::to_bits);
             let kz = wrays[0].kz;
             let shared = rays
@@ -656,21 +660,19 @@ impl Geometry {
         hits: &mut ArrayVec<Option<SurfaceHit>, PACKET>,
     ) -> bool {
         let mut packet = PacketLeaves {
-            rays: rays
-                .iter()
-                .zip(wrays)
-                .map(|(ray, wray)| {
-                    let leaves = Bvh4Leaves::<KZ> {
-                        geometry: self,
-                        wray,
-                        ray,
-                        best: None,
-                    };
-                    (leaves, ray.t_max)
-                })
-                .collect(),
+            rays: ArrayVec::new(),
         };
-        let dirs: ArrayVec<Vec3, PACKET> = rays.iter().map(|r| r.d).collect();
+        let mut dirs = ArrayVec::<Vec3, PACKET>::new();
+        for (ray, wray) in rays.iter().zip(wrays) {
+            let leaves = Bvh4Leaves::<KZ> {
+                geometry: self,
+                wray,
+                ray,
+                best: None,
+            };
+            packet.rays.push((leaves, ray.t_max));
+            dirs.push(ray.d);
+        }
         let largest = rays
             .iter()
             .map(|r| r.t_max)
@@ -678,12 +680,14 @@ impl Geometry {
         if !bvh.closest_packet(rays[0].o, &dirs, largest, &mut packet) {
             return false;
         }
-        hits.extend(packet.rays.iter().map(|(leaves, _)| {
+        for (leaves, _) in &packet.rays {
             let ray = leaves.ray;
-            leaves
-                .best
-                .map(|(id, t, b1, b2)| self.surface_hit(ray, id, t, b1, b2))
-        }));
+            hits.push(
+                leaves
+                    .best
+                    .map(|(id, t, b1, b2)| self.surface_hit(ray, id, t, b1, b2)),
+            );
+        }
         true
     }
 
