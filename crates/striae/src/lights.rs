@@ -316,7 +316,7 @@ mod tests {
     fn rectangle_light_area_sampling_matches_its_pdf() {
         let t = Transform::rotate(Vec3::X, 90.0)
             .unwrap()
-            .then(&Transform::translate(Vec3::new(0.5, 1.5, 0.0)));
+            .then(&Transform::translate(Vec3::new(0.5, 1.5, 0.0)).unwrap());
         check_light(
             ShapeGeometry::Mesh(TriangleMesh::rectangle().transformed(&t).unwrap()),
             Vec3::ZERO,

@@ -93,7 +93,7 @@ impl TableParams {
 /// times its item size) than the archive entry holds, so that a corrupt or hostile header
 /// (shape `(3, 100000, 100000)` in a small file) is an error instead of a 240 GB allocation
 /// that aborts the process: ndarray-npy allocates what the header declares before it reads.
-fn check_npz_sizes(file: std::fs::File) -> Result<(), String> {
+fn check_npz_sizes(file: &std::fs::File) -> Result<(), String> {
     use std::io::Read;
     let mut zip = zip::ZipArchive::new(std::io::BufReader::new(file)).map_err(|e| e.to_string())?;
     for i in 0..zip.len() {
@@ -342,15 +342,16 @@ impl ScratchTable {
 
     /// Read and validate a table written by [`ScratchTable::save`].
     pub fn load(path: &Path) -> Result<Self, TableError> {
+        use std::io::Seek;
         let p = || path.to_path_buf();
-        let open = || {
-            std::fs::File::open(path).map_err(|e| TableError::Io {
-                path: p(),
-                source: e,
-            })
+        let io = |e| TableError::Io {
+            path: p(),
+            source: e,
         };
-        check_npz_sizes(open()?).map_err(|why| TableError::Npz { path: p(), why })?;
-        let file = open()?;
+        // One handle for the size check and the read, so both see the same file.
+        let mut file = std::fs::File::open(path).map_err(io)?;
+        check_npz_sizes(&file).map_err(|why| TableError::Npz { path: p(), why })?;
+        file.rewind().map_err(io)?;
         let mut npz =
             NpzReader::new(std::io::BufReader::new(file)).map_err(|e| TableError::Npz {
                 path: p(),

@@ -157,7 +157,7 @@ fn closed_mesh_is_watertight_at_shared_edges_and_vertices() {
 fn test_scene() -> Vec<Shape> {
     let t = Transform::rotate(Vec3::new(1.0, 2.0, 0.5), 40.0)
         .unwrap()
-        .then(&Transform::translate(Vec3::new(0.5, 0.0, 0.2)));
+        .then(&Transform::translate(Vec3::new(0.5, 0.0, 0.2)).unwrap());
     vec![
         shape(ShapeGeometry::Mesh(
             uv_sphere_mesh(12, 20, 1.0).transformed(&t).unwrap(),
@@ -168,7 +168,7 @@ fn test_scene() -> Vec<Shape> {
                 .transformed(
                     &Transform::scale(Vec3::splat(3.0))
                         .unwrap()
-                        .then(&Transform::translate(Vec3::new(0.0, 0.0, -1.0))),
+                        .then(&Transform::translate(Vec3::new(0.0, 0.0, -1.0)).unwrap()),
                 )
                 .unwrap(),
         )),
@@ -177,7 +177,7 @@ fn test_scene() -> Vec<Shape> {
                 .transformed(
                     &Transform::scale(Vec3::new(0.5, 0.2, 0.4))
                         .unwrap()
-                        .then(&Transform::translate(Vec3::new(1.0, 1.5, 0.0))),
+                        .then(&Transform::translate(Vec3::new(1.0, 1.5, 0.0)).unwrap()),
                 )
                 .unwrap(),
         )),
@@ -378,7 +378,7 @@ fn hits_very_close_to_the_origin_are_found() {
     }
     let tri = TriangleMesh::new(positions, indices, None, None, None).unwrap();
     let far = TriangleMesh::rectangle()
-        .transformed(&Transform::translate(Vec3::new(0.0, 0.0, 5.0)))
+        .transformed(&Transform::translate(Vec3::new(0.0, 0.0, 5.0)).unwrap())
         .unwrap();
     for kind in [BvhKind::Bvh4, BvhKind::Cwbvh, BvhKind::Bvh2] {
         let g = Geometry::with_bvh(
@@ -550,7 +550,7 @@ fn sphere_transform_rejects_non_uniform_scale() {
         .transformed(
             &Transform::scale(Vec3::splat(2.0))
                 .unwrap()
-                .then(&Transform::translate(Vec3::X)),
+                .then(&Transform::translate(Vec3::X).unwrap()),
         )
         .unwrap();
     assert!(

@@ -75,11 +75,17 @@ impl Transform {
         Transform::from_matrix(Mat4::from_cols_array_2d(&rows).transpose())
     }
 
-    pub fn translate(t: Vec3) -> Transform {
-        Transform {
+    /// Translate by `t`; every component must be finite.
+    pub fn translate(t: Vec3) -> Result<Transform, GeometryError> {
+        if !t.is_finite() {
+            return Err(GeometryError::BadTransform {
+                reason: format!("translation {t:?} is not finite"),
+            });
+        }
+        Ok(Transform {
             m: Mat4::from_translation(t),
             inv: Mat4::from_translation(-t),
-        }
+        })
     }
 
     /// Scale by `s` per axis; every component must be non-zero and finite.
@@ -214,15 +220,7 @@ pub enum ScaleSpec {
 impl TransformOp {
     pub fn to_transform(&self) -> Result<Transform, GeometryError> {
         match self {
-            TransformOp::Translate(t) => {
-                let t = Vec3::from(*t);
-                if !t.is_finite() {
-                    return Err(GeometryError::BadTransform {
-                        reason: format!("translation {t:?} is not finite"),
-                    });
-                }
-                Ok(Transform::translate(t))
-            }
+            TransformOp::Translate(t) => Transform::translate(Vec3::from(*t)),
             TransformOp::Scale(ScaleSpec::Uniform(s)) => Transform::scale(Vec3::splat(*s)),
             TransformOp::Scale(ScaleSpec::PerAxis(s)) => Transform::scale(Vec3::from(*s)),
             TransformOp::Rotate { axis, angle } => Transform::rotate(Vec3::from(*axis), *angle),
@@ -290,7 +288,7 @@ mod tests {
         let t = Transform::scale(Vec3::new(2.0, 1.0, 1.0))
             .unwrap()
             .then(&Transform::rotate(Vec3::Z, 90.0).unwrap())
-            .then(&Transform::translate(Vec3::new(0.0, 0.0, 1.0)));
+            .then(&Transform::translate(Vec3::new(0.0, 0.0, 1.0)).unwrap());
         // (1,0,0) -> scale (2,0,0) -> rotate (0,2,0) -> translate (0,2,1)
         assert!(close(t.point(Vec3::X), Vec3::new(0.0, 2.0, 1.0)));
         assert!(close(t.vector(Vec3::X), Vec3::new(0.0, 2.0, 0.0)));
@@ -313,7 +311,7 @@ mod tests {
     }
 
     #[test]
-    fn rejects_singular_and_non_affine() {
+    fn rejects_singular_non_affine_and_non_finite() {
         assert!(Transform::scale(Vec3::new(1.0, 0.0, 1.0)).is_err());
         assert!(Transform::from_rows([
             [1.0, 0.0, 0.0, 0.0],
@@ -331,6 +329,11 @@ mod tests {
         .is_err());
         assert!(Transform::rotate(Vec3::ZERO, 10.0).is_err());
         assert!(Transform::look_at(Vec3::ZERO, Vec3::Z, Vec3::Z).is_err());
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            assert!(Transform::translate(Vec3::new(0.0, bad, 1.0)).is_err());
+            assert!(Transform::scale(Vec3::new(1.0, bad, 1.0)).is_err());
+        }
+        assert!(Transform::translate(Vec3::new(1.0, -2.0, 3.0)).is_ok());
     }
 
     #[test]
