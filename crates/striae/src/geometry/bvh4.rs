@@ -1,11 +1,12 @@
 //! A wide BVH with SIMD box tests, collapsed from obvhs' binary BVH (PLOC + reinsertion), in
 //! the style of Embree's BVH4/BVH8 (Wald et al. 2014, "Embree: A Kernel Framework for Efficient
 //! CPU Ray Tracing"): every node stores its children's boxes as structure-of-arrays, one row
-//! of [`WIDTH`] = 8 lanes per slab, so one node visit tests all children at once: the lane
-//! loops of the box test compile to 256-bit AVX instructions in the AVX2 and AVX-512 copies of
-//! the render loop and to pairs of SSE instructions in the portable copy (`BENCHMARKS.md`,
-//! "Renderer speed, session 3"; session 2's version tested two `Vec4` groups, which LLVM did
-//! not merge).
+//! of [`WIDTH`] = 8 lanes per slab, so one node visit tests all children at once (`BENCHMARKS.md`,
+//! "Renderer speed, session 3"). The lane loops of the box test compile to pairs of 128-bit
+//! instructions in every copy of the render loop, to match the two `movmskps` halves of the hit
+//! mask ([`lanes_le`]): a lane loop for the mask built it bit by bit, and 256-bit intrinsics
+//! behind a feature check measured 3-4 % faster per secondary ray, but cannot be chosen per copy without
+//! a run-time check in the portable one (session 20).
 //! The type keeps its first name, `Bvh4`, from when nodes had four children.
 //!
 //! * **Collapse**: starting from a binary node's two children, the interior child of largest
@@ -210,8 +211,8 @@ impl NodeTest for BoxRay {
 /// `near_t(axis, b - o)` to its near slabs and `far_t(axis, b - o)` to its far slabs, entered at
 /// the largest near one (at least 0) and left at the smallest far one (scaled by
 /// [`T_FAR_SCALE`], at most `t_max`); `(entry distances, hit mask)`. Written as loops over the
-/// [`WIDTH`] lanes: the AVX2 copy of the render loop runs each step as one 256-bit
-/// instruction, the portable copy as two SSE ones; both compute the same IEEE operations.
+/// [`WIDTH`] lanes, which every copy of the render loop runs as pairs of 128-bit instructions
+/// (see the module doc); all copies compute the same IEEE operations.
 #[inline(always)]
 fn slab_test(
     node: &Node4,
