@@ -5,8 +5,8 @@
 //! "Renderer speed, session 3"). The lane loops of the box test compile to pairs of 128-bit
 //! instructions in every copy of the render loop, to match the two `movmskps` halves of the hit
 //! mask ([`lanes_le`]): a lane loop for the mask built it bit by bit, and 256-bit intrinsics
-//! behind a feature check measured 3-4 % faster per secondary ray, but cannot be chosen per copy without
-//! a run-time check in the portable one (session 20).
+//! behind a feature check measured 3-4 % faster per secondary ray, but cannot be chosen per
+//! copy without a run-time check in the portable one (session 20).
 //! The type keeps its first name, `Bvh4`, from when nodes had four children.
 //!
 //! * **Collapse**: starting from a binary node's two children, the interior child of largest
