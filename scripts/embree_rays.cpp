@@ -2,15 +2,20 @@
 //
 // `scripts/bench_traversal.py` times Embree through Mitsuba, whose LLVM variants hand it rays in
 // packets of 16 consecutive rays. This times Mitsuba's own copy of Embree 3 directly, built as
-// Mitsuba builds it (`RTC_BUILD_QUALITY_HIGH`, no scene flags, one thread), on the same
-// triangles, three ways: `rtcIntersect1` ray by ray, `rtcIntersect16` on runs of 16
-// consecutive rays of the file, and `rtcOccluded1`. Set against striae's single-ray figures
-// (`trace_rays`), it tells the traversal apart from the packet calls.
+// Mitsuba builds it (`RTC_BUILD_QUALITY_HIGH`, no scene flags, one thread; with `--robust`,
+// `RTC_SCENE_FLAG_ROBUST`, Embree's conservative mode), on the same triangles, four ways:
+// * `intersect1`: `rtcIntersect1` ray by ray;
+// * `intersect16`: `rtcIntersect16` on runs of 16 consecutive rays of the file;
+// * `intersect16_7`: `rtcIntersect16` on runs of 7 rays (9 lanes invalid): Embree 3's hybrid
+//   intersector traces a call of at most 7 valid rays one ray at a time, so this is its
+//   single-ray traversal without `rtcIntersect1`'s per-call cost;
+// * `occluded1`: `rtcOccluded1` ray by ray.
+// Set against striae's figures (`trace_rays`), it tells the traversal apart from the calls.
 //
 //   M=$(python3 -c "import mitsuba, os; print(os.path.dirname(mitsuba.__file__))")
 //   g++ -O2 -std=c++17 -I$M/include -o /tmp/embree_rays scripts/embree_rays.cpp $M/libembree3.so -Wl,-rpath,$M
 //   target/release/striae render scenes/glass-teapot.toml --export-meshes /tmp/meshes
-//   /tmp/embree_rays RAYS.f32 /tmp/meshes/*.obj
+//   /tmp/embree_rays [--robust] RAYS.f32 /tmp/meshes/*.obj
 //
 // RAYS.f32: six little-endian f32 a ray (origin, direction), t in (0, inf), as
 // `scripts/mitsuba_rays.py --dump` writes them. The OBJ reader takes `v` and `f` lines only
@@ -72,8 +77,13 @@ static void set_ray(RTCRay& r, const float* p) {
 }
 
 int main(int argc, char** argv) {
+    const bool robust = argc > 1 && strcmp(argv[1], "--robust") == 0;
+    if (robust) {
+        argv++;
+        argc--;
+    }
     if (argc < 3) {
-        fprintf(stderr, "usage: embree_rays RAYS.f32 MESH.obj...\n");
+        fprintf(stderr, "usage: embree_rays [--robust] RAYS.f32 MESH.obj...\n");
         return 2;
     }
     std::ifstream rf(argv[1], std::ios::binary | std::ios::ate);
@@ -88,14 +98,16 @@ int main(int argc, char** argv) {
     RTCDevice dev = rtcNewDevice("threads=1");
     RTCScene scene = rtcNewScene(dev);
     rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
+    rtcSetSceneFlags(scene, robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
     for (int i = 2; i < argc; i++)
         if (!add_obj(dev, scene, argv[i])) {
             fprintf(stderr, "%s: cannot read\n", argv[i]);
             return 1;
         }
     rtcCommitScene(scene);
-    const char* names[] = {"intersect1", "intersect16", "occluded1"};
-    for (int query = 0; query < 3; query++) {
+    const char* names[] = {"intersect1", "intersect16", "intersect16_7", "occluded1"};
+    for (int query = 0; query < 4; query++) {
+        const size_t run = query == 2 ? 7 : 16;  // rays a 16-wide call
         std::vector<double> seconds;
         size_t hits = 0;
         for (int pass = 0; pass < 6; pass++) {
@@ -111,14 +123,14 @@ int main(int argc, char** argv) {
                     rtcIntersect1(scene, &ctx, &rh);
                     hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
                 }
-            } else if (query == 1) {
-                for (size_t i = 0; i < n; i += 16) {
+            } else if (query == 1 || query == 2) {
+                for (size_t i = 0; i < n; i += run) {
                     alignas(64) RTCRayHit16 rh;
                     alignas(64) int valid[16];
                     for (int k = 0; k < 16; k++) {
                         const size_t j = std::min(i + k, n - 1);
                         const float* p = &rays[6 * j];
-                        valid[k] = i + k < n ? -1 : 0;
+                        valid[k] = size_t(k) < run && i + k < n ? -1 : 0;
                         rh.ray.org_x[k] = p[0], rh.ray.org_y[k] = p[1], rh.ray.org_z[k] = p[2];
                         rh.ray.dir_x[k] = p[3], rh.ray.dir_y[k] = p[4], rh.ray.dir_z[k] = p[5];
                         rh.ray.tnear[k] = 0.0f, rh.ray.time[k] = 0.0f, rh.ray.tfar[k] = INFINITY;
