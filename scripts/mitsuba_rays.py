@@ -20,7 +20,6 @@ import re
 import subprocess
 import sys
 import tempfile
-import tomllib
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -49,23 +48,28 @@ def main():
     embree = os.path.join(os.path.dirname(mitsuba.__file__), "libembree3.so")
     if not os.path.exists(embree):
         sys.exit(f"{embree}: not found (this Mitsuba wheel does not ship Embree 3)")
-    with open(a.scene, "rb") as f:
-        render = tomllib.load(f).get("render", {})
-    w, h = (int(x) for x in a.res.lower().split("x")) if a.res else (render.get("width", 512), render.get("height", 384))
-    samples = w * h * a.spp
     tmp = tempfile.mkdtemp()
+    # striae first: its output names the resolution (the scene's unless `--res`) and the rays.
+    p = subprocess.run([a.striae, "render", a.scene, "--spp", str(a.spp), "-o", os.path.join(tmp, "st")]
+                       + (["--res", a.res] if a.res else []), capture_output=True, text=True)
+    size = re.search(r" at (\d+)x(\d+), ", p.stdout + p.stderr)
+    rays = re.search(r"\((\d+) rays", p.stdout + p.stderr)
+    if p.returncode != 0 or not size or not rays:
+        sys.exit(f"striae failed:\n{p.stdout}{p.stderr}")
+    w, h = int(size.group(1)), int(size.group(2))
+    samples = w * h * a.spp
     shim = build_shim(tmp)
-    res = ["--res", f"{w}x{h}"]
     print(f"{a.scene}, {w}x{h}, {a.spp} spp ({samples} samples); rays a sample")
     print(f"{'renderer':22s} {'closest-hit':>12s} {'shadow':>8s} {'total':>8s} {'lanes/call':>11s}")
     for i, v in enumerate(a.variants):
         counts = os.path.join(tmp, f"{v}.txt")
         env = dict(os.environ, LD_PRELOAD=shim, EMBREE_LIB=embree, RAYCOUNT_OUT=counts)
-        if a.dump and i == len(a.variants) - 1:
+        dumping = a.dump and i == len(a.variants) - 1
+        if dumping:
             env.update(DUMP_FILE=os.path.abspath(a.dump), DUMP_EVERY=str(a.dump_every))
         p = subprocess.run([sys.executable, os.path.join(HERE, "mitsuba_scene.py"), a.scene, "-o",
                             os.path.join(tmp, f"{v}.exr"), "--spp", str(a.spp), "--variant", v,
-                            "--striae", a.striae] + res, env=env, capture_output=True, text=True)
+                            "--striae", a.striae, "--res", f"{w}x{h}"], env=env, capture_output=True, text=True)
         if p.returncode != 0 or not os.path.exists(counts):
             sys.exit(f"mitsuba {v} failed:\n{p.stdout}{p.stderr}")
         lines = [dict(zip(*[iter(line.split())] * 2)) for line in open(counts).read().splitlines()]
@@ -75,15 +79,9 @@ def main():
         hit, shadow = c["intersect"] / samples, c["occluded"] / samples
         per_call = f"{(c['intersect'] + c['occluded']) / c['packet_calls']:.1f}" if c["packet_calls"] else "-"
         print(f"{'mitsuba ' + v:22s} {hit:12.3f} {shadow:8.3f} {hit + shadow:8.3f} {per_call:>11s}")
-        if a.dump and i == len(a.variants) - 1:
+        if dumping:
             print(f"  kept {c['lanes_in_dump']} rays of {v} in {a.dump}")
-    p = subprocess.run([a.striae, "render", a.scene, "--spp", str(a.spp), "-o", os.path.join(tmp, "st")] + res,
-                       capture_output=True, text=True)
-    m = re.search(r"\((\d+) rays", p.stdout + p.stderr)
-    if p.returncode != 0 or not m:
-        sys.exit(f"striae failed:\n{p.stdout}{p.stderr}")
-    print(f"{'striae':22s} {'-':>12s} {'-':>8s} {int(m.group(1)) / samples:8.3f} {'-':>11s}")
-
+    print(f"{'striae':22s} {'-':>12s} {'-':>8s} {int(rays.group(1)) / samples:8.3f} {'-':>11s}")
 
 if __name__ == "__main__":
     main()
