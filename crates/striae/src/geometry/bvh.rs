@@ -663,6 +663,7 @@ impl Geometry {
             rays: ArrayVec::new(),
         };
         let mut dirs = ArrayVec::<Vec3, PACKET>::new();
+        let mut largest = f32::NEG_INFINITY;
         for (ray, wray) in rays.iter().zip(wrays) {
             let leaves = Bvh4Leaves::<KZ> {
                 geometry: self,
@@ -672,11 +673,8 @@ impl Geometry {
             };
             packet.rays.push((leaves, ray.t_max));
             dirs.push(ray.d);
+            largest = largest.max(ray.t_max);
         }
-        let largest = rays
-            .iter()
-            .map(|r| r.t_max)
-            .fold(f32::NEG_INFINITY, f32::max);
         if !bvh.closest_packet(rays[0].o, &dirs, largest, &mut packet) {
             return false;
         }
