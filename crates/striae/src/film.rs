@@ -19,28 +19,15 @@ pub struct Image {
 pub enum FilmError {
     #[error("cannot write {path}: {message}")]
     Write { path: PathBuf, message: String },
-    /// A failure of a set of outputs as a whole (a destination that is a folder, a rename);
-    /// the message names the file.
+    /// A failure of the outputs as a whole in [`crate::io::write_all_atomically`] (a
+    /// destination that is a folder, a rename); its message names the file.
     #[error("{0}")]
     Outputs(String),
 }
 
 impl From<std::io::Error> for FilmError {
     fn from(e: std::io::Error) -> Self {
-        FilmError::Write {
-            path: PathBuf::new(),
-            message: e.to_string(),
-        }
-    }
-}
-
-fn with_path(path: &Path, e: FilmError) -> FilmError {
-    match e {
-        FilmError::Write { path: p, message } if p.as_os_str().is_empty() => FilmError::Write {
-            path: path.to_path_buf(),
-            message,
-        },
-        other => other,
+        FilmError::Outputs(e.to_string())
     }
 }
 
@@ -78,7 +65,6 @@ impl Image {
     /// the same bytes (the crate's parallel writer stores them in the order they finish).
     pub fn write_exr(&self, path: &Path) -> Result<(), FilmError> {
         crate::io::write_atomically(path, |tmp| self.exr_into(tmp, path))
-            .map_err(|e| with_path(path, e))
     }
 
     /// Write the EXR and the PNG preview together: both or neither
@@ -96,13 +82,6 @@ impl Image {
                 Box::new(|tmp: &Path| self.png_into(tmp, png, exposure)),
             ),
         ])
-        .map_err(|e| match e {
-            // A folder or rename error of the pair, which names its file.
-            FilmError::Write { path, message } if path.as_os_str().is_empty() => {
-                FilmError::Outputs(message)
-            }
-            other => other,
-        })
     }
 
     /// The EXR of [`Self::write_exr`] into `tmp`, errors naming `path`.
@@ -138,7 +117,6 @@ impl Image {
     /// Write the PNG preview (see [`Image::to_srgb8`]).
     pub fn write_png(&self, path: &Path, exposure: f32) -> Result<(), FilmError> {
         crate::io::write_atomically(path, |tmp| self.png_into(tmp, path, exposure))
-            .map_err(|e| with_path(path, e))
     }
 
     /// The PNG of [`Self::write_png`] into `tmp`, errors naming `path`.
