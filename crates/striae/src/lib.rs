@@ -25,6 +25,7 @@
 //!   output whatever the thread count.
 
 pub mod fresnel;
+pub mod hash;
 pub mod io;
 pub mod math;
 pub mod sampling;

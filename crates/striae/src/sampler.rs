@@ -20,6 +20,7 @@
 //! provides, the dimension wraps and the seed is re-hashed, which gives an independent (still
 //! Owen-scrambled, no longer stratified against the earlier dimensions) stream.
 
+use crate::hash::splitmix64;
 use crate::math::Vec2;
 
 /// Dimensions used by the camera ray: pixel position (2) and lens position (2).
@@ -68,15 +69,6 @@ impl SamplerKind {
     }
 }
 
-/// A 64-bit finaliser (splitmix64), used to derive independent seeds.
-#[inline]
-pub fn mix64(mut x: u64) -> u64 {
-    x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    x ^ (x >> 31)
-}
-
 /// The random numbers of one sample of one pixel.
 #[derive(Clone, Debug)]
 pub struct PixelSampler {
@@ -108,7 +100,7 @@ impl PixelSampler {
     /// The stream of sample `sample_index` (< [`MAX_SPP`]) of pixel `pixel_index` under `seed`,
     /// of the given kind.
     pub fn with_kind(kind: SamplerKind, pixel_index: u64, sample_index: u32, seed: u64) -> Self {
-        let pixel_seed = mix64(mix64(seed) ^ pixel_index);
+        let pixel_seed = splitmix64(splitmix64(seed) ^ pixel_index);
         let sample_index = sample_index.min(MAX_SPP - 1);
         PixelSampler {
             kind,
@@ -154,7 +146,7 @@ impl PixelSampler {
             self.cached = if d < n {
                 sobol_set(self.shuffled_rev_index, set, self.seed)
             } else {
-                let seed = mix64(self.seed as u64 ^ ((d / n) as u64) << 32) as u32;
+                let seed = splitmix64(self.seed as u64 ^ ((d / n) as u64) << 32) as u32;
                 sobol_burley::sample_4d(self.sample_index, (d % n) / 4, seed)
             };
             self.cached_set = set;
@@ -171,7 +163,7 @@ impl PixelSampler {
         let d = self.dimension;
         self.dimension += 1;
         // The top 24 bits of a SplitMix64 output: exactly representable, in [0, 1).
-        let bits = mix64(self.key.wrapping_add(d as u64)) >> 40;
+        let bits = splitmix64(self.key.wrapping_add(d as u64)) >> 40;
         bits as f32 * (1.0 / (1u64 << 24) as f32)
     }
 
@@ -261,7 +253,7 @@ mod tests {
                 let seed_d = if d < n {
                     seed
                 } else {
-                    mix64(seed as u64 ^ ((d / n) as u64) << 32) as u32
+                    splitmix64(seed as u64 ^ ((d / n) as u64) << 32) as u32
                 };
                 assert_eq!(
                     got,

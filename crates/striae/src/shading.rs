@@ -102,7 +102,7 @@ impl PixelHit {
     /// The chain after a delta bounce off `shape` that reflected or (`transmitted`) refracted.
     #[inline]
     pub fn chain_after(chain: u64, shape: u32, transmitted: bool) -> u64 {
-        crate::sampler::mix64(chain ^ (((shape as u64) << 1 | transmitted as u64) + 1))
+        crate::hash::splitmix64(chain ^ (((shape as u64) << 1 | transmitted as u64) + 1))
     }
 }
 

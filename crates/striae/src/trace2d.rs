@@ -4,7 +4,7 @@
 //! opening at stratified (jittered) points travelling along `-(sin phi_i, cos phi_i)`, bounce
 //! off the profile's walls and are binned by their exit angle `phi_o` when they leave upward
 //! through the opening. Walls are mirrors (`specular`, [Raymond16]'s metal scratches) or
-//! Lambertian in 2D (`diffuse`, the seed's glass model, section 3.1). For diffuse walls the
+//! Lambertian in 2D (`diffuse`, the seed's glass model, section 3.1). For diffuse use walls the
 //! seed's scheme is used: from each entry point `N_r` independent walks, each choosing one
 //! random reflected direction per bounce (`sin a` uniform in `[-1, 1]` about the wall normal),
 //! each weighted `1 / N_r`. A facet albedo scales each bounce; walks still inside after
@@ -33,6 +33,7 @@
 pub const TRACER_VERSION: u32 = 2;
 
 use crate::fresnel::FresnelLaw;
+use crate::hash::{mix64, GOLDEN};
 use crate::profile::Profile;
 use rayon::prelude::*;
 use std::f64::consts::{FRAC_PI_2, PI};
@@ -338,16 +339,6 @@ impl Walls2D {
         (best != usize::MAX).then(|| (best, best_num / best_den))
     }
 }
-
-/// The SplitMix64 finaliser: a bijective 64-bit mixer.
-#[inline(always)]
-fn mix64(mut y: u64) -> u64 {
-    y = (y ^ (y >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    y = (y ^ (y >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    y ^ (y >> 31)
-}
-
-const GOLDEN: u64 = 0x9E37_79B9_7F4A_7C15;
 
 /// The key of an entry point's random streams, from `(seed, phi_i index, entry index)`
 /// (distinct for every `(row, entry)` as `row < 2^13`, `entry < 2^32`).

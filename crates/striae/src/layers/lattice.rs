@@ -397,8 +397,8 @@ impl LayerSet {
             tile.key[2],
             tile.key[3],
         ];
-        let h = key.iter().fold(0u64, |h, &k| super::worley::mix64(h ^ k)) as usize
-            & (CACHE_ENTRIES - 1);
+        let h =
+            key.iter().fold(0u64, |h, &k| crate::hash::mix64(h ^ k)) as usize & (CACHE_ENTRIES - 1);
         CACHE.with(|cache| {
             let mut cache = cache.borrow_mut();
             if cache.is_empty() {

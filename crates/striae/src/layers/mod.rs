@@ -152,12 +152,12 @@ impl LayerSet {
         let layers = (0..params.layers)
             .map(|k| {
                 // Bijective in k for a given seed, so no two layers of a set share their stream.
-                let h = worley::mix64(
-                    worley::mix64(seed ^ 0xa076_1d64_78bd_642f)
+                let h = crate::hash::mix64(
+                    crate::hash::mix64(seed ^ 0xa076_1d64_78bd_642f)
                         .wrapping_add((k as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15)),
                 );
                 let alpha = (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64) * std::f64::consts::TAU;
-                let noise_seed = worley::mix64(h ^ 0x9e37_79b9_7f4a_7c15);
+                let noise_seed = crate::hash::mix64(h ^ 0x9e37_79b9_7f4a_7c15);
                 ScratchLayer::new(k, alpha, noise_seed, &params)
             })
             .collect::<Result<Vec<_>, _>>()?;

@@ -10,6 +10,7 @@
 //! point sits in a far corner; nothing beyond the ring can matter, because F2 < 2 always).
 
 use super::LayerError;
+use crate::hash::mix64;
 use glam::DVec2;
 
 /// The result of one Worley lookup.
@@ -24,14 +25,6 @@ pub struct WorleySample {
     /// The (unwrapped) cell `[i, j]` holding the nearest feature point; `[i mod P, j mod P]` is
     /// its id within one period.
     pub cell: [i64; 2],
-}
-
-/// SplitMix64's finaliser: a bijective 64-bit mixer (Steele, Lea, Flood 2014).
-#[inline(always)]
-pub(crate) fn mix64(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }
 
 /// `floor(x)` as an integer without a libm call (baseline x86-64 has no `roundsd`); `|x| < 2^62`.
