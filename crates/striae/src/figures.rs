@@ -61,7 +61,7 @@ pub const FIG2_PHI_I_DEG: f64 = 30.0;
 /// seed's sizes `M = 256, N = 10000, N_r = 100` (about 3 s on 2 cores, then cached;
 /// the same table as the glass scenes).
 pub fn fig2_table_params() -> crate::table::TableParams {
-    let profile = crate::profile::Profile::parse(crate::scratched::DEFAULT_PROFILE)
+    let profile = crate::profile::Profile::parse(crate::scene::scratches::DEFAULT_PROFILE)
         .expect("valid built-in profile");
     crate::table::TableParams::new(profile, crate::trace2d::TraceSettings::default())
 }
@@ -137,7 +137,7 @@ fn scratch_params(scene: &Scene, name: &str) -> Result<Vec<(String, String)>, Fi
         .materials
         .iter()
         .find_map(|m| match m {
-            Material::Scratched(s) => s.prepared(),
+            Material::Scratched(s) => Some(&**s),
             _ => None,
         })
         .ok_or_else(|| FigureError::NoScratches(name.to_string()))?;
@@ -189,8 +189,7 @@ pub fn generate(
     // Fig. 2: the lobe of the glass scenes' profile at the seed's table size.
     let start = Instant::now();
     let params = fig2_table_params();
-    let table =
-        crate::scratched::obtain_table(&params).map_err(|e| FigureError::Table(Box::new(e)))?;
+    let table = crate::cache::obtain_table(&params).map_err(|e| FigureError::Table(Box::new(e)))?;
     let file = "fig2-lobe.png".to_string();
     crate::plot::plot_lobe(table.table(), FIG2_PHI_I_DEG, &dir.join(&file))?;
     let t = &params.trace;

@@ -35,12 +35,13 @@
 use crate::bsdf::Bsdf;
 use crate::film::Image;
 use crate::geometry::{Geometry, SurfaceHit, PACKET};
-use crate::material::Material;
+use crate::layers::CoverageCache;
+use crate::material::{HitView, Material};
 use crate::math::{Frame, Ray, RayDifferential, Rgb, Vec2, Vec3};
 use crate::sampler::PixelSampler;
 use crate::sampling::power_heuristic;
-use crate::scene::{material_bsdf, Scene, NO_MATERIAL};
-use crate::shading::{footprint_dp, spawn_differentials, PixelHit, ShadingContext};
+use crate::scene::{Scene, NO_MATERIAL};
+use crate::shading::{footprint_dp, hit_context, spawn_differentials, PixelHit, ShadingContext};
 use arrayvec::ArrayVec;
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
@@ -48,9 +49,6 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Side of a square tile of pixels, the unit of parallel work.
 pub const TILE: u32 = 16;
-
-/// The next render's id ([`PixelHit::render`]).
-static NEXT_RENDER: AtomicU64 = AtomicU64::new(1);
 
 /// Counters of one render.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -76,19 +74,20 @@ impl RenderStats {
     }
 }
 
-/// What every pixel of one render shares: the render's id ([`PixelHit::render`]) and whether
-/// paths carry ray differentials (only when a material reads the footprint).
+/// What every pixel of one render shares: whether paths carry ray differentials (only when a
+/// material reads the footprint).
 #[derive(Clone, Copy)]
 struct Pass {
-    id: u64,
     differentials: bool,
 }
 
-/// Per-thread counters, summed at the end of a tile.
+/// What one render worker owns: its counters, summed at the end of each tile, and its
+/// scratch-coverage caches, handed to the materials it shades.
 #[derive(Default)]
-struct Counters {
+struct Worker {
     rays: u64,
     nonfinite: u64,
+    coverage: CoverageCache,
 }
 
 /// Offset a ray origin off the surface at `p` (geometric normal `ng`) toward the side `dir`
@@ -101,22 +100,6 @@ pub fn offset_origin(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
     } else {
         p - eps * ng
     }
-}
-
-/// Bend the shading normal `ns` toward the geometric normal `ng` (same hemisphere) so that
-/// `wo` lies on the same side of it as of `ng`, with a small margin. Returns `ns` unchanged in
-/// the usual case.
-#[inline]
-pub fn guard_shading_normal(ns: Vec3, ng: Vec3, wo: Vec3) -> Vec3 {
-    const MARGIN: f32 = 1e-3;
-    let g = wo.dot(ng);
-    let side = if g >= 0.0 { 1.0 } else { -1.0 };
-    let c = wo.dot(ns) * side;
-    if c >= MARGIN {
-        return ns;
-    }
-    let t = (MARGIN - c) / g.abs().max(1e-6);
-    (ns + t * ng).normalize_or(ng)
 }
 
 /// The shading normals at the starts of a delta bounce's offset rays
@@ -243,111 +226,25 @@ impl PathDifferentials {
     }
 }
 
-/// The material's view of a hit and the BSDF it presents there.
-pub struct Shaded<'a> {
-    pub ctx: ShadingContext,
-    pub bsdf: Bsdf<'a>,
-}
-
-/// Build the shading context at `hit` seen from `wo_world` and ask the material for its BSDF.
-/// The frame handed to the material is the final one: flipped to `wo`'s side for opaque
-/// BSDFs and guarded against `wo` falling behind the shading normal ([`shading_frame`]), so
-/// the BSDF lives in `ctx.frame`.
+/// The shading context at `hit` seen from `wo_world` and the BSDF the material presents there
+/// ([`Material::shade`], with every part of the context the material may read): for tests and
+/// debugging views of the footprint.
 pub fn shade<'a>(
     material: &'a Material,
     hit: &SurfaceHit,
     rd: &RayDifferential,
     wo_world: Vec3,
     u_layer: f32,
-) -> Shaded<'a> {
-    let frame = shading_frame(hit, wo_world, material.has_transmission());
-    let ctx = hit_context(hit, Some(rd), frame, wo_world, Some(u_layer), None);
-    Shaded {
-        bsdf: material_bsdf(material, &ctx),
-        ctx,
-    }
-}
-
-/// [`shade`] for the render loop, with a footprint only when `rd` is given: without
-/// differentials it is zero (the render loop passes `None` where the material does not read
-/// the footprint: in a scene where no material does, see
-/// [`Material::reads_footprint`], and at hits where the material does not read the hit's
-/// context). `u_layer` is `Some` exactly where the material reads the hit's context
-/// ([`Material::reads_hit_context`]: the scratched material, not glass seen from inside);
-/// elsewhere the context's `u_layer` is 0.5. `pixel` tells a hit reached from the camera by
-/// delta bounces only ([`ShadingContext::pixel`]); only meaningful with `rd`. Returns the
-/// shading frame and the BSDF only: the context (about 200 bytes) is built only where the
-/// material reads it (`BENCHMARKS.md`, "Session 12").
-#[inline(always)]
-pub fn shade_with<'a>(
-    material: &'a Material,
-    hit: &SurfaceHit,
-    rd: Option<&RayDifferential>,
-    wo_world: Vec3,
-    u_layer: Option<f32>,
-    pixel: Option<PixelHit>,
-) -> (Frame, Bsdf<'a>) {
-    match material {
-        Material::Scratched(m) => {
-            let frame = shading_frame(hit, wo_world, m.has_transmission());
-            let bsdf = match u_layer {
-                Some(_) => m.bsdf(&hit_context(hit, rd, frame, wo_world, u_layer, pixel)),
-                // Glass seen from inside: its smooth base, whatever the context.
-                None => m.base_bsdf(),
-            };
-            (frame, bsdf)
-        }
-        // The other materials' BSDFs do not depend on the frame, so it is worked out after
-        // them, from the BSDF, as before: taking `material.has_transmission()` here too made
-        // the smooth close-up 3.4 % slower (code layout, `BENCHMARKS.md`, "Session 12").
-        _ => {
-            let bsdf = material.bsdf_at(hit.uv);
-            (shading_frame(hit, wo_world, bsdf.has_transmission()), bsdf)
-        }
-    }
-}
-
-/// The shading context at `hit` in `frame` (see [`shade_with`] for the options).
-#[inline(always)]
-fn hit_context(
-    hit: &SurfaceHit,
-    rd: Option<&RayDifferential>,
-    frame: Frame,
-    wo_world: Vec3,
-    u_layer: Option<f32>,
-    pixel: Option<PixelHit>,
-) -> ShadingContext {
-    ShadingContext {
-        p: hit.p,
-        uv: hit.uv,
-        rd: rd.copied(),
-        dpdu: hit.dpdu,
-        dpdv: hit.dpdv,
-        frame,
-        ng: hit.ng,
-        u_layer: u_layer.unwrap_or(0.5),
+) -> (ShadingContext, Bsdf<'a>) {
+    let view = HitView {
         wo: wo_world,
-        pixel: pixel.filter(|_| rd.is_some()),
-    }
-}
-
-/// The shading frame at `hit` seen from `wo_world` for a material that transmits or not
-/// ([`Material::has_transmission`]): the shading normal and `dP/du`, the normal flipped to
-/// `wo`'s side for opaque materials (two-sided), then guarded against `wo` falling behind it
-/// ([`guard_shading_normal`]). Worked out before the material's BSDF, which is then built
-/// once, in its final frame.
-#[inline(always)]
-fn shading_frame(hit: &SurfaceHit, wo_world: Vec3, transmits: bool) -> Frame {
-    let (mut ng, mut ns) = (hit.ng, hit.ns);
-    if !transmits && wo_world.dot(ng) < 0.0 {
-        // Opaque surfaces are two-sided: shade on wo's side.
-        ng = -ng;
-        ns = -ns;
-    }
-    let guarded = guard_shading_normal(ns, ng, wo_world);
-    // `hit.ns` itself where the guard left it equal (a zero's sign aside), as before.
-    let n = if guarded != hit.ns { guarded } else { hit.ns };
-    Frame::from_normal_tangent(n, hit.dpdu)
+        rd: Some(rd),
+        u_layer: Some(u_layer),
+        pixel: None,
+    };
+    let (frame, bsdf) = material.shade(hit, view, &mut CoverageCache::new());
+    let ctx = hit_context(hit, Some(rd), frame, wo_world, u_layer, None);
+    (ctx, bsdf)
 }
 
 /// The shading contexts along the camera ray through film position `film` (pinhole centre of
@@ -366,26 +263,26 @@ pub fn trace_contexts(scene: &Scene, film: Vec2, max_hits: usize) -> Vec<Shading
             break;
         }
         let wo_world = -ray.d;
-        let sh = shade(
+        let (ctx, bsdf) = shade(
             &scene.materials[shape.material as usize],
             &hit,
             &rd,
             wo_world,
             0.5,
         );
-        out.push(sh.ctx);
-        let wo = sh.ctx.frame.to_local(wo_world);
-        let Some(bs) = sh.bsdf.sample(wo, 0.5, Vec2::splat(0.5)) else {
+        out.push(ctx);
+        let wo = ctx.frame.to_local(wo_world);
+        let Some(bs) = bsdf.sample(wo, 0.5, Vec2::splat(0.5)) else {
             break;
         };
         if !bs.delta {
             break;
         }
-        let wi = sh.ctx.frame.to_world(bs.wi);
+        let wi = ctx.frame.to_world(bs.wi);
         let transmitted = bs.wi.z * wo.z < 0.0;
         let bounce = DeferredBounce {
             hit,
-            n: sh.ctx.frame.n,
+            n: ctx.frame.n,
             d_in: ray.d,
             wi,
             delta: true,
@@ -517,19 +414,17 @@ pub fn render_with(
     let nonfinite = AtomicU64::new(0);
     let spp = scene.settings.spp;
     let pass = Pass {
-        id: NEXT_RENDER.fetch_add(1, Ordering::Relaxed),
         differentials: scene.materials.iter().any(Material::reads_footprint),
     };
     let tiles: Vec<(u32, Vec<Rgb>)> = (0..tiles_x * tiles_y)
         .into_par_iter()
-        .map(|tile| {
+        .map_init(Worker::default, |worker, tile| {
             let (tx, ty) = (tile % tiles_x, tile / tiles_x);
             let (x0, y0) = (tx * TILE, ty * TILE);
             let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
-            let mut counters = Counters::default();
-            let out = render_tile(scene, [x0, y0, x1, y1], pass, copy, &mut counters);
-            rays.fetch_add(counters.rays, Ordering::Relaxed);
-            nonfinite.fetch_add(counters.nonfinite, Ordering::Relaxed);
+            let out = render_tile(scene, [x0, y0, x1, y1], pass, copy, worker);
+            rays.fetch_add(std::mem::take(&mut worker.rays), Ordering::Relaxed);
+            nonfinite.fetch_add(std::mem::take(&mut worker.nonfinite), Ordering::Relaxed);
             progress(out.len() as u64 * spp as u64);
             (tile, out)
         })
@@ -564,7 +459,7 @@ fn render_tile(
     rect: [u32; 4],
     pass: Pass,
     copy: LoopCopy,
-    counters: &mut Counters,
+    worker: &mut Worker,
 ) -> Vec<Rgb> {
     // One compiled loop per case, each with only its own state to keep in registers (with
     // the two changes beside it, -1.7 % instructions on the setting-1 teapot and -1.0 % on
@@ -574,26 +469,26 @@ fn render_tile(
         // SAFETY: `copy` is at most `LoopCopy::available()`, so the CPU has the features.
         LoopCopy::Avx512 => unsafe {
             return if pass.differentials {
-                render_tile_avx512::<true>(scene, rect, pass, counters)
+                render_tile_avx512::<true>(scene, rect, worker)
             } else {
-                render_tile_avx512::<false>(scene, rect, pass, counters)
+                render_tile_avx512::<false>(scene, rect, worker)
             };
         },
         // SAFETY: as above.
         LoopCopy::Avx2 => unsafe {
             return if pass.differentials {
-                render_tile_avx2::<true>(scene, rect, pass, counters)
+                render_tile_avx2::<true>(scene, rect, worker)
             } else {
-                render_tile_avx2::<false>(scene, rect, pass, counters)
+                render_tile_avx2::<false>(scene, rect, worker)
             };
         },
         LoopCopy::Portable => {}
     }
     let _ = copy;
     if pass.differentials {
-        render_tile_body::<true>(scene, rect, pass, counters)
+        render_tile_body::<true>(scene, rect, worker)
     } else {
-        render_tile_body::<false>(scene, rect, pass, counters)
+        render_tile_body::<false>(scene, rect, worker)
     }
 }
 
@@ -631,10 +526,9 @@ macro_rules! render_loop_copy {
             unsafe fn $name<const DIFFERENTIALS: bool>(
                 scene: &Scene,
                 rect: [u32; 4],
-                pass: Pass,
-                counters: &mut Counters,
+                worker: &mut Worker,
             ) -> Vec<Rgb> {
-                render_tile_body::<DIFFERENTIALS>(scene, rect, pass, counters)
+                render_tile_body::<DIFFERENTIALS>(scene, rect, worker)
             }
         }
     };
@@ -649,13 +543,12 @@ render_loop_copy!(loop_copy_avx512, render_tile_avx512);
 fn render_tile_body<const DIFFERENTIALS: bool>(
     scene: &Scene,
     [x0, y0, x1, y1]: [u32; 4],
-    pass: Pass,
-    counters: &mut Counters,
+    worker: &mut Worker,
 ) -> Vec<Rgb> {
     let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
     for y in y0..y1 {
         for x in x0..x1 {
-            out.push(render_pixel::<DIFFERENTIALS>(scene, x, y, pass, counters));
+            out.push(render_pixel::<DIFFERENTIALS>(scene, x, y, worker));
         }
     }
     out
@@ -668,18 +561,28 @@ enum CameraHit {
     Untraced,
 }
 
-/// Sample `s` of pixel `(x, y)` (index `pixel_index`) up to its camera ray: the sampler, past
-/// the camera's dimensions, the ray and its differentials, and the pixel as [`radiance`] takes
-/// it. (Forced inline, with what it calls, into the render loop's copies: out of line it ran
-/// without their instruction sets, and the sampler with it, 10 % slower.)
+/// One sample of a pixel up to its camera ray.
+struct CameraSample {
+    /// The sample's random numbers, past the camera's dimensions.
+    sampler: PixelSampler,
+    ray: Ray,
+    /// The ray's differentials (along the ray without `DIFFERENTIALS`).
+    rd: RayDifferential,
+    /// The film position minus the pixel's centre, in pixels ([`PixelHit::offset`]; zero
+    /// without `DIFFERENTIALS`).
+    offset: Vec2,
+}
+
+/// Sample `s` of pixel `(x, y)` (index `pixel_index`) up to its camera ray. (Forced inline,
+/// with what it calls, into the render loop's copies: out of line it runs without their
+/// instruction sets, and the sampler with it, 10 % slower.)
 #[inline(always)]
 fn camera_sample<const DIFFERENTIALS: bool>(
     scene: &Scene,
     (x, y): (u32, u32),
     pixel_index: u64,
-    pass: Pass,
     s: u32,
-) -> (PixelSampler, Ray, RayDifferential, (u64, u64, Vec2)) {
+) -> CameraSample {
     let mut sampler =
         PixelSampler::with_kind(scene.settings.sampler, pixel_index, s, scene.settings.seed);
     let in_pixel = sampler.next_2d();
@@ -692,12 +595,17 @@ fn camera_sample<const DIFFERENTIALS: bool>(
         let ray = scene.camera.generate_ray_only(film, u_lens);
         (ray, RayDifferential::along(&ray), Vec2::ZERO)
     };
-    (sampler, ray, rd, (pass.id, pixel_index, offset))
+    CameraSample {
+        sampler,
+        ray,
+        rd,
+        offset,
+    }
 }
 
 /// Pixels with at least this many samples trace their camera rays in packets (through a
-/// pinhole): with fewer they save nothing (`BENCHMARKS.md`, "Session 16": 4-7 % faster at
-/// 4 spp, no faster or slower at 2).
+/// pinhole): at 4 spp packets are 4-7 % faster, at 2 spp neither faster nor slower (glass
+/// teapot and smooth close-up, whole process).
 const PACKET_MIN_SPP: u32 = 4;
 
 /// The mean of `spp` samples of pixel `(x, y)` (box filter: uniform positions in the pixel).
@@ -709,35 +617,31 @@ fn render_pixel<const DIFFERENTIALS: bool>(
     scene: &Scene,
     x: u32,
     y: u32,
-    pass: Pass,
-    counters: &mut Counters,
+    worker: &mut Worker,
 ) -> Rgb {
     let (w, _) = scene.camera.resolution();
     let pixel_index = y as u64 * w as u64 + x as u64;
     let spp = scene.settings.spp;
+    worker.coverage.start_pixel();
     let mut sum = Rgb::ZERO;
-    let mut add = |l: Rgb, counters: &mut Counters| {
+    let mut add = |l: Rgb, worker: &mut Worker| {
         if l.is_finite() {
             sum += l;
         } else {
-            counters.nonfinite += 1;
+            worker.nonfinite += 1;
         }
     };
     // (A thin lens's rays share no origin: no packet.)
     if spp < PACKET_MIN_SPP || !scene.camera.is_pinhole() {
         for s in 0..spp {
-            let (mut sampler, ray, rd, pixel) =
-                camera_sample::<DIFFERENTIALS>(scene, (x, y), pixel_index, pass, s);
-            let camera = (ray, rd, CameraHit::Untraced);
-            add(
-                radiance::<DIFFERENTIALS>(scene, camera, pixel, &mut sampler, counters),
-                counters,
-            );
+            let mut sample = camera_sample::<DIFFERENTIALS>(scene, (x, y), pixel_index, s);
+            let l = radiance::<DIFFERENTIALS>(scene, &mut sample, CameraHit::Untraced, worker);
+            add(l, worker);
         }
         return sum / spp as f32;
     }
     // (`ArrayVec`s: only what a chunk holds is written.)
-    let mut samples = ArrayVec::<_, PACKET>::new();
+    let mut samples = ArrayVec::<CameraSample, PACKET>::new();
     let mut rays = ArrayVec::<Ray, PACKET>::new();
     let mut hits = ArrayVec::<Option<SurfaceHit>, PACKET>::new();
     let mut first = 0;
@@ -746,37 +650,37 @@ fn render_pixel<const DIFFERENTIALS: bool>(
         samples.clear();
         rays.clear();
         for s in first..first + n {
-            let (sampler, ray, rd, pixel) =
-                camera_sample::<DIFFERENTIALS>(scene, (x, y), pixel_index, pass, s);
-            samples.push((sampler, rd, pixel));
-            rays.push(ray);
+            let sample = camera_sample::<DIFFERENTIALS>(scene, (x, y), pixel_index, s);
+            rays.push(sample.ray);
+            samples.push(sample);
         }
         scene.geometry.intersect_coherent(&rays, &mut hits);
-        for (((sampler, rd, pixel), ray), hit) in samples.iter_mut().zip(&rays).zip(&hits) {
-            let camera = (*ray, *rd, CameraHit::Traced(*hit));
-            add(
-                radiance::<DIFFERENTIALS>(scene, camera, *pixel, sampler, counters),
-                counters,
-            );
+        for (sample, hit) in samples.iter_mut().zip(&hits) {
+            let l = radiance::<DIFFERENTIALS>(scene, sample, CameraHit::Traced(*hit), worker);
+            add(l, worker);
         }
         first += n;
     }
     sum / spp as f32
 }
 
-/// Radiance arriving at the camera along `ray` (one path sample), whose differentials are `rd`
-/// and whose closest hit is `camera_hit` where traced beforehand (in a packet), through a pixel
-/// (the render's id, the pixel's index and the ray's offset from its centre, see
-/// [`PixelHit`]). With `DIFFERENTIALS` false the ray differentials are neither used nor updated
-/// (no material of the scene reads them).
+/// Radiance arriving at the camera along a camera sample's ray (one path sample), whose closest
+/// hit is `camera_hit` where traced beforehand (in a packet). With `DIFFERENTIALS` false the
+/// ray differentials are neither used nor updated (no material of the scene reads them).
 #[inline(always)]
 fn radiance<const DIFFERENTIALS: bool>(
     scene: &Scene,
-    (mut ray, rd, camera_hit): (Ray, RayDifferential, CameraHit),
-    (render, pixel, offset): (u64, u64, Vec2),
-    sampler: &mut PixelSampler,
-    counters: &mut Counters,
+    camera: &mut CameraSample,
+    camera_hit: CameraHit,
+    worker: &mut Worker,
 ) -> Rgb {
+    let CameraSample {
+        sampler,
+        ray,
+        rd,
+        offset,
+    } = camera;
+    let (mut ray, offset) = (*ray, *offset);
     let settings = &scene.settings;
     let shapes = scene.geometry.shapes();
     let n_lights = scene.lights.len();
@@ -797,12 +701,12 @@ fn radiance<const DIFFERENTIALS: bool>(
     // The camera acts like a delta bounce: emitters seen directly count fully.
     let mut specular = true;
     let mut prev_pdf = 0.0f32;
-    let mut differentials = PathDifferentials::new(rd);
+    let mut differentials = PathDifferentials::new(*rd);
 
     let mut depth = 0u32;
     loop {
         sampler.start_bounce(depth);
-        counters.rays += 1;
+        worker.rays += 1;
         let hit = match camera_hit {
             CameraHit::Traced(hit) if depth == 0 => hit,
             _ => scene.geometry.intersect(&ray),
@@ -865,57 +769,30 @@ fn radiance<const DIFFERENTIALS: bool>(
         } else {
             (None, None)
         };
-        let (frame, bsdf) = shade_with(
-            material,
-            &hit,
-            rd_here.as_ref(),
-            wo_world,
+        let view = HitView {
+            wo: wo_world,
+            rd: rd_here.as_ref(),
             u_layer,
-            chain.map(|chain| PixelHit {
-                render,
-                pixel,
+            pixel: chain.map(|chain| PixelHit {
                 shape: hit.shape,
                 chain,
                 offset,
             }),
-        );
+        };
+        let (frame, bsdf) = material.shade(&hit, view, &mut worker.coverage);
         let wo = frame.to_local(wo_world);
 
-        // Next-event estimation: one light, chosen uniformly (a constant environment, left to
-        // BSDF sampling, gives no sample when chosen: pbrt-v4's `allowIncompletePDF`).
+        // Next-event estimation.
         if !bsdf.is_delta() && n_lights > 0 {
-            let u_choice = sampler.next_1d();
-            let u_light = sampler.next_2d();
-            let index = ((u_choice * n_lights as f32) as usize).min(n_lights - 1);
-            let light = &scene.lights[index];
-            if let Some(ls) = light.sample_li(hit.p, u_light, shapes) {
-                let wi = frame.to_local(ls.wi);
-                let (f, pdf_bsdf) = bsdf.eval_for_light(wo, wi, ls.delta);
-                let f = f * wi.z.abs();
-                if f != Rgb::ZERO {
-                    let origin = offset_origin(hit.p, hit.ng, ls.wi);
-                    let t_max = if ls.dist.is_finite() {
-                        (ls.dist - (origin - hit.p).length()) * (1.0 - 1e-3)
-                    } else {
-                        f32::INFINITY
-                    };
-                    counters.rays += 1;
-                    let shadow = Ray {
-                        o: origin,
-                        d: ls.wi,
-                        t_max,
-                    };
-                    if !scene.geometry.occluded(&shadow) {
-                        let pdf_light = light_select_pdf * ls.pdf;
-                        let w = if ls.delta {
-                            1.0
-                        } else {
-                            let pdf_bsdf = pdf_bsdf.unwrap_or_else(|| bsdf.pdf(wo, wi));
-                            power_heuristic(pdf_light, pdf_bsdf)
-                        };
-                        l += beta * f * ls.radiance * (w / pdf_light);
-                    }
-                }
+            let vertex = Vertex {
+                hit: &hit,
+                frame,
+                wo,
+                bsdf: &bsdf,
+                beta,
+            };
+            if let Some(c) = direct_light(scene, &vertex, sampler, worker) {
+                l += c;
             }
         }
 
@@ -963,6 +840,67 @@ fn radiance<const DIFFERENTIALS: bool>(
         }
     }
     l
+}
+
+/// A path vertex as next-event estimation reads it: the hit, its shading frame, the direction
+/// toward the viewer in that frame, the BSDF there and the path throughput that reached it.
+struct Vertex<'a, 'b> {
+    hit: &'a SurfaceHit,
+    frame: Frame,
+    wo: Vec3,
+    bsdf: &'a Bsdf<'b>,
+    beta: Rgb,
+}
+
+/// Next-event estimation at a non-delta vertex: one light chosen uniformly, its sample weighted
+/// by MIS (power heuristic) against BSDF sampling; a constant environment, left to BSDF
+/// sampling, gives no sample when chosen (pbrt-v4's `allowIncompletePDF`). Returns the radiance
+/// the path gains, `None` where the light's sample adds nothing or is occluded.
+#[inline(always)]
+fn direct_light(
+    scene: &Scene,
+    v: &Vertex<'_, '_>,
+    sampler: &mut PixelSampler,
+    worker: &mut Worker,
+) -> Option<Rgb> {
+    let (hit, frame, wo, bsdf) = (v.hit, v.frame, v.wo, v.bsdf);
+    let shapes = scene.geometry.shapes();
+    let n_lights = scene.lights.len();
+    let light_select_pdf = 1.0 / n_lights as f32;
+    let u_choice = sampler.next_1d();
+    let u_light = sampler.next_2d();
+    let index = ((u_choice * n_lights as f32) as usize).min(n_lights - 1);
+    let light = &scene.lights[index];
+    let ls = light.sample_li(hit.p, u_light, shapes)?;
+    let wi = frame.to_local(ls.wi);
+    let (f, pdf_bsdf) = bsdf.eval_for_light(wo, wi, ls.delta);
+    let f = f * wi.z.abs();
+    if f == Rgb::ZERO {
+        return None;
+    }
+    let origin = offset_origin(hit.p, hit.ng, ls.wi);
+    let t_max = if ls.dist.is_finite() {
+        (ls.dist - (origin - hit.p).length()) * (1.0 - 1e-3)
+    } else {
+        f32::INFINITY
+    };
+    worker.rays += 1;
+    let shadow = Ray {
+        o: origin,
+        d: ls.wi,
+        t_max,
+    };
+    if scene.geometry.occluded(&shadow) {
+        return None;
+    }
+    let pdf_light = light_select_pdf * ls.pdf;
+    let w = if ls.delta {
+        1.0
+    } else {
+        let pdf_bsdf = pdf_bsdf.unwrap_or_else(|| bsdf.pdf(wo, wi));
+        power_heuristic(pdf_light, pdf_bsdf)
+    };
+    Some(v.beta * f * ls.radiance * (w / pdf_light))
 }
 
 #[cfg(test)]

@@ -2,15 +2,19 @@
 //! the destination folder first and is renamed into place only when complete.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
-/// The temporary sibling used while `path` is being written: `.NAME.tmp-PID` in the same folder,
-/// so the final rename is atomic on one filesystem.
+/// The temporary sibling used while `path` is being written: `.NAME.tmp-PID-N` in the same
+/// folder, so the final rename is atomic on one filesystem; `N` counts the calls of the process,
+/// so two writers of one file (two threads, or a render and a table cache) never share it.
 pub fn temp_path(path: &Path) -> PathBuf {
+    static CALLS: AtomicU64 = AtomicU64::new(0);
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let tmp = format!(".{name}.tmp-{}", std::process::id());
+    let call = CALLS.fetch_add(1, Ordering::Relaxed);
+    let tmp = format!(".{name}.tmp-{}-{call}", std::process::id());
     match path.parent() {
         Some(dir) if !dir.as_os_str().is_empty() => dir.join(tmp),
         _ => PathBuf::from(tmp),
@@ -127,6 +131,38 @@ mod tests {
         .unwrap();
         assert_eq!(std::fs::read(&a).unwrap(), b"new");
         assert_eq!(std::fs::read(&b).unwrap(), b"x");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn concurrent_writers_of_one_file_never_share_a_temporary_name() {
+        let dir = std::env::temp_dir().join(format!("striae-io-race-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let out = dir.join("t.bin");
+        assert_ne!(temp_path(&out), temp_path(&out));
+        // Many threads write the same destination, each its own 64 KiB of one byte value: every
+        // write succeeds and the file is one writer's whole content, never a mix.
+        std::thread::scope(|s| {
+            for k in 0..8u8 {
+                let out = &out;
+                s.spawn(move || {
+                    for _ in 0..20 {
+                        write_atomically::<std::io::Error>(out, |p| {
+                            std::fs::write(p, vec![k; 1 << 16])
+                        })
+                        .unwrap();
+                    }
+                });
+            }
+        });
+        let data = std::fs::read(&out).unwrap();
+        assert_eq!(data.len(), 1 << 16);
+        assert!(data.iter().all(|&b| b == data[0]));
+        assert_eq!(
+            std::fs::read_dir(&dir).unwrap().count(),
+            1,
+            "temporary files left"
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

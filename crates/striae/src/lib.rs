@@ -24,9 +24,11 @@
 //! * Every random choice is driven by an explicit seed; the same seed gives bit-identical
 //!   output whatever the thread count.
 
+pub mod cache;
 pub mod fresnel;
 pub mod hash;
 pub mod io;
+pub mod log;
 pub mod math;
 pub mod sampling;
 pub mod testing;

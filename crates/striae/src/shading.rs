@@ -56,9 +56,10 @@ pub struct ShadingContext {
     /// skips its layer queries for rays arriving from inside.
     pub wo: Vec3,
     /// For a hit of a camera path that carries differentials and has only bounced specularly
-    /// so far (the camera ray's first hit included): which pixel, which chain of delta bounces
-    /// and which shape, and where in the pixel the ray went, so that a material can filter
-    /// over the footprint of the whole pixel once and share it among the pixel's samples.
+    /// so far (the camera ray's first hit included): which chain of delta bounces and which
+    /// shape, and where in the pixel the ray went, so that a material can filter over the
+    /// footprint of the whole pixel once and share it among the pixel's samples
+    /// (`layers::CoverageCache::of_pixel`; the render loop starts the cache's pixel).
     pub pixel: Option<PixelHit>,
 }
 
@@ -80,11 +81,6 @@ impl ShadingContext {
 /// A hit reached from a pixel by delta bounces only ([`ShadingContext::pixel`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PixelHit {
-    /// Names the render (unique per call of `integrator::render` in the process), so that
-    /// per-pixel state never outlives it.
-    pub render: u64,
-    /// Row-major pixel index.
-    pub pixel: u64,
     /// The shape hit.
     pub shape: u32,
     /// Names the chain of delta bounces that led here: 0 for the camera ray's first hit, else
@@ -104,6 +100,66 @@ impl PixelHit {
     pub fn chain_after(chain: u64, shape: u32, transmitted: bool) -> u64 {
         crate::hash::splitmix64(chain ^ (((shape as u64) << 1 | transmitted as u64) + 1))
     }
+}
+
+/// Bend the shading normal `ns` toward the geometric normal `ng` (same hemisphere) so that
+/// `wo` lies on the same side of it as of `ng`, with a small margin. Returns `ns` unchanged in
+/// the usual case.
+#[inline]
+pub fn guard_shading_normal(ns: Vec3, ng: Vec3, wo: Vec3) -> Vec3 {
+    const MARGIN: f32 = 1e-3;
+    let g = wo.dot(ng);
+    let side = if g >= 0.0 { 1.0 } else { -1.0 };
+    let c = wo.dot(ns) * side;
+    if c >= MARGIN {
+        return ns;
+    }
+    let t = (MARGIN - c) / g.abs().max(1e-6);
+    (ns + t * ng).normalize_or(ng)
+}
+
+/// The shading context at `hit` in `frame` (the options as `material::HitView`'s; the pixel is
+/// kept only with differentials).
+#[inline(always)]
+pub fn hit_context(
+    hit: &SurfaceHit,
+    rd: Option<&RayDifferential>,
+    frame: Frame,
+    wo_world: Vec3,
+    u_layer: f32,
+    pixel: Option<PixelHit>,
+) -> ShadingContext {
+    ShadingContext {
+        p: hit.p,
+        uv: hit.uv,
+        rd: rd.copied(),
+        dpdu: hit.dpdu,
+        dpdv: hit.dpdv,
+        frame,
+        ng: hit.ng,
+        u_layer,
+        wo: wo_world,
+        pixel: pixel.filter(|_| rd.is_some()),
+    }
+}
+
+/// The shading frame at `hit` seen from `wo_world` for a material that transmits or not
+/// (`Material::has_transmission`): the shading normal and `dP/du`, the normal flipped to
+/// `wo`'s side for opaque materials (two-sided), then guarded against `wo` falling behind it
+/// ([`guard_shading_normal`]). Worked out before the material's BSDF, which is then built
+/// once, in its final frame.
+#[inline(always)]
+pub fn shading_frame(hit: &SurfaceHit, wo_world: Vec3, transmits: bool) -> Frame {
+    let (mut ng, mut ns) = (hit.ng, hit.ns);
+    if !transmits && wo_world.dot(ng) < 0.0 {
+        // Opaque surfaces are two-sided: shade on wo's side.
+        ng = -ng;
+        ns = -ns;
+    }
+    let guarded = guard_shading_normal(ns, ng, wo_world);
+    // `hit.ns` itself where the guard left it equal (a zero's sign aside), as before.
+    let n = if guarded != hit.ns { guarded } else { hit.ns };
+    Frame::from_normal_tangent(n, hit.dpdu)
 }
 
 /// `dP/dx`, `dP/dy`, `du/dx`, `dv/dx`, `du/dy`, `dv/dy` at a hit from the ray's differentials

@@ -6,9 +6,10 @@
 use std::path::Path;
 use striae::bsdf::Bsdf;
 use striae::integrator::trace_contexts;
+use striae::layers::CoverageCache;
 use striae::material::Material;
 use striae::math::Vec2;
-use striae::scene::{material_bsdf, Overrides, Scene};
+use striae::scene::{Overrides, Scene};
 use striae::testing::MeanEstimate;
 
 mod common;
@@ -86,8 +87,10 @@ fn scratched_fraction(s: &Scene) -> f64 {
         for x in 0..w {
             let ctxs = trace_contexts(s, Vec2::new(x as f32 + 0.5, y as f32 + 0.5), 1);
             if let Some(ctx) = ctxs.first() {
-                let mat: &Material = &s.materials[0];
-                if matches!(material_bsdf(mat, ctx), Bsdf::Scratched(_)) {
+                let Material::Scratched(mat) = &s.materials[0] else {
+                    panic!("the scene's material is scratched")
+                };
+                if matches!(mat.bsdf(ctx, &mut CoverageCache::new()), Bsdf::Scratched(_)) {
                     n += 1;
                 }
             }
@@ -212,7 +215,7 @@ fn scratched_pixels_are_where_the_masks_say() {
     let Material::Scratched(m) = &s.materials[0] else {
         panic!()
     };
-    let layers = &m.prepared().unwrap().layers;
+    let layers = &m.layers;
     // The view spans u, v in [0.25, 0.75] over 96 pixels: rasters with texels of a pixel.
     let res = 192;
     let rasters: Vec<_> = (0..layers.len())

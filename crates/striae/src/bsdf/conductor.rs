@@ -25,6 +25,73 @@ impl ConductorIor {
     }
 }
 
+/// A named complex IOR for a conductor: `(names, eta, k)` in linear RGB.
+pub type ConductorPreset = (&'static [&'static str], [f32; 3], [f32; 3]);
+
+/// Conductor presets, `(names, eta, k)` per linear RGB channel.
+///
+/// Source for Ag, Al, Au, Cr, Cu: Tungsten's `ComplexIorData.hpp` (Bitterli), the spectral
+/// data Mitsuba 3's `conductor` presets are built from (Mitsuba's `data/ior/*.spd`, from
+/// Palik's handbook) integrated to linear sRGB. Fe: refractiveindex.info (Johnson and Christy
+/// 1974) sampled at 650 / 550 / 450 nm; Mitsuba has no iron preset, so "steel" and "iron" are
+/// not validated against it. `none`: Mitsuba's perfect mirror (`eta = 0, k = 1`: `F = 1` at
+/// every angle), for furnace tests.
+pub const CONDUCTOR_PRESETS: &[ConductorPreset] = &[
+    (&["none", "mirror"], [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]),
+    (
+        &["Au", "gold"],
+        [0.143_118_96, 0.374_957_04, 1.442_478_6],
+        [3.983_160_4, 2.385_720_7, 1.603_215_3],
+    ),
+    (
+        &["Ag", "silver"],
+        [0.155_264_65, 0.116_723_3, 0.138_380_7],
+        [4.828_343_3, 3.122_245_8, 2.146_950_4],
+    ),
+    (
+        &["Cu", "copper"],
+        [0.200_437_7, 0.924_033_4, 1.102_212],
+        [3.912_948_6, 2.452_847_7, 2.142_188],
+    ),
+    (
+        &["Al", "aluminium", "aluminum"],
+        [1.657_46, 0.880_368_96, 0.521_228_7],
+        [9.223_869, 6.269_523_4, 4.837_001],
+    ),
+    (
+        &["Cr", "chromium", "chrome"],
+        [4.369_683, 2.916_702_5, 1.654_700_5],
+        [5.206_434, 4.231_364_7, 3.754_946_7],
+    ),
+    (
+        &["Fe", "iron", "steel"],
+        [2.9114, 2.9497, 2.5845],
+        [3.0893, 2.9318, 2.7670],
+    ),
+];
+
+impl ConductorIor {
+    /// A conductor preset by any of its names (case-insensitive).
+    pub fn preset(name: &str) -> Option<ConductorIor> {
+        CONDUCTOR_PRESETS
+            .iter()
+            .find(|(names, _, _)| names.iter().any(|n| n.eq_ignore_ascii_case(name)))
+            .map(|(_, eta, k)| ConductorIor {
+                eta: Rgb::from(*eta),
+                k: Rgb::from(*k),
+            })
+    }
+
+    /// Every preset's names, `"none|mirror, Au|gold, ..."`, for error messages.
+    pub fn preset_names() -> String {
+        CONDUCTOR_PRESETS
+            .iter()
+            .map(|(n, _, _)| n.join("|"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
 /// A smooth conductor: a single delta reflection lobe with weight `F(cos theta_o)`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Conductor {

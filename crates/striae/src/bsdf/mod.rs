@@ -40,7 +40,7 @@ mod fresnel_f32;
 pub mod microfacet;
 pub mod scratched;
 
-pub use conductor::{Conductor, ConductorIor, RoughConductor};
+pub use conductor::{Conductor, ConductorIor, RoughConductor, CONDUCTOR_PRESETS};
 pub use dielectric::{Dielectric, RoughDielectric};
 pub use diffuse::Diffuse;
 pub use scratched::{ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf};

@@ -268,7 +268,8 @@ fn visible_normal_sampler_chi2() {
 }
 
 fn gold() -> (Rgb, Rgb) {
-    crate::material::conductor_preset("gold").unwrap()
+    let ior = super::ConductorIor::preset("gold").unwrap();
+    (ior.eta, ior.k)
 }
 
 /// Smooth conductor: one delta lobe at the mirror direction, weight F per channel; the

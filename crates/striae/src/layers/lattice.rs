@@ -1,8 +1,6 @@
-//! Footprint tiles: the renderer's coverage queries snapped to a lattice of footprint-shaped
-//! tiles, and a per-thread cache of their exact coverage; and, for hits reached from the
-//! camera by delta bounces only (a camera ray's first hit, a surface seen through glass or in
-//! a mirror), the exact coverage of the whole pixel's footprint, computed once per pixel and
-//! chain of bounces ([`LayerSet::coverage_of_pixel`]).
+//! Footprint tiles: the renderer's coverage queries at hits not reached from the camera by
+//! delta bounces, snapped to a lattice of footprint-shaped tiles whose exact coverage is cached
+//! (`layers::cache::CoverageCache::tiled`).
 //!
 //! A pixel's samples hit points spread over one pixel footprint, and each asks for the scratch
 //! coverage of a footprint of that same shape (METHOD.md section 6). Computing it exactly at
@@ -12,7 +10,7 @@
 //! ([`quantize`]) and the hit point is snapped to the nearest point of the lattice
 //! `{(i a + j b) / TILE_STEPS}`; the coverage is that of the footprint of the rounded shape
 //! centred there, a function of `(i, j, a, b)` only, like a texel of an anisotropic mip level.
-//! It is computed exactly once per thread and reused by every sample that snaps to it.
+//! It is computed exactly once per render worker and reused by every sample that snaps to it.
 //!
 //! This is a departure from a footprint centred on each sample: the footprint a sample sees is
 //! displaced by at most `1 / (2 TILE_STEPS)` of its size along each edge, its edges are off by
@@ -25,11 +23,9 @@
 //! Determinism: a tile's value depends only on its key, never on which sample or thread
 //! computed it first, so images stay bit-identical for any thread count.
 
-use super::layer::MAX_FOOTPRINT_CELLS;
 use super::LayerSet;
 use crate::math::Vec2;
 use glam::DVec2;
-use std::cell::RefCell;
 
 /// Tiles whose noise-space bounding box spans more cells than this take the layers' expected
 /// coverage (the prefiltered limit) instead of the exact one. Lower than the exact queries'
@@ -47,9 +43,6 @@ pub const TILE_STEPS: f64 = 2.0;
 
 /// Layers a cached tile holds; larger sets are not cached.
 pub const CACHED_LAYERS: usize = 16;
-/// Entries of each thread's direct-mapped cache (a power of two). A 16 x 16 pixel tile of the
-/// renderer touches a few hundred footprint tiles per surface.
-const CACHE_ENTRIES: usize = 4096;
 
 /// `x` rounded to 4 significant bits (relative error at most 1/16); `None` unless normal.
 #[inline]
@@ -127,7 +120,7 @@ pub struct FootprintTile {
     pub centre: DVec2,
     pub a: DVec2,
     pub b: DVec2,
-    key: [u64; 4],
+    pub(crate) key: [u64; 4],
 }
 
 impl FootprintTile {
@@ -166,79 +159,6 @@ pub enum TileQuery {
     Max,
 }
 
-#[derive(Clone, Copy)]
-struct Entry {
-    /// Set id, query, tile key; all zero when empty (set ids start at 1).
-    key: [u64; 6],
-    values: [f32; CACHED_LAYERS],
-}
-
-/// Pixel footprints ([`LayerSet::coverage_of_pixel`]) each thread keeps: the pixel's first
-/// hit and the surfaces its samples see through the glass or in mirrors, up to
-/// [`PIXEL_CLUSTERS`] per chain of delta bounces, replaced oldest first.
-const PIXEL_ENTRIES: usize = 16;
-
-/// Footprints one pixel keeps per shape and chain: a sample whose estimate of the pixel
-/// centre is not near any of them starts another, until there are this many (then it takes
-/// its tile). Behind curved glass the estimates of a pixel's samples scatter (the footprint
-/// changes across the pixel faster than the differentials' linear model): on the setting-1
-/// teapot about 3 in 10 samples seen through the glass miss the first sample's footprint,
-/// and the tiles they fell back to were shared by one sample in four.
-pub const PIXEL_CLUSTERS: usize = 4;
-
-thread_local! {
-    static CACHE: RefCell<Vec<Entry>> = const { RefCell::new(Vec::new()) };
-    static PIXEL: RefCell<PixelCache> = const {
-        RefCell::new(PixelCache {
-            entries: [None; PIXEL_ENTRIES],
-            next: 0,
-        })
-    };
-}
-
-/// The pixel footprints of one thread, written round-robin. A pixel's entries are replaced
-/// only by the pixel's own later ones, oldest first, whatever the slot the pixel starts at, so
-/// the values a sample sees depend only on its pixel's earlier samples (determinism). Its
-/// entries are always the newest ones, so a lookup stops at the first entry of another pixel.
-struct PixelCache {
-    entries: [Option<PixelEntry>; PIXEL_ENTRIES],
-    next: usize,
-}
-
-/// A pixel's footprint coverage ([`LayerSet::coverage_of_pixel`]): set id, query, render,
-/// pixel, shape and chain; the footprint's centre and edges, and `1 / (a x b)`; the values.
-#[derive(Clone, Copy)]
-struct PixelEntry {
-    key: [u64; 6],
-    centre: Vec2,
-    a: Vec2,
-    b: Vec2,
-    inv_det: f32,
-    values: [f32; CACHED_LAYERS],
-}
-
-/// Which pixel of which render a hit belongs to, the chain of delta bounces that reached it
-/// and the shape it is on ([`LayerSet::coverage_of_pixel`], `shading::PixelHit`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct PixelKey {
-    pub render: u64,
-    pub pixel: u64,
-    pub shape: u32,
-    /// 0 for the camera ray's first hit, else names the chain of delta bounces.
-    pub chain: u64,
-}
-
-/// A sample shares its pixel's footprint coverage when its own estimate of the pixel centre's
-/// texture point lies within this fraction of the footprint's edges of the stored one.
-pub const PIXEL_TOLERANCE: f32 = 0.25;
-
-/// Empty the calling thread's tile cache (for benchmarks that render one scene repeatedly:
-/// results never depend on it, only the time does).
-pub fn clear_cache() {
-    CACHE.with(|cache| cache.borrow_mut().clear());
-    PIXEL.with(|cache| cache.borrow_mut().entries = [None; PIXEL_ENTRIES]);
-}
-
 impl LayerSet {
     /// [`Self::coverage_all_within`] or [`Self::coverage_max_within`], as `query` asks.
     /// # Panics
@@ -256,168 +176,5 @@ impl LayerSet {
             TileQuery::All => self.coverage_all_within(uv, duvdx, duvdy, max_cells, out),
             TileQuery::Max => self.coverage_max_within(uv, duvdx, duvdy, max_cells, out),
         }
-    }
-
-    /// The per-layer coverage of a whole pixel's footprint, for a hit at texture point `uv`
-    /// reached from the camera through `pixel` by delta bounces only (on its shape, along its
-    /// chain, in its render), `offset` (pixels) from the pixel's centre, with the footprint
-    /// `footprint() = (duvdx, duvdy)`: the exact coverage ([`Self::coverage_max`] or
-    /// [`Self::coverage_all`] per `query`, up to [`TILE_MAX_CELLS`]) of that footprint centred
-    /// on the texture point of the pixel centre's ray along the same chain,
-    /// `uv - offset.x duvdx - offset.y duvdy`. It is computed at the pixel's first such hit and
-    /// kept per thread ([`PIXEL_ENTRIES`] of them); the pixel's later samples on the same
-    /// shape along the same chain reuse it when their own estimate of the centre,
-    /// `uv - offset.x a - offset.y b` with the stored footprint's edges `a`, `b`, lies within
-    /// [`PIXEL_TOLERANCE`] of those edges from the stored centre. Those samples never call
-    /// `footprint`: most samples of a pixel need no ray differentials worked out. A sample
-    /// near none of the pixel's footprints for the hit (at silhouettes, texture seams, and
-    /// behind curved glass, where the estimates scatter) adds its own, centred on its own
-    /// estimate, up to [`PIXEL_CLUSTERS`]; after that it takes its tile
-    /// ([`Self::coverage_tiled`]).
-    ///
-    /// So every sample of a pixel sees the coverage of the pixel's own footprint, exactly, as
-    /// METHOD.md section 6 asks, for one exact query per pixel and chain (a few behind curved
-    /// glass) instead of one per tile. Deterministic: a pixel's samples run in order on one
-    /// thread, so which sample fills an entry depends only on the pixel ([`PixelCache`]).
-    /// # Panics
-    /// If `out.len() < len()`.
-    pub fn coverage_of_pixel(
-        &self,
-        uv: Vec2,
-        footprint: impl FnOnce() -> (Vec2, Vec2),
-        pixel: PixelKey,
-        offset: Vec2,
-        query: TileQuery,
-        out: &mut [f32],
-    ) {
-        let n = self.len();
-        if n > CACHED_LAYERS {
-            let (duvdx, duvdy) = footprint();
-            self.coverage_tiled(uv, duvdx, duvdy, query, out);
-            return;
-        }
-        let key = [
-            self.id(),
-            query as u64,
-            pixel.render,
-            pixel.pixel,
-            pixel.shape as u64,
-            pixel.chain,
-        ];
-        // Whether this sample shares one of the pixel's footprints for this hit, and if not,
-        // how many the pixel has.
-        enum Lookup {
-            Shared,
-            Far(usize),
-        }
-        let lookup = PIXEL.with(|cache| {
-            let cache = cache.borrow();
-            // The pixel's own entries are the newest ones (its samples run one after another
-            // on this thread): look back from the newest, up to the first of another pixel.
-            let mut same = 0;
-            let mut slot = cache.next;
-            for _ in 0..PIXEL_ENTRIES {
-                slot = slot.checked_sub(1).unwrap_or(PIXEL_ENTRIES - 1);
-                let Some(e) = &cache.entries[slot] else { break };
-                if e.key[2] != key[2] || e.key[3] != key[3] {
-                    break; // another pixel's (render, pixel)
-                }
-                if e.key[4] != key[4] || e.key[5] != key[5] || e.key[..2] != key[..2] {
-                    continue; // another shape or chain (or set, or query)
-                }
-                // This sample's estimate of the centre in the stored footprint's edge
-                // coordinates.
-                let d = uv - offset.x * e.a - offset.y * e.b - e.centre;
-                let (s, t) = (d.perp_dot(e.b) * e.inv_det, e.a.perp_dot(d) * e.inv_det);
-                if s.abs() <= PIXEL_TOLERANCE && t.abs() <= PIXEL_TOLERANCE {
-                    out[..n].copy_from_slice(&e.values[..n]);
-                    return Lookup::Shared;
-                }
-                same += 1;
-            }
-            Lookup::Far(same)
-        });
-        let same = match lookup {
-            Lookup::Shared => return,
-            Lookup::Far(same) => same,
-        };
-        let (duvdx, duvdy) = footprint();
-        // A new footprint of the pixel, centred on this sample's estimate of the pixel centre
-        // (up to `PIXEL_CLUSTERS`; then, and where it is degenerate, the tile).
-        let centre = uv - offset.x * duvdx - offset.y * duvdy;
-        let det = duvdx.perp_dot(duvdy);
-        if same < PIXEL_CLUSTERS && det.abs() > 0.0 && det.is_finite() && centre.is_finite() {
-            let mut values = [0.0f32; CACHED_LAYERS];
-            self.coverage_query(query, centre, duvdx, duvdy, TILE_MAX_CELLS, &mut values);
-            out[..n].copy_from_slice(&values[..n]);
-            PIXEL.with(|cache| {
-                let mut cache = cache.borrow_mut();
-                let slot = cache.next;
-                cache.entries[slot] = Some(PixelEntry {
-                    key,
-                    centre,
-                    a: duvdx,
-                    b: duvdy,
-                    inv_det: 1.0 / det,
-                    values,
-                });
-                cache.next = (slot + 1) % PIXEL_ENTRIES;
-            });
-            return;
-        }
-        self.coverage_tiled(uv, duvdx, duvdy, query, out);
-    }
-
-    /// The per-layer coverage of the footprint tile containing `uv` ([`FootprintTile`]), into
-    /// `out[0..len()]`, as [`Self::coverage_all`] or [`Self::coverage_max`] of the tile (up to
-    /// [`TILE_MAX_CELLS`]); cached per thread. Where there is no tile
-    /// ([`FootprintTile::containing`]) or the set has more than [`CACHED_LAYERS`] layers, the
-    /// footprint itself is queried, uncached.
-    /// # Panics
-    /// If `out.len() < len()`.
-    pub fn coverage_tiled(
-        &self,
-        uv: Vec2,
-        duvdx: Vec2,
-        duvdy: Vec2,
-        query: TileQuery,
-        out: &mut [f32],
-    ) {
-        let n = self.len();
-        let tile = FootprintTile::containing(uv, duvdx, duvdy).filter(|_| n <= CACHED_LAYERS);
-        let Some(tile) = tile else {
-            self.coverage_query(query, uv, duvdx, duvdy, MAX_FOOTPRINT_CELLS, out);
-            return;
-        };
-        let key = [
-            self.id(),
-            query as u64,
-            tile.key[0],
-            tile.key[1],
-            tile.key[2],
-            tile.key[3],
-        ];
-        let h =
-            key.iter().fold(0u64, |h, &k| crate::hash::mix64(h ^ k)) as usize & (CACHE_ENTRIES - 1);
-        CACHE.with(|cache| {
-            let mut cache = cache.borrow_mut();
-            if cache.is_empty() {
-                cache.resize(
-                    CACHE_ENTRIES,
-                    Entry {
-                        key: [0; 6],
-                        values: [0.0; CACHED_LAYERS],
-                    },
-                );
-            }
-            let entry = &mut cache[h];
-            // (Compared field by field: `!=` on the array compiled to a `memcmp` call.)
-            if !entry.key.iter().zip(&key).all(|(a, b)| a == b) {
-                let (c, a, b) = (tile.centre.as_vec2(), tile.a.as_vec2(), tile.b.as_vec2());
-                self.coverage_query(query, c, a, b, TILE_MAX_CELLS, &mut entry.values);
-                entry.key = key;
-            }
-            out[..n].copy_from_slice(&entry.values[..n]);
-        });
     }
 }

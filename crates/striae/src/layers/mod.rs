@@ -21,12 +21,14 @@
 //! The layer is defined on the whole plane; `[0, 1]^2` is the part the rasters show (the noise
 //! continues, it is not wrapped, outside it).
 
+pub mod cache;
 pub mod footprint;
 pub mod lattice;
 pub mod layer;
 pub mod raster;
 pub mod worley;
 
+pub use cache::CoverageCache;
 pub use layer::ScratchLayer;
 pub use raster::CoverageRaster;
 pub use worley::{Worley, WorleySample};

@@ -1,6 +1,7 @@
 //! Tests of the layer set against METHOD.md section 5: determinism, coverage ~ pi tau^2,
 //! orientation and scratch size measured on rasters, and procedural queries against rasters.
 
+use super::cache::{PixelKey, PIXEL_CLUSTERS};
 use super::*;
 use crate::testing::MeanEstimate;
 use glam::DVec2;
@@ -802,6 +803,7 @@ fn footprint_tiles_contain_their_hits_and_cache_their_exact_coverage() {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(23);
     let (mut tiled, mut direct) = (vec![0.0f32; n], vec![0.0f32; n]);
     let mut shared = 0;
+    let mut cache = CoverageCache::new();
     for (uv, a, b) in random_footprints(&mut rng, 300, 0.02) {
         let tile = lattice::FootprintTile::containing(uv, a, b).unwrap();
         // uv - centre = s a + t b with |s|, |t| <= 1 / (2 TILE_STEPS).
@@ -821,7 +823,7 @@ fn footprint_tiles_contain_their_hits_and_cache_their_exact_coverage() {
         }
         for query in [lattice::TileQuery::Max, lattice::TileQuery::All] {
             for _ in 0..2 {
-                set.coverage_tiled(uv, a, b, query, &mut tiled);
+                cache.tiled(&set, uv, a, b, query, &mut tiled);
                 let (c, ta, tb) = (tile.centre.as_vec2(), tile.a.as_vec2(), tile.b.as_vec2());
                 set.coverage_query(query, c, ta, tb, lattice::TILE_MAX_CELLS, &mut direct);
                 assert_eq!(tiled, direct);
@@ -845,16 +847,10 @@ fn pixel_footprint_coverage_is_the_exact_coverage_of_the_pixel_centre() {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(41);
     let (mut got, mut want) = (vec![0.0f32; n], vec![0.0f32; n]);
     let mut nonzero = 0;
-    for (pixel, (uv, a, b)) in random_footprints(&mut rng, 200, 0.05)
-        .into_iter()
-        .enumerate()
-    {
-        let key = |shape| lattice::PixelKey {
-            render: 1,
-            pixel: pixel as u64,
-            shape,
-            chain: 0,
-        };
+    let mut cache = CoverageCache::new();
+    for (uv, a, b) in random_footprints(&mut rng, 200, 0.05) {
+        cache.start_pixel();
+        let key = |shape| PixelKey { shape, chain: 0 };
         for query in [lattice::TileQuery::Max, lattice::TileQuery::All] {
             let exact = |set: &LayerSet, c: Vec2, out: &mut [f32]| {
                 set.coverage_query(query, c, a, b, cells, out)
@@ -862,7 +858,7 @@ fn pixel_footprint_coverage_is_the_exact_coverage_of_the_pixel_centre() {
             // The first hit, a quarter pixel right of the centre.
             let offset = Vec2::new(0.25, -0.125);
             let centre = uv - offset.x * a - offset.y * b;
-            set.coverage_of_pixel(uv, || (a, b), key(3), offset, query, &mut got);
+            cache.of_pixel(&set, uv, || (a, b), key(3), offset, query, &mut got);
             exact(&set, centre, &mut want);
             assert_eq!(got, want);
             nonzero += want.iter().any(|&c| c > 0.0) as usize;
@@ -871,33 +867,64 @@ fn pixel_footprint_coverage_is_the_exact_coverage_of_the_pixel_centre() {
             let offset2 = Vec2::new(-0.4, 0.3);
             let uv2 = centre + offset2.x * a + offset2.y * b;
             let unused = || -> (Vec2, Vec2) { panic!("a shared footprint needs no differentials") };
-            set.coverage_of_pixel(uv2, unused, key(3), offset2, query, &mut got);
+            cache.of_pixel(&set, uv2, unused, key(3), offset2, query, &mut got);
             assert_eq!(got, want);
             // A hit whose centre estimate is half a footprint away: a footprint of its own,
             // exact about its own estimate, which a later hit near that estimate shares.
             let far = uv2 + 0.5 * a;
-            set.coverage_of_pixel(far, || (a, b), key(3), offset2, query, &mut got);
+            cache.of_pixel(&set, far, || (a, b), key(3), offset2, query, &mut got);
             exact(&set, far - offset2.x * a - offset2.y * b, &mut want);
             assert_eq!(got, want);
-            set.coverage_of_pixel(far + 0.2 * b, unused, key(3), offset2, query, &mut got);
+            cache.of_pixel(
+                &set,
+                far + 0.2 * b,
+                unused,
+                key(3),
+                offset2,
+                query,
+                &mut got,
+            );
             assert_eq!(got, want);
             // Up to `PIXEL_CLUSTERS` footprints per pixel and chain; a hit far from all of
             // them then takes its tile.
-            for j in 2..lattice::PIXEL_CLUSTERS {
+            for j in 2..PIXEL_CLUSTERS {
                 let uv3 = uv2 + j as f32 * a;
-                set.coverage_of_pixel(uv3, || (a, b), key(3), offset2, query, &mut got);
+                cache.of_pixel(&set, uv3, || (a, b), key(3), offset2, query, &mut got);
                 exact(&set, uv3 - offset2.x * a - offset2.y * b, &mut want);
                 assert_eq!(got, want);
             }
             let beyond = uv2 + 10.0 * a;
-            set.coverage_of_pixel(beyond, || (a, b), key(3), offset2, query, &mut got);
-            set.coverage_tiled(beyond, a, b, query, &mut want);
+            cache.of_pixel(&set, beyond, || (a, b), key(3), offset2, query, &mut got);
+            cache.tiled(&set, beyond, a, b, query, &mut want);
             assert_eq!(got, want);
             // Another shape in the same pixel: exact again, about its own centre.
-            set.coverage_of_pixel(far, || (a, b), key(4), offset2, query, &mut got);
+            cache.of_pixel(&set, far, || (a, b), key(4), offset2, query, &mut got);
             exact(&set, far - offset2.x * a - offset2.y * b, &mut want);
             assert_eq!(got, want);
         }
+        // The next pixel shares nothing with this one: the hit that shared the first
+        // footprint above now works out its own.
+        cache.start_pixel();
+        let asked = std::cell::Cell::new(false);
+        let offset2 = Vec2::new(-0.4, 0.3);
+        let uv2 = uv - 0.25 * a + 0.125 * b + offset2.x * a + offset2.y * b;
+        let footprint = || {
+            asked.set(true);
+            (a, b)
+        };
+        cache.of_pixel(
+            &set,
+            uv2,
+            footprint,
+            key(3),
+            offset2,
+            lattice::TileQuery::Max,
+            &mut got,
+        );
+        assert!(
+            asked.get(),
+            "a new pixel reused the previous pixel's footprint"
+        );
     }
     assert!(nonzero > 50, "{nonzero}");
 }
@@ -914,33 +941,27 @@ fn pixel_footprint_coverage_keeps_chains_of_bounces_apart() {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(43);
     let (mut got, mut want) = (vec![0.0f32; n], vec![0.0f32; n]);
     let mut distinct = 0;
-    for (pixel, (uv, a, b)) in random_footprints(&mut rng, 200, 0.05)
-        .into_iter()
-        .enumerate()
-    {
-        let key = |chain| lattice::PixelKey {
-            render: 2,
-            pixel: pixel as u64,
-            shape: 3,
-            chain,
-        };
+    let mut cache = CoverageCache::new();
+    for (uv, a, b) in random_footprints(&mut rng, 200, 0.05) {
+        cache.start_pixel();
+        let key = |chain| PixelKey { shape: 3, chain };
         let query = lattice::TileQuery::Max;
         let exact = |c: Vec2, out: &mut [f32]| set.coverage_query(query, c, a, b, cells, out);
         let offset = Vec2::ZERO;
         // Chain 1 fills its entry about uv.
-        set.coverage_of_pixel(uv, || (a, b), key(1), offset, query, &mut got);
+        cache.of_pixel(&set, uv, || (a, b), key(1), offset, query, &mut got);
         let first = got.clone();
         // Chains 2..=4 (less than the cache holds) a fifth of a footprint away: each exact
         // about its own centre, not chain 1's value.
         let near = uv + 0.2 * a;
         exact(near, &mut want);
         for chain in 2..=4 {
-            set.coverage_of_pixel(near, || (a, b), key(chain), offset, query, &mut got);
+            cache.of_pixel(&set, near, || (a, b), key(chain), offset, query, &mut got);
             assert_eq!(got, want);
         }
         distinct += (want != first) as usize;
         // Chain 1 again, near its own centre: its stored value.
-        set.coverage_of_pixel(near, || (a, b), key(1), offset, query, &mut got);
+        cache.of_pixel(&set, near, || (a, b), key(1), offset, query, &mut got);
         assert_eq!(got, first);
     }
     assert!(distinct > 20, "{distinct}");

@@ -2,8 +2,8 @@
 //! (a misspelt key is an error that names it, like pbrt's "unused parameter"). Every key is
 //! documented with an example in `docs/scenes.md`.
 
+use super::materials::MaterialDesc;
 use crate::geometry::Transform;
-use crate::material::Material;
 use crate::math::Vec3;
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -18,7 +18,7 @@ pub struct SceneFile {
     pub render: RenderSection,
     pub camera: CameraSection,
     #[serde(default)]
-    pub materials: BTreeMap<String, Material>,
+    pub materials: BTreeMap<String, MaterialDesc>,
     #[serde(default)]
     pub shapes: Vec<ShapeSection>,
     #[serde(default)]

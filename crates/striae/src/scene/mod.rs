@@ -11,17 +11,18 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod file;
+pub mod materials;
+pub mod scratches;
 
-use crate::bsdf::Bsdf;
 use crate::camera::{CameraError, PerspectiveCamera};
 use crate::envmap::EnvMap;
 use crate::geometry::{Geometry, Shape, ShapeGeometry, TriangleMesh};
 use crate::lights::{Environment, Light};
-use crate::material::{Material, MaterialError};
+use crate::material::Material;
 use crate::math::Vec3;
 use crate::sampler::SamplerKind;
-use crate::shading::ShadingContext;
 use file::{EnvironmentType, LightType, SceneFile, ShapeSection, ShapeType};
+use materials::MaterialError;
 use std::path::{Path, PathBuf};
 
 /// The built-in default scene (`striae render` with no argument): the glass teapot with the
@@ -139,16 +140,6 @@ impl Scene {
             message: e.to_string(),
         })?;
         build(parsed, file, base, overrides)
-    }
-}
-
-/// The BSDF a material presents at a hit. The one place the integrator asks a material for its
-/// BSDF: the scratched material (issue 5) takes the whole [`ShadingContext`] here.
-#[inline]
-pub fn material_bsdf<'a>(material: &'a Material, ctx: &ShadingContext) -> Bsdf<'a> {
-    match material {
-        Material::Scratched(m) => m.bsdf(ctx),
-        _ => material.bsdf_at(ctx.uv),
     }
 }
 
@@ -335,9 +326,7 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
     let names: Vec<&String> = f.materials.keys().collect();
     let mut materials: Vec<Material> = Vec::with_capacity(names.len());
     for (name, m) in &f.materials {
-        let mut m = m.clone();
-        m.prepare(base).map_err(|e| material_error(file, name, e))?;
-        materials.push(m);
+        materials.push(m.prepare(base).map_err(|e| material_error(file, name, e))?);
     }
 
     let mut shapes = Vec::with_capacity(f.shapes.len());

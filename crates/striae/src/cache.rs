@@ -1,0 +1,212 @@
+//! Scratch tables shared and cached: in memory by parameter hash ([`TableParams::hash`]), so
+//! each distinct table is computed or loaded once per process however many materials use it,
+//! and on disk in [`cache_dir`] as `scratch-table-HASH.npz`, written atomically
+//! ([`crate::io::write_atomically`], a temporary name unique to the call), so concurrent renders
+//! sharing a cache folder never read a half-written file. A cache file that cannot be read, or
+//! holds other parameters, is recomputed with a warning ([`crate::log`]).
+
+use crate::bsdf::ScratchLobeTable;
+use crate::table::{ScratchTable, TableError, TableParams};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, OnceLock, Weak};
+
+/// The on-disk table cache: `$STRIAE_CACHE`, else `$XDG_CACHE_HOME/striae`, else
+/// `~/.cache/striae` (`None` if none can be named).
+pub fn cache_dir() -> Option<PathBuf> {
+    let var = |k: &str| {
+        std::env::var_os(k)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
+    var("STRIAE_CACHE")
+        .or_else(|| var("XDG_CACHE_HOME").map(|d| d.join("striae")))
+        .or_else(|| var("HOME").map(|h| h.join(".cache").join("striae")))
+}
+
+/// The cache file of a table: `scratch-table-HASH.npz`.
+pub fn cache_file(dir: &Path, hash: &str) -> PathBuf {
+    dir.join(format!("scratch-table-{hash}.npz"))
+}
+
+type Registry = Mutex<HashMap<String, Weak<ScratchLobeTable>>>;
+
+/// The live tables of the process by parameter hash.
+fn registry() -> &'static Registry {
+    static REGISTRY: OnceLock<Registry> = OnceLock::new();
+    REGISTRY.get_or_init(|| Mutex::new(HashMap::new()))
+}
+
+/// The live table of `hash`, or the one `make` gives (then registered). The registry lock is
+/// held meanwhile, so two materials needing one table compute it once.
+fn shared(
+    hash: String,
+    make: impl FnOnce() -> Result<ScratchTable, TableError>,
+) -> Result<Arc<ScratchLobeTable>, TableError> {
+    let mut reg = registry().lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(t) = reg.get(&hash).and_then(Weak::upgrade) {
+        return Ok(t);
+    }
+    let t = Arc::new(ScratchLobeTable::new(make()?));
+    reg.retain(|_, w| w.strong_count() > 0);
+    reg.insert(hash, Arc::downgrade(&t));
+    Ok(t)
+}
+
+/// The table of `params`: shared in memory if a live one has the same hash, else read from the
+/// disk cache, else computed (and cached).
+pub fn obtain_table(params: &TableParams) -> Result<Arc<ScratchLobeTable>, TableError> {
+    let hash = params.hash();
+    shared(hash.clone(), || {
+        load_or_compute(params, &hash, cache_dir().as_deref())
+    })
+}
+
+/// Read a table file (shared in memory by its parameter hash like computed ones).
+pub fn load_table_file(path: &Path) -> Result<Arc<ScratchLobeTable>, TableError> {
+    let table = ScratchTable::load(path)?;
+    shared(table.params.hash(), || Ok(table))
+}
+
+/// The disk-cache step of [`obtain_table`] with an explicit cache folder (`None`: no cache).
+pub fn load_or_compute(
+    params: &TableParams,
+    hash: &str,
+    dir: Option<&Path>,
+) -> Result<ScratchTable, TableError> {
+    if let Some(dir) = dir {
+        let file = cache_file(dir, hash);
+        if file.exists() {
+            match ScratchTable::load(&file) {
+                Ok(t) if t.params.hash() == hash => return Ok(t),
+                Ok(_) => crate::log::warn(&format!(
+                    "cached table {} holds other parameters; recomputing it",
+                    file.display()
+                )),
+                Err(e) => {
+                    crate::log::warn(&format!("cached table unreadable ({e}); recomputing it"))
+                }
+            }
+        }
+    }
+    let start = std::time::Instant::now();
+    let t = &params.trace;
+    crate::log::info(&format!(
+        "computing scratch table {} ({}, {:?} walls, M {} N {} N_r {}) ...",
+        &hash[..12],
+        params.profile.spec,
+        t.walls,
+        t.m,
+        t.n,
+        t.nr
+    ));
+    let table = ScratchTable::compute(params, &|_| {})?;
+    crate::log::info(&format!(
+        "scratch table {} computed in {:.2} s",
+        &hash[..12],
+        start.elapsed().as_secs_f64()
+    ));
+    if let Some(dir) = dir {
+        let result = std::fs::create_dir_all(dir)
+            .map_err(|e| TableError::Io {
+                path: dir.to_path_buf(),
+                source: e,
+            })
+            .and_then(|_| table.save(&cache_file(dir, hash)));
+        if let Err(e) = result {
+            crate::log::warn(&format!("could not cache the scratch table ({e})"));
+        }
+    }
+    Ok(table)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fresnel::FresnelLaw;
+    use crate::profile::Profile;
+    use crate::trace2d::{FresnelMode, TraceSettings, Walls};
+
+    #[test]
+    fn table_cache_writes_reads_and_recovers_from_corruption() {
+        let dir = std::env::temp_dir().join(format!("striae-cache-test-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let trace = TraceSettings {
+            m: 8,
+            n: 100,
+            nr: 2,
+            seed: 99,
+            ..TraceSettings::default()
+        };
+        let params = TableParams::new(Profile::parse("v:angle=80").unwrap(), trace);
+        let hash = params.hash();
+        let a = load_or_compute(&params, &hash, Some(&dir)).unwrap();
+        let file = cache_file(&dir, &hash);
+        assert!(file.exists());
+        // Only the final file remains (no temporary left behind).
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+        let b = load_or_compute(&params, &hash, Some(&dir)).unwrap();
+        assert_eq!(a, b);
+        // A corrupt cache file is recomputed (with a warning) and replaced.
+        std::fs::write(&file, b"garbage").unwrap();
+        let c = load_or_compute(&params, &hash, Some(&dir)).unwrap();
+        assert_eq!(a.rho_s, c.rho_s);
+        assert!(ScratchTable::load(&file).is_ok());
+        // A file under the wrong name (other parameters) is not trusted either.
+        let mut other = params.clone();
+        other.trace.seed = 100;
+        std::fs::copy(&file, cache_file(&dir, &other.hash())).unwrap();
+        let d = load_or_compute(&other, &other.hash(), Some(&dir)).unwrap();
+        assert_eq!(d.params, other);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn tables_are_shared_by_hash() {
+        let trace = TraceSettings {
+            m: 8,
+            n: 50,
+            nr: 2,
+            seed: 12345,
+            ..TraceSettings::default()
+        };
+        let params = TableParams::new(Profile::parse("v:angle=70").unwrap(), trace);
+        let a = obtain_table(&params).unwrap();
+        let b = obtain_table(&params).unwrap();
+        assert!(Arc::ptr_eq(&a, &b));
+        let mut other = params.clone();
+        other.trace.seed += 1;
+        let c = obtain_table(&other).unwrap();
+        assert!(!Arc::ptr_eq(&a, &c));
+    }
+
+    /// A table's parameters read back from its file are the ones written, bit for bit, so that
+    /// its hash (the cache file's name) matches: a curved profile's vertices are not round
+    /// numbers, and a JSON parser that rounds them by one ulp made every render of the scratched
+    /// metal teapot recompute its cached table.
+    #[test]
+    fn table_parameters_read_back_bit_for_bit() {
+        let trace = TraceSettings {
+            m: 8,
+            n: 100,
+            walls: Walls::Specular,
+            fresnel_mode: FresnelMode::Walls,
+            fresnel_law: FresnelLaw::Conductor {
+                eta: 0.1431189626455307,
+                k: 3.9831604957580566,
+            },
+            ..TraceSettings::default()
+        };
+        let params = TableParams::new(Profile::parse("round:depth=0.3").unwrap(), trace);
+        let dir =
+            std::env::temp_dir().join(format!("striae-roundtrip-test-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let hash = params.hash();
+        load_or_compute(&params, &hash, Some(&dir)).unwrap();
+        let loaded = ScratchTable::load(&cache_file(&dir, &hash)).unwrap();
+        assert_eq!(loaded.params.profile.points, params.profile.points);
+        assert_eq!(loaded.params.trace, params.trace);
+        assert_eq!(loaded.params.hash(), hash);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

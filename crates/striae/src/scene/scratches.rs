@@ -1,0 +1,441 @@
+//! The scratched material as a scene file describes it (`type = "scratched"`, METHOD.md
+//! sections 5-7, `docs/scratched.md`): its keys, their validation and defaults
+//! ([`ScratchedDesc::resolve`]), and its preparation into the runtime
+//! [`ScratchedMaterial`] (table obtained through [`crate::cache`], layers drawn).
+//!
+//! ```toml
+//! [materials.glass]
+//! type = "scratched"
+//! base = "glass"                 # or "metal" (with preset = "gold", or eta and k)
+//! ior = 1.5                      # glass only
+//! [materials.glass.scratches]
+//! profile = "v:angle=90"         # the syntax of `striae precompute --profile`
+//! walls = "diffuse"              # "specular" = mirror walls, [Raymond16]'s delta lobe
+//! fresnel = "seed"               # or "walls"
+//! fresnel_law = "schlick"        # dielectric | conductor:ETA,K | none
+//! m = 256                        # table size M, N, N_r (default: the seed's,
+//! n = 10000                      # `TraceSettings::default`)
+//! nr = 100
+//! setting = 1                    # the seed's Table 1, or length / width / threshold
+//! layers = 8
+//! seed = 1
+//! layer_mix = "max"              # or "sum" ([Raymond16])
+//! # table = "my-table.npz"       # load a table instead of computing one
+//! ```
+
+use super::materials::{conductor_ior, invalid, MaterialError};
+use crate::bsdf::{ConductorIor, ScratchLobeTable, ScratchedBase};
+use crate::fresnel::FresnelLaw;
+use crate::layers::{LayerError, LayerParams, LayerSet, MAX_LAYERS};
+use crate::math::Rgb;
+use crate::profile::Profile;
+use crate::scratched::{CoverageMode, LayerMix, ScratchedMaterial};
+use crate::table::{TableError, TableParams};
+use crate::trace2d::{FresnelMode, TraceError, TraceSettings, Walls};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// The smooth base under the scratches.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum BaseKind {
+    /// A smooth dielectric (`ior`, default 1.5, the seed's glass).
+    Glass,
+    /// A smooth conductor (`preset`, or `eta` and `k`).
+    Metal,
+}
+
+/// Default profile: a 90-degree V groove.
+pub const DEFAULT_PROFILE: &str = "v:angle=90";
+/// Default layer-set seed.
+pub const DEFAULT_LAYER_SEED: u64 = 1;
+
+/// `[materials.NAME.scratches]`. Every key is optional; the defaults depend on the base
+/// (see [`ScratchedDesc::resolve`] and `docs/scratched.md`).
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ScratchSpec {
+    /// Profile spec, as `striae precompute --profile` (`file:` paths are relative to the scene).
+    pub profile: Option<String>,
+    /// Wall micro-BRDF: glass default `diffuse` (the seed), metal `specular` ([Raymond16]).
+    #[serde(default, deserialize_with = "keyed::walls")]
+    pub walls: Option<Walls>,
+    /// Where Fresnel is applied: glass default `seed`, metal `walls`.
+    #[serde(default, deserialize_with = "keyed::fresnel")]
+    pub fresnel: Option<FresnelMode>,
+    /// `schlick`, `dielectric`, `conductor:ETA,K` or `none`; glass default `schlick`, metal the
+    /// base's complex IOR in its brightest channel (`none` for a perfect mirror base).
+    pub fresnel_law: Option<String>,
+    /// Index for `schlick` / `dielectric` (default: the glass base's `ior`, else 1.5).
+    pub ior: Option<f64>,
+    pub m: Option<usize>,
+    pub n: Option<usize>,
+    pub nr: Option<usize>,
+    /// Facet albedo per bounce (default 1).
+    pub albedo: Option<f64>,
+    pub max_bounces: Option<usize>,
+    /// Seed of the 2D trace (default 0).
+    pub trace_seed: Option<u64>,
+    /// The seed's Table 1 (1 or 2); excludes `length`, `width`, `threshold`.
+    pub setting: Option<u32>,
+    pub length: Option<f64>,
+    pub width: Option<f64>,
+    pub threshold: Option<f64>,
+    /// Number of layers `K` (default 8).
+    pub layers: Option<usize>,
+    /// Seed of the layer set (default 1).
+    pub seed: Option<u64>,
+    #[serde(default, deserialize_with = "keyed::layer_mix")]
+    pub layer_mix: Option<LayerMix>,
+    /// `footprint` (default, section 6) or `point` (see [`CoverageMode`]).
+    #[serde(default, deserialize_with = "keyed::coverage")]
+    pub coverage: Option<CoverageMode>,
+    /// A table file (`.npz`, relative to the scene file) to load instead of computing one;
+    /// excludes the table keys above.
+    pub table: Option<PathBuf>,
+}
+
+/// Deserialisers of the scratched material's word-valued keys that put the key in the error.
+/// A material is an internally tagged enum, which serde buffers, so `toml` can point only at the
+/// material's table and its message would name the bad word but not the key.
+mod keyed {
+    use super::{BaseKind, CoverageMode, FresnelMode, LayerMix, Walls};
+    use serde::de::{Deserialize, Deserializer, Error};
+
+    fn named<'de, T: Deserialize<'de>, D: Deserializer<'de>>(
+        d: D,
+        key: &str,
+    ) -> Result<T, D::Error> {
+        T::deserialize(d).map_err(|e| D::Error::custom(format_args!("key `{key}`: {e}")))
+    }
+
+    pub fn base<'de, D: Deserializer<'de>>(d: D) -> Result<BaseKind, D::Error> {
+        named(d, "base")
+    }
+    pub fn walls<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Walls>, D::Error> {
+        named(d, "scratches.walls")
+    }
+    pub fn fresnel<'de, D: Deserializer<'de>>(d: D) -> Result<Option<FresnelMode>, D::Error> {
+        named(d, "scratches.fresnel")
+    }
+    pub fn layer_mix<'de, D: Deserializer<'de>>(d: D) -> Result<Option<LayerMix>, D::Error> {
+        named(d, "scratches.layer_mix")
+    }
+    pub fn coverage<'de, D: Deserializer<'de>>(d: D) -> Result<Option<CoverageMode>, D::Error> {
+        named(d, "scratches.coverage")
+    }
+}
+
+/// Where a material's table comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TableSource {
+    Compute(TableParams),
+    File(PathBuf),
+}
+
+/// Everything a scratched material resolves to before its table is built.
+#[derive(Clone, Debug)]
+pub struct Resolved {
+    pub base: ScratchedBase,
+    pub tint: Rgb,
+    pub table: TableSource,
+    pub layers: LayerParams,
+    pub layer_seed: u64,
+    pub mix: LayerMix,
+    pub coverage: CoverageMode,
+}
+
+/// The base's defaults for the scratch table.
+struct BaseDefaults {
+    base: ScratchedBase,
+    tint: Rgb,
+    law: FresnelLaw,
+    walls: Walls,
+    mode: FresnelMode,
+}
+
+/// `type = "scratched"` in a scene file.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScratchedDesc {
+    #[serde(deserialize_with = "keyed::base")]
+    pub base: BaseKind,
+    /// Glass: interior index (default 1.5; the exterior is 1).
+    pub ior: Option<f32>,
+    /// Metal: a conductor preset (see `bsdf::CONDUCTOR_PRESETS`) or `eta` and `k`.
+    pub preset: Option<String>,
+    pub eta: Option<[f32; 3]>,
+    pub k: Option<[f32; 3]>,
+    #[serde(default)]
+    pub scratches: ScratchSpec,
+}
+
+/// `scratches.KEY` for a trace parameter's name.
+fn trace_key(key: &str) -> &'static str {
+    match key {
+        "m" => "scratches.m",
+        "n" => "scratches.n",
+        "nr" => "scratches.nr",
+        "albedo" => "scratches.albedo",
+        "max_bounces" => "scratches.max_bounces",
+        "fresnel_law" => "scratches.fresnel_law",
+        "ior" => "scratches.ior",
+        _ => "scratches",
+    }
+}
+
+fn layer_error(e: LayerError) -> MaterialError {
+    let key = match e {
+        LayerError::Length(_) => "scratches.length",
+        LayerError::Width(_) => "scratches.width",
+        LayerError::Threshold(_) => "scratches.threshold",
+        LayerError::LayerCount(_) => "scratches.layers",
+        LayerError::Setting(_) => "scratches.setting",
+        _ => "scratches",
+    };
+    let value = match &e {
+        LayerError::Length(v) | LayerError::Width(v) | LayerError::Threshold(v) => v.to_string(),
+        LayerError::LayerCount(v) => v.to_string(),
+        LayerError::Setting(v) => v.to_string(),
+        _ => String::new(),
+    };
+    invalid(key, value, e.to_string())
+}
+
+impl ScratchedDesc {
+    /// Check every key and work out the defaults (no table is computed).
+    pub fn resolve(&self, base_dir: &Path) -> Result<Resolved, MaterialError> {
+        let defaults = self.resolve_base()?;
+        let table = self.resolve_table(&defaults, base_dir)?;
+        let s = &self.scratches;
+        Ok(Resolved {
+            base: defaults.base,
+            tint: defaults.tint,
+            table,
+            layers: self.resolve_layers()?,
+            layer_seed: s.seed.unwrap_or(DEFAULT_LAYER_SEED),
+            mix: s.layer_mix.unwrap_or_default(),
+            coverage: s.coverage.unwrap_or_default(),
+        })
+    }
+
+    /// The base (`ior`, or a conductor's `preset` / `eta` and `k`) and the table defaults it
+    /// implies: glass takes the seed's model (diffuse walls, Schlick, one Fresnel factor), metal
+    /// [Raymond16]'s (mirror walls, Fresnel per wall hit).
+    fn resolve_base(&self) -> Result<BaseDefaults, MaterialError> {
+        match self.base {
+            BaseKind::Glass => {
+                for (key, given) in [
+                    ("preset", self.preset.is_some()),
+                    ("eta", self.eta.is_some()),
+                    ("k", self.k.is_some()),
+                ] {
+                    if given {
+                        return Err(invalid(key, "(given)", "applies to base = \"metal\" only"));
+                    }
+                }
+                let ior = self.ior.unwrap_or(1.5);
+                if !(ior.is_finite() && ior >= 1.0) {
+                    return Err(invalid(
+                        "ior",
+                        ior,
+                        "an index of refraction must be finite and >= 1",
+                    ));
+                }
+                Ok(BaseDefaults {
+                    base: ScratchedBase::Glass { eta: ior },
+                    tint: Rgb::ONE,
+                    law: FresnelLaw::Schlick {
+                        n: self.scratches.ior.unwrap_or(ior as f64),
+                    },
+                    walls: Walls::Diffuse,
+                    mode: FresnelMode::Seed,
+                })
+            }
+            BaseKind::Metal => {
+                if let Some(ior) = self.ior {
+                    return Err(invalid(
+                        "ior",
+                        ior,
+                        "applies to base = \"glass\" only (metal takes preset or eta and k)",
+                    ));
+                }
+                let ior = conductor_ior(self.preset.as_deref(), self.eta, self.k)?;
+                let (law, tint) = metal_law_and_tint(&ior);
+                Ok(BaseDefaults {
+                    base: ScratchedBase::Metal { ior },
+                    tint,
+                    law,
+                    walls: Walls::Specular,
+                    mode: FresnelMode::Walls,
+                })
+            }
+        }
+    }
+
+    /// Where the table comes from: a file (`scratches.table`, excluding every table key) or
+    /// the parameters of a computation.
+    fn resolve_table(
+        &self,
+        defaults: &BaseDefaults,
+        base_dir: &Path,
+    ) -> Result<TableSource, MaterialError> {
+        let s = &self.scratches;
+        let table_keys = [
+            ("scratches.profile", s.profile.is_some()),
+            ("scratches.walls", s.walls.is_some()),
+            ("scratches.fresnel", s.fresnel.is_some()),
+            ("scratches.fresnel_law", s.fresnel_law.is_some()),
+            ("scratches.ior", s.ior.is_some()),
+            ("scratches.m", s.m.is_some()),
+            ("scratches.n", s.n.is_some()),
+            ("scratches.nr", s.nr.is_some()),
+            ("scratches.albedo", s.albedo.is_some()),
+            ("scratches.max_bounces", s.max_bounces.is_some()),
+            ("scratches.trace_seed", s.trace_seed.is_some()),
+        ];
+        if let Some(path) = &s.table {
+            if let Some((key, _)) = table_keys.iter().find(|(_, given)| *given) {
+                return Err(invalid(key, "(given)", "`scratches.table` loads a precomputed table; its parameters cannot be given too"));
+            }
+            return Ok(TableSource::File(base_dir.join(path)));
+        }
+        let spec = s
+            .profile
+            .clone()
+            .unwrap_or_else(|| DEFAULT_PROFILE.to_string());
+        let profile = match spec.strip_prefix("file:") {
+            Some(p) if Path::new(p).is_relative() => {
+                Profile::parse(&format!("file:{}", base_dir.join(p).display()))
+            }
+            _ => Profile::parse(&spec),
+        }
+        .map_err(|e| invalid("scratches.profile", format!("{spec:?}"), e.to_string()))?;
+        let law = match &s.fresnel_law {
+            Some(text) => {
+                let n = s.ior.unwrap_or(match defaults.base {
+                    ScratchedBase::Glass { eta } => eta as f64,
+                    ScratchedBase::Metal { .. } => 1.5,
+                });
+                FresnelLaw::parse(text, n)
+                    .map_err(|e| invalid("scratches.fresnel_law", format!("{text:?}"), e))?
+            }
+            None => defaults.law,
+        };
+        if let (Some(n), Some(_)) = (
+            s.ior,
+            s.fresnel_law
+                .as_deref()
+                .filter(|l| l.starts_with("conductor") || *l == "none"),
+        ) {
+            return Err(invalid(
+                "scratches.ior",
+                n,
+                "applies to the schlick and dielectric laws only",
+            ));
+        }
+        let seed = TraceSettings::default();
+        let trace = TraceSettings {
+            walls: s.walls.unwrap_or(defaults.walls),
+            m: s.m.unwrap_or(seed.m),
+            n: s.n.unwrap_or(seed.n),
+            nr: s.nr.unwrap_or(seed.nr),
+            albedo: s.albedo.unwrap_or(seed.albedo),
+            max_bounces: s.max_bounces.unwrap_or(seed.max_bounces),
+            seed: s.trace_seed.unwrap_or(seed.seed),
+            fresnel_mode: s.fresnel.unwrap_or(defaults.mode),
+            fresnel_law: law,
+            ..seed
+        };
+        trace.validate().map_err(|e| {
+            let TraceError::BadParameter { key, value, why } = e;
+            invalid(trace_key(key), value, why)
+        })?;
+        Ok(TableSource::Compute(TableParams::new(profile, trace)))
+    }
+
+    /// The layer parameters: a `setting` of the seed's Table 1, or all of `length`, `width`
+    /// and `threshold`; then `layers`.
+    fn resolve_layers(&self) -> Result<LayerParams, MaterialError> {
+        let s = &self.scratches;
+        let mut layers = match (s.setting, s.length, s.width, s.threshold) {
+            (Some(n), None, None, None) => LayerParams::setting(n).map_err(layer_error)?,
+            (Some(_), ..) => {
+                return Err(invalid(
+                    "scratches.setting",
+                    s.setting.unwrap_or(0),
+                    "a setting excludes `length`, `width` and `threshold`",
+                ));
+            }
+            (None, None, None, None) => LayerParams::setting(1).map_err(layer_error)?,
+            (None, Some(length), Some(width), Some(threshold)) => LayerParams {
+                length,
+                width,
+                threshold,
+                layers: LayerParams::DEFAULT_LAYERS,
+            },
+            (None, ..) => {
+                return Err(invalid(
+                    "scratches.length",
+                    format!("{:?}/{:?}/{:?}", s.length, s.width, s.threshold),
+                    "give all of `length`, `width` and `threshold` (or a `setting`)",
+                ));
+            }
+        };
+        layers.layers = s.layers.unwrap_or(LayerParams::DEFAULT_LAYERS);
+        if layers.layers > MAX_LAYERS {
+            return Err(layer_error(LayerError::LayerCount(layers.layers)));
+        }
+        layers.validate().map_err(layer_error)?;
+        Ok(layers)
+    }
+
+    /// Validate, then obtain the table (memory, disk cache, file or computation) and build the
+    /// layer set.
+    pub fn prepare(&self, base_dir: &Path) -> Result<ScratchedMaterial, MaterialError> {
+        let r = self.resolve(base_dir)?;
+        let table: Result<Arc<ScratchLobeTable>, TableError> = match &r.table {
+            TableSource::Compute(params) => crate::cache::obtain_table(params),
+            TableSource::File(path) => crate::cache::load_table_file(path),
+        };
+        let table = table.map_err(|e| MaterialError::ScratchTable {
+            key: if self.scratches.table.is_some() {
+                "scratches.table"
+            } else {
+                "scratches"
+            },
+            source: Box::new(e),
+        })?;
+        let layers = LayerSet::new(r.layers, r.layer_seed).map_err(layer_error)?;
+        Ok(ScratchedMaterial::new(
+            r.base, r.tint, table, layers, r.mix, r.coverage,
+        ))
+    }
+}
+
+/// Metal scratches: the table's Fresnel law is a scalar, so it takes the base's complex IOR in
+/// the channel that reflects most at normal incidence (`none` when that channel is the perfect
+/// mirror `eta = 0`), and the lobe is tinted by `F_rgb(1) / F_max(1) <= 1` (an approximation:
+/// the colour of one reflection at normal incidence; documented in `docs/scratched.md`).
+fn metal_law_and_tint(ior: &ConductorIor) -> (FresnelLaw, Rgb) {
+    let f = ior.fresnel(1.0);
+    let c = if f.x >= f.y && f.x >= f.z {
+        0
+    } else if f.y >= f.z {
+        1
+    } else {
+        2
+    };
+    let (eta, k) = (ior.eta[c] as f64, ior.k[c] as f64);
+    let law = if eta > 0.0 {
+        FresnelLaw::Conductor { eta, k }
+    } else {
+        FresnelLaw::None
+    };
+    let fmax = f[c].max(1e-6);
+    (law, (f / fmax).min(Rgb::ONE))
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,140 @@
+//! The scratched material's scene keys: defaults, and errors naming the key and the value.
+
+use super::*;
+use crate::scene::materials::MaterialDesc;
+
+fn parse(text: &str) -> Result<ScratchedDesc, String> {
+    let m: MaterialDesc = toml::from_str(text).map_err(|e| e.to_string())?;
+    m.validate().map_err(|e| e.to_string())?;
+    match m {
+        MaterialDesc::Scratched(s) => Ok(s),
+        _ => Err("not scratched".into()),
+    }
+}
+
+#[test]
+fn keys_are_validated() {
+    let ok = parse("type = \"scratched\"\nbase = \"glass\"\nior = 1.5\n[scratches]\nsetting = 2\nlayers = 3\nlayer_mix = \"sum\"\nm = 16").unwrap();
+    let r = ok.resolve(Path::new(".")).unwrap();
+    assert_eq!(
+        r.layers,
+        LayerParams {
+            layers: 3,
+            ..LayerParams::setting(2).unwrap()
+        }
+    );
+    assert_eq!(
+        (r.mix, r.coverage),
+        (LayerMix::Sum, CoverageMode::Footprint)
+    );
+    let TableSource::Compute(p) = r.table else {
+        panic!()
+    };
+    assert_eq!(
+        (p.trace.m, p.trace.walls, p.trace.fresnel_law),
+        (16, Walls::Diffuse, FresnelLaw::Schlick { n: 1.5 })
+    );
+    // Metal defaults: mirror walls, Fresnel at the walls, the base's law; `none` for F = 1.
+    let r = parse("type = \"scratched\"\nbase = \"metal\"\npreset = \"none\"")
+        .unwrap()
+        .resolve(Path::new("."))
+        .unwrap();
+    let TableSource::Compute(p) = r.table else {
+        panic!()
+    };
+    assert_eq!(
+        (p.trace.walls, p.trace.fresnel_mode, p.trace.fresnel_law),
+        (Walls::Specular, FresnelMode::Walls, FresnelLaw::None)
+    );
+    assert_eq!(r.tint, Rgb::ONE);
+    let r = parse("type = \"scratched\"\nbase = \"metal\"\npreset = \"gold\"")
+        .unwrap()
+        .resolve(Path::new("."))
+        .unwrap();
+    assert!(r.tint.x == 1.0 && r.tint.z < 0.6, "{:?}", r.tint);
+    let cases: &[(&str, &[&str])] = &[
+        ("base = \"wood\"", &["`base`", "wood"]),
+        ("base = \"glass\"\nior = 0.5", &["`ior`", "0.5"]),
+        (
+            "base = \"glass\"\npreset = \"gold\"",
+            &["`preset`", "metal"],
+        ),
+        (
+            "base = \"metal\"\nior = 1.5\npreset = \"gold\"",
+            &["`ior`", "glass"],
+        ),
+        (
+            "base = \"metal\"\npreset = \"unobtainium\"",
+            &["unobtainium"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nm = 0",
+            &["`scratches.m`", "0"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nsetting = 3",
+            &["`scratches.setting`", "3"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nsetting = 1\nwidth = 0.1",
+            &["`scratches.setting`", "excludes"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nlength = 0.1",
+            &["`scratches.length`"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nlength = 0.1\nwidth = -1\nthreshold = 0.1",
+            &["`scratches.width`", "-1"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nlayers = 0",
+            &["`scratches.layers`"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nlayers = 65",
+            &["`scratches.layers`", "65"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nprofile = \"zigzag\"",
+            &["`scratches.profile`", "zigzag"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nior = 0.5",
+            &["`scratches.ior`", "0.5", ">= 1"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nfresnel_law = \"fancy\"",
+            &["`scratches.fresnel_law`", "fancy"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\ntable = \"t.npz\"\nm = 64",
+            &["`scratches.m`", "table"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nlayer_mix = \"avg\"",
+            &["`scratches.layer_mix`", "avg"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nwalls = \"rough\"",
+            &["`scratches.walls`", "rough"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nfresnel = \"exact\"",
+            &["`scratches.fresnel`", "exact"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\ncoverage = \"pixel\"",
+            &["`scratches.coverage`", "pixel"],
+        ),
+        ("base = \"glass\"\n[scratches]\nfoo = 1", &["foo"]),
+        ("base = \"glass\"\nroughness = 0.1", &["roughness"]),
+    ];
+    for (body, needles) in cases {
+        let src = format!("type = \"scratched\"\n{body}");
+        let e = parse(&src).expect_err(&src);
+        for n in *needles {
+            assert!(e.contains(n), "error for {src:?} should mention {n:?}: {e}");
+        }
+    }
+}

@@ -1,0 +1,310 @@
+//! The scratched material at render time (METHOD.md sections 5-6, `docs/scratched.md`): a
+//! smooth glass or metal base, a scratch layer set (section 5, evaluated procedurally) and a
+//! shared scratch BRDF table (sections 3-4), combined at a hit as section 6 prescribes. Its
+//! scene-file description and preparation are `scene::scratches`.
+//!
+//! At a hit ([`ScratchedMaterial::bsdf`]): every layer's coverage of the pixel footprint
+//! (`uv` and `ShadingContext::footprint_uv`; exact, [`crate::layers`]); in `max` mode (section
+//! 6) the layer with the largest coverage, one chosen by `ShadingContext::u_layer` among ties
+//! (where several scratches cross); in `sum` mode ([Raymond16]) every layer with some coverage
+//! (at most [`MAX_SCRATCH_LOBES`], the largest). The scratch frame's `t` is the layer's texture
+//! direction `d` carried to 3D by `d.x dP/du + d.y dP/dv` and projected into the shading plane.
+//! Where no layer covers the footprint the BSDF is the base itself, at no extra cost; glass seen
+//! from inside skips the layer queries (its scratches are on the outer side, `bsdf::scratched`).
+
+use crate::bsdf::scratched::MAX_SCRATCH_LOBES;
+use crate::bsdf::{
+    Bsdf, Conductor, Dielectric, ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf,
+};
+use crate::layers::cache::PixelKey;
+use crate::layers::lattice::TileQuery;
+use crate::layers::layer::MAX_FOOTPRINT_CELLS;
+use crate::layers::{CoverageCache, LayerSet, MAX_LAYERS};
+use crate::math::{Rgb, Vec3};
+use crate::shading::ShadingContext;
+use serde::Deserialize;
+use std::sync::Arc;
+
+/// How the layers covering one footprint combine.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum LayerMix {
+    /// The layer with the largest coverage (METHOD.md section 6, the seed).
+    #[default]
+    Max,
+    /// `(1 - sum c_k) f_base + sum c_k f_scratch,k` over every layer ([Raymond16]).
+    Sum,
+}
+
+/// How a hit measures the layers' scratch coverage.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum CoverageMode {
+    /// The exact share of the pixel footprint (the hit's `uv` and
+    /// `ShadingContext::footprint_uv`) each layer's scratches cover (METHOD.md section 6,
+    /// [Raymond16]): at hits reached from the camera by delta
+    /// bounces only (the camera ray's first hit, surfaces seen through the glass or in a
+    /// mirror), of the footprint centred on the pixel centre's ray, computed once per pixel and
+    /// chain of bounces ([`LayerSet::coverage_of_pixel`]); at other hits, with the footprint
+    /// snapped to the footprint-shaped tile that holds the hit and cached per tile
+    /// ([`crate::layers::lattice`]).
+    #[default]
+    Footprint,
+    /// The same exact coverage, of the footprint centred on each sample: no snapping, no
+    /// reuse (several microseconds per hit where a pixel spans many scratches).
+    Sample,
+    /// The scratch test at the hit point only (`c` is 0 or 1 per layer). The camera ray's hit
+    /// is uniformly distributed over the pixel's footprint, so averaging a pixel's samples
+    /// estimates the same coverage without bias in `sum` mode (in `max` mode a footprint
+    /// covered by several layers counts once per layer it picks, not the largest share).
+    Point,
+}
+
+/// A prepared scratched material: the base, the shared table, the layer set.
+#[derive(Clone)]
+pub struct ScratchedMaterial {
+    pub base: ScratchedBase,
+    /// RGB factor on the scratch lobe (metal: the base's colour; glass: 1).
+    pub tint: Rgb,
+    pub table: Arc<ScratchLobeTable>,
+    pub layers: LayerSet,
+    /// Each layer's scratch direction `d_k` in texture space ([`LayerSet::direction`]), as `f32`,
+    /// computed once here rather than with a `sin_cos` per hit.
+    directions: Vec<[f32; 2]>,
+    pub mix: LayerMix,
+    pub coverage: CoverageMode,
+}
+
+impl std::fmt::Debug for ScratchedMaterial {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ScratchedMaterial")
+            .field("base", &self.base)
+            .field("table", &self.table.hash())
+            .field("layers", &self.layers.len())
+            .field("mix", &self.mix)
+            .field("coverage", &self.coverage)
+            .finish()
+    }
+}
+
+impl ScratchedMaterial {
+    pub fn new(
+        base: ScratchedBase,
+        tint: Rgb,
+        table: Arc<ScratchLobeTable>,
+        layers: LayerSet,
+        mix: LayerMix,
+        coverage: CoverageMode,
+    ) -> ScratchedMaterial {
+        let directions = (0..layers.len())
+            .map(|k| layers.direction(k).map(|x| x as f32))
+            .collect();
+        ScratchedMaterial {
+            base,
+            tint,
+            table,
+            layers,
+            directions,
+            mix,
+            coverage,
+        }
+    }
+
+    /// Whether its BSDF transmits, at every hit: glass does (scratched or not, from either
+    /// side), metal does not.
+    #[inline]
+    pub fn has_transmission(&self) -> bool {
+        matches!(self.base, ScratchedBase::Glass { .. })
+    }
+
+    /// The smooth base's BSDF.
+    #[inline]
+    pub fn base_bsdf(&self) -> Bsdf<'static> {
+        match self.base {
+            ScratchedBase::Glass { eta } => Bsdf::Dielectric(Dielectric::new(eta)),
+            ScratchedBase::Metal { ior } => Bsdf::Conductor(Conductor { ior }),
+        }
+    }
+
+    /// Whether [`Self::bsdf`] reads the pixel footprint: every coverage mode but `point`.
+    pub fn reads_footprint(&self) -> bool {
+        self.coverage != CoverageMode::Point
+    }
+
+    /// Whether [`Self::bsdf`] reads the hit's footprint and `u_layer` for `wo` (world, toward
+    /// the viewer) and the geometric normal `ng`: not for glass seen from inside (its smooth
+    /// base).
+    #[inline]
+    pub fn reads_hit_context(&self, wo: Vec3, ng: Vec3) -> bool {
+        !self.seen_from_inside(wo, ng)
+    }
+
+    /// Glass seen from inside: the scratches are on the outer side only (`bsdf::scratched`).
+    #[inline]
+    fn seen_from_inside(&self, wo: Vec3, ng: Vec3) -> bool {
+        matches!(self.base, ScratchedBase::Glass { .. }) && wo.dot(ng) <= 0.0
+    }
+
+    /// The BSDF at a hit (see the module notes), with the render worker's coverage caches.
+    #[inline(always)]
+    pub fn bsdf(&self, ctx: &ShadingContext, cache: &mut CoverageCache) -> Bsdf<'_> {
+        if self.seen_from_inside(ctx.wo, ctx.ng) {
+            return self.base_bsdf();
+        }
+        let k = self.layers.len();
+        let mut cov = [0.0f32; MAX_LAYERS];
+        if !self.layer_coverage(ctx, cache, &mut cov[..k]) {
+            return self.base_bsdf();
+        }
+        let mut lobes = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
+        let count = match self.mix {
+            LayerMix::Max => self.largest_lobe(ctx, &cov[..k], &mut lobes),
+            LayerMix::Sum => self.covering_lobes(ctx, &cov[..k], &mut lobes),
+        };
+        if count == 0 {
+            return self.base_bsdf();
+        }
+        // The integrator evaluates and samples it with `wo` in this frame: precompute the
+        // first lobe's `wo` terms once (`ScratchedBsdf::at_wo`; the same results bit for bit).
+        Bsdf::Scratched(
+            ScratchedBsdf::new(self.base, &self.table, self.tint, &lobes[..count])
+                .at_wo(ctx.frame.to_local(ctx.wo)),
+        )
+    }
+
+    /// Each layer's coverage at the hit into `cov`, as the coverage mode asks; `false` where
+    /// the point test (`coverage = "point"`) finds no scratch.
+    #[inline(always)]
+    fn layer_coverage(
+        &self,
+        ctx: &ShadingContext,
+        cache: &mut CoverageCache,
+        cov: &mut [f32],
+    ) -> bool {
+        let query = match self.mix {
+            LayerMix::Max => TileQuery::Max,
+            LayerMix::Sum => TileQuery::All,
+        };
+        match self.coverage {
+            CoverageMode::Footprint => match ctx.pixel {
+                Some(hit) => cache.of_pixel(
+                    &self.layers,
+                    ctx.uv,
+                    || ctx.footprint_uv(),
+                    PixelKey {
+                        shape: hit.shape,
+                        chain: hit.chain,
+                    },
+                    hit.offset,
+                    query,
+                    cov,
+                ),
+                None => {
+                    let (duvdx, duvdy) = ctx.footprint_uv();
+                    cache.tiled(&self.layers, ctx.uv, duvdx, duvdy, query, cov)
+                }
+            },
+            CoverageMode::Sample => {
+                let (duvdx, duvdy) = ctx.footprint_uv();
+                self.layers
+                    .coverage_query(query, ctx.uv, duvdx, duvdy, MAX_FOOTPRINT_CELLS, cov)
+            }
+            CoverageMode::Point => {
+                let mask = self.layers.scratched_mask(ctx.uv);
+                if mask == 0 {
+                    return false;
+                }
+                for (i, c) in cov.iter_mut().enumerate() {
+                    *c = ((mask >> i) & 1) as f32;
+                }
+            }
+        }
+        true
+    }
+
+    /// `layer_mix = "max"` (METHOD.md section 6): the lobe of the layer with the largest
+    /// coverage, one chosen by `ctx.u_layer` among ties; 0 lobes where no layer covers the hit.
+    #[inline(always)]
+    fn largest_lobe(
+        &self,
+        ctx: &ShadingContext,
+        cov: &[f32],
+        lobes: &mut [ScratchLobe; MAX_SCRATCH_LOBES],
+    ) -> usize {
+        let best = cov.iter().copied().fold(0.0f32, f32::max);
+        if best <= 0.0 {
+            // (`best` is never NaN: `f32::max` drops NaN.)
+            return 0;
+        }
+        // Ties (several scratches crossing the footprint equally): one at random. `c > 0`: with
+        // a tiny best (a disc grazing the footprint) an uncovered layer must not count as a
+        // tie. The ties as a bit mask (one pass, no branch per layer), the pick as its
+        // `pick`-th set bit.
+        const _: () = assert!(MAX_LAYERS <= 64);
+        let ties = cov.iter().enumerate().fold(0u64, |mask, (i, &c)| {
+            mask | (((c > 0.0) & (c >= best - 1e-6)) as u64) << i
+        });
+        let count = ties.count_ones();
+        let layer = if count == 1 {
+            ties.trailing_zeros() as usize
+        } else {
+            let pick = ((ctx.u_layer * count as f32) as u32).min(count - 1);
+            let mut rest = ties;
+            for _ in 0..pick {
+                rest &= rest - 1;
+            }
+            rest.trailing_zeros() as usize
+        };
+        lobes[0] = lobe(self, ctx, layer, cov[layer]);
+        1
+    }
+
+    /// `layer_mix = "sum"` ([Raymond16]): a lobe for every covering layer, the
+    /// [`MAX_SCRATCH_LOBES`] largest where more cover the hit.
+    #[inline(always)]
+    fn covering_lobes(
+        &self,
+        ctx: &ShadingContext,
+        cov: &[f32],
+        lobes: &mut [ScratchLobe; MAX_SCRATCH_LOBES],
+    ) -> usize {
+        let mut order: [usize; MAX_LAYERS] = std::array::from_fn(|i| i);
+        let mut covered = 0;
+        for (i, &c) in cov.iter().enumerate() {
+            if c > 0.0 {
+                order[covered] = i;
+                covered += 1;
+            }
+        }
+        if covered > MAX_SCRATCH_LOBES {
+            order[..covered].sort_by(|&a, &b| cov[b].total_cmp(&cov[a]).then(a.cmp(&b)));
+        }
+        let n = covered.min(MAX_SCRATCH_LOBES);
+        for j in 0..n {
+            lobes[j] = lobe(self, ctx, order[j], cov[order[j]]);
+        }
+        n
+    }
+}
+
+/// Scratch lobe of `layer` with coverage `c`: `t = d.x dP/du + d.y dP/dv` in the shading
+/// plane, as `(cos beta, sin beta)` against the frame's `s` axis (METHOD.md section 1).
+fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32) -> ScratchLobe {
+    let d = p.directions[layer];
+    let t: Vec3 = ctx.dpdu * d[0] + ctx.dpdv * d[1];
+    let (x, y) = (t.dot(ctx.frame.s), t.dot(ctx.frame.t));
+    let len = (x * x + y * y).sqrt();
+    let (cos, sin) = if len > 1e-20 && len.is_finite() {
+        (x / len, y / len)
+    } else {
+        (1.0, 0.0)
+    };
+    ScratchLobe {
+        coverage: c,
+        cos,
+        sin,
+    }
+}
+
+#[cfg(test)]
+mod tests;
