@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Interleaved speed comparison of striae and Mitsuba 3 on one scene (issue 4, "Speed").
+"""Interleaved speed comparison of striae and Mitsuba 3 on one scene (BENCHMARKS.md,
+"Render speed against Mitsuba 3": target at least `llvm_ad_rgb`'s speed on the glass teapot).
 
 Runs, round after round, `striae render` (one or more binaries) and `scripts/mitsuba_scene.py`
 for each Mitsuba variant, all at the same spp and resolution, and prints per renderer the

@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Ray queries alone, striae against Mitsuba 3 (Embree) on the same rays (issue 4, "Speed").
+"""Ray queries alone, striae against Mitsuba 3 (Embree) on the same rays (BENCHMARKS.md,
+"Rays a sample and ray queries against Embree").
 
 `scripts/bench_render.py` compares whole renders; this separates the BVH from the rest of the
 path tracer. The scene is described to Mitsuba by `scripts/mitsuba_scene.py` (the same

@@ -1,4 +1,5 @@
-// Embree alone on a file of rays: one ray a call against packets of 16 (issue 4, "Speed").
+// Embree alone on a file of rays: one ray a call against packets of 16 (BENCHMARKS.md,
+// "Rays a sample and ray queries against Embree").
 //
 // `scripts/bench_traversal.py` times Embree through Mitsuba, whose LLVM variants hand it rays in
 // packets of 16 consecutive rays. This times Mitsuba's own copy of Embree 3 directly, built as

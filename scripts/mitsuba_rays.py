@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""How many rays Mitsuba 3 traces a sample, against striae, on the same scene (issue 4, "Speed").
+"""How many rays Mitsuba 3 traces a sample, against striae, on the same scene (BENCHMARKS.md,
+"Rays a sample and ray queries against Embree").
 
 A render's speed is its rays a sample times its cost a ray, plus the shading. This counts the
 first factor for Mitsuba: `scripts/embree_count.c` (built here with gcc) is preloaded into

@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Cost per sample of scratched glass over smooth glass on the same scene (issue 5, "Speed").
+"""Cost per sample of scratched glass over smooth glass on the same scene (BENCHMARKS.md,
+"Scratched glass over smooth glass": target at most 1.3x).
 
 For each scene (a scratched-glass scene file whose glass material is `[materials.glass]`), the
 script writes variants of it: `smooth` (the glass swapped for `type = "dielectric"` with the same
