@@ -1,12 +1,12 @@
 //! Rays per second of `Geometry::intersect` (closest hit) and `Geometry::occluded` (any hit) on
-//! the Utah teapot tessellated at 64 x 64 quads per patch (~260k triangles), for obvhs' CWBVH
-//! and BVH2, with coherent camera rays and incoherent random rays. Single-threaded.
+//! the Utah teapot tessellated at 64 x 64 quads per patch (~260k triangles), for the 8-wide BVH
+//! and obvhs' binary BVH, with coherent camera rays and incoherent random rays. Single-threaded.
 //!
 //! Time is the benchmark thread's **CPU time** (`/proc/thread-self/schedstat`), not wall time:
 //! the development machine is shared by several engineers compiling at once, and wall time there
 //! measures the scheduler more than the code. (Falls back to wall time where the file is missing.)
 //!
-//! `cargo bench -p striae --bench bvh`; results in BENCHMARKS.md, section "BVH".
+//! `cargo bench -p striae --bench bvh`; results in BENCHMARKS.md, "Precompute, layers, BSDFs, BVH".
 
 use std::time::Instant;
 
@@ -134,7 +134,7 @@ fn bench(c: &mut Criterion<ThreadCpuTime>) {
         _ => unreachable!(),
     };
     let mut geometries = Vec::new();
-    for kind in [BvhKind::Bvh4, BvhKind::Cwbvh, BvhKind::Bvh2] {
+    for kind in [BvhKind::Bvh8, BvhKind::Bvh2] {
         // Single-threaded build, so the thread's CPU time is the build's.
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(1)

@@ -1,7 +1,8 @@
 //! End-to-end path tracing throughput on the built-in glass teapot scene (camera samples per
 //! second; the CLI prints the same figure plus rays/s for a full 512 x 384 render). Also the
-//! cost of one pixel sample's random numbers. The built-in scene is now the scratched teapot
-//! (setting 1); the smooth glass teapot of `scenes/glass-teapot.toml` (issue 4's speed target)
+//! cost of one pixel sample's random numbers. The built-in scene is the scratched teapot
+//! (setting 1); the smooth glass teapot of `scenes/glass-teapot.toml` (the scene of the speed
+//! comparison with Mitsuba 3, BENCHMARKS.md)
 //! runs at 128 x 96 x 4 spp with the default render loop (the widest copy the CPU runs), its
 //! AVX2 copy (`Simd::Avx2`: what a CPU without AVX-512 runs) and its portable copy
 //! (`Simd::Portable`: no AVX2). Run:

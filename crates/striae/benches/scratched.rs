@@ -1,12 +1,13 @@
-//! Cost per camera sample of scratched glass against smooth glass on the same scene (issue 5;
-//! target: at most 1.3x): the setting-1 glass teapot (Fig. 7 a, mostly background) and the
+//! Cost per camera sample of scratched glass against smooth glass on the same scene (target:
+//! at most 1.3x): the setting-1 glass teapot (Fig. 6 b, mostly background) and the
 //! setting-1 plate close-up (Fig. 8 a, glass fills the frame), each rendered with the smooth
 //! dielectric and the scratched material with its three coverage modes: `footprint` (the
-//! default: METHOD.md section 6, footprints snapped to tiles whose exact coverage is cached per
-//! thread), `sample` (the exact footprint of every sample) and `point`. Single-threaded,
-//! 128 x 96 pixels, 16 spp; the tile cache is emptied before every render.
+//! default: METHOD.md section 6, one exact coverage per pixel and chain of delta bounces,
+//! cached footprint tiles elsewhere), `sample` (the exact footprint of every sample) and
+//! `point`. Single-threaded, 128 x 96 pixels, 16 spp; every render starts with empty caches.
 //!
-//! `cargo bench -p striae --bench scratched`; results in BENCHMARKS.md, section "Scratched".
+//! `cargo bench -p striae --bench scratched`; the standing figures (`scripts/scratched_cost.py`
+//! at 512 x 384) are in BENCHMARKS.md, "Scratched glass over smooth glass".
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::path::Path;

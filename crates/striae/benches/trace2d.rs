@@ -2,7 +2,7 @@
 //! seed's table (90-degree V-groove, diffuse walls, N_r = 100), the full table with the
 //! optional kernel estimator, and mirror walls. Throughput is
 //! reported in walks ("paths"). The full seed table is timed with `striae precompute`
-//! (see BENCHMARKS.md).
+//! (BENCHMARKS.md, "Precompute, layers, BSDFs, BVH").
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use striae::profile::Profile;

@@ -16,9 +16,9 @@
 //! row 0 is the zenith. Like Mitsuba, the image's pixels are treated as *samples on a grid*:
 //! pixel `(x, y)` sits at `u = (x + 1/2) / W`, `v = y / (H - 1)` (pixel centres across, the
 //! first and last rows at the poles, columns wrap), and radiance is bilinear between them.
-//! (Mitsuba 3.9's `envmap` shifts `u` by this half texel, `half_texel()`; before session 5
-//! striae put pixel `x` at `u = x / W`, which the Mitsuba comparison of the `features` scene
-//! in `docs/validation.md` caught.) An optional rotation maps world directions to the map's
+//! (Mitsuba 3.9's `envmap` shifts `u` by this half texel, `half_texel()`; with pixel `x` at
+//! `u = x / W` the sky seen directly differs from Mitsuba's by up to 5 %: `docs/validation.md`,
+//! "Conventions the comparison pins down".) An optional rotation maps world directions to the map's
 //! frame (Mitsuba's `to_world`).
 //!
 //! Sampling: cell `(i, j)` of the `W x (H - 1)` bilinear patches gets weight (mean corner

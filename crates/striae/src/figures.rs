@@ -1,4 +1,4 @@
-//! The seed's figures, regenerated (issue 5; `docs/METHOD.md` section 7): Fig. 2 (the polar
+//! The seed's figures, regenerated (`docs/METHOD.md` section 7): Fig. 2 (the polar
 //! lobe of the averaged 2D scratch BRDF for one incident angle), Fig. 4 (a, b, c: cell noise,
 //! after rotation and stretch, after the threshold), Fig. 6 (setting 1: (a) the scratched glass
 //! plate, (b) the scratched glass teapot), Fig. 7 (the same at setting 2) and Fig. 8 (a: a
@@ -78,7 +78,7 @@ pub struct FigureOptions {
 }
 
 impl Default for FigureOptions {
-    /// Sized to finish in a few minutes on 2 cores (`BENCHMARKS.md`).
+    /// Sized to finish in a few seconds on 2 cores (`BENCHMARKS.md`, "Main jobs").
     fn default() -> Self {
         FigureOptions {
             spp: 32,

@@ -121,7 +121,7 @@ pub enum FresnelLaw {
     Dielectric { n: f64 },
     /// A conductor with complex index `eta + i k`.
     Conductor { eta: f64, k: f64 },
-    /// No Fresnel attenuation: `F = 1` at every angle (issue 5's white-furnace tests of
+    /// No Fresnel attenuation: `F = 1` at every angle (the white-furnace tests of
     /// scratched metal; Mitsuba's perfect mirror).
     None,
 }

@@ -21,9 +21,10 @@
 //!   image is the same as if every bounce were worked out. In a scene where no material
 //!   reads the footprint ([`Material::reads_footprint`]) they are skipped altogether (the
 //!   footprint fields are then zero), which changes no pixel either.
-//! * **Speed**: the render loop is compiled twice, for AVX2 + FMA (chosen at run time) and
-//!   portable, with traversal and shading inlined into it; both give the same image bit for
-//!   bit ([`render_with`], `BENCHMARKS.md`, "Renderer speed, session 2").
+//! * **Speed**: the render loop is compiled three times, for AVX-512 (x86-64-v4), AVX2 + FMA
+//!   (x86-64-v3) and portable, the widest the CPU runs chosen at run time ([`LoopCopy`]), with
+//!   traversal and shading inlined into it; all three give the same image bit for bit
+//!   ([`render_with`]; Rust never contracts `a * b + c` into an FMA).
 //! * **Determinism**: each pixel sample draws from its own Sobol stream
 //!   (`sampler::PixelSampler`), tiles are rendered in parallel by rayon and written to fixed
 //!   places, so the image does not depend on the thread count.
@@ -166,9 +167,9 @@ impl DeferredBounce {
 /// a path through glass: the hits inside, the floor, the sky) cost a copy instead of the
 /// bending. The same operations run in the same order as when every bounce is worked out at
 /// once, so every footprint, and the image, is the same bit for bit (test
-/// `deferred_differentials_equal_eager_ones`; `BENCHMARKS.md`, "Session 10"). The path's
-/// chain of delta bounces ([`PixelHit::chain`]), read at the same hits, is folded in the same
-/// way (`BENCHMARKS.md`, "Session 13").
+/// `deferred_differentials_equal_eager_ones`); the setting-1 teapot renders 7 % faster so.
+/// The path's chain of delta bounces ([`PixelHit::chain`]), read at the same hits, is folded
+/// in the same way, instead of a SplitMix64 round at every bounce.
 struct PathDifferentials {
     /// Differentials of the ray that arrived at the first pending bounce (of the path's current
     /// ray when none is pending).
@@ -179,22 +180,25 @@ struct PathDifferentials {
     /// The first `len` entries are initialised.
     pending: [MaybeUninit<DeferredBounce>; PathDifferentials::CAPACITY],
     len: usize,
+    /// The camera ray's film position minus its pixel's centre ([`PixelHit::offset`]).
+    offset: Vec2,
 }
 
 impl PathDifferentials {
     /// Bounces kept pending at most; a longer run is worked out as it fills up. 16: paths of
     /// the usual `max_depth = 16` never fill it, so no bounce is worked out that no hit reads
-    /// (with 8, the flushes on long paths inside glass cost 50 instructions a sample on the
-    /// glass teapot carrying differentials, `BENCHMARKS.md`, "Session 12").
+    /// (8 costs 50 instructions a sample in flushes on long paths inside glass, glass teapot
+    /// carrying differentials).
     const CAPACITY: usize = 16;
 
     #[inline(always)]
-    fn new(rd: RayDifferential) -> Self {
+    fn new(rd: RayDifferential, offset: Vec2) -> Self {
         PathDifferentials {
             rd,
             chain: Some(0),
             pending: [const { MaybeUninit::uninit() }; Self::CAPACITY],
             len: 0,
+            offset,
         }
     }
 
@@ -250,7 +254,7 @@ pub fn shade<'a>(
 /// The shading contexts along the camera ray through film position `film` (pinhole centre of
 /// the lens), following delta bounces (the first lobe a BSDF samples with `u = 0.5`) for up to
 /// `max_hits` hits; stops after the first non-delta BSDF. For tests and debugging views of the
-/// footprint (e.g. the scratch masks of issue 5).
+/// footprint (e.g. the scratch masks in the scratched material's tests).
 pub fn trace_contexts(scene: &Scene, film: Vec2, max_hits: usize) -> Vec<ShadingContext> {
     let (mut ray, mut rd) = scene.camera.generate_ray(film, Vec2::splat(0.5));
     let mut out = Vec::new();
@@ -324,7 +328,7 @@ pub enum LoopCopy {
     Avx2,
     /// The AVX2 set plus AVX-512 F/VL/BW/DQ/CD (x86-64-v4): the same 256-bit box tests, but 32
     /// vector registers, so the big render loop spills less (on an AMD Zen 4, smooth glass
-    /// 2.6-5.7 % faster, scratched glass about the same: `BENCHMARKS.md`, "Session 14"). LLVM
+    /// 2.6-5.7 % faster, scratched glass -2 to +1 %: `BENCHMARKS.md`, "Design findings"). LLVM
     /// also uses 512-bit moves and a few 512-bit compares in it, which lower the clock of
     /// Intel's first AVX-512 server cores (Skylake-SP); not measured there (`STRIAE_SIMD=avx2`
     /// caps the choice).
@@ -461,9 +465,8 @@ fn render_tile(
     copy: LoopCopy,
     worker: &mut Worker,
 ) -> Vec<Rgb> {
-    // One compiled loop per case, each with only its own state to keep in registers (with
-    // the two changes beside it, -1.7 % instructions on the setting-1 teapot and -1.0 % on
-    // the close-up, same images bit for bit: `BENCHMARKS.md`, "Session 11").
+    // One compiled loop per case (with and without differentials), each with only its own
+    // state to keep in registers.
     #[cfg(target_arch = "x86_64")]
     match copy {
         // SAFETY: `copy` is at most `LoopCopy::available()`, so the CPU has the features.
@@ -680,7 +683,7 @@ fn radiance<const DIFFERENTIALS: bool>(
         rd,
         offset,
     } = camera;
-    let (mut ray, offset) = (*ray, *offset);
+    let mut ray = *ray;
     let settings = &scene.settings;
     let shapes = scene.geometry.shapes();
     let n_lights = scene.lights.len();
@@ -701,7 +704,7 @@ fn radiance<const DIFFERENTIALS: bool>(
     // The camera acts like a delta bounce: emitters seen directly count fully.
     let mut specular = true;
     let mut prev_pdf = 0.0f32;
-    let mut differentials = PathDifferentials::new(*rd);
+    let mut differentials = PathDifferentials::new(*rd, *offset);
 
     let mut depth = 0u32;
     loop {
@@ -714,11 +717,9 @@ fn radiance<const DIFFERENTIALS: bool>(
         let Some(hit) = hit else {
             if let Some(env) = scene.environment() {
                 let le = env.eval(ray.d);
-                let w = if specular {
-                    1.0
-                } else {
-                    power_heuristic(prev_pdf, light_select_pdf * env.light_pdf(ray.d))
-                };
+                let w = emission_weight(specular, prev_pdf, || {
+                    light_select_pdf * env.light_pdf(ray.d)
+                });
                 l += beta * le * w;
             }
             break;
@@ -731,14 +732,9 @@ fn radiance<const DIFFERENTIALS: bool>(
             let light = &scene.lights[li as usize];
             let le = light.emitted(hit.ng, wo_world);
             if le != Rgb::ZERO {
-                let w = if specular {
-                    1.0
-                } else {
-                    power_heuristic(
-                        prev_pdf,
-                        light_select_pdf * light.area_pdf(shapes, ray.o, hit.t, ray.d, hit.ng),
-                    )
-                };
+                let w = emission_weight(specular, prev_pdf, || {
+                    light_select_pdf * light.area_pdf(shapes, ray.o, hit.t, ray.d, hit.ng)
+                });
                 l += beta * le * w;
             }
         }
@@ -749,37 +745,15 @@ fn radiance<const DIFFERENTIALS: bool>(
         }
 
         // Shading frame and the material's BSDF.
-        let material = &scene.materials[shape.material as usize];
-        // Dimension 0 of the bounce's block; drawn only where the material reads it (the
-        // scratched material, not glass seen from inside). It only breaks ties between
-        // crossing scratches, so it is hashed: the block's first Sobol set (light choice and
-        // position) is computed only where light sampling runs, not at every hit of a
-        // scratched surface (most of them see no scratch and are delta bounces).
-        let u_layer = if material.reads_hit_context(wo_world, hit.ng) {
-            Some(sampler.next_1d_hashed())
-        } else {
-            sampler.seek(depth, 1);
-            None
-        };
-        // The footprint, and the chain of delta bounces that led here, are worked out only
-        // where the material reads them.
-        let (rd_here, chain) = if DIFFERENTIALS && u_layer.is_some() {
-            let (rd, chain) = differentials.resolve(&scene.geometry);
-            (Some(rd), chain)
-        } else {
-            (None, None)
-        };
-        let view = HitView {
-            wo: wo_world,
-            rd: rd_here.as_ref(),
-            u_layer,
-            pixel: chain.map(|chain| PixelHit {
-                shape: hit.shape,
-                chain,
-                offset,
-            }),
-        };
-        let (frame, bsdf) = material.shade(&hit, view, &mut worker.coverage);
+        let (frame, bsdf) = shade_hit::<DIFFERENTIALS>(
+            scene,
+            &hit,
+            wo_world,
+            depth,
+            sampler,
+            &mut differentials,
+            worker,
+        );
         let wo = frame.to_local(wo_world);
 
         // Next-event estimation.
@@ -840,6 +814,62 @@ fn radiance<const DIFFERENTIALS: bool>(
         }
     }
     l
+}
+
+/// The MIS weight of emission a path found by BSDF sampling: 1 after a delta bounce (and at the
+/// camera), else the power heuristic of the BSDF's pdf `prev_pdf` against light sampling's,
+/// `light_pdf()` (light choice included).
+#[inline(always)]
+fn emission_weight(specular: bool, prev_pdf: f32, light_pdf: impl FnOnce() -> f32) -> f32 {
+    if specular {
+        1.0
+    } else {
+        power_heuristic(prev_pdf, light_pdf())
+    }
+}
+
+/// The shading frame and the BSDF of the material at `hit` (not a pure emitter), seen from
+/// `wo_world` at bounce `depth`, with what the material reads of the hit worked out only where
+/// it reads it: `u_layer`, the footprint, and the chain of delta bounces that led here.
+#[inline(always)]
+fn shade_hit<'a, const DIFFERENTIALS: bool>(
+    scene: &'a Scene,
+    hit: &SurfaceHit,
+    wo_world: Vec3,
+    depth: u32,
+    sampler: &mut PixelSampler,
+    differentials: &mut PathDifferentials,
+    worker: &mut Worker,
+) -> (Frame, Bsdf<'a>) {
+    let material = &scene.materials[scene.geometry.shapes()[hit.shape as usize].material as usize];
+    // Dimension 0 of the bounce's block; drawn only where the material reads it (the
+    // scratched material, not glass seen from inside). It only breaks ties between crossing
+    // scratches, so it is hashed: the block's first Sobol set (light choice and position) is
+    // computed only where light sampling runs, not at every hit of a scratched surface (most
+    // of them see no scratch and are delta bounces).
+    let u_layer = if material.reads_hit_context(wo_world, hit.ng) {
+        Some(sampler.next_1d_hashed())
+    } else {
+        sampler.seek(depth, 1);
+        None
+    };
+    let (rd_here, chain) = if DIFFERENTIALS && u_layer.is_some() {
+        let (rd, chain) = differentials.resolve(&scene.geometry);
+        (Some(rd), chain)
+    } else {
+        (None, None)
+    };
+    let view = HitView {
+        wo: wo_world,
+        rd: rd_here.as_ref(),
+        u_layer,
+        pixel: chain.map(|chain| PixelHit {
+            shape: hit.shape,
+            chain,
+            offset: differentials.offset,
+        }),
+    };
+    material.shade(hit, view, &mut worker.coverage)
 }
 
 /// A path vertex as next-event estimation reads it: the hit, its shading frame, the direction
@@ -959,7 +989,7 @@ mod tests {
                 };
                 let mut eager = camera;
                 let mut eager_chain = Some(0u64);
-                let mut lazy = PathDifferentials::new(camera);
+                let mut lazy = PathDifferentials::new(camera, Vec2::ZERO);
                 let mut ray = Ray::new(o, d);
                 let mut bounces = 0;
                 while let Some(hit) = g.intersect(&ray) {

@@ -33,16 +33,16 @@ pub mod math;
 pub mod sampling;
 pub mod testing;
 
-// Issue 2: the scratch BRDF precompute (METHOD.md sections 2-4, 6).
+// The scratch BRDF precompute (METHOD.md sections 2-4, 6).
 pub mod plot;
 pub mod profile;
 pub mod table;
 pub mod trace2d;
 
-// Issue 3: scratch layers from Worley cell noise (section 5).
+// Scratch layers from Worley cell noise (section 5).
 pub mod layers;
 
-// Issue 4: the path tracer.
+// The path tracer (sections 6-7).
 pub mod bsdf;
 pub mod camera;
 pub mod envmap;
@@ -56,7 +56,7 @@ pub mod scene;
 pub mod shading;
 pub mod texture;
 
-// Issue 5: scratched glass and metal, and the seed's figures.
+// Scratched glass and metal (section 6), and the seed's figures (section 7).
 pub mod figures;
 pub mod scratched;
 

@@ -11,8 +11,9 @@
 //!   ([`Environment::light_pdf`]), as pbrt-v4 does with `allowIncompletePDF` (its
 //!   `UniformInfiniteLight::SampleLi`). Against a constant radiance the BSDF's own sample is
 //!   the better strategy (for a Lambertian surface it is exact but for visibility), so a
-//!   uniform-sphere sample added a shadow ray and almost no information: measured on the
-//!   shipped scenes, the same noise in less time (`BENCHMARKS.md`, "Session 8").
+//!   uniform-sphere sample would add a shadow ray and almost no information: on the shipped
+//!   scenes this gives the same noise or less in less time (setting-1 teapot 2-8 %, gold
+//!   teapot 14 %; `BENCHMARKS.md`, "Design findings").
 //! * [`Light::Sun`]: a directional (delta) light given by its irradiance on a surface facing it.
 //!
 //! The integrator picks one light uniformly per shading point (probability `1 / n_lights`).

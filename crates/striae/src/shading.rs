@@ -29,8 +29,8 @@ use crate::geometry::SurfaceHit;
 use crate::math::{Frame, RayDifferential, Vec2, Vec3};
 
 /// Everything a material may use to build its BSDF at one hit. New fields may be added (the
-/// scratched material of issue 5 filters its layers over the footprint,
-/// [`ShadingContext::footprint_uv`]).
+/// scratched material filters its layers over the footprint, [`ShadingContext::footprint_uv`],
+/// METHOD.md section 6).
 #[derive(Clone, Copy, Debug)]
 pub struct ShadingContext {
     /// World position.
@@ -52,8 +52,8 @@ pub struct ShadingContext {
     /// A uniform random number in `[0, 1)` from the pixel's sample stream, for stochastic
     /// choices a material makes once per hit (e.g. which scratch layer where several cross).
     pub u_layer: f32,
-    /// The direction toward the viewer (`-ray.d`, world, unit). The scratched glass of issue 5
-    /// skips its layer queries for rays arriving from inside.
+    /// The direction toward the viewer (`-ray.d`, world, unit). Scratched glass skips its
+    /// layer queries for rays arriving from inside.
     pub wo: Vec3,
     /// For a hit of a camera path that carries differentials and has only bounced specularly
     /// so far (the camera ray's first hit included): which chain of delta bounces and which
@@ -248,9 +248,9 @@ pub fn refract_dir(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
 /// locally flat surface) and, for refraction, `eta = n_incident / n_transmitted` along the
 /// path's direction of travel.
 #[allow(clippy::too_many_arguments)]
-// Always inlined: LLVM's inliner once dropped it (and its offset-direction closure) from the
-// render loop after an unrelated change in the layers, costing the close-up 6 % (BENCHMARKS.md,
-// "Secondary-hit coverage, session 4").
+// Always inlined: LLVM's own choice depends on unrelated code in the loop, and out of line
+// (compiled for baseline x86-64, the loop's registers spilled at the call) it costs the
+// close-up 6 %.
 #[inline(always)]
 pub fn spawn_differentials(
     p: Vec3,

@@ -672,8 +672,7 @@ fn sample_cos2(u: f64) -> f64 {
 /// [`sample_cos2`] and the Newton iterations it took. It stops as soon as the step falls below
 /// 1e-15 (or the residual is exactly 0), before the bracket check: a converged iterate sits on
 /// an end of its bracket, and testing it against the bracket first would turn the last steps
-/// into bisection (26 iterations on average instead of 4.6, each with a `sin` and a `cos`:
-/// `BENCHMARKS.md`, "Session 13").
+/// into bisection (26 iterations on average instead of 4.6, each with a `sin` and a `cos`).
 fn sample_cos2_counted(u: f64) -> (f64, u32) {
     let target = u.clamp(0.0, 1.0) * PI - FRAC_PI_2;
     let (mut lo, mut hi) = (-FRAC_PI_2, FRAC_PI_2);
@@ -1543,8 +1542,8 @@ mod tests {
             iterations += its;
         }
         // Newton converges quadratically: about 5 steps from the start `target / 2` (the
-        // steep ends need a few bisections). Before session 13 a converged iterate fell back
-        // to bisection, 26 steps on average.
+        // steep ends need a few bisections). A converged iterate that fell back to bisection
+        // would take 26 steps on average.
         let mean = iterations as f64 / (n + 1) as f64;
         assert!(mean < 6.0, "{mean} iterations on average");
     }

@@ -1,4 +1,4 @@
-//! Scene tests of the scratched material (issue 5): white furnaces (lossless scratched glass,
+//! Scene tests of the scratched material: white furnaces (lossless scratched glass,
 //! scratched metal with F = 1, smooth and mirror-wall lobes), the scratched pixels of a
 //! head-on plate against the rasterised layer masks, and determinism across thread counts.
 //! Tiny tables and images: the file runs in a few seconds (tables are cached on disk).

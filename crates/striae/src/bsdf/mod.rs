@@ -1,5 +1,5 @@
 //! BSDFs in a local shading frame (`z` = shading normal; `wo`, `wi` point away), the
-//! surface-scattering part of the path tracer (issue 4; `docs/METHOD.md` section 7 uses them
+//! surface-scattering part of the path tracer (`docs/METHOD.md` section 7 uses them
 //! as the base layer under the scratches).
 //!
 //! Five models, each in its own file, gathered in the closed enum [`Bsdf`] so the integrator
@@ -27,7 +27,7 @@
 //!   Mitsuba 3's `dielectric` in radiance mode). [`BsdfSample::eta`] reports that relative
 //!   index so Russian roulette can undo the scaling.
 //!
-//! Issue 5 adds the [`Scratched`](ScratchedBsdf) variant (`scratched.rs`): it borrows the
+//! The [`Scratched`](ScratchedBsdf) variant (`scratched.rs`) borrows the
 //! scene's scratch table, so [`Bsdf`] carries the lifetime of the material it came from.
 
 // `!(x > 0.0)` is used on purpose: it also rejects NaN.
@@ -71,7 +71,7 @@ pub enum Bsdf<'a> {
     Conductor(Conductor),
     RoughDielectric(RoughDielectric),
     RoughConductor(RoughConductor),
-    /// A smooth dielectric or conductor with scratches (issue 5).
+    /// A smooth dielectric or conductor with scratches (METHOD.md section 6).
     Scratched(ScratchedBsdf<'a>),
 }
 

@@ -1,4 +1,4 @@
-//! The scratched BSDF (issue 5; `docs/METHOD.md` section 6, `docs/scratched.md`): a smooth
+//! The scratched BSDF (`docs/METHOD.md` section 6, `docs/scratched.md`): a smooth
 //! dielectric (glass) or smooth conductor (metal) base mixed with the precomputed scratch BRDF
 //! of sections 3-4 by the footprint coverage of the scratch layers,
 //! `f = (1 - c) f_base + c f_scratch` ([Raymond16]'s linear combination over a footprint).

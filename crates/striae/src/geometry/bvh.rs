@@ -1,9 +1,9 @@
 //! The scene's acceleration structure: every triangle and sphere of every shape in one BVH,
 //! traversed for the closest hit and for any hit (shadow rays, early exit). The default
-//! ([`BvhKind::Bvh4`]) is an 8-wide BVH with SSE box tests (`geometry::bvh4`) collapsed from
+//! ([`BvhKind::Bvh8`]) is an 8-wide BVH with SSE box tests (`geometry::bvh8`) collapsed from
 //! obvhs' binary BVH (PLOC with reinsertion), whose leaves are blocks of four triangles tested
-//! at once (`Tri4`); obvhs' compressed wide BVH (CWBVH, Ylitie et al. 2017) and its binary BVH
-//! remain selectable for comparison (`BENCHMARKS.md`, "BVH" and "Renderer").
+//! at once (`Tri4`); obvhs' binary BVH itself is the reference it is tested against
+//! ([`BvhKind::Bvh2`]) and the fallback for trees too deep for the 8-wide traversal's stack.
 //!
 //! Triangles are intersected with the watertight test of Woop, Benthin and Wald (2013, "Watertight
 //! Ray/Triangle Intersection", JCGT 2(1)), in the form of pbrt-v4's `Triangle::Intersect`: the
@@ -18,12 +18,10 @@ use glam::{Vec3A, Vec4};
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
 use obvhs::bvh2::Bvh2;
-use obvhs::cwbvh::builder::build_cwbvh;
-use obvhs::cwbvh::CwBvh;
 use obvhs::ploc::PlocSearchDistance;
 use obvhs::BvhBuildParams;
 
-use super::bvh4::{AnyLeaf, Bvh4, ClosestLeaf, Leaf, BLOCK, PACKET};
+use super::bvh8::{AnyLeaf, Bvh8, ClosestLeaf, Leaf, BLOCK, PACKET};
 use super::sphere::{intersect_sphere, sphere_surface};
 use super::{Shape, ShapeGeometry, SurfaceHit};
 use crate::math::{Ray, Vec3};
@@ -147,7 +145,7 @@ impl WatertightRay {
     }
 }
 
-/// Four triangles of a [`Bvh4`] leaf block as structure of arrays: `v[vertex][axis]` holds
+/// Four triangles of a [`Bvh8`] leaf block as structure of arrays: `v[vertex][axis]` holds
 /// that coordinate of the four triangles, so [`WatertightRay::intersect4`] tests them at once.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(16))]
@@ -289,47 +287,38 @@ enum Hits4 {
     },
 }
 
-/// Which obvhs hierarchy [`Geometry`] traverses (see `BENCHMARKS.md`, "BVH", for the
-/// measurement behind the default).
+/// Which hierarchy [`Geometry`] traverses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum BvhKind {
     /// 8-wide BVH with SSE box tests and 4-triangle SIMD leaves, collapsed from obvhs' binary
-    /// BVH (`geometry::bvh4`; the name is from when it was 4-wide).
+    /// BVH (`geometry::bvh8`).
     #[default]
-    Bvh4,
-    /// Compressed 8-wide BVH (Ylitie et al. 2017), SIMD node tests.
-    Cwbvh,
-    /// Binary BVH with collapsed leaves.
+    Bvh8,
+    /// obvhs' binary BVH with collapsed leaves: the reference the 8-wide one is tested against,
+    /// and its fallback for trees too deep for its traversal stack.
     Bvh2,
 }
 
 enum Accel {
     None,
-    Cwbvh(CwBvh),
     Bvh2(Bvh2),
-    Bvh4(Bvh4),
+    Bvh8(Bvh8),
 }
 
-/// obvhs' CWBVH node test clamps a box's entry distance to at least `1e-4`
-/// (`cwbvh::node::EPSILON`), so a box lying entirely closer than that to the ray origin would be
-/// skipped. Traversal therefore starts the ray `CWBVH_SHIFT` (in units of `t`) behind its origin
-/// and reports `t + CWBVH_SHIFT` to obvhs; the primitive tests use the true origin.
-const CWBVH_SHIFT: f32 = 2e-4;
-
-/// Most primitives per leaf of the binary BVH that [`BvhKind::Bvh4`] collapses (its leaf
+/// Most primitives per leaf of the binary BVH that [`BvhKind::Bvh8`] collapses (its leaf
 /// blocks hold up to [`BLOCK`]).
-const BVH4_LEAF_PRIMS: u32 = 2;
+const BVH8_LEAF_PRIMS: u32 = 2;
 
 /// Scenes of at most this many primitives get the slower, better binary BVH build before the
-/// collapse to [`Bvh4`] (see [`Geometry::with_bvh`]).
+/// collapse to [`Bvh8`] (see [`Geometry::with_bvh`]).
 const SLOW_BUILD_PRIMS: usize = 1 << 17;
 
 /// Shapes with the BVH over their primitives.
 pub struct Geometry {
     shapes: Vec<Shape>,
-    /// Primitives in BVH order; for [`BvhKind::Bvh4`] `BLOCK` per leaf block (padded).
+    /// Primitives in BVH order; for [`BvhKind::Bvh8`] `BLOCK` per leaf block (padded).
     prims: Vec<Prim>,
-    /// The triangles of `prims` as blocks of four ([`BvhKind::Bvh4`] only).
+    /// The triangles of `prims` as blocks of four ([`BvhKind::Bvh8`] only).
     tri4: Vec<Tri4>,
     /// Number of distinct primitives.
     prim_count: usize,
@@ -402,22 +391,17 @@ impl Geometry {
         let aabbs: Vec<Aabb> = prims.iter().map(prim_aabb).collect();
         let params = BvhBuildParams::medium_build();
         let (accel, order) = match kind {
-            BvhKind::Cwbvh => {
-                let bvh = build_cwbvh(&aabbs, params, &mut Duration::default());
-                let order = bvh.primitive_indices.clone();
-                (Accel::Cwbvh(bvh), order)
-            }
             BvhKind::Bvh2 => {
                 let bvh = build_bvh2(&aabbs, params, &mut Duration::default());
                 let order = bvh.primitive_indices.clone();
                 (Accel::Bvh2(bvh), order)
             }
-            BvhKind::Bvh4 => {
+            BvhKind::Bvh8 => {
                 // Up to SLOW_BUILD_PRIMS primitives: obvhs' `very_slow_build` without its
                 // triangle pre-splitting (the BVH is built over boxes) and with the widest PLOC
-                // search: 2.6 % fewer instructions per render than `medium_build` on the glass
-                // teapot, for a build 6x as long (~30 ms for its 4096 triangles; `BENCHMARKS.md`,
-                // "Renderer speed, session 3"). Larger meshes keep `medium_build`.
+                // search: 2.6 % fewer instructions and 3.6 % less time per render than
+                // `medium_build` on the glass teapot, for a build 6x as long (~30 ms for its
+                // 4096 triangles). Larger meshes keep `medium_build`.
                 let base = if prims.len() <= SLOW_BUILD_PRIMS {
                     BvhBuildParams {
                         pre_split: false,
@@ -428,14 +412,14 @@ impl Geometry {
                     params
                 };
                 let params = BvhBuildParams {
-                    max_prims_per_leaf: BVH4_LEAF_PRIMS,
+                    max_prims_per_leaf: BVH8_LEAF_PRIMS,
                     ..base
                 };
                 let bvh = build_bvh2(&aabbs, params, &mut Duration::default());
                 let order = bvh.primitive_indices.clone();
-                match Bvh4::from_bvh2(&bvh, |i| prims[i as usize].prim == SPHERE) {
-                    Some((bvh4, order)) => (Accel::Bvh4(bvh4), order),
-                    // Too deep for the BVH4's fixed stack: keep the binary BVH.
+                match Bvh8::from_bvh2(&bvh, |i| prims[i as usize].prim == SPHERE) {
+                    Some((bvh8, order)) => (Accel::Bvh8(bvh8), order),
+                    // Too deep for the BVH8's fixed stack: keep the binary BVH.
                     None => (Accel::Bvh2(bvh), order),
                 }
             }
@@ -443,7 +427,7 @@ impl Geometry {
         // Primitives in BVH order: traversal indexes them directly.
         let prims: Vec<Prim> = order.iter().map(|&i| prims[i as usize]).collect();
         let tri4 = match accel {
-            Accel::Bvh4(_) => prims
+            Accel::Bvh8(_) => prims
                 .chunks(BLOCK)
                 .map(|block| {
                     let mut tri = Tri4 {
@@ -482,11 +466,11 @@ impl Geometry {
     }
 
     #[inline]
-    fn obvhs_ray(ray: &Ray, shift: f32) -> obvhs::ray::Ray {
-        // `+ 0.0` turns -0.0 into +0.0: obvhs' CWBVH picks the slab order from `d < 0` but
-        // inverts -0.0 to -huge, so a -0.0 component would swap the slabs and miss every box.
+    fn obvhs_ray(ray: &Ray) -> obvhs::ray::Ray {
+        // `+ 0.0` turns -0.0 into +0.0: obvhs picks the slab order from `d < 0` but inverts
+        // -0.0 to -huge, so a -0.0 component would swap the slabs and miss every box.
         let d = Vec3A::from(ray.d) + Vec3A::ZERO;
-        obvhs::ray::Ray::new(Vec3A::from(ray.o) - shift * d, d, 0.0, ray.t_max + shift)
+        obvhs::ray::Ray::new(Vec3A::from(ray.o), d, 0.0, ray.t_max)
     }
 
     #[inline]
@@ -522,15 +506,15 @@ impl Geometry {
         }
     }
 
-    /// Closest hit in the [`Bvh4`]: `(primitive, t, b1, b2)`.
+    /// Closest hit in the [`Bvh8`]: `(primitive, t, b1, b2)`.
     #[inline(always)]
-    fn closest_bvh4<const KZ: usize>(
+    fn closest_bvh8<const KZ: usize>(
         &self,
-        bvh: &Bvh4,
+        bvh: &Bvh8,
         wray: &WatertightRay,
         ray: &Ray,
     ) -> Option<(usize, f32, f32, f32)> {
-        let mut test = Bvh4Leaves::<KZ> {
+        let mut test = Bvh8Leaves::<KZ> {
             geometry: self,
             wray,
             ray,
@@ -540,10 +524,10 @@ impl Geometry {
         test.best
     }
 
-    /// Any hit in the [`Bvh4`].
+    /// Any hit in the [`Bvh8`].
     #[inline(always)]
-    fn occluded_bvh4<const KZ: usize>(&self, bvh: &Bvh4, wray: &WatertightRay, ray: &Ray) -> bool {
-        let mut test = Bvh4Leaves::<KZ> {
+    fn occluded_bvh8<const KZ: usize>(&self, bvh: &Bvh8, wray: &WatertightRay, ray: &Ray) -> bool {
+        let mut test = Bvh8Leaves::<KZ> {
             geometry: self,
             wray,
             ray,
@@ -557,30 +541,30 @@ impl Geometry {
     /// inline, obvhs' hierarchies out of line.
     #[inline(always)]
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceHit> {
-        let Accel::Bvh4(bvh) = &self.accel else {
+        let Accel::Bvh8(bvh) = &self.accel else {
             return self.intersect_obvhs(ray);
         };
-        self.intersect_bvh4(bvh, &WatertightRay::new(ray), ray)
+        self.intersect_bvh8(bvh, &WatertightRay::new(ray), ray)
     }
 
-    /// [`Geometry::intersect`] in the [`Bvh4`] with the ray's watertight constants `wray`.
+    /// [`Geometry::intersect`] in the [`Bvh8`] with the ray's watertight constants `wray`.
     #[inline(always)]
-    fn intersect_bvh4(&self, bvh: &Bvh4, wray: &WatertightRay, ray: &Ray) -> Option<SurfaceHit> {
+    fn intersect_bvh8(&self, bvh: &Bvh8, wray: &WatertightRay, ray: &Ray) -> Option<SurfaceHit> {
         let (id, t, b1, b2) = match wray.kz {
-            0 => self.closest_bvh4::<0>(bvh, wray, ray),
-            1 => self.closest_bvh4::<1>(bvh, wray, ray),
-            _ => self.closest_bvh4::<2>(bvh, wray, ray),
+            0 => self.closest_bvh8::<0>(bvh, wray, ray),
+            1 => self.closest_bvh8::<1>(bvh, wray, ray),
+            _ => self.closest_bvh8::<2>(bvh, wray, ray),
         }?;
         Some(self.surface_hit(ray, id, t, b1, b2))
     }
 
     /// The closest hits of `rays` (at most [`PACKET`]) into `hits` (cleared first), as
-    /// [`Geometry::intersect`] finds them (but for exact ties in `t`, see `bvh4`). Rays that
+    /// [`Geometry::intersect`] finds them (but for exact ties in `t`, see `bvh8`). Rays that
     /// share their origin, their dominant axis and the signs of their directions (a pixel's
-    /// camera rays through a pinhole) are traversed as one packet ([`Bvh4::closest_packet`]),
+    /// camera rays through a pinhole) are traversed as one packet ([`Bvh8::closest_packet`]),
     /// other rays one by one. (The hits go to the caller's array rather than being returned:
-    /// at 84 bytes a hit, a returned array was copied several times on its way out,
-    /// `BENCHMARKS.md`, "Session 16".)
+    /// a returned array of 32 hits, 2.7 KB, is copied several times on its way out; in place,
+    /// an 8-spp glass-teapot render is 6 % faster.)
     /// # Panics
     /// If there are more than [`PACKET`] rays.
     #[inline(always)]
@@ -601,7 +585,7 @@ impl Geometry {
     ) -> bool {
         assert!(rays.len() <= PACKET);
         hits.clear();
-        if let (Accel::Bvh4(bvh), 2..) = (&self.accel, rays.len()) {
+        if let (Accel::Bvh8(bvh), 2..) = (&self.accel, rays.len()) {
             // (Loops of `push` rather than `collect` / `extend` here and below: those are
             // compiled out of line, where the render loop's copy loses its target features.)
             let mut wrays = ArrayVec::<WatertightRay, PACKET>::new();
@@ -640,10 +624,10 @@ impl Geometry {
         hits: &mut ArrayVec<Option<SurfaceHit>, PACKET>,
     ) {
         match &self.accel {
-            Accel::Bvh4(bvh) if wrays.len() == rays.len() => hits.extend(
+            Accel::Bvh8(bvh) if wrays.len() == rays.len() => hits.extend(
                 rays.iter()
                     .zip(wrays)
-                    .map(|(ray, wray)| self.intersect_bvh4(bvh, wray, ray)),
+                    .map(|(ray, wray)| self.intersect_bvh8(bvh, wray, ray)),
             ),
             _ => hits.extend(rays.iter().map(|ray| self.intersect(ray))),
         }
@@ -654,7 +638,7 @@ impl Geometry {
     #[inline(always)]
     fn closest_packet<const KZ: usize>(
         &self,
-        bvh: &Bvh4,
+        bvh: &Bvh8,
         wrays: &[WatertightRay],
         rays: &[Ray],
         hits: &mut ArrayVec<Option<SurfaceHit>, PACKET>,
@@ -665,7 +649,7 @@ impl Geometry {
         let mut dirs = ArrayVec::<Vec3, PACKET>::new();
         let mut largest = f32::NEG_INFINITY;
         for (ray, wray) in rays.iter().zip(wrays) {
-            let leaves = Bvh4Leaves::<KZ> {
+            let leaves = Bvh8Leaves::<KZ> {
                 geometry: self,
                 wray,
                 ray,
@@ -689,7 +673,7 @@ impl Geometry {
         true
     }
 
-    /// [`Geometry::intersect`] for every kind of hierarchy.
+    /// [`Geometry::intersect`] for both kinds of hierarchy.
     #[inline(never)]
     fn intersect_obvhs(&self, ray: &Ray) -> Option<SurfaceHit> {
         let wray = WatertightRay::new(ray);
@@ -698,29 +682,15 @@ impl Geometry {
         let mut hit = obvhs::ray::RayHit::none();
         match &self.accel {
             Accel::None => return None,
-            Accel::Cwbvh(bvh) => {
-                bvh.ray_traverse(
-                    Self::obvhs_ray(ray, CWBVH_SHIFT),
-                    &mut hit,
-                    |_, id| match self.hit_prim(&wray, ray, id, t_max) {
-                        Some((t, b1, b2)) => {
-                            best = Some((id, t, b1, b2));
-                            t_max = t;
-                            t + CWBVH_SHIFT
-                        }
-                        None => f32::INFINITY,
-                    },
-                );
-            }
-            Accel::Bvh4(bvh) => {
+            Accel::Bvh8(bvh) => {
                 best = match wray.kz {
-                    0 => self.closest_bvh4::<0>(bvh, &wray, ray),
-                    1 => self.closest_bvh4::<1>(bvh, &wray, ray),
-                    _ => self.closest_bvh4::<2>(bvh, &wray, ray),
+                    0 => self.closest_bvh8::<0>(bvh, &wray, ray),
+                    1 => self.closest_bvh8::<1>(bvh, &wray, ray),
+                    _ => self.closest_bvh8::<2>(bvh, &wray, ray),
                 };
             }
             Accel::Bvh2(bvh) => {
-                bvh.ray_traverse(Self::obvhs_ray(ray, 0.0), &mut hit, |_, id| {
+                bvh.ray_traverse(Self::obvhs_ray(ray), &mut hit, |_, id| {
                     match self.hit_prim(&wray, ray, id, t_max) {
                         Some((t, b1, b2)) => {
                             best = Some((id, t, b1, b2));
@@ -740,18 +710,18 @@ impl Geometry {
     /// like [`Geometry::intersect`].
     #[inline(always)]
     pub fn occluded(&self, ray: &Ray) -> bool {
-        let Accel::Bvh4(bvh) = &self.accel else {
+        let Accel::Bvh8(bvh) = &self.accel else {
             return self.occluded_obvhs(ray);
         };
         let wray = WatertightRay::new(ray);
         match wray.kz {
-            0 => self.occluded_bvh4::<0>(bvh, &wray, ray),
-            1 => self.occluded_bvh4::<1>(bvh, &wray, ray),
-            _ => self.occluded_bvh4::<2>(bvh, &wray, ray),
+            0 => self.occluded_bvh8::<0>(bvh, &wray, ray),
+            1 => self.occluded_bvh8::<1>(bvh, &wray, ray),
+            _ => self.occluded_bvh8::<2>(bvh, &wray, ray),
         }
     }
 
-    /// [`Geometry::occluded`] for every kind of hierarchy.
+    /// [`Geometry::occluded`] for both kinds of hierarchy.
     #[inline(never)]
     fn occluded_obvhs(&self, ray: &Ray) -> bool {
         let wray = WatertightRay::new(ray);
@@ -764,14 +734,11 @@ impl Geometry {
         };
         match &self.accel {
             Accel::None => false,
-            Accel::Cwbvh(bvh) => {
-                !bvh.ray_traverse_miss(Self::obvhs_ray(ray, CWBVH_SHIFT), |_, id| test(id))
-            }
-            Accel::Bvh2(bvh) => !bvh.ray_traverse_miss(Self::obvhs_ray(ray, 0.0), |_, id| test(id)),
-            Accel::Bvh4(bvh) => match wray.kz {
-                0 => self.occluded_bvh4::<0>(bvh, &wray, ray),
-                1 => self.occluded_bvh4::<1>(bvh, &wray, ray),
-                _ => self.occluded_bvh4::<2>(bvh, &wray, ray),
+            Accel::Bvh2(bvh) => !bvh.ray_traverse_miss(Self::obvhs_ray(ray), |_, id| test(id)),
+            Accel::Bvh8(bvh) => match wray.kz {
+                0 => self.occluded_bvh8::<0>(bvh, &wray, ray),
+                1 => self.occluded_bvh8::<1>(bvh, &wray, ray),
+                _ => self.occluded_bvh8::<2>(bvh, &wray, ray),
             },
         }
     }
@@ -837,16 +804,16 @@ impl Geometry {
     }
 }
 
-/// The primitive tests of [`Geometry`]'s [`Bvh4`] for a ray of dominant axis `KZ`, with the
+/// The primitive tests of [`Geometry`]'s [`Bvh8`] for a ray of dominant axis `KZ`, with the
 /// closest hit so far `(primitive, t, b1, b2)`.
-struct Bvh4Leaves<'a, const KZ: usize> {
+struct Bvh8Leaves<'a, const KZ: usize> {
     geometry: &'a Geometry,
     wray: &'a WatertightRay,
     ray: &'a Ray,
     best: Option<(usize, f32, f32, f32)>,
 }
 
-impl<const KZ: usize> ClosestLeaf for Bvh4Leaves<'_, KZ> {
+impl<const KZ: usize> ClosestLeaf for Bvh8Leaves<'_, KZ> {
     #[inline(always)]
     fn closest(&mut self, leaf: Leaf, t_max: &mut f32) {
         let first = BLOCK * leaf.block;
@@ -870,7 +837,7 @@ impl<const KZ: usize> ClosestLeaf for Bvh4Leaves<'_, KZ> {
     }
 }
 
-impl<const KZ: usize> AnyLeaf for Bvh4Leaves<'_, KZ> {
+impl<const KZ: usize> AnyLeaf for Bvh8Leaves<'_, KZ> {
     #[inline(always)]
     fn any(&mut self, leaf: Leaf, t_max: f32) -> bool {
         let first = BLOCK * leaf.block;
@@ -887,10 +854,10 @@ impl<const KZ: usize> AnyLeaf for Bvh4Leaves<'_, KZ> {
     }
 }
 
-/// The primitive tests of a packet ([`Bvh4::closest_packet`]): each ray's own
-/// [`Bvh4Leaves`], with its own closest `t`.
+/// The primitive tests of a packet ([`Bvh8::closest_packet`]): each ray's own
+/// [`Bvh8Leaves`], with its own closest `t`.
 struct PacketLeaves<'a, const KZ: usize> {
-    rays: ArrayVec<(Bvh4Leaves<'a, KZ>, f32), PACKET>,
+    rays: ArrayVec<(Bvh8Leaves<'a, KZ>, f32), PACKET>,
 }
 
 impl<const KZ: usize> ClosestLeaf for PacketLeaves<'_, KZ> {

@@ -6,7 +6,7 @@
 //! * [`mesh`]: [`TriangleMesh`] with the rectangle and box; [`obj`] loads OBJ files (tobj);
 //!   [`teapot`] tessellates Newell's 32 Bezier patches with per-vertex uv and tangents.
 //! * [`sphere`]: the analytic sphere.
-//! * [`bvh`]: [`Geometry`], the BVH (an 8-wide SSE BVH, `bvh4`, by default) with the watertight
+//! * [`bvh`]: [`Geometry`], the BVH (an 8-wide SSE BVH, `bvh8`, by default) with the watertight
 //!   ray-triangle test.
 //! * [`uv_footprint`]: texture-space footprint of a pixel from ray differentials (pbrt-v4).
 
@@ -14,7 +14,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod bvh;
-mod bvh4;
+mod bvh8;
 pub mod mesh;
 pub mod obj;
 pub mod sphere;
@@ -24,7 +24,7 @@ pub mod transform;
 use std::path::PathBuf;
 
 pub use bvh::{BvhKind, Geometry};
-pub use bvh4::PACKET;
+pub use bvh8::PACKET;
 pub use mesh::TriangleMesh;
 pub use transform::Transform;
 

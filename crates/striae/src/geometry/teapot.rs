@@ -1,7 +1,7 @@
 //! The Utah teapot: Newell's 32 bicubic Bezier patches (1975; the 4 bottom patches are Frank
 //! Crow's), embedded from `data/newell_teapot.txt` and tessellated into a [`TriangleMesh`] with
 //! per-vertex normals, uvs and tangents taken from the patch parameters (the scratch layers are
-//! mapped with them, issue 5).
+//! mapped with them, METHOD.md section 5).
 //!
 //! **Orientation.** With `s` running along a patch's control-point columns and `t` along its
 //! rows, `dP/ds x dP/dt` points out of the body (Newell's "du x dv points inward" holds for his

@@ -5,7 +5,7 @@
 //! A pixel's samples hit points spread over one pixel footprint, and each asks for the scratch
 //! coverage of a footprint of that same shape (METHOD.md section 6). Computing it exactly at
 //! every sample costs one noise-cell enumeration per cell the footprint spans, per layer:
-//! several microseconds where a pixel spans many scratches (`BENCHMARKS.md`). Here the
+//! 1-4 us for 8 layers where a pixel spans many scratches (`BENCHMARKS.md`, "Design findings"). Here the
 //! footprint's edge vectors `a`, `b` are rounded to one of a discrete set of shapes
 //! ([`quantize`]) and the hit point is snapped to the nearest point of the lattice
 //! `{(i a + j b) / TILE_STEPS}`; the coverage is that of the footprint of the rounded shape
@@ -18,7 +18,7 @@
 //! converges to a slightly different filter of the same coverage. Measured against the
 //! per-sample footprint (`coverage = "sample"`) at 256 spp: the image means agree within
 //! 0.1 %, and the difference (RMSE 0.0085 on the close-up, mean 0.118; 0.0031 on the teapot)
-//! is a slight jaggedness of pixel-wide scratch lines (`BENCHMARKS.md`).
+//! is a slight jaggedness of pixel-wide scratch lines (`BENCHMARKS.md`, "Design findings").
 //!
 //! Determinism: a tile's value depends only on its key, never on which sample or thread
 //! computed it first, so images stay bit-identical for any thread count.
@@ -32,7 +32,7 @@ use glam::DVec2;
 /// [`super::layer::MAX_FOOTPRINT_CELLS`]: such tiles come from grazing views and from rays that
 /// went through curved glass, whose footprints change from sample to sample, so they are
 /// rarely shared and cost most (the setting-1 teapot: 1.69x smooth glass per sample with 256,
-/// 1.49x with 64; the images differ only along silhouettes, `BENCHMARKS.md`).
+/// 1.49x with 64; the images differ only along silhouettes).
 pub const TILE_MAX_CELLS: usize = 64;
 
 /// Tile centres lie on the lattice of the footprint's edges divided by this: a footprint is

@@ -7,9 +7,13 @@
 //! such layers, each with its own `alpha_k` and noise seed drawn from one set seed.
 //!
 //! Two ways to use it:
-//! * the renderer asks procedural questions, nothing rasterised: [`LayerSet::is_scratched`],
-//!   [`LayerSet::scratched_mask`], [`LayerSet::coverage`] and [`LayerSet::coverage_all`] (the
-//!   exact scratch coverage of a ray-differential footprint, [`footprint`]);
+//! * the renderer asks procedural questions, nothing rasterised: the point tests
+//!   [`LayerSet::is_scratched`] and [`LayerSet::scratched_mask`], and the exact scratch
+//!   coverage of a ray-differential footprint ([`footprint`]) for one layer
+//!   ([`LayerSet::coverage`]), every layer ([`LayerSet::coverage_all`]) or the largest
+//!   ([`LayerSet::coverage_max`]), each within a cell budget
+//!   ([`LayerSet::coverage_query`]); a render worker's [`CoverageCache`] shares these between
+//!   a pixel's samples and between nearby footprints ([`lattice`]);
 //! * people get anti-aliased rasters with a mip chain ([`raster`]) and PNGs.
 //!
 //! Conventions. Texture space is `(u, v)` in `[0, 1]^2`; `alpha` is measured from the `u` axis

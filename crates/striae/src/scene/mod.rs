@@ -26,7 +26,7 @@ use materials::MaterialError;
 use std::path::{Path, PathBuf};
 
 /// The built-in default scene (`striae render` with no argument): the glass teapot with the
-/// seed's setting-1 scratches (Fig. 7 a; issue 5), lit by a sun in a dark environment.
+/// seed's setting-1 scratches (Fig. 6 b), lit by a sun in a dark environment.
 pub const DEFAULT_SCENE: &str = include_str!("../../../../scenes/glass-teapot-setting1.toml");
 /// The name the default scene is reported under in messages.
 pub const DEFAULT_SCENE_NAME: &str = "<built-in glass-teapot-setting1.toml>";
@@ -258,6 +258,33 @@ fn with_causes(e: &dyn std::error::Error) -> String {
 }
 
 fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene, SceneError> {
+    let settings = render_settings(&f, file, o)?;
+    let camera = camera(&f, file, &settings)?;
+    let (names, materials) = materials(&f, file, base)?;
+    // Area lights first (in shape order), then the environment, then suns.
+    let (shapes, mut lights) = shapes(&f, file, base, &names)?;
+    let mut environment = None;
+    if let Some(env) = self::environment(&f, file, base)? {
+        lights.push(env);
+        environment = Some(lights.len() - 1);
+    }
+    lights.extend(suns(&f, file)?);
+    Ok(Scene {
+        camera,
+        geometry: Geometry::new(shapes),
+        materials,
+        lights,
+        environment,
+        settings,
+    })
+}
+
+/// The render settings: the file's `[render]` table with the command line's overrides.
+fn render_settings(
+    f: &SceneFile,
+    file: &Path,
+    o: &Overrides,
+) -> Result<RenderSettings, SceneError> {
     let r = &f.render;
     let (width, height) = o.resolution.unwrap_or((r.width, r.height));
     let sampler = match o.sampler {
@@ -305,12 +332,21 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
             "must be finite",
         ));
     }
+    Ok(settings)
+}
 
+/// The camera (`[camera]`) at the render's resolution.
+fn camera(
+    f: &SceneFile,
+    file: &Path,
+    settings: &RenderSettings,
+) -> Result<PerspectiveCamera, SceneError> {
+    let (width, height) = (settings.width, settings.height);
     let c = &f.camera;
     let position = Vec3::from_array(c.position);
     let look_at = Vec3::from_array(c.look_at);
     let focus = c.focus_distance.unwrap_or((look_at - position).length());
-    let camera = PerspectiveCamera::new(
+    PerspectiveCamera::new(
         position,
         look_at,
         Vec3::from_array(c.up),
@@ -320,15 +356,31 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
         c.aperture_radius,
         focus,
     )
-    .map_err(|e| camera_error(file, c, (width, height), e))?;
+    .map_err(|e| camera_error(file, c, (width, height), e))
+}
 
-    // Materials by name, in file order of the table (sorted keys: BTreeMap).
+/// The materials, prepared, in the order of their names (sorted: the file's table is a
+/// `BTreeMap`), and the names.
+fn materials<'a>(
+    f: &'a SceneFile,
+    file: &Path,
+    base: &Path,
+) -> Result<(Vec<&'a String>, Vec<Material>), SceneError> {
     let names: Vec<&String> = f.materials.keys().collect();
     let mut materials: Vec<Material> = Vec::with_capacity(names.len());
     for (name, m) in &f.materials {
         materials.push(m.prepare(base).map_err(|e| material_error(file, name, e))?);
     }
+    Ok((names, materials))
+}
 
+/// The shapes (`[[shapes]]`), and an area light for each that emits.
+fn shapes(
+    f: &SceneFile,
+    file: &Path,
+    base: &Path,
+    names: &[&String],
+) -> Result<(Vec<Shape>, Vec<Light>), SceneError> {
     let mut shapes = Vec::with_capacity(f.shapes.len());
     let mut lights = Vec::new();
     for (i, s) in f.shapes.iter().enumerate() {
@@ -401,72 +453,80 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
         }
         shapes.push(shape);
     }
+    Ok((shapes, lights))
+}
 
-    let mut environment = None;
-    if let Some(env) = &f.environment {
-        let e = match env.kind {
-            EnvironmentType::Constant => {
-                if env.path.is_some() || env.scale.is_some() || !env.transform.is_identity() {
-                    return Err(invalid(
-                        file,
-                        "environment",
-                        env.kind,
-                        "a constant environment takes only `radiance`",
-                    ));
-                }
-                let radiance = env.radiance.ok_or_else(|| {
-                    invalid(
-                        file,
-                        "environment.radiance",
-                        "(missing)",
-                        "a constant environment needs `radiance`",
-                    )
-                })?;
-                let rgb = radiance.rgb();
-                if !(rgb.is_finite() && rgb.min_element() >= 0.0) {
-                    return Err(invalid(
-                        file,
-                        "environment.radiance",
-                        radiance,
-                        "radiance must be finite and >= 0",
-                    ));
-                }
-                Environment::Constant { radiance: rgb }
+/// The environment light (`[environment]`), if any.
+fn environment(f: &SceneFile, file: &Path, base: &Path) -> Result<Option<Light>, SceneError> {
+    let Some(env) = &f.environment else {
+        return Ok(None);
+    };
+    let e = match env.kind {
+        EnvironmentType::Constant => {
+            if env.path.is_some() || env.scale.is_some() || !env.transform.is_identity() {
+                return Err(invalid(
+                    file,
+                    "environment",
+                    env.kind,
+                    "a constant environment takes only `radiance`",
+                ));
             }
-            EnvironmentType::Map => {
-                if env.radiance.is_some() {
-                    return Err(invalid(
-                        file,
-                        "environment.radiance",
-                        env.radiance,
-                        "a map environment takes `path`, `scale` and `transform`",
-                    ));
-                }
-                let path = env.path.as_ref().ok_or_else(|| {
-                    invalid(
-                        file,
-                        "environment.path",
-                        "(missing)",
-                        "a map environment needs `path`",
-                    )
-                })?;
-                let scale = env.scale.unwrap_or(1.0);
-                if !(scale.is_finite() && scale >= 0.0) {
-                    return Err(invalid(
-                        file,
-                        "environment.scale",
-                        scale,
-                        "must be finite and >= 0",
-                    ));
-                }
-                let map = load_envmap(&base.join(path), scale, &env.transform)
-                    .map_err(|e| invalid(file, "environment.path", path, e))?;
-                Environment::Map(Box::new(map))
+            let radiance = env.radiance.ok_or_else(|| {
+                invalid(
+                    file,
+                    "environment.radiance",
+                    "(missing)",
+                    "a constant environment needs `radiance`",
+                )
+            })?;
+            let rgb = radiance.rgb();
+            if !(rgb.is_finite() && rgb.min_element() >= 0.0) {
+                return Err(invalid(
+                    file,
+                    "environment.radiance",
+                    radiance,
+                    "radiance must be finite and >= 0",
+                ));
             }
-        };
-        lights.push(Light::Environment(e));
-        environment = Some(lights.len() - 1);
-    }
+            Environment::Constant { radiance: rgb }
+        }
+        EnvironmentType::Map => {
+            if env.radiance.is_some() {
+                return Err(invalid(
+                    file,
+                    "environment.radiance",
+                    env.radiance,
+                    "a map environment takes `path`, `scale` and `transform`",
+                ));
+            }
+            let path = env.path.as_ref().ok_or_else(|| {
+                invalid(
+                    file,
+                    "environment.path",
+                    "(missing)",
+                    "a map environment needs `path`",
+                )
+            })?;
+            let scale = env.scale.unwrap_or(1.0);
+            if !(scale.is_finite() && scale >= 0.0) {
+                return Err(invalid(
+                    file,
+                    "environment.scale",
+                    scale,
+                    "must be finite and >= 0",
+                ));
+            }
+            let map = load_envmap(&base.join(path), scale, &env.transform)
+                .map_err(|e| invalid(file, "environment.path", path, e))?;
+            Environment::Map(Box::new(map))
+        }
+    };
+    Ok(Some(Light::Environment(e)))
+}
+
+/// The directional lights (`[[lights]]`).
+fn suns(f: &SceneFile, file: &Path) -> Result<Vec<Light>, SceneError> {
+    let mut lights = Vec::new();
     for (i, l) in f.lights.iter().enumerate() {
         match l.kind {
             LightType::Sun => {
@@ -495,15 +555,7 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
             }
         }
     }
-
-    Ok(Scene {
-        camera,
-        geometry: Geometry::new(shapes),
-        materials,
-        lights,
-        environment,
-        settings,
-    })
+    Ok(lights)
 }
 
 /// Load an environment map and orient it: `transform` must be a rotation (directions only).

@@ -1,13 +1,13 @@
 //! A wide BVH with SIMD box tests, collapsed from obvhs' binary BVH (PLOC + reinsertion), in
-//! the style of Embree's BVH4/BVH8 (Wald et al. 2014, "Embree: A Kernel Framework for Efficient
+//! the style of Embree's BVH8/BVH8 (Wald et al. 2014, "Embree: A Kernel Framework for Efficient
 //! CPU Ray Tracing"): every node stores its children's boxes as structure-of-arrays, one row
-//! of [`WIDTH`] = 8 lanes per slab, so one node visit tests all children at once (`BENCHMARKS.md`,
-//! "Renderer speed, session 3"). The lane loops of the box test compile to pairs of 128-bit
+//! of [`WIDTH`] = 8 lanes per slab, so one node visit tests all children at once (8 children instead
+//! of 4: glass teapot 2.11 -> 1.96 s, 16 spp, one thread; `BENCHMARKS.md`, "Design findings").
+//! The lane loops of the box test compile to pairs of 128-bit
 //! instructions in every copy of the render loop, to match the two `movmskps` halves of the hit
 //! mask ([`lanes_le`]): a lane loop for the mask built it bit by bit, and 256-bit intrinsics
 //! behind a feature check measured 3-4 % faster per secondary ray, but cannot be chosen per
-//! copy without a run-time check in the portable one (session 20).
-//! The type keeps its first name, `Bvh4`, from when nodes had four children.
+//! copy without a run-time check in the portable one.
 //!
 //! * **Collapse**: starting from a binary node's two children, the interior child of largest
 //!   surface area is replaced by its two children until there are [`WIDTH`] (the usual BVH2 to
@@ -21,7 +21,7 @@
 //! * **Traversal**: closest-hit front to back (children sorted by entry distance, a stack of
 //!   `(node, entry distance)` pairs culled against the current closest `t`); any-hit with an
 //!   early exit.
-//! * **Packets** ([`Bvh4::closest_packet`]): the camera rays of one pixel share their origin
+//! * **Packets** ([`Bvh8::closest_packet`]): the camera rays of one pixel share their origin
 //!   and nearly their direction, so they are traversed together, once, with the interval of
 //!   their inverse directions (Wald et al. 2007, "Ray Tracing Deformable Scenes Using Dynamic
 //!   Bounding Volume Hierarchies": the interval-arithmetic test of a packet against a box);
@@ -52,14 +52,14 @@ const COUNT_MASK: u32 = (1 << COUNT_BITS) - 1;
 /// Primitives per leaf block: a leaf is one block of up to four primitives, tested at once with
 /// SSE (`bvh::Tri4`); a binary subtree of at most this many primitives becomes one leaf.
 pub(crate) const BLOCK: usize = 4;
-/// Traversal stack size; a tree that could overflow it is not built (see [`Bvh4::from_bvh2`]).
+/// Traversal stack size; a tree that could overflow it is not built (see [`Bvh8::from_bvh2`]).
 const STACK: usize = 192;
 /// Children per node: one 256-bit AVX2 register (two SSE registers in the portable copy) per
 /// slab.
 const WIDTH: usize = 8;
 
 /// A leaf as the traversal hands it to the caller's test: block `block` holds primitives
-/// `BLOCK * block .. BLOCK * block + count` of the primitive order [`Bvh4::from_bvh2`] returns
+/// `BLOCK * block .. BLOCK * block + count` of the primitive order [`Bvh8::from_bvh2`] returns
 /// (padded lanes repeat the last primitive); `scalar` when one of them is not a triangle.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Leaf {
@@ -97,7 +97,7 @@ impl Leaf {
 /// range).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
-struct Node4 {
+struct Node8 {
     bounds: [[f32; WIDTH]; 6],
     child: [u32; WIDTH],
 }
@@ -105,14 +105,14 @@ struct Node4 {
 /// The 4-wide BVH; primitive ranges index the caller's primitive array in BVH order (the order
 /// of the source [`Bvh2`]'s `primitive_indices`).
 #[derive(Clone, Debug)]
-pub(crate) struct Bvh4 {
-    nodes: Vec<Node4>,
+pub(crate) struct Bvh8 {
+    nodes: Vec<Node8>,
 }
 
 /// A box test of the closest-hit traversal: `(entry distances, hit mask)` of a node's children
 /// for `t` in `[0, t_max]`.
 trait NodeTest {
-    fn test(&self, node: &Node4, t_max: f32) -> ([f32; WIDTH], u32);
+    fn test(&self, node: &Node8, t_max: f32) -> ([f32; WIDTH], u32);
 }
 
 /// `1 / d` with zero components replaced by `+-1e-30` (no `0 * inf` NaN in the slab test), and
@@ -140,7 +140,7 @@ fn slab_inverse(d: f32, a: usize) -> (f32, usize, usize) {
 struct BoxRay {
     o: [f32; 3],
     inv_d: [f32; 3],
-    /// Index into `Node4::bounds` of the near and far slab per axis.
+    /// Index into `Node8::bounds` of the near and far slab per axis.
     near: [usize; 3],
     far: [usize; 3],
 }
@@ -200,7 +200,7 @@ fn lanes_le(a: &[f32; WIDTH], b: &[f32; WIDTH]) -> u32 {
 
 impl NodeTest for BoxRay {
     #[inline(always)]
-    fn test(&self, node: &Node4, t_max: f32) -> ([f32; WIDTH], u32) {
+    fn test(&self, node: &Node8, t_max: f32) -> ([f32; WIDTH], u32) {
         let inv = self.inv_d;
         let t = |a: usize, d: f32| d * inv[a];
         slab_test(node, self.o, self.near, self.far, t_max, t, t)
@@ -215,7 +215,7 @@ impl NodeTest for BoxRay {
 /// (see the module doc); all copies compute the same IEEE operations.
 #[inline(always)]
 fn slab_test(
-    node: &Node4,
+    node: &Node8,
     [o0, o1, o2]: [f32; 3],
     near: [usize; 3],
     far: [usize; 3],
@@ -243,7 +243,7 @@ fn slab_test(
     (t_near, lanes_le(&t_near, &t_far))
 }
 
-/// Most rays of a packet ([`Bvh4::closest_packet`]).
+/// Most rays of a packet ([`Bvh8::closest_packet`]).
 pub const PACKET: usize = 32;
 
 /// The box test of a packet of rays with one origin and the same sign of each direction
@@ -288,7 +288,7 @@ impl NodeTest for PacketBoxRay {
     /// monotonically in `inv`, so every ray's own `t_near` is at least, and its `t_far` at
     /// most, what this gives, and every child any ray's test accepts is accepted.
     #[inline(always)]
-    fn test(&self, node: &Node4, t_max: f32) -> ([f32; WIDTH], u32) {
+    fn test(&self, node: &Node8, t_max: f32) -> ([f32; WIDTH], u32) {
         let (lo, hi) = (self.inv_lo, self.inv_hi);
         let near_t = |a: usize, d: f32| min_ps(d * lo[a], d * hi[a]);
         let far_t = |a: usize, d: f32| max_ps(d * lo[a], d * hi[a]);
@@ -296,13 +296,13 @@ impl NodeTest for PacketBoxRay {
     }
 }
 
-/// State of [`Bvh4::from_bvh2`].
+/// State of [`Bvh8::from_bvh2`].
 struct Builder<'a, F: Fn(u32) -> bool> {
     bvh: &'a Bvh2,
     /// Primitive count of each binary subtree.
     under: Vec<u32>,
     is_scalar: &'a F,
-    out: Bvh4,
+    out: Bvh8,
     order: Vec<u32>,
 }
 
@@ -389,7 +389,7 @@ impl<F: Fn(u32) -> bool> Builder<'_, F> {
         }
         let index = self.out.nodes.len();
         let (inf, neg) = (f32::INFINITY, f32::NEG_INFINITY);
-        let mut node = Node4 {
+        let mut node = Node8 {
             bounds: [
                 [inf; WIDTH],
                 [inf; WIDTH],
@@ -421,7 +421,7 @@ impl<F: Fn(u32) -> bool> Builder<'_, F> {
     }
 }
 
-impl Bvh4 {
+impl Bvh8 {
     /// Collapses `bvh`; every binary subtree of at most [`BLOCK`] primitives becomes one leaf
     /// block. Returns the tree and the primitive order its blocks index: `BLOCK` slots per
     /// block, each an index into the primitives `bvh` was built over, a block's unused slots
@@ -431,7 +431,7 @@ impl Bvh4 {
     pub(crate) fn from_bvh2(
         bvh: &Bvh2,
         is_scalar: impl Fn(u32) -> bool,
-    ) -> Option<(Bvh4, Vec<u32>)> {
+    ) -> Option<(Bvh8, Vec<u32>)> {
         if bvh.nodes.is_empty() {
             return None;
         }
@@ -452,7 +452,7 @@ impl Bvh4 {
             bvh,
             under,
             is_scalar: &is_scalar,
-            out: Bvh4 { nodes: Vec::new() },
+            out: Bvh8 { nodes: Vec::new() },
             order: Vec::new(),
         };
         let depth = b.build(0)?;
