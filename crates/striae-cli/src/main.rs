@@ -31,6 +31,7 @@ enum Command {
 
 fn main() {
     let cli = Cli::parse();
+    commands::print_library_messages(false);
     let result = match cli.command {
         Command::Precompute(a) => commands::precompute::run(a),
         Command::Plot(a) => commands::plot::run(a),

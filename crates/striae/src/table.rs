@@ -210,6 +210,126 @@ pub enum TableError {
     Params { path: PathBuf, why: String },
 }
 
+/// A table file being read: its archive, the names of its entries, and the path every error
+/// names.
+struct TableFile<'a> {
+    path: &'a Path,
+    npz: NpzReader<std::io::BufReader<std::fs::File>>,
+    names: Vec<String>,
+}
+
+impl<'a> TableFile<'a> {
+    /// Open `path` and check each entry's declared size against the bytes it holds
+    /// ([`check_npz_sizes`]) before anything is decoded; one handle serves the check and the
+    /// read, so both see the same file.
+    fn open(path: &'a Path) -> Result<Self, TableError> {
+        use std::io::Seek;
+        let io = |e| TableError::Io {
+            path: path.into(),
+            source: e,
+        };
+        let npz_error = |why: String| TableError::Npz {
+            path: path.into(),
+            why,
+        };
+        let mut file = std::fs::File::open(path).map_err(io)?;
+        check_npz_sizes(&file).map_err(npz_error)?;
+        file.rewind().map_err(io)?;
+        let mut npz =
+            NpzReader::new(std::io::BufReader::new(file)).map_err(|e| npz_error(e.to_string()))?;
+        let names = npz.names().map_err(|e| npz_error(e.to_string()))?;
+        Ok(TableFile { path, npz, names })
+    }
+
+    fn has(&self, key: &str) -> bool {
+        self.names.iter().any(|n| n == key)
+    }
+
+    fn bad_array(&self, key: &'static str, dtype: &'static str, why: String) -> TableError {
+        TableError::BadArray {
+            path: self.path.into(),
+            key,
+            dtype,
+            why,
+        }
+    }
+
+    /// An `int64` scalar entry.
+    fn int_scalar(&mut self, key: &'static str) -> Result<i64, TableError> {
+        let a: ndarray::Array0<i64> = self
+            .npz
+            .by_name(key)
+            .map_err(|e| self.bad_array(key, "int64 scalar", e.to_string()))?;
+        Ok(a.into_scalar())
+    }
+
+    /// A UTF-8 text entry, stored as `uint8[]`.
+    fn text(&mut self, key: &'static str) -> Result<String, TableError> {
+        let a: Array1<u8> = self
+            .npz
+            .by_name(key)
+            .map_err(|e| self.bad_array(key, "uint8[]", e.to_string()))?;
+        String::from_utf8(a.to_vec()).map_err(|e| self.bad_array(key, "UTF-8 text", e.to_string()))
+    }
+
+    /// A `float64` entry of exactly `shape`, finite, and `>= 0` with `nonneg`, flattened.
+    fn floats(
+        &mut self,
+        key: &'static str,
+        shape: &[usize],
+        nonneg: bool,
+    ) -> Result<Vec<f64>, TableError> {
+        let a: ArrayD<f64> = self
+            .npz
+            .by_name(key)
+            .map_err(|e| self.bad_array(key, "float64", e.to_string()))?;
+        if a.shape() != shape {
+            return Err(TableError::Shape {
+                path: self.path.into(),
+                key,
+                got: a.shape().to_vec(),
+                expected: shape.to_vec(),
+            });
+        }
+        let v: Vec<f64> = a.iter().copied().collect();
+        if let Some((index, &value)) = v
+            .iter()
+            .enumerate()
+            .find(|(_, x)| !x.is_finite() || (nonneg && **x < 0.0))
+        {
+            return Err(TableError::BadValue {
+                path: self.path.into(),
+                key,
+                index,
+                value,
+            });
+        }
+        Ok(v)
+    }
+}
+
+/// `got` equals the grid `expected` within `1e-12`, or the first value that does not.
+fn check_grid(
+    path: &Path,
+    key: &'static str,
+    got: &[f64],
+    expected: impl Iterator<Item = f64>,
+) -> Result<(), TableError> {
+    match got
+        .iter()
+        .zip(expected)
+        .position(|(&a, b)| (a - b).abs() > 1e-12)
+    {
+        Some(index) => Err(TableError::BadValue {
+            path: path.into(),
+            key,
+            index,
+            value: got[index],
+        }),
+        None => Ok(()),
+    }
+}
+
 /// A precomputed scratch BRDF. Arrays are row-major `[phi_i bin][phi_o bin]`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ScratchTable {
@@ -340,28 +460,11 @@ impl ScratchTable {
         })
     }
 
-    /// Read and validate a table written by [`ScratchTable::save`].
+    /// Read and validate a table written by [`ScratchTable::save`]: every array present, of
+    /// its type and shape, finite (and `>= 0` where a BRDF value), the bin centres those of
+    /// eq. (1'), the format version this crate's.
     pub fn load(path: &Path) -> Result<Self, TableError> {
-        use std::io::Seek;
-        let p = || path.to_path_buf();
-        let io = |e| TableError::Io {
-            path: p(),
-            source: e,
-        };
-        // One handle for the size check and the read, so both see the same file.
-        let mut file = std::fs::File::open(path).map_err(io)?;
-        check_npz_sizes(&file).map_err(|why| TableError::Npz { path: p(), why })?;
-        file.rewind().map_err(io)?;
-        let mut npz =
-            NpzReader::new(std::io::BufReader::new(file)).map_err(|e| TableError::Npz {
-                path: p(),
-                why: e.to_string(),
-            })?;
-        let names = npz.names().map_err(|e| TableError::Npz {
-            path: p(),
-            why: e.to_string(),
-        })?;
-        let has = |k: &str| names.iter().any(|n| n == k);
+        let mut f = TableFile::open(path)?;
         for key in [
             "format_version",
             "params_json",
@@ -371,119 +474,47 @@ impl ScratchTable {
             "rho_s",
             "gamma",
         ] {
-            if !has(key) {
-                return Err(TableError::MissingKey { path: p(), key });
+            if !f.has(key) {
+                return Err(TableError::MissingKey {
+                    path: path.into(),
+                    key,
+                });
             }
         }
-        let fv: ndarray::Array0<i64> =
-            npz.by_name("format_version")
-                .map_err(|e| TableError::BadArray {
-                    path: p(),
-                    key: "format_version",
-                    dtype: "int64 scalar",
-                    why: e.to_string(),
-                })?;
-        let fv = fv.into_scalar();
-        if fv != FORMAT_VERSION {
+        let found = f.int_scalar("format_version")?;
+        if found != FORMAT_VERSION {
             return Err(TableError::Incompatible {
-                path: p(),
-                found: fv,
+                path: path.into(),
+                found,
                 expected: FORMAT_VERSION,
             });
         }
-        let bytes = |npz: &mut NpzReader<_>, key: &'static str| -> Result<String, TableError> {
-            let a: Array1<u8> = npz.by_name(key).map_err(|e| TableError::BadArray {
-                path: p(),
-                key,
-                dtype: "uint8[]",
-                why: e.to_string(),
-            })?;
-            String::from_utf8(a.to_vec()).map_err(|e| TableError::BadArray {
-                path: p(),
-                key,
-                dtype: "UTF-8 text",
-                why: e.to_string(),
-            })
-        };
-        let json = bytes(&mut npz, "params_json")?;
-        let version = if has("version") {
-            bytes(&mut npz, "version")?
+        let json = f.text("params_json")?;
+        let version = if f.has("version") {
+            f.text("version")?
         } else {
             String::new()
         };
-        let value: serde_json::Value =
-            serde_json::from_str(&json).map_err(|e| TableError::Params {
-                path: p(),
-                why: e.to_string(),
+        let params = serde_json::from_str(&json)
+            .map_err(|e| e.to_string())
+            .and_then(|value| TableParams::from_json(&value))
+            .map_err(|why| TableError::Params {
+                path: path.into(),
+                why,
             })?;
-        let params =
-            TableParams::from_json(&value).map_err(|why| TableError::Params { path: p(), why })?;
         let m = params.trace.m;
-        let mut get =
-            |key: &'static str, shape: &[usize], nonneg: bool| -> Result<Vec<f64>, TableError> {
-                let a: ArrayD<f64> = npz.by_name(key).map_err(|e| TableError::BadArray {
-                    path: p(),
-                    key,
-                    dtype: "float64",
-                    why: e.to_string(),
-                })?;
-                if a.shape() != shape {
-                    return Err(TableError::Shape {
-                        path: p(),
-                        key,
-                        got: a.shape().to_vec(),
-                        expected: shape.to_vec(),
-                    });
-                }
-                let v: Vec<f64> = a.iter().copied().collect();
-                if let Some((index, &value)) = v
-                    .iter()
-                    .enumerate()
-                    .find(|(_, x)| !x.is_finite() || (nonneg && **x < 0.0))
-                {
-                    return Err(TableError::BadValue {
-                        path: p(),
-                        key,
-                        index,
-                        value,
-                    });
-                }
-                Ok(v)
-            };
-        let phi = get("phi", &[m], false)?;
-        let theta = get("theta", &[3], false)?;
-        let rho_m = get("rho_m", &[m, m], true)?;
-        let rho_s = get("rho_s", &[3, m, m], true)?;
-        let gamma = get("gamma", &[m, m], true)?;
-        let dropped = if has("dropped") {
-            get("dropped", &[m], true)?
+        let phi = f.floats("phi", &[m], false)?;
+        let theta = f.floats("theta", &[3], false)?;
+        let rho_m = f.floats("rho_m", &[m, m], true)?;
+        let rho_s = f.floats("rho_s", &[3, m, m], true)?;
+        let gamma = f.floats("gamma", &[m, m], true)?;
+        let dropped = if f.has("dropped") {
+            f.floats("dropped", &[m], true)?
         } else {
             vec![0.0; m]
         };
-        for (k, (&a, &b)) in phi
-            .iter()
-            .zip((0..m).map(|k| bin_centre(k, m)).collect::<Vec<_>>().iter())
-            .enumerate()
-        {
-            if (a - b).abs() > 1e-12 {
-                return Err(TableError::BadValue {
-                    path: p(),
-                    key: "phi",
-                    index: k,
-                    value: a,
-                });
-            }
-        }
-        for (k, (&a, &b)) in theta.iter().zip(THETA_SLICES.iter()).enumerate() {
-            if (a - b).abs() > 1e-12 {
-                return Err(TableError::BadValue {
-                    path: p(),
-                    key: "theta",
-                    index: k,
-                    value: a,
-                });
-            }
-        }
+        check_grid(path, "phi", &phi, (0..m).map(|k| bin_centre(k, m)))?;
+        check_grid(path, "theta", &theta, THETA_SLICES.iter().copied())?;
         Ok(ScratchTable {
             params,
             m,

@@ -117,6 +117,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("--exposure {e}: must be finite");
     }
     striae::integrator::LoopCopy::env_cap().map_err(anyhow::Error::msg)?;
+    super::print_library_messages(args.quiet);
     let mut scene = match &args.scene {
         Some(path) => Scene::load(path, &overrides).context("cannot load the scene")?,
         None => Scene::default_scene(&overrides).context("building the built-in default scene")?,
