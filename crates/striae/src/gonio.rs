@@ -66,11 +66,16 @@ fn heat_panel(
     hist: &[f64],
     caption: &str,
 ) -> Result<(), String> {
-    let vmax = hist.iter().cloned().fold(0.0, f64::max).max(1e-12);
+    let vmax = hist.iter().cloned().fold(0.0, f64::max);
+    let (vmax, caption) = if vmax > 0.0 {
+        (vmax, caption.to_string())
+    } else {
+        (1.0, format!("{caption} (empty)"))
+    };
     let (pw, _) = area.dim_in_pixel();
     let (map, bar_area) = area.split_horizontally(pw - 120);
     let mut chart = ChartBuilder::on(&map)
-        .caption(caption, ("sans-serif", 18))
+        .caption(&caption, ("sans-serif", 18))
         .margin(15)
         .x_label_area_size(45)
         .y_label_area_size(60)
@@ -100,12 +105,13 @@ fn heat_panel(
         .margin_top(50)
         .margin_bottom(60)
         .margin_right(10)
-        .y_label_area_size(80)
+        .y_label_area_size(85)
         .build_cartesian_2d(0.0..1.0f64, 0.0..vmax)
         .map_err(|e| e.to_string())?;
     bar.configure_mesh()
         .disable_mesh()
         .disable_x_axis()
+        .y_label_formatter(&|v| format!("{v:.2e}"))
         .y_desc("fraction per bin")
         .label_style(("sans-serif", 14))
         .axis_desc_style(("sans-serif", 16))
@@ -124,4 +130,58 @@ fn heat_panel(
     }))
     .map_err(|e| e.to_string())?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::groove::{trace_groove, GonioSettings, GrooveWalls};
+    use crate::profile::Profile;
+    use ndarray::{Array0, Ix0};
+    use ndarray_npy::NpzReader;
+
+    #[test]
+    fn npz_holds_exactly_the_documented_arrays_and_the_plot_is_drawn() {
+        let s = GonioSettings {
+            walls: GrooveWalls::Dielectric,
+            theta_i: 0.3,
+            phi_i: 0.2,
+            paths: 5000,
+            bins: 6,
+            ..GonioSettings::default()
+        };
+        let out = trace_groove(&Profile::parse("v:angle=90").unwrap(), &s, &|_| {}).unwrap();
+        let dir = std::env::temp_dir().join(format!("striae-gonio-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("g.npz");
+        save_npz(&out, &path).unwrap();
+        let mut r = NpzReader::new(std::fs::File::open(&path).unwrap()).unwrap();
+        let mut names = r.names().unwrap();
+        names.sort();
+        assert_eq!(
+            names,
+            [
+                "albedo_r",
+                "albedo_t",
+                "phi",
+                "reflected",
+                "theta",
+                "transmitted"
+            ]
+        );
+        let theta: Array1<f64> = r.by_name("theta").unwrap();
+        assert_eq!(theta.to_vec(), out.centres);
+        let refl: Array2<f64> = r.by_name("reflected").unwrap();
+        assert_eq!(refl.dim(), (6, 6));
+        assert_eq!(refl.iter().cloned().collect::<Vec<_>>(), out.reflected);
+        let a: Array0<f64> = r
+            .by_name::<ndarray::OwnedRepr<f64>, Ix0>("albedo_t")
+            .unwrap();
+        assert_eq!(a.into_scalar(), out.albedo_t);
+        let png = dir.join("g.png");
+        plot(&out, "test", &png).unwrap();
+        let img = image::open(&png).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (1500, 720));
+        std::fs::remove_dir_all(&dir).ok();
+    }
 }
