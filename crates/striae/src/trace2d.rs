@@ -988,8 +988,8 @@ impl<'a> ConvexDiffuse<'a> {
             let k = draw(key, walk_counter(r as usize, bounces, s.max_bounces)) >> 11;
             let (dir, escapes, j) = self.bounce(next, pos, k);
             let e = (escapes as u8) as f64;
-            for c in 0..channels {
-                scratch.hist[c * (m + 1) + j] += e * w[c];
+            for (c, wc) in w.iter().enumerate().take(channels) {
+                scratch.hist[c * (m + 1) + j] += e * wc;
             }
             queue[kept] = Walk {
                 key,
@@ -1012,9 +1012,9 @@ impl<'a> ConvexDiffuse<'a> {
             let sg = &self.geo.segs[seg];
             let cos_in = (sg.n[0] * d0[0] + sg.n[1] * d0[1]).abs();
             let w0 = hit_weights::<WALLS_MODE>([1.0; 4], cos_in, s.albedo, s.fresnel_law);
-            for c in 0..channels {
+            for (c, wc) in w0.iter().enumerate().take(channels) {
                 for (h, &n) in scratch.hist[c * (m + 1)..].iter_mut().zip(counts) {
-                    *h += n as f64 * w0[c];
+                    *h += n as f64 * wc;
                 }
             }
         }
