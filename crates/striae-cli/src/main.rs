@@ -27,6 +27,9 @@ enum Command {
     Render(commands::render::Args),
     /// Regenerate the seed's figures (Fig. 2, 4, 6, 7, 8a) as PNGs plus an index.html.
     Figures(commands::figures::Args),
+    /// The exact BSDF of an extruded groove by 2.5D tracing: a virtual gonioreflectometer
+    /// (METHOD.md 8.1).
+    Gonio(commands::gonio::Args),
 }
 
 fn main() {
@@ -38,6 +41,7 @@ fn main() {
         Command::Layers(a) => commands::layers::run(a),
         Command::Render(a) => commands::render::run(a),
         Command::Figures(a) => commands::figures::run(a),
+        Command::Gonio(a) => commands::gonio::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -39,6 +39,12 @@ pub mod profile;
 pub mod table;
 pub mod trace2d;
 
+// The exact groove (METHOD.md 8.1): shared cross-section geometry, angle bins, the 2.5D tracer.
+pub mod angle_bins;
+pub(crate) mod cross_section;
+pub mod gonio;
+pub mod groove;
+
 // Scratch layers from Worley cell noise (section 5).
 pub mod layers;
 

@@ -36,7 +36,7 @@ fn draw_err(path: &Path) -> impl Fn(String) -> PlotError + '_ {
 }
 
 /// Render to a temporary PNG and rename it into place (no half-written file).
-fn render(
+pub(crate) fn render(
     path: &Path,
     size: (u32, u32),
     draw: impl FnOnce(&Path) -> Result<(), String>,
@@ -176,7 +176,7 @@ fn nice_step(x: f64) -> f64 {
 }
 
 /// A viridis-like colour map on `[0, 1]` (piecewise linear through 5 of viridis' colours).
-fn colour(t: f64) -> RGBColor {
+pub(crate) fn colour(t: f64) -> RGBColor {
     const STOPS: [(f64, f64, f64); 5] = [
         (68.0, 1.0, 84.0),
         (59.0, 82.0, 139.0),

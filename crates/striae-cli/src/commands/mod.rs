@@ -1,4 +1,5 @@
 pub mod figures;
+pub mod gonio;
 pub mod layers;
 pub mod plot;
 pub mod precompute;
