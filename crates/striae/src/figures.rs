@@ -177,16 +177,19 @@ pub fn generate(
     log: &dyn Fn(&str),
 ) -> Result<Vec<Figure>, FigureError> {
     std::fs::create_dir_all(dir).map_err(io(dir))?;
-    let overrides = Overrides {
-        spp: Some(opts.spp),
-        resolution: Some(opts.resolution),
-        seed: None,
-        max_depth: None,
-        sampler: None,
-    };
-    let mut figures = Vec::new();
+    let mut figures = vec![lobe_figure(dir, log)?];
+    figures.extend(layer_figures(dir, opts.layer_resolution, log)?);
+    figures.extend(render_figures(dir, opts, log)?);
+    let html = index_html(&figures, opts);
+    let path = dir.join("index.html");
+    crate::io::write_atomically(&path, |tmp| std::fs::write(tmp, html.as_bytes()))
+        .map_err(io(&path))?;
+    log(&format!("wrote {}", path.display()));
+    Ok(figures)
+}
 
-    // Fig. 2: the lobe of the glass scenes' profile at the seed's table size.
+/// Fig. 2: the lobe of the glass scenes' profile at the seed's table size.
+fn lobe_figure(dir: &Path, log: &dyn Fn(&str)) -> Result<Figure, FigureError> {
     let start = Instant::now();
     let params = fig2_table_params();
     let table = crate::cache::obtain_table(&params).map_err(|e| FigureError::Table(Box::new(e)))?;
@@ -209,19 +212,21 @@ pub fn generate(
     ];
     let seconds = start.elapsed().as_secs_f64();
     log(&format!("fig2: lobe at phi_i = {FIG2_PHI_I_DEG} deg ({seconds:.2} s, table computed or read from the cache)"));
-    figures.push(Figure {
+    Ok(Figure {
         id: "fig2".into(),
         caption: "Fig. 2: the 2D scratch BRDF rho_m(phi_o, phi_i), polar plot".into(),
         file,
         params,
         seconds,
-    });
+    })
+}
 
-    // Fig. 4: the stages of layer 0 of a setting-2 set.
+/// Fig. 4: the stages of layer 0 of a setting-2 set at `res x res`.
+fn layer_figures(dir: &Path, res: usize, log: &dyn Fn(&str)) -> Result<Vec<Figure>, FigureError> {
+    let mut figures = Vec::new();
     let lp = LayerParams::setting(2)?;
     let set = LayerSet::new(lp, 1)?;
     let layer = &set.layers()[0];
-    let res = opts.layer_resolution;
     let lparams = vec![
         (
             "setting".to_string(),
@@ -282,8 +287,23 @@ pub fn generate(
             seconds,
         });
     }
+    Ok(figures)
+}
 
-    // Figs. 6-8: renders.
+/// Figs. 6-8: the renders, at the resolution and sample count of `opts`.
+fn render_figures(
+    dir: &Path,
+    opts: &FigureOptions,
+    log: &dyn Fn(&str),
+) -> Result<Vec<Figure>, FigureError> {
+    let overrides = Overrides {
+        spp: Some(opts.spp),
+        resolution: Some(opts.resolution),
+        seed: None,
+        max_depth: None,
+        sampler: None,
+    };
+    let mut figures = Vec::new();
     for (id, caption, name, text) in FIGURE_SCENES {
         let start = Instant::now();
         let scene = Scene::parse(text, Path::new(name), Path::new("."), &overrides)?;
@@ -324,12 +344,6 @@ pub fn generate(
             seconds,
         });
     }
-
-    let html = index_html(&figures, opts);
-    let path = dir.join("index.html");
-    crate::io::write_atomically(&path, |tmp| std::fs::write(tmp, html.as_bytes()))
-        .map_err(io(&path))?;
-    log(&format!("wrote {}", path.display()));
     Ok(figures)
 }
 

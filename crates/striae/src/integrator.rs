@@ -33,7 +33,7 @@
 // `!(x > 0.0)` is meant: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-use crate::bsdf::Bsdf;
+use crate::bsdf::{Bsdf, BsdfSample};
 use crate::film::Image;
 use crate::geometry::{Geometry, SurfaceHit, PACKET};
 use crate::layers::CoverageCache;
@@ -699,11 +699,7 @@ fn radiance<const DIFFERENTIALS: bool>(
     };
 
     let mut l = Rgb::ZERO;
-    let mut beta = Rgb::ONE;
-    let mut eta_scale = 1.0f32;
-    // The camera acts like a delta bounce: emitters seen directly count fully.
-    let mut specular = true;
-    let mut prev_pdf = 0.0f32;
+    let mut path = PathState::new();
     let mut differentials = PathDifferentials::new(*rd, *offset);
 
     let mut depth = 0u32;
@@ -714,30 +710,14 @@ fn radiance<const DIFFERENTIALS: bool>(
             CameraHit::Traced(hit) if depth == 0 => hit,
             _ => scene.geometry.intersect(&ray),
         };
+        if let Some(c) = path.found_emission(scene, &ray, hit.as_ref(), light_select_pdf) {
+            l += c;
+        }
         let Some(hit) = hit else {
-            if let Some(env) = scene.environment() {
-                let le = env.eval(ray.d);
-                let w = emission_weight(specular, prev_pdf, || {
-                    light_select_pdf * env.light_pdf(ray.d)
-                });
-                l += beta * le * w;
-            }
             break;
         };
         let shape = &shapes[hit.shape as usize];
         let wo_world = -ray.d;
-
-        // Emission of an area light hit by the path (MIS against light sampling).
-        if let Some(li) = shape.area_light {
-            let light = &scene.lights[li as usize];
-            let le = light.emitted(hit.ng, wo_world);
-            if le != Rgb::ZERO {
-                let w = emission_weight(specular, prev_pdf, || {
-                    light_select_pdf * light.area_pdf(shapes, ray.o, hit.t, ray.d, hit.ng)
-                });
-                l += beta * le * w;
-            }
-        }
         // Paths of at most `max_depth` segments: the next vertex would make depth + 2. A shape
         // without a material (a pure emitter) absorbs everything.
         if depth + 2 > max_depth || shape.material == NO_MATERIAL {
@@ -763,7 +743,7 @@ fn radiance<const DIFFERENTIALS: bool>(
                 frame,
                 wo,
                 bsdf: &bsdf,
-                beta,
+                beta: path.beta,
             };
             if let Some(c) = direct_light(scene, &vertex, sampler, worker) {
                 l += c;
@@ -781,13 +761,9 @@ fn radiance<const DIFFERENTIALS: bool>(
             break;
         }
         let wi_world = frame.to_world(bs.wi);
-        beta *= bs.weight;
-        eta_scale *= bs.eta * bs.eta;
-        specular = bs.delta;
-        prev_pdf = bs.pdf;
-        let transmitted = bs.wi.z * wo.z < 0.0;
-        let eta_path = if transmitted { 1.0 / bs.eta } else { 1.0 };
+        path.scatter(&bs);
         if DIFFERENTIALS {
+            let transmitted = bs.wi.z * wo.z < 0.0;
             differentials.push(
                 &scene.geometry,
                 DeferredBounce {
@@ -797,23 +773,98 @@ fn radiance<const DIFFERENTIALS: bool>(
                     wi: wi_world,
                     delta: bs.delta,
                     transmitted,
-                    eta: eta_path,
+                    eta: if transmitted { 1.0 / bs.eta } else { 1.0 },
                 },
             );
         }
         ray = Ray::new(offset_origin(hit.p, hit.ng, wi_world), wi_world);
 
-        // Russian roulette.
         depth += 1;
-        if depth >= settings.rr_depth {
-            let q = (beta * eta_scale).max_element().min(0.95);
-            if !(sampler.next_1d() < q) {
-                break;
-            }
-            beta /= q;
+        if depth >= settings.rr_depth && !path.survives_roulette(sampler) {
+            break;
         }
     }
     l
+}
+
+/// What a path carries from vertex to vertex: its throughput `beta`, the product of the
+/// squared relative indices it crossed (to keep Russian roulette independent of radiance
+/// scaling at refraction), and what the MIS weight of the next emitter hit needs.
+struct PathState {
+    beta: Rgb,
+    eta_scale: f32,
+    /// The last bounce was a delta lobe (the camera counts as one): emitters hit count fully.
+    specular: bool,
+    /// The BSDF sampling pdf of the last bounce.
+    prev_pdf: f32,
+}
+
+impl PathState {
+    #[inline(always)]
+    fn new() -> Self {
+        PathState {
+            beta: Rgb::ONE,
+            eta_scale: 1.0,
+            specular: true,
+            prev_pdf: 0.0,
+        }
+    }
+
+    /// The MIS weight of emission found by BSDF sampling ([`emission_weight`]).
+    #[inline(always)]
+    fn emission_weight(&self, light_pdf: impl FnOnce() -> f32) -> f32 {
+        emission_weight(self.specular, self.prev_pdf, light_pdf)
+    }
+
+    /// Emission the path finds along `ray`, times its throughput and MIS-weighted against
+    /// light sampling: the environment's where it escapes (`hit` is `None`), an area light's
+    /// where it hits one.
+    #[inline(always)]
+    fn found_emission(
+        &self,
+        scene: &Scene,
+        ray: &Ray,
+        hit: Option<&SurfaceHit>,
+        light_select_pdf: f32,
+    ) -> Option<Rgb> {
+        let Some(hit) = hit else {
+            let env = scene.environment()?;
+            let le = env.eval(ray.d);
+            let w = self.emission_weight(|| light_select_pdf * env.light_pdf(ray.d));
+            return Some(self.beta * le * w);
+        };
+        let shapes = scene.geometry.shapes();
+        let light = &scene.lights[shapes[hit.shape as usize].area_light? as usize];
+        let le = light.emitted(hit.ng, -ray.d);
+        if le == Rgb::ZERO {
+            return None;
+        }
+        let w = self.emission_weight(|| {
+            light_select_pdf * light.area_pdf(shapes, ray.o, hit.t, ray.d, hit.ng)
+        });
+        Some(self.beta * le * w)
+    }
+
+    /// Continue through the sampled bounce `bs`.
+    #[inline(always)]
+    fn scatter(&mut self, bs: &BsdfSample) {
+        self.beta *= bs.weight;
+        self.eta_scale *= bs.eta * bs.eta;
+        self.specular = bs.delta;
+        self.prev_pdf = bs.pdf;
+    }
+
+    /// Russian roulette: survive with probability `q = min(max(beta eta_scale), 0.95)` and
+    /// divide the throughput by it.
+    #[inline(always)]
+    fn survives_roulette(&mut self, sampler: &mut PixelSampler) -> bool {
+        let q = (self.beta * self.eta_scale).max_element().min(0.95);
+        if !(sampler.next_1d() < q) {
+            return false;
+        }
+        self.beta /= q;
+        true
+    }
 }
 
 /// The MIS weight of emission a path found by BSDF sampling: 1 after a delta bounce (and at the

@@ -8,6 +8,7 @@
 //! and samples it as section 6 prescribes; for mirror walls it is the delta-in-theta lobe.
 //! The file layout is documented in `docs/table-format.md`.
 
+use crate::angle_bins::AngleBins;
 use crate::fresnel::FresnelLaw;
 use crate::math::Vec3;
 use crate::profile::Profile;
@@ -605,18 +606,12 @@ pub struct ScratchBrdf {
     delta: bool,
     /// Per `phi_o` bin: distribution over `phi_i` bins of `rho_s(pi/2, phi_o, phi_i) cos(phi_i)`.
     rows: Vec<Distribution1D>,
-    /// `tan` of the inner bin boundaries `-pi/2 + k pi/M`, `k = 1..M-1` (see [`Self::phi_bin`]).
-    tan_bounds: Vec<f64>,
-    /// [`Self::phi_bin`]'s first guess: the bin at the lower end of each of `4 M` equal cells
-    /// of `u = x / (z + |x|)` in `[-1, 1]`.
-    phi_guess: Vec<u16>,
+    /// The `phi` binner of `wo` and `wi` ([`Self::phi_bin`]).
+    phi_bins: AngleBins,
     /// The eq. (4) exponent most bins share ([`common_gamma`]), NaN if none is shared widely.
     gamma_common: f64,
-    /// `t = 2 |theta| / pi` and `R = t^gamma_common` of eq. (4) on the grid
-    /// `s_k = k / (THETA_GRID - 1)` of `s = sqrt(1 - |y|)` ([`ScratchBrdf::wo_terms`]); `R` is
-    /// empty unless `gamma_common >= 2`.
-    t_grid: Vec<f64>,
-    r_grid: Vec<f64>,
+    /// `t` and the common `R` of eq. (4) as functions of `wo.y` ([`ThetaGrid`]).
+    theta_grid: ThetaGrid,
 }
 
 /// Points of the `s = sqrt(1 - |y|)` grid on which `theta_o` and eq. (4)'s `R` are tabulated.
@@ -624,6 +619,53 @@ pub struct ScratchBrdf {
 /// is smooth for `gamma >= 2`, so linear interpolation on 2049 points is within 3e-8 in `t`
 /// and about 1e-6 in `R` (for the seed's `gamma` = 8.55: `|R''| <= 60`, `h^2/8 |R''|`).
 pub const THETA_GRID: usize = 2049;
+
+/// `t = 2 |theta_o| / pi` and `R = t^gamma` of eq. (4) as functions of `y = wo.y`, interpolated
+/// on [`THETA_GRID`] points of `s = sqrt(1 - |y|)`: a hit needs one `sqrt` instead of an `asin`
+/// and a `powf`. The fast path of [`eq4_t`] and [`eq4_r`], tested against them in
+/// `tabulated_theta_terms_match_asin_and_powf`.
+#[derive(Clone, Debug)]
+struct ThetaGrid {
+    gamma: f64,
+    t: Vec<f64>,
+    /// `R` on the grid; empty unless `gamma >= 2` (where `R` is smooth enough to interpolate).
+    r: Vec<f64>,
+}
+
+impl ThetaGrid {
+    fn new(gamma: f64) -> Self {
+        let t: Vec<f64> = (0..THETA_GRID)
+            .map(|k| {
+                let s = k as f64 / (THETA_GRID - 1) as f64;
+                eq4_t((1.0 - s * s).clamp(-1.0, 1.0).asin())
+            })
+            .collect();
+        let r = if gamma >= 2.0 {
+            t.iter().map(|&t| eq4_r(t, gamma)).collect()
+        } else {
+            Vec::new()
+        };
+        ThetaGrid { gamma, t, r }
+    }
+
+    /// `(t, R)` at `y` (`R` = 0 when `gamma` is NaN).
+    #[inline]
+    fn at(&self, y: f64) -> (f64, f64) {
+        let x = (1.0 - y.abs()).max(0.0).sqrt() * (THETA_GRID - 1) as f64;
+        let k = (x as usize).min(THETA_GRID - 2);
+        let f = (x - k as f64).clamp(0.0, 1.0);
+        let lerp = |v: &[f64]| v[k] + (v[k + 1] - v[k]) * f;
+        let t = lerp(&self.t);
+        let r = if !self.r.is_empty() {
+            lerp(&self.r)
+        } else if self.gamma.is_nan() {
+            0.0
+        } else {
+            eq4_r(t, self.gamma)
+        };
+        (t, r)
+    }
+}
 
 /// What the lookups of eq. (3)-(4) and the sampler need of `wo` (scratch frame, above the
 /// surface), computed once per `wo` by [`ScratchBrdf::wo_terms`] and reused by every lookup
@@ -747,40 +789,15 @@ impl ScratchBrdf {
                 Distribution1D::new(&w)
             })
             .collect();
-        let tan_bounds = (1..m)
-            .map(|k| (-FRAC_PI_2 + k as f64 * PI / m as f64).tan())
-            .collect();
-        // `phi = atan2(u, 1 - |u|)` changes by at most 2 du, so a cell of width 1 / (2 M)
-        // spans at most 1 / M < pi / M: its lower end's bin is within one of any point's.
-        let cells = 4 * m;
-        let phi_guess = (0..cells)
-            .map(|c| {
-                let u = -1.0 + 2.0 * c as f64 / cells as f64;
-                let phi = u.atan2(1.0 - u.abs());
-                (((phi + FRAC_PI_2) * (m as f64 / PI)) as usize).min(m - 1) as u16
-            })
-            .collect();
         let gamma_common = common_gamma(&table.gamma);
-        let t_grid: Vec<f64> = (0..THETA_GRID)
-            .map(|k| {
-                let s = k as f64 / (THETA_GRID - 1) as f64;
-                eq4_t((1.0 - s * s).clamp(-1.0, 1.0).asin())
-            })
-            .collect();
-        let r_grid = if gamma_common >= 2.0 {
-            t_grid.iter().map(|&t| eq4_r(t, gamma_common)).collect()
-        } else {
-            Vec::new()
-        };
+        let theta_grid = ThetaGrid::new(gamma_common);
         ScratchBrdf {
             table,
             delta,
             rows,
-            tan_bounds,
-            phi_guess,
+            phi_bins: AngleBins::new(m),
             gamma_common,
-            t_grid,
-            r_grid,
+            theta_grid,
         }
     }
 
@@ -789,27 +806,13 @@ impl ScratchBrdf {
         self.gamma_common
     }
 
-    /// The `wo`-dependent part of every lookup (`wo` in the scratch frame with `wo.z > 0`).
-    /// `theta_o` and eq. (4)'s `t` and common `R` are interpolated in the tables over
-    /// `s = sqrt(1 - |wo.y|)` ([`THETA_GRID`]; a departure from the exact `asin` and `powf` by
-    /// at most 3e-8 in `t` and about 1e-6 in `R`, far below the table's own noise), so a hit
-    /// needs one `sqrt` instead of an `asin` and a `powf`.
+    /// The `wo`-dependent part of every lookup (`wo` in the scratch frame with `wo.z > 0`):
+    /// its `phi_o` bin, and `theta_o` with eq. (4)'s `t` and common `R` from [`ThetaGrid`].
     #[inline]
     pub fn wo_terms(&self, wo: Vec3) -> WoTerms {
         let o = self.phi_bin(wo.x as f64, wo.z as f64);
         let y = wo.y as f64;
-        let x = (1.0 - y.abs()).max(0.0).sqrt() * (THETA_GRID - 1) as f64;
-        let k = (x as usize).min(THETA_GRID - 2);
-        let f = (x - k as f64).clamp(0.0, 1.0);
-        let lerp = |v: &[f64]| v[k] + (v[k + 1] - v[k]) * f;
-        let t = lerp(&self.t_grid);
-        let r_common = if !self.r_grid.is_empty() {
-            lerp(&self.r_grid)
-        } else if self.gamma_common.is_nan() {
-            0.0
-        } else {
-            eq4_r(t, self.gamma_common)
-        };
+        let (t, r_common) = self.theta_grid.at(y);
         WoTerms {
             o,
             theta_o: (t * FRAC_PI_2).copysign(y),
@@ -832,31 +835,12 @@ impl ScratchBrdf {
         r * t.slice(2, i, o) + (1.0 - r) * t.slice(0, i, o)
     }
 
-    /// The `phi` bin of a direction above the surface (`z > 0`), `phi = atan2(x, z)`: the bin
-    /// `k` with `tan(phi_k) <= x/z < tan(phi_k+1)` at its boundaries, guessed from a table
-    /// over `u = x / (z + |x|)` (a monotone map of `phi`, within one bin) and corrected by
-    /// comparing against the boundaries' tangents (no `atan2`: the lookups of eq. (3) and of
-    /// the sampler run several times per scratched hit). Equal to `bin_of(atan2(x, z), M)`
-    /// but where `atan2` rounds across a boundary; the guess only changes the work.
+    /// The `phi` bin of a direction above the surface (`z > 0`), `phi = atan2(x, z)`
+    /// ([`AngleBins::bin_xz`]: no `atan2`, the lookups of eq. (3) and of the sampler run several
+    /// times per scratched hit).
     #[inline]
     pub fn phi_bin(&self, x: f64, z: f64) -> usize {
-        let m = self.table.m;
-        let r = x / z;
-        if r.is_nan() {
-            return m / 2;
-        }
-        let b = &self.tan_bounds; // b[k - 1] = tan(phi_k)
-        let cells = self.phi_guess.len();
-        let u = x / (z + x.abs());
-        let c = (((u + 1.0) * (cells as f64 / 2.0)) as usize).min(cells - 1);
-        let mut k = self.phi_guess[c] as usize;
-        while k > 0 && r < b[k - 1] {
-            k -= 1;
-        }
-        while k + 1 < m && r >= b[k] {
-            k += 1;
-        }
-        k
+        self.phi_bins.bin_xz(x, z)
     }
 
     pub fn table(&self) -> &ScratchTable {

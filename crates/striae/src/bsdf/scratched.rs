@@ -215,15 +215,32 @@ pub struct ScratchedBsdf<'a> {
     count: u8,
     /// `C = sum_k c_k <= 1`.
     total: f32,
-    /// Whether `cache` holds the first lobe's [`LobeWo`] for the `wo` whose bits are
-    /// `wo_bits` ([`ScratchedBsdf::at_wo`]). A hit evaluates, light-samples and samples one
-    /// `wo`, so its `phi_o` bin, `asin`, albedo and eq. (4)'s `powf` are computed once instead
-    /// of in each of those lookups (4-8 times); another `wo`, and the other lobes of `sum`
-    /// mode, are computed afresh, to the same bits. (One lobe only: the BSDF is returned and
-    /// moved by value at every hit, so it is kept small; `max` mode has one lobe.)
-    cached: bool,
-    wo_bits: [u32; 3],
-    cache: LobeWo,
+    /// The first lobe's `wo` terms for the `wo` of [`ScratchedBsdf::at_wo`].
+    wo_cache: WoCache,
+}
+
+/// The first lobe's [`LobeWo`] for one `wo`, keyed on the bits of `wo`. A hit evaluates,
+/// light-samples and samples one `wo`, so its `phi_o` bin, `theta_o`, albedo and eq. (4)'s
+/// `R` are computed once instead of in each of those lookups (4-8 times); another `wo`, and
+/// the other lobes of `sum` mode, are computed afresh, to the same bits (the test
+/// `wo_cache_changes_no_result` holds it to that). One lobe only: the BSDF is returned and moved
+/// by value at every hit, so it is kept small; `max` mode has one lobe.
+#[derive(Clone, Copy, Debug, Default)]
+struct WoCache {
+    key: Option<[u32; 3]>,
+    terms: LobeWo,
+}
+
+impl WoCache {
+    #[inline]
+    fn key(wo: Vec3) -> [u32; 3] {
+        wo.to_array().map(f32::to_bits)
+    }
+
+    #[inline]
+    fn get(&self, wo: Vec3) -> Option<LobeWo> {
+        (self.key == Some(Self::key(wo))).then_some(self.terms)
+    }
 }
 
 impl<'a> ScratchedBsdf<'a> {
@@ -261,9 +278,7 @@ impl<'a> ScratchedBsdf<'a> {
             lobes: out,
             count: count as u8,
             total,
-            cached: false,
-            wo_bits: [0; 3],
-            cache: LobeWo::default(),
+            wo_cache: WoCache::default(),
         }
     }
 
@@ -273,9 +288,10 @@ impl<'a> ScratchedBsdf<'a> {
     #[inline]
     pub fn at_wo(mut self, wo: Vec3) -> Self {
         if wo.z > 0.0 && self.count > 0 {
-            self.cache = self.lobe_wo(&self.lobes[0], wo);
-            self.cached = true;
-            self.wo_bits = wo.to_array().map(f32::to_bits);
+            self.wo_cache = WoCache {
+                key: Some(WoCache::key(wo)),
+                terms: self.lobe_wo(&self.lobes[0], wo),
+            };
         }
         self
     }
@@ -292,10 +308,9 @@ impl<'a> ScratchedBsdf<'a> {
     /// [`LobeWo`] of lobe `k` for `wo.z > 0`: the cached one for lobe 0 and the cached `wo`.
     #[inline]
     fn terms(&self, k: usize, wo: Vec3) -> LobeWo {
-        if k == 0 && self.cached && wo.to_array().map(f32::to_bits) == self.wo_bits {
-            self.cache
-        } else {
-            self.lobe_wo(&self.lobes[k], wo)
+        match self.wo_cache.get(wo) {
+            Some(terms) if k == 0 => terms,
+            _ => self.lobe_wo(&self.lobes[k], wo),
         }
     }
 

@@ -251,6 +251,79 @@ struct Scratch {
 /// it keeps the sum of their areas, clamped to 1.
 pub fn rasterize(layer: &ScratchLayer, res: usize) -> Result<CoverageRaster, LayerError> {
     check_resolution(res)?;
+    let shape = EllipseShape::of(layer);
+    let scratches = reaching_scratches(layer, res, &shape)?;
+    let r = res as f64;
+    let bands = res.div_ceil(BAND);
+    let mut lists: Vec<Vec<u32>> = vec![Vec::new(); bands];
+    for (k, s) in scratches.iter().enumerate() {
+        let (y0, y1) = shape.row_range(s, res);
+        if y0 > y1 {
+            continue;
+        }
+        for list in &mut lists[y0 / BAND..=y1 / BAND] {
+            list.push(k as u32);
+        }
+    }
+    let texel = TexelShape::of(layer, r);
+    let mut data = vec![0.0f32; res * res];
+    data.par_chunks_mut(BAND * res)
+        .enumerate()
+        .for_each(|(b, chunk)| {
+            let band = Band {
+                layer,
+                res,
+                first_row: b * BAND,
+                shape: &shape,
+                texel: &texel,
+            };
+            band.rasterize(&lists[b], &scratches, chunk);
+        });
+    Ok(CoverageRaster::from_coverage(res, data))
+}
+
+/// A layer's scratch ellipse in texture space: its extents, and its horizontal chords (with
+/// the quadratic form `Q = M^T M / tau^2`, the chord at height `dv` is centred at
+/// `du = k_chord dv`, half-width at most `h0`).
+struct EllipseShape {
+    ex: f64,
+    ey: f64,
+    k_chord: f64,
+    h0: f64,
+}
+
+impl EllipseShape {
+    fn of(layer: &ScratchLayer) -> Self {
+        let tau = layer.threshold();
+        let (hl, hw) = layer.half_axes();
+        let [du, dv] = layer.direction();
+        let mx = layer.vector_to_noise(DVec2::X);
+        let my = layer.vector_to_noise(DVec2::Y);
+        let (q11, q12) = (mx.length_squared() / (tau * tau), mx.dot(my) / (tau * tau));
+        EllipseShape {
+            ex: ((hl * du).powi(2) + (hw * dv).powi(2)).sqrt(),
+            ey: ((hl * dv).powi(2) + (hw * du).powi(2)).sqrt(),
+            k_chord: -q12 / q11,
+            h0: 1.0 / q11.sqrt(),
+        }
+    }
+
+    /// The texel rows `y0..=y1` that scratch `s` can touch (empty when `y0 > y1`).
+    fn row_range(&self, s: &Scratch, res: usize) -> (usize, usize) {
+        let r = res as f64;
+        let y0 = ((1.0 - (s.p.y + self.ey)) * r).floor().max(0.0) as usize;
+        let y1 = (((1.0 - (s.p.y - self.ey)) * r).floor().max(0.0) as usize).min(res - 1);
+        (y0, y1)
+    }
+}
+
+/// The scratches of `layer` whose ellipse reaches the texture square, each marked when it
+/// overlaps another. Refuses layers with more than [`MAX_RASTER_CELLS`] cells to enumerate.
+fn reaching_scratches(
+    layer: &ScratchLayer,
+    res: usize,
+    shape: &EllipseShape,
+) -> Result<Vec<Scratch>, LayerError> {
     let tau = layer.threshold();
     let noise = layer.noise();
     // Cells whose disc can reach the texture square: its noise-space bounding box plus tau.
@@ -271,17 +344,7 @@ pub fn rasterize(layer: &ScratchLayer, res: usize) -> Result<CoverageRaster, Lay
             reason: format!("the layer has about {cells:.2e} noise cells to enumerate (scratches too small for a raster; the most is {MAX_RASTER_CELLS:.0e})"),
         });
     }
-    // Ellipse extents in texture space, and its horizontal chords: with the quadratic form
-    // Q = M^T M / tau^2, the chord at height dv is centred at du = k dv, half-width <= h0.
-    let (hl, hw) = layer.half_axes();
-    let [du, dv] = layer.direction();
-    let ex = ((hl * du).powi(2) + (hw * dv).powi(2)).sqrt();
-    let ey = ((hl * dv).powi(2) + (hw * du).powi(2)).sqrt();
-    let mx = layer.vector_to_noise(DVec2::X);
-    let my = layer.vector_to_noise(DVec2::Y);
-    let (q11, q12) = (mx.length_squared() / (tau * tau), mx.dot(my) / (tau * tau));
-    let (k_chord, h0) = (-q12 / q11, 1.0 / q11.sqrt());
-
+    let (ex, ey) = (shape.ex, shape.ey);
     let reach = (2.0 * tau).ceil() as i64;
     let mut scratches = Vec::new();
     for j in j0 as i64..=j1 as i64 {
@@ -306,105 +369,120 @@ pub fn rasterize(layer: &ScratchLayer, res: usize) -> Result<CoverageRaster, Lay
             scratches.push(Scratch { q, p, clustered });
         }
     }
-    let r = res as f64;
-    let row_range = |s: &Scratch| {
-        let y0 = ((1.0 - (s.p.y + ey)) * r).floor().max(0.0) as usize;
-        let y1 = (((1.0 - (s.p.y - ey)) * r).floor().max(0.0) as usize).min(res - 1);
-        (y0, y1)
-    };
-    let bands = res.div_ceil(BAND);
-    let mut lists: Vec<Vec<u32>> = vec![Vec::new(); bands];
-    for (k, s) in scratches.iter().enumerate() {
-        let (y0, y1) = row_range(s);
-        if y0 > y1 {
-            continue;
-        }
-        for list in &mut lists[y0 / BAND..=y1 / BAND] {
-            list.push(k as u32);
-        }
-    }
-    // One texel in noise space: a parallelogram around its centre.
-    let (ta, tb) = (mx / r, my / r);
-    let texel_area = ta.perp_dot(tb);
-    let poly = [
-        (-ta - tb) * 0.5,
-        (ta - tb) * 0.5,
-        (ta + tb) * 0.5,
-        (tb - ta) * 0.5,
-    ];
-    let mut planes = [(DVec2::ZERO, 0.0f64); 4];
-    for e in 0..4 {
-        let d = poly[(e + 1) % 4] - poly[e];
-        let n = DVec2::new(d.y, -d.x).normalize();
-        planes[e] = (n, n.dot(poly[e]));
-    }
-    let disc_area = std::f64::consts::PI * tau * tau;
+    Ok(scratches)
+}
 
-    let mut data = vec![0.0f32; res * res];
-    data.par_chunks_mut(BAND * res)
-        .enumerate()
-        .for_each(|(b, chunk)| {
-            let rows = chunk.len() / res;
-            let mut acc = vec![0.0f64; chunk.len()];
-            let mut needs_union = vec![false; chunk.len()];
-            for &k in &lists[b] {
-                let s = &scratches[k as usize];
-                let (y0, y1) = row_range(s);
-                for y in y0.max(b * BAND)..=y1.min(b * BAND + rows - 1) {
-                    // The slab of this row, clipped to the ellipse's v-range, gives the chord centres.
-                    let (vb, vt) = (1.0 - (y + 1) as f64 / r, 1.0 - y as f64 / r);
-                    let dv0 = (vb - s.p.y).max(-ey);
-                    let dv1 = (vt - s.p.y).min(ey);
-                    let (ca, cb) = (k_chord * dv0, k_chord * dv1);
-                    let u0 = s.p.x + ca.min(cb) - h0;
-                    let u1 = s.p.x + ca.max(cb) + h0;
-                    if u1 < 0.0 || u0 > 1.0 {
-                        continue;
-                    }
-                    let x0 = (u0 * r).floor().max(0.0) as usize;
-                    let x1 = ((u1 * r).floor() as usize).min(res - 1);
-                    let row = (y - b * BAND) * res;
-                    for x in x0..=x1 {
-                        let qt = layer.to_noise(texel_centre(res, x, y));
-                        let c = s.q - qt;
-                        let mut inside = true;
-                        let mut touches = true;
-                        for &(n, d) in &planes {
-                            let sd = d - n.dot(c);
-                            if sd <= -tau {
-                                touches = false;
-                                break;
-                            }
-                            inside &= sd >= tau;
-                        }
-                        if !touches {
-                            continue;
-                        }
-                        let a = if inside {
-                            disc_area
-                        } else {
-                            union_discs_polygon_area(&[c], tau, &poly)
-                        };
+/// One texel in noise space: a parallelogram around its centre, its edges' half-planes
+/// `(n, d)` (`n . x <= d` inside) and its area.
+struct TexelShape {
+    poly: [DVec2; 4],
+    planes: [(DVec2, f64); 4],
+    area: f64,
+}
+
+impl TexelShape {
+    fn of(layer: &ScratchLayer, r: f64) -> Self {
+        let (ta, tb) = (
+            layer.vector_to_noise(DVec2::X) / r,
+            layer.vector_to_noise(DVec2::Y) / r,
+        );
+        let poly = [
+            (-ta - tb) * 0.5,
+            (ta - tb) * 0.5,
+            (ta + tb) * 0.5,
+            (tb - ta) * 0.5,
+        ];
+        let mut planes = [(DVec2::ZERO, 0.0f64); 4];
+        for e in 0..4 {
+            let d = poly[(e + 1) % 4] - poly[e];
+            let n = DVec2::new(d.y, -d.x).normalize();
+            planes[e] = (n, n.dot(poly[e]));
+        }
+        TexelShape {
+            poly,
+            planes,
+            area: ta.perp_dot(tb),
+        }
+    }
+
+    /// The area of the disc of radius `tau` about `c` (relative to the texel's centre) inside
+    /// the texel: the whole disc or the exact clipped area; `None` where the disc stays clear
+    /// of the texel's edges' half-planes.
+    fn disc_area(&self, c: DVec2, tau: f64) -> Option<f64> {
+        let mut inside = true;
+        for &(n, d) in &self.planes {
+            let sd = d - n.dot(c);
+            if sd <= -tau {
+                return None;
+            }
+            inside &= sd >= tau;
+        }
+        Some(if inside {
+            std::f64::consts::PI * tau * tau
+        } else {
+            union_discs_polygon_area(&[c], tau, &self.poly)
+        })
+    }
+}
+
+/// The rows of one band of the raster and what rasterising them needs.
+struct Band<'a> {
+    layer: &'a ScratchLayer,
+    res: usize,
+    first_row: usize,
+    shape: &'a EllipseShape,
+    texel: &'a TexelShape,
+}
+
+impl Band<'_> {
+    /// Coverage of the band's texels (`chunk`, rows of `res`) by the scratches `list` of
+    /// `scratches`: the sum of each disc's exact area in a texel, replaced by the exact union
+    /// where overlapping scratches meet.
+    fn rasterize(&self, list: &[u32], scratches: &[Scratch], chunk: &mut [f32]) {
+        let (res, r, tau) = (self.res, self.res as f64, self.layer.threshold());
+        let rows = chunk.len() / res;
+        let mut acc = vec![0.0f64; chunk.len()];
+        let mut needs_union = vec![false; chunk.len()];
+        for &k in list {
+            let s = &scratches[k as usize];
+            let (y0, y1) = self.shape.row_range(s, res);
+            for y in y0.max(self.first_row)..=y1.min(self.first_row + rows - 1) {
+                // The slab of this row, clipped to the ellipse's v-range, gives the chord centres.
+                let (vb, vt) = (1.0 - (y + 1) as f64 / r, 1.0 - y as f64 / r);
+                let dv0 = (vb - s.p.y).max(-self.shape.ey);
+                let dv1 = (vt - s.p.y).min(self.shape.ey);
+                let (ca, cb) = (self.shape.k_chord * dv0, self.shape.k_chord * dv1);
+                let u0 = s.p.x + ca.min(cb) - self.shape.h0;
+                let u1 = s.p.x + ca.max(cb) + self.shape.h0;
+                if u1 < 0.0 || u0 > 1.0 {
+                    continue;
+                }
+                let x0 = (u0 * r).floor().max(0.0) as usize;
+                let x1 = ((u1 * r).floor() as usize).min(res - 1);
+                let row = (y - self.first_row) * res;
+                for x in x0..=x1 {
+                    let c = s.q - self.layer.to_noise(texel_centre(res, x, y));
+                    if let Some(a) = self.texel.disc_area(c, tau) {
                         acc[row + x] += a;
                         needs_union[row + x] |= s.clustered;
                     }
                 }
             }
-            for (k, (o, &a)) in chunk.iter_mut().zip(&acc).enumerate() {
-                let mut v = a / texel_area;
-                if needs_union[k] {
-                    let (x, y) = (k % res, b * BAND + k / res);
-                    if let Some(exact) = layer.footprint_coverage(
-                        texel_centre(res, x, y),
-                        DVec2::X / r,
-                        DVec2::Y / r,
-                        usize::MAX,
-                    ) {
-                        v = exact;
-                    }
+        }
+        for (k, (o, &a)) in chunk.iter_mut().zip(&acc).enumerate() {
+            let mut v = a / self.texel.area;
+            if needs_union[k] {
+                let (x, y) = (k % res, self.first_row + k / res);
+                if let Some(exact) = self.layer.footprint_coverage(
+                    texel_centre(res, x, y),
+                    DVec2::X / r,
+                    DVec2::Y / r,
+                    usize::MAX,
+                ) {
+                    v = exact;
                 }
-                *o = v.clamp(0.0, 1.0) as f32;
             }
-        });
-    Ok(CoverageRaster::from_coverage(res, data))
+            *o = v.clamp(0.0, 1.0) as f32;
+        }
+    }
 }

@@ -673,3 +673,27 @@ fn point_coverage_needs_no_ray_differentials() {
         assert_eq!(m.reads_footprint(), reads, "{mode:?}");
     }
 }
+
+/// [`ScratchedBsdf::at_wo`]'s cache of the first lobe's `wo` terms changes no result: eval, pdf
+/// and samples with the cached `wo` (and with another `wo`) are bit-identical to the BSDF
+/// without the cache.
+#[test]
+fn wo_cache_changes_no_result() {
+    let t = schlick_diffuse();
+    let glass = ScratchedBase::Glass { eta: 1.5 };
+    let lobes = [lobe(0.4, 0.3), lobe(0.5, 1.9)];
+    let plain = ScratchedBsdf::new(glass, &t, Rgb::ONE, &lobes);
+    let mut rng = Pcg64::seed_from_u64(5);
+    for wo in wos() {
+        let cached = plain.at_wo(wo);
+        for probe in [wo, dir(20.0, 75.0)] {
+            for _ in 0..200 {
+                let wi = dir(rng.random_range(0.0..179.0), rng.random_range(0.0..360.0));
+                assert_eq!(plain.eval_pdf(probe, wi), cached.eval_pdf(probe, wi));
+                let (u, v) = (rng.random(), Vec2::new(rng.random(), rng.random()));
+                let (a, b) = (plain.sample(probe, u, v), cached.sample(probe, u, v));
+                assert_eq!(format!("{a:?}"), format!("{b:?}"), "{wo:?} {probe:?}");
+            }
+        }
+    }
+}
