@@ -5,7 +5,7 @@
 //! `[theta bin, phi bin]`, see [`crate::groove`]) and the scalars `albedo_r`, `albedo_t`.
 
 use crate::groove::GonioOutput;
-use crate::plot::{colour, render, PlotError};
+use crate::plot::{heat_panel, render, HeatMap, PlotError};
 use ndarray::{arr0, Array1, Array2};
 use ndarray_npy::NpzWriter;
 use plotters::prelude::*;
@@ -54,82 +54,24 @@ pub fn plot(out: &GonioOutput, title: &str, path: &Path) -> Result<(), PlotError
             ),
         ];
         for (area, hist, name, albedo) in panels {
-            heat_panel(area, out.bins, hist, &format!("{name}: albedo {albedo:.4}"))?;
+            let vmax = hist.iter().cloned().fold(0.0, f64::max);
+            let caption = format!("{name}: albedo {albedo:.4}");
+            let map = HeatMap {
+                values: hist,
+                n: out.bins,
+                vmax: if vmax > 0.0 { vmax } else { 1.0 },
+                caption: if vmax > 0.0 {
+                    caption
+                } else {
+                    format!("{caption} (empty)")
+                },
+                y_desc: "theta_o (degrees)",
+                bar_desc: "fraction per bin",
+            };
+            heat_panel(area, &map)?;
         }
         root.present().map_err(|e| e.to_string())
     })
-}
-
-fn heat_panel(
-    area: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
-    b: usize,
-    hist: &[f64],
-    caption: &str,
-) -> Result<(), String> {
-    let vmax = hist.iter().cloned().fold(0.0, f64::max);
-    let (vmax, caption) = if vmax > 0.0 {
-        (vmax, caption.to_string())
-    } else {
-        (1.0, format!("{caption} (empty)"))
-    };
-    let (pw, _) = area.dim_in_pixel();
-    let (map, bar_area) = area.split_horizontally(pw - 120);
-    let mut chart = ChartBuilder::on(&map)
-        .caption(&caption, ("sans-serif", 18))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(60)
-        .build_cartesian_2d(-90.0..90.0f64, -90.0..90.0f64)
-        .map_err(|e| e.to_string())?;
-    chart
-        .configure_mesh()
-        .disable_mesh()
-        .x_desc("phi_o (degrees)")
-        .y_desc("theta_o (degrees)")
-        .label_style(("sans-serif", 14))
-        .axis_desc_style(("sans-serif", 16))
-        .draw()
-        .map_err(|e| e.to_string())?;
-    let bw = 180.0 / b as f64;
-    chart
-        .draw_series((0..b * b).map(|k| {
-            let (i, j) = (k / b, k % b);
-            let (x0, y0) = (-90.0 + j as f64 * bw, -90.0 + i as f64 * bw);
-            Rectangle::new(
-                [(x0, y0), (x0 + bw, y0 + bw)],
-                colour(hist[k] / vmax).filled(),
-            )
-        }))
-        .map_err(|e| e.to_string())?;
-    let mut bar = ChartBuilder::on(&bar_area)
-        .margin_top(50)
-        .margin_bottom(60)
-        .margin_right(10)
-        .y_label_area_size(85)
-        .build_cartesian_2d(0.0..1.0f64, 0.0..vmax)
-        .map_err(|e| e.to_string())?;
-    bar.configure_mesh()
-        .disable_mesh()
-        .disable_x_axis()
-        .y_label_formatter(&|v| format!("{v:.2e}"))
-        .y_desc("fraction per bin")
-        .label_style(("sans-serif", 14))
-        .axis_desc_style(("sans-serif", 16))
-        .draw()
-        .map_err(|e| e.to_string())?;
-    let steps = 200;
-    bar.draw_series((0..steps).map(|k| {
-        let (a, c) = (
-            vmax * k as f64 / steps as f64,
-            vmax * (k + 1) as f64 / steps as f64,
-        );
-        Rectangle::new(
-            [(0.0, a), (1.0, c)],
-            colour((k as f64 + 0.5) / steps as f64).filled(),
-        )
-    }))
-    .map_err(|e| e.to_string())?;
-    Ok(())
 }
 
 #[cfg(test)]

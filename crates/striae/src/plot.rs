@@ -210,67 +210,97 @@ pub fn plot_heatmap(table: &ScratchTable, path: &Path) -> Result<(), PlotError> 
     render(path, (w, h), |tmp| {
         let root = BitMapBackend::new(tmp, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
-        let (left, right) = root.split_horizontally(w - 150);
-        let caption = format!(
-            "rho_m: {}, {:?} walls, M = {} (colour saturates at {:.3})",
-            table.params.profile.spec, table.params.trace.walls, m, vmax
-        );
-        let mut chart = ChartBuilder::on(&left)
-            .caption(caption, ("sans-serif", 18))
-            .margin(15)
-            .x_label_area_size(45)
-            .y_label_area_size(60)
-            .build_cartesian_2d(-90.0..90.0f64, -90.0..90.0f64)
-            .map_err(|e| e.to_string())?;
-        chart
-            .configure_mesh()
-            .disable_mesh()
-            .x_desc("phi_o (degrees)")
-            .y_desc("phi_i (degrees)")
-            .label_style(("sans-serif", 14))
-            .axis_desc_style(("sans-serif", 16))
-            .draw()
-            .map_err(|e| e.to_string())?;
-        let bw = 180.0 / m as f64;
-        chart
-            .draw_series((0..m * m).map(|k| {
-                let (i, j) = (k / m, k % m);
-                let x0 = -90.0 + j as f64 * bw;
-                let y0 = -90.0 + i as f64 * bw;
-                Rectangle::new(
-                    [(x0, y0), (x0 + bw, y0 + bw)],
-                    colour(table.rho_m[k] / vmax).filled(),
-                )
-            }))
-            .map_err(|e| e.to_string())?;
-        // Colour bar.
-        let mut bar = ChartBuilder::on(&right)
-            .margin_top(50)
-            .margin_bottom(60)
-            .margin_right(10)
-            .y_label_area_size(70)
-            .build_cartesian_2d(0.0..1.0f64, 0.0..vmax)
-            .map_err(|e| e.to_string())?;
-        bar.configure_mesh()
-            .disable_mesh()
-            .disable_x_axis()
-            .y_desc("rho_m")
-            .label_style(("sans-serif", 14))
-            .axis_desc_style(("sans-serif", 16))
-            .draw()
-            .map_err(|e| e.to_string())?;
-        let steps = 200;
-        bar.draw_series((0..steps).map(|k| {
-            let a = vmax * k as f64 / steps as f64;
-            let b = vmax * (k + 1) as f64 / steps as f64;
+        let map = HeatMap {
+            values: &table.rho_m,
+            n: m,
+            vmax,
+            caption: format!(
+                "rho_m: {}, {:?} walls, M = {} (colour saturates at {:.3})",
+                table.params.profile.spec, table.params.trace.walls, m, vmax
+            ),
+            y_desc: "phi_i (degrees)",
+            bar_desc: "rho_m",
+        };
+        heat_panel(&root, &map)?;
+        root.present().map_err(|e| e.to_string())
+    })
+}
+
+/// An `n x n` grid of values over `[-90, 90]` degrees in both axes, row-major with rows along
+/// y (x is always `phi_o`), drawn with colours saturating at `vmax`.
+pub(crate) struct HeatMap<'a> {
+    pub values: &'a [f64],
+    pub n: usize,
+    pub vmax: f64,
+    pub caption: String,
+    pub y_desc: &'a str,
+    pub bar_desc: &'a str,
+}
+
+/// Draws `map` into `area` with its colour bar on the right.
+pub(crate) fn heat_panel(
+    area: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
+    map: &HeatMap,
+) -> Result<(), String> {
+    let (n, vmax) = (map.n, map.vmax);
+    let (pw, _) = area.dim_in_pixel();
+    let (left, bar_area) = area.split_horizontally(pw - 150);
+    let mut chart = ChartBuilder::on(&left)
+        .caption(&map.caption, ("sans-serif", 18))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d(-90.0..90.0f64, -90.0..90.0f64)
+        .map_err(|e| e.to_string())?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc("phi_o (degrees)")
+        .y_desc(map.y_desc)
+        .label_style(("sans-serif", 14))
+        .axis_desc_style(("sans-serif", 16))
+        .draw()
+        .map_err(|e| e.to_string())?;
+    let bw = 180.0 / n as f64;
+    chart
+        .draw_series((0..n * n).map(|k| {
+            let (i, j) = (k / n, k % n);
+            let (x0, y0) = (-90.0 + j as f64 * bw, -90.0 + i as f64 * bw);
             Rectangle::new(
-                [(0.0, a), (1.0, b)],
-                colour((k as f64 + 0.5) / steps as f64).filled(),
+                [(x0, y0), (x0 + bw, y0 + bw)],
+                colour(map.values[k] / vmax).filled(),
             )
         }))
         .map_err(|e| e.to_string())?;
-        root.present().map_err(|e| e.to_string())
-    })
+    let mut bar = ChartBuilder::on(&bar_area)
+        .margin_top(50)
+        .margin_bottom(60)
+        .margin_right(10)
+        .y_label_area_size(90)
+        .build_cartesian_2d(0.0..1.0f64, 0.0..vmax)
+        .map_err(|e| e.to_string())?;
+    bar.configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_label_formatter(&|v| format!("{v:.1e}"))
+        .y_desc(map.bar_desc)
+        .label_style(("sans-serif", 14))
+        .axis_desc_style(("sans-serif", 16))
+        .draw()
+        .map_err(|e| e.to_string())?;
+    let steps = 200;
+    bar.draw_series((0..steps).map(|k| {
+        let (a, c) = (
+            vmax * k as f64 / steps as f64,
+            vmax * (k + 1) as f64 / steps as f64,
+        );
+        Rectangle::new(
+            [(0.0, a), (1.0, c)],
+            colour((k as f64 + 0.5) / steps as f64).filled(),
+        )
+    }))
+    .map_err(|e| e.to_string())?;
+    Ok(())
 }
 
 #[cfg(test)]

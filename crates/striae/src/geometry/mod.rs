@@ -53,6 +53,25 @@ pub struct SurfaceHit {
     pub prim: u32,
 }
 
+#[cfg(test)]
+impl SurfaceHit {
+    /// A hit at the origin of the plane `z = 0` (normal `+z`, `dp/du = x`, `dp/dv = y`) at
+    /// texture coordinates `uv`, for tests of materials.
+    pub(crate) fn flat(uv: Vec2) -> Self {
+        SurfaceHit {
+            t: 1.0,
+            p: Vec3::ZERO,
+            ng: Vec3::Z,
+            ns: Vec3::Z,
+            uv,
+            dpdu: Vec3::X,
+            dpdv: Vec3::Y,
+            shape: 0,
+            prim: 0,
+        }
+    }
+}
+
 /// Errors from building geometry: bad files, meshes and transforms.
 #[derive(Debug, thiserror::Error)]
 pub enum GeometryError {

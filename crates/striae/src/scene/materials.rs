@@ -304,17 +304,7 @@ mod tests {
 
     /// The BSDF of a material on a flat hit at `uv`, seen from above.
     fn bsdf_at(m: &Material, uv: Vec2) -> Bsdf<'_> {
-        let hit = crate::geometry::SurfaceHit {
-            t: 1.0,
-            p: Vec3::ZERO,
-            ng: Vec3::Z,
-            ns: Vec3::Z,
-            uv,
-            dpdu: Vec3::X,
-            dpdv: Vec3::Y,
-            shape: 0,
-            prim: 0,
-        };
+        let hit = crate::geometry::SurfaceHit::flat(uv);
         let view = crate::material::HitView {
             wo: Vec3::Z,
             rd: None,

@@ -527,17 +527,7 @@ fn material_transmission_matches_its_bsdf() {
     use crate::geometry::SurfaceHit;
     use crate::material::{HitView, Material};
     use crate::scene::materials::MaterialDesc;
-    let hit = |uv: Vec2| SurfaceHit {
-        t: 1.0,
-        p: Vec3::ZERO,
-        ng: Vec3::Z,
-        ns: Vec3::Z,
-        uv,
-        dpdu: Vec3::X,
-        dpdv: Vec3::Y,
-        shape: 0,
-        prim: 0,
-    };
+    let hit = SurfaceHit::flat;
     let view = |wo: Vec3| HitView {
         wo,
         rd: None,
