@@ -30,6 +30,10 @@ fn bad_render_flags_name_the_flag_and_write_nothing() {
         ("--res", "0x5"),
         ("--sampler", "halton"),
         ("--exposure", "NaN"),
+        ("--spp", "-1"),
+        ("--seed", "-1"),
+        ("--threads", "-2"),
+        ("--res", "100000x100000"),
     ] {
         let (ok, err) = striae(&["render", flag, value, "-q"], &out);
         assert!(!ok, "{flag} {value} should fail");
@@ -121,5 +125,38 @@ fn striae_simd_caps_the_render_loop_and_a_bad_value_is_named() {
         "{err}"
     );
     assert!(!figs.exists(), "a bad STRIAE_SIMD wrote figures");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn outputs_that_would_be_wrong_or_would_replace_what_is_not_a_file_are_refused() {
+    let dir = std::env::temp_dir().join(format!("striae-outputs-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // A `.jpg` name would get PNG bytes.
+    let (ok, err) = striae(
+        &["render", "--spp", "1", "--res", "8x6", "-q"],
+        &dir.join("a.jpg"),
+    );
+    assert!(!ok && err.contains("not .jpg"), "{err}");
+    assert_eq!(
+        std::fs::read_dir(&dir).unwrap().count(),
+        0,
+        "something written"
+    );
+    // A FIFO (or a device) at the output's name is not replaced by the rename.
+    let fifo = dir.join("t.npz");
+    if std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .is_ok_and(|s| s.success())
+    {
+        let (ok, err) = striae(&["precompute", "--m", "4", "--n", "20", "--nr", "2"], &fifo);
+        assert!(!ok && err.contains("not a regular file"), "{err}");
+        use std::os::unix::fs::FileTypeExt;
+        assert!(std::fs::symlink_metadata(&fifo)
+            .unwrap()
+            .file_type()
+            .is_fifo());
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

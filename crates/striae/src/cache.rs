@@ -3,7 +3,8 @@
 //! and on disk in [`cache_dir`] as `scratch-table-HASH.npz`, written atomically
 //! ([`crate::io::write_atomically`], a temporary name unique to the call), so concurrent renders
 //! sharing a cache folder never read a half-written file. A cache file that cannot be read, or
-//! holds other parameters, is recomputed with a warning ([`crate::log`]).
+//! holds other parameters, is recomputed with a warning ([`crate::log`]); temporary files of
+//! processes killed while writing are swept ([`crate::io::sweep_stale_temporaries`]).
 
 use crate::bsdf::ScratchLobeTable;
 use crate::table::{ScratchTable, TableError, TableParams};
@@ -75,6 +76,8 @@ pub fn load_or_compute(
     dir: Option<&Path>,
 ) -> Result<ScratchTable, TableError> {
     if let Some(dir) = dir {
+        // Temporaries of killed processes (which could not clean up) would stay forever.
+        crate::io::sweep_stale_temporaries(dir, None);
         let file = cache_file(dir, hash);
         if file.exists() {
             match ScratchTable::load(&file) {

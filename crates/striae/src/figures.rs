@@ -176,15 +176,39 @@ pub fn generate(
     opts: &FigureOptions,
     log: &dyn Fn(&str),
 ) -> Result<Vec<Figure>, FigureError> {
-    std::fs::create_dir_all(dir).map_err(io(dir))?;
-    let mut figures = vec![lobe_figure(dir, log)?];
-    figures.extend(layer_figures(dir, opts.layer_resolution, log)?);
-    figures.extend(render_figures(dir, opts, log)?);
+    // Every option is checked before the first file is written, and the figures are made in
+    // a temporary folder published whole at the end: an error or a signal leaves `dir` as it
+    // was.
+    crate::layers::raster::check_resolution(opts.layer_resolution)?;
+    let overrides = Overrides {
+        spp: Some(opts.spp),
+        resolution: Some(opts.resolution),
+        ..Overrides::default()
+    };
+    overrides.validate()?;
+    if dir.exists() && !dir.is_dir() {
+        return Err(FigureError::Io {
+            path: dir.to_path_buf(),
+            source: std::io::Error::other("exists and is not a folder"),
+        });
+    }
+    if let Some(parent) = dir.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(io(parent))?;
+    }
+    let tmp = crate::io::TempFile::new(dir, "");
+    let work = tmp.path();
+    std::fs::create_dir(work).map_err(io(work))?;
+    let mut figures = vec![lobe_figure(work, log)?];
+    figures.extend(layer_figures(work, opts.layer_resolution, log)?);
+    figures.extend(render_figures(work, opts, log)?);
     let html = index_html(&figures, opts);
-    let path = dir.join("index.html");
-    crate::io::write_atomically(&path, |tmp| std::fs::write(tmp, html.as_bytes()))
-        .map_err(io(&path))?;
-    log(&format!("wrote {}", path.display()));
+    std::fs::write(work.join("index.html"), html.as_bytes()).map_err(io(work))?;
+    crate::io::publish_folder(tmp, dir).map_err(io(dir))?;
+    log(&format!(
+        "wrote {} figures and index.html to {}",
+        figures.len(),
+        dir.display()
+    ));
     Ok(figures)
 }
 

@@ -31,6 +31,7 @@ pub mod io;
 pub mod log;
 pub mod math;
 pub mod sampling;
+pub mod strict_array;
 pub mod testing;
 
 // The scratch BRDF precompute (METHOD.md sections 2-4, 6).

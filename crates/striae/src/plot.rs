@@ -44,22 +44,11 @@ pub(crate) fn render(
     register_font();
     let _ = size;
     let err = draw_err(path);
-    let tmp = crate::io::temp_path(path);
+    crate::io::check_destination(path).map_err(|e| err(e.to_string()))?;
     // plotters picks the encoder from the extension: keep `.png` on the temporary name.
-    let tmp = tmp.with_file_name(format!(
-        "{}.png",
-        tmp.file_name().unwrap_or_default().to_string_lossy()
-    ));
-    match draw(&tmp) {
-        Ok(()) => std::fs::rename(&tmp, path).map_err(|e| {
-            let _ = std::fs::remove_file(&tmp);
-            err(e.to_string())
-        }),
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            Err(err(e))
-        }
-    }
+    let tmp = crate::io::TempFile::new(path, ".png");
+    draw(tmp.path()).map_err(&err)?;
+    tmp.persist(path).map_err(|e| err(e.to_string()))
 }
 
 /// The seed's Fig. 2: polar plot of `rho_m(phi_o, phi_i)` over `phi_o` for the incident bin

@@ -190,7 +190,7 @@ impl Profile {
     /// endpoints must have `z = 0` and `x0 < x_last`; the polyline is translated and scaled
     /// uniformly so that they land on `(-1/2, 0)` and `(1/2, 0)`.
     pub fn from_file(path: &Path) -> Result<Self, ProfileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io {
+        let text = crate::io::read_text(path).map_err(|source| ProfileError::Io {
             path: path.into(),
             source,
         })?;

@@ -233,7 +233,7 @@ impl<'a> TableFile<'a> {
             path: path.into(),
             why,
         };
-        let mut file = std::fs::File::open(path).map_err(io)?;
+        let mut file = crate::io::open_regular(path, crate::io::MAX_BINARY_BYTES).map_err(io)?;
         check_npz_sizes(&file).map_err(npz_error)?;
         file.rewind().map_err(io)?;
         let mut npz =

@@ -36,6 +36,22 @@ pub enum TextureError {
     BadPixel { path: PathBuf, x: usize, y: usize },
 }
 
+/// Refuses an image whose header claims more than [`crate::io::MAX_IMAGE_PIXELS`], before a
+/// pixel is allocated.
+fn check_image_size(path: &Path, width: usize, height: usize) -> Result<(), TextureError> {
+    let pixels = width as u64 * height as u64;
+    if pixels > crate::io::MAX_IMAGE_PIXELS {
+        return Err(TextureError::Decode {
+            path: path.to_path_buf(),
+            message: format!(
+                "its header claims {width} x {height} pixels, over the limit of {} million",
+                crate::io::MAX_IMAGE_PIXELS / 1_000_000
+            ),
+        });
+    }
+    Ok(())
+}
+
 /// The sRGB transfer function inverted (IEC 61966-2-1): an 8-bit-style encoded value in
 /// `[0, 1]` to linear.
 #[inline]
@@ -77,12 +93,12 @@ impl RgbImage {
             .extension()
             .and_then(|e| e.to_str())
             .map(|e| e.to_ascii_lowercase());
-        if !path.exists() {
-            return Err(TextureError::Io {
+        crate::io::open_regular(path, crate::io::MAX_BINARY_BYTES).map_err(|source| {
+            TextureError::Io {
                 path: path.to_path_buf(),
-                source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
-            });
-        }
+                source,
+            }
+        })?;
         let img = match ext.as_deref() {
             Some("png") => Self::load_png(path, srgb.unwrap_or(true))?,
             Some("exr") => Self::load_exr(path)?,
@@ -105,15 +121,23 @@ impl RgbImage {
     }
 
     fn load_png(path: &Path, srgb: bool) -> Result<Self, TextureError> {
-        let bytes = std::fs::read(path).map_err(|source| TextureError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        let decoded = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)
-            .map_err(|e| TextureError::Decode {
-                path: path.to_path_buf(),
-                message: e.to_string(),
+        let bytes =
+            crate::io::read_bounded(path, crate::io::MAX_BINARY_BYTES).map_err(|source| {
+                TextureError::Io {
+                    path: path.to_path_buf(),
+                    source,
+                }
             })?;
+        let decode_error = |e: image::ImageError| TextureError::Decode {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        };
+        let reader = || {
+            image::ImageReader::with_format(std::io::Cursor::new(&bytes), image::ImageFormat::Png)
+        };
+        let (w, h) = reader().into_dimensions().map_err(decode_error)?;
+        check_image_size(path, w as usize, h as usize)?;
+        let decoded = reader().decode().map_err(decode_error)?;
         let rgb = decoded.to_rgb32f();
         let (w, h) = (rgb.width() as usize, rgb.height() as usize);
         if w == 0 || h == 0 {
@@ -132,6 +156,22 @@ impl RgbImage {
 
     fn load_exr(path: &Path) -> Result<Self, TextureError> {
         use exr::prelude::*;
+        let decode_error = |e: exr::error::Error| TextureError::Decode {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        };
+        let file =
+            crate::io::open_regular(path, crate::io::MAX_BINARY_BYTES).map_err(|source| {
+                TextureError::Io {
+                    path: path.to_path_buf(),
+                    source,
+                }
+            })?;
+        let meta = exr::meta::MetaData::read_from_buffered(std::io::BufReader::new(file), false)
+            .map_err(decode_error)?;
+        for header in &meta.headers {
+            check_image_size(path, header.layer_size.width(), header.layer_size.height())?;
+        }
         let image = read_first_rgba_layer_from_file(
             path,
             |resolution, _| {
@@ -144,10 +184,7 @@ impl RgbImage {
                 px[pos.y() * *w + pos.x()] = Rgb::new(r, g, b);
             },
         )
-        .map_err(|e| TextureError::Decode {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        .map_err(decode_error)?;
         let (w, pixels) = image.layer_data.channel_data.pixels;
         if w == 0 || pixels.is_empty() {
             return Err(TextureError::Decode {

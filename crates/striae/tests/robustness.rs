@@ -137,11 +137,11 @@ fn sweep(
     loaded
 }
 
-#[test]
-fn every_value_of_a_scene_replaced_by_a_bad_one_loads_or_errors_without_panicking() {
-    let dir = std::env::temp_dir().join(format!("striae-robustness-{}", std::process::id()));
+/// A fresh folder holding the files the two scenes name: a mesh, an environment map, an image
+/// texture and a small scratch table.
+fn input_files(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("striae-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    // The files the scenes name.
     std::fs::write(dir.join("tet.obj"), include_str!("data/tet.obj")).unwrap();
     let mut image = Image::new(8, 4);
     for (i, p) in image.pixels.iter_mut().enumerate() {
@@ -160,6 +160,12 @@ fn every_value_of_a_scene_replaced_by_a_bad_one_loads_or_errors_without_panickin
         .unwrap()
         .save(&dir.join("t.npz"))
         .unwrap();
+    dir
+}
+
+#[test]
+fn every_value_of_a_scene_replaced_by_a_bad_one_loads_or_errors_without_panicking() {
+    let dir = input_files("robustness");
     // Both files load as written.
     for (name, text) in [
         ("everything.toml", EVERYTHING),
@@ -191,5 +197,183 @@ fn every_value_of_a_scene_replaced_by_a_bad_one_loads_or_errors_without_panickin
     // Many replacements are legal (0 seed, 1e30 radiance...) and rendered: the sweep reached
     // the render loop, not only the parser.
     assert!(loaded > 50, "only {loaded} variants loaded");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// An error and its causes, as the CLI prints them.
+fn chain(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        text = format!("{text}: {c}");
+        cause = c.source();
+    }
+    text
+}
+
+/// A valid 8 x 4 EXR whose header is patched to claim a 100000 x 100000 data window: 470 bytes
+/// that would ask the decoder for 120 GB.
+fn exr_bomb(path: &Path) {
+    Image::new(8, 4).write_exr(path).unwrap();
+    let mut bytes = std::fs::read(path).unwrap();
+    let key = b"dataWindow\0box2i\0";
+    let at = bytes.windows(key.len()).position(|w| w == key).unwrap() + key.len() + 4;
+    for (k, v) in [0i32, 0, 99_999, 99_999].into_iter().enumerate() {
+        bytes[at + 4 * k..at + 4 * k + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// Header-size bombs and special files: every input (scene, mesh, image texture, environment
+/// map, profile, table) is refused with what is wrong, before anything large is allocated and
+/// without blocking on a FIFO.
+#[test]
+fn header_bombs_and_special_files_are_refused_up_front() {
+    let dir = input_files("bombs");
+    exr_bomb(&dir.join("bomb.exr"));
+    let fifo = dir.join("fifo");
+    let fifo_made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .is_ok_and(|s| s.success());
+    let file = dir.join("everything.toml");
+    let load = |text: &str| {
+        Scene::parse(text, &file, &dir, &Overrides::default())
+            .map(|_| ())
+            .unwrap_err()
+            .to_string()
+    };
+    let mut cases = vec![
+        ("\"sky.exr\"", "\"bomb.exr\"", "100000 x 100000"),
+        ("\"wood.png\"", "\"bomb.exr\"", "100000 x 100000"),
+        ("\"tet.obj\"", "\"/dev/zero\"", "a device"),
+        ("\"tet.obj\"", "\".\"", "a folder"),
+        ("\"sky.exr\"", "\"/dev/urandom\"", "a device"),
+    ];
+    if fifo_made {
+        cases.push(("\"tet.obj\"", "\"fifo\"", "a FIFO"));
+        cases.push(("\"wood.png\"", "\"fifo\"", "a FIFO"));
+    }
+    for (from, to, expect) in cases {
+        assert!(EVERYTHING.contains(from));
+        let msg = load(&EVERYTHING.replacen(from, to, 1));
+        assert!(msg.contains(expect), "{from} -> {to}: {msg}");
+    }
+    for path in [Path::new("/dev/zero"), fifo.as_path(), dir.as_path()] {
+        if path == fifo && !fifo_made {
+            continue;
+        }
+        let msg = Scene::load(path, &Overrides::default())
+            .map(|_| ())
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("not a regular file"), "{msg}");
+        let msg = chain(&Profile::parse(&format!("file:{}", path.display())).unwrap_err());
+        assert!(msg.contains("not a regular file"), "{msg}");
+        let msg = chain(&ScratchTable::load(path).unwrap_err());
+        assert!(msg.contains("not a regular file"), "{msg}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Over-long and short arrays: every numeric array of the scene format (positions, axes,
+/// colours, matrix rows, conductor indices) given one element more or one fewer is refused
+/// with the file named, never trimmed or padded.
+#[test]
+fn arrays_of_the_wrong_length_are_refused() {
+    let dir = input_files("arrays");
+    let file = dir.join("everything.toml");
+    let mut arrays = 0;
+    let mut from = 0;
+    while let Some(k) = EVERYTHING[from..].find('[') {
+        let start = from + k;
+        let end = start + EVERYTHING[start..].find(']').unwrap();
+        from = start + 1;
+        let body = &EVERYTHING[start + 1..end];
+        let line = EVERYTHING[..start].rfind('\n').map_or(0, |n| n + 1);
+        let numeric = !body.is_empty()
+            && body.split(',').all(|x| x.trim().parse::<f32>().is_ok())
+            && !EVERYTHING[line..start].trim_start().starts_with('#');
+        if !numeric {
+            continue;
+        }
+        arrays += 1;
+        let shorter = body.rsplit_once(',').map_or("", |(head, _)| head);
+        for changed in [format!("{body}, 0.5"), shorter.to_string()] {
+            let variant = format!(
+                "{}[{changed}]{}",
+                &EVERYTHING[..start],
+                &EVERYTHING[end + 1..]
+            );
+            let msg = Scene::parse(&variant, &file, &dir, &Overrides::default())
+                .map(|_| ())
+                .expect_err(&format!("[{body}] -> [{changed}] accepted"))
+                .to_string();
+            assert!(
+                msg.contains("everything.toml")
+                    && (msg.contains("expected an array of exactly")
+                        || msg.contains("a number or an [r, g, b] array")
+                        || msg.contains("a number or an [x, y, z] array")),
+                "[{body}] -> [{changed}]: {msg}"
+            );
+        }
+    }
+    assert!(arrays >= 10, "only {arrays} arrays");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Every rejection names the key or flag that was wrong, with the value as written: a bad
+/// key is checked on its own before any check that combines keys.
+#[test]
+fn errors_blame_the_key_or_flag_with_the_value_as_written() {
+    let dir = input_files("blame");
+    let file = dir.join("everything.toml");
+    let load = |text: &str, o: &Overrides| {
+        Scene::parse(text, &file, &dir, o)
+            .map(|_| ())
+            .unwrap_err()
+            .to_string()
+    };
+    let none = Overrides::default();
+    for (from, to, expect) in [
+        (
+            "position = [0.0, 2.6, 6.0]",
+            "position = [nan, 2.6, 6.0]",
+            "`camera.position`",
+        ),
+        (
+            "position = [0.0, 2.6, 6.0]",
+            "position = [0.0, 0.7, 1e30]",
+            "`camera.position`",
+        ),
+        (
+            "center = [-1.0, 1.0, 0.0]",
+            "center = [-1.0, 1e30, 0.0]",
+            "`shapes[3].center`",
+        ),
+        ("fov = ", "fov = 1e39 #", "`camera.fov` = 1e39"),
+        (
+            "\nradius = ",
+            "\nradius = -1e39 #",
+            "`shapes[3].radius` = -1e39",
+        ),
+    ] {
+        assert!(EVERYTHING.contains(from), "{from}");
+        let msg = load(&EVERYTHING.replacen(from, to, 1), &none);
+        assert!(msg.contains(expect), "{to}: {msg}");
+        assert!(!msg.contains("inf"), "{to}: {msg}");
+    }
+    // A flag's value is blamed on the flag, not on the scene file.
+    let res = Overrides {
+        resolution: Some((100_000, 100_000)),
+        ..Overrides::default()
+    };
+    let msg = load(EVERYTHING, &res);
+    assert!(msg.contains("`--res` = 100000x100000"), "{msg}");
+    assert!(!msg.contains("everything.toml"), "{msg}");
+    // An OBJ face of two vertices is not a triangle.
+    std::fs::write(dir.join("tet.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n").unwrap();
+    let msg = load(EVERYTHING, &none);
+    assert!(msg.contains("line 4 has 2 vertices"), "{msg}");
     let _ = std::fs::remove_dir_all(&dir);
 }

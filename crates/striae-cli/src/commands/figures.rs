@@ -2,7 +2,7 @@
 //! 6 a-b, 7 a-b, 8 a) as PNGs plus an `index.html` showing them side by side with their
 //! parameters and render times (`striae::figures`).
 
-use anyhow::{bail, Context};
+use anyhow::Context;
 use std::path::PathBuf;
 use std::time::Instant;
 use striae::figures::{generate, FigureOptions};
@@ -28,11 +28,10 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if args.out.exists() && !args.out.is_dir() {
-        bail!("output {} exists and is not a folder", args.out.display());
-    }
     // The figures are rendered: a bad `STRIAE_SIMD` stops them as it stops `striae render`.
     striae::integrator::LoopCopy::env_cap().map_err(anyhow::Error::msg)?;
+    striae::layers::raster::check_resolution(args.layer_res)
+        .with_context(|| format!("invalid --layer-res {}", args.layer_res))?;
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
     let opts = FigureOptions {
         spp: args.spp,

@@ -83,6 +83,8 @@ fn parse_law(s: &str, ior: f64) -> anyhow::Result<FresnelLaw> {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    striae::io::check_destination(&a.output)
+        .with_context(|| format!("-o {}", a.output.display()))?;
     let profile =
         Profile::parse(&a.profile).with_context(|| format!("--profile `{}`", a.profile))?;
     let trace = TraceSettings {

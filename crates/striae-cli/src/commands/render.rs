@@ -84,14 +84,19 @@ pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
     Ok((w, h))
 }
 
-/// `NAME.exr` and `NAME.png` from `-o` or the default.
-fn output_paths(output: Option<&Path>, scene: Option<&Path>) -> (PathBuf, PathBuf) {
+/// `NAME.exr` and `NAME.png` from `-o` or the default. Another extension (`.jpg`) is an
+/// error, not a PNG written under a JPEG's name.
+fn output_paths(output: Option<&Path>, scene: Option<&Path>) -> anyhow::Result<(PathBuf, PathBuf)> {
     let stem = match output {
         Some(o) => match o.extension().and_then(|e| e.to_str()) {
             Some(e) if e.eq_ignore_ascii_case("exr") || e.eq_ignore_ascii_case("png") => {
                 o.with_extension("")
             }
-            _ => o.to_path_buf(),
+            Some(e) => bail!(
+                "-o {}: striae writes OpenEXR and PNG only; give NAME.exr, NAME.png or NAME (both are written), not .{e}",
+                o.display()
+            ),
+            None => o.to_path_buf(),
         },
         None => match scene.and_then(|s| s.file_stem()) {
             Some(s) => PathBuf::from(s),
@@ -102,7 +107,13 @@ fn output_paths(output: Option<&Path>, scene: Option<&Path>) -> (PathBuf, PathBu
     exr.push(".exr");
     let mut png = stem.into_os_string();
     png.push(".png");
-    (PathBuf::from(exr), PathBuf::from(png))
+    let (exr, png) = (PathBuf::from(exr), PathBuf::from(png));
+    if let Some(input) =
+        scene.filter(|s| striae::io::same_file(s, &exr) || striae::io::same_file(s, &png))
+    {
+        bail!("-o would overwrite the scene file {}", input.display());
+    }
+    Ok((exr, png))
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -128,7 +139,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(dir) = &args.export_meshes {
         return export_meshes(&scene, dir);
     }
-    let (exr_path, png_path) = output_paths(args.output.as_deref(), args.scene.as_deref());
+    let (exr_path, png_path) = output_paths(args.output.as_deref(), args.scene.as_deref())?;
+    for path in [&exr_path, &png_path] {
+        striae::io::check_destination(path).with_context(|| format!("-o {}", path.display()))?;
+    }
     let s = &scene.settings;
     let total = s.width as u64 * s.height as u64 * s.spp as u64;
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
@@ -221,16 +235,20 @@ mod tests {
         assert!(parse_resolution("512").is_err());
         assert!(parse_resolution("0x4").is_err());
         assert_eq!(
-            output_paths(None, None),
+            output_paths(None, None).unwrap(),
             (PathBuf::from("striae.exr"), PathBuf::from("striae.png"))
         );
         assert_eq!(
-            output_paths(Some(Path::new("out/a.png")), None).0,
+            output_paths(Some(Path::new("out/a.png")), None).unwrap().0,
             PathBuf::from("out/a.exr")
         );
         assert_eq!(
-            output_paths(None, Some(Path::new("scenes/glass-plate.toml"))).1,
+            output_paths(None, Some(Path::new("scenes/glass-plate.toml")))
+                .unwrap()
+                .1,
             PathBuf::from("glass-plate.png")
         );
+        let e = output_paths(Some(Path::new("a.jpg")), None).unwrap_err();
+        assert!(e.to_string().contains("not .jpg"), "{e}");
     }
 }

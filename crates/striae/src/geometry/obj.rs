@@ -14,21 +14,50 @@ use std::path::Path;
 use super::{GeometryError, TriangleMesh};
 use crate::math::{Vec2, Vec3};
 
+/// Every face (`f`) must have at least three vertices: `tobj` would turn a two-vertex face into
+/// a degenerate triangle that renders as nothing, hiding the broken file.
+fn check_faces(text: &str) -> Result<(), String> {
+    for (i, line) in text.lines().enumerate() {
+        let mut words = line.split('#').next().unwrap_or("").split_whitespace();
+        if words.next() == Some("f") {
+            let n = words.count();
+            if n < 3 {
+                return Err(format!(
+                    "the face on line {} has {n} vertices; a face needs at least 3",
+                    i + 1
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 impl TriangleMesh {
     /// Loads `path`; errors name the path for a missing, unreadable or corrupt file, and for
     /// a file without triangles.
     pub fn from_obj(path: impl AsRef<Path>) -> Result<TriangleMesh, GeometryError> {
         let path = path.as_ref();
+        let load_error = |message: String| GeometryError::ObjLoad {
+            path: path.to_path_buf(),
+            message,
+        };
+        let text = crate::io::read_text(path).map_err(|e| load_error(e.to_string()))?;
+        check_faces(&text).map_err(|reason| GeometryError::ObjInvalid {
+            path: path.to_path_buf(),
+            reason,
+        })?;
+        // Points (`p`) and polylines (`l`) are not surfaces: skipped, not made into degenerate
+        // triangles. Materials (`mtllib`) are not read: striae's materials come from the scene.
         let options = tobj::LoadOptions {
             triangulate: true,
             single_index: true,
-            ..Default::default()
+            ignore_points: true,
+            ignore_lines: true,
         };
-        let (models, _materials) =
-            tobj::load_obj(path, &options).map_err(|e| GeometryError::ObjLoad {
-                path: path.to_path_buf(),
-                message: e.to_string(),
-            })?;
+        let (models, _materials) = tobj::load_obj_buf(&mut text.as_bytes(), &options, |_| {
+            Err(tobj::LoadError::OpenFileFailed)
+        })
+        .map_err(|e| load_error(e.to_string()))?;
         let mut positions = Vec::new();
         let mut indices = Vec::new();
         let mut normals = Vec::new();

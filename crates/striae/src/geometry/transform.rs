@@ -194,24 +194,30 @@ impl std::ops::Mul for Transform {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum TransformOp {
+    #[serde(deserialize_with = "crate::strict_array::exact")]
     Translate([f32; 3]),
     Scale(ScaleSpec),
     Rotate {
+        #[serde(deserialize_with = "crate::strict_array::exact")]
         axis: [f32; 3],
         angle: f32,
     },
     LookAt {
+        #[serde(deserialize_with = "crate::strict_array::exact")]
         origin: [f32; 3],
+        #[serde(deserialize_with = "crate::strict_array::exact")]
         target: [f32; 3],
+        #[serde(deserialize_with = "crate::strict_array::exact")]
         up: [f32; 3],
     },
     /// Row-major 4x4.
+    #[serde(deserialize_with = "crate::strict_array::matrix")]
     Matrix([[f32; 4]; 4]),
 }
 
 /// A uniform or per-axis scale.
 #[derive(Clone, Debug, Deserialize)]
-#[serde(untagged)]
+#[serde(untagged, expecting = "a number or an [x, y, z] array")]
 pub enum ScaleSpec {
     Uniform(f32),
     PerAxis([f32; 3]),

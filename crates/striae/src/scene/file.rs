@@ -87,9 +87,14 @@ impl Default for RenderSection {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraSection {
+    #[serde(deserialize_with = "crate::strict_array::exact")]
     pub position: [f32; 3],
+    #[serde(deserialize_with = "crate::strict_array::exact")]
     pub look_at: [f32; 3],
-    #[serde(default = "default_up")]
+    #[serde(
+        default = "default_up",
+        deserialize_with = "crate::strict_array::exact"
+    )]
     pub up: [f32; 3],
     pub fov: f32,
     #[serde(default)]
@@ -138,6 +143,7 @@ pub struct ShapeSection {
     /// `teapot`: segments per patch side (default 8).
     pub subdivisions: Option<u32>,
     /// `sphere`: centre (default the origin) and radius (default 1).
+    #[serde(default, deserialize_with = "crate::strict_array::optional")]
     pub center: Option<[f32; 3]>,
     pub radius: Option<f32>,
 }
@@ -177,6 +183,7 @@ pub enum LightType {
 pub struct LightSection {
     #[serde(rename = "type")]
     pub kind: LightType,
+    #[serde(deserialize_with = "crate::strict_array::exact")]
     pub direction: [f32; 3],
     pub irradiance: Colour,
 }

@@ -108,9 +108,9 @@ pub enum MaterialDesc {
     Conductor {
         #[serde(default)]
         preset: Option<String>,
-        #[serde(default)]
+        #[serde(default, deserialize_with = "crate::strict_array::optional")]
         eta: Option<[f32; 3]>,
-        #[serde(default)]
+        #[serde(default, deserialize_with = "crate::strict_array::optional")]
         k: Option<[f32; 3]>,
         #[serde(default)]
         roughness: f32,

@@ -61,6 +61,32 @@ pub struct Overrides {
     pub sampler: Option<SamplerKind>,
 }
 
+impl Overrides {
+    /// The flags' values checked on their own, before any scene file is read: a bad value is
+    /// blamed on its flag, not on the scene file.
+    pub fn validate(&self) -> Result<(), SceneError> {
+        let flag = |flag, value: String, reason: String| SceneError::Flag {
+            flag,
+            value,
+            reason,
+        };
+        if let Some(spp) = self.spp.filter(|&n| n == 0 || n > crate::sampler::MAX_SPP) {
+            let range = format!("must lie in 1..={}", crate::sampler::MAX_SPP);
+            return Err(flag("--spp", spp.to_string(), range));
+        }
+        if let Some((w, h)) = self.resolution.filter(|&(w, h)| !resolution_in_range(w, h)) {
+            let range = "each side must lie in 1..=32768".to_string();
+            return Err(flag("--res", format!("{w}x{h}"), range));
+        }
+        Ok(())
+    }
+}
+
+/// Image sides from 1 to 32768 pixels.
+fn resolution_in_range(width: u32, height: u32) -> bool {
+    (1..=1 << 15).contains(&width) && (1..=1 << 15).contains(&height)
+}
+
 /// What can be wrong with a scene.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
@@ -73,6 +99,13 @@ pub enum SceneError {
     Invalid {
         file: PathBuf,
         key: String,
+        value: String,
+        reason: String,
+    },
+    /// A command-line flag overriding a scene key (`--spp`, `--res`) with a bad value.
+    #[error("command-line flag `{flag}` = {value}: {reason}")]
+    Flag {
+        flag: &'static str,
         value: String,
         reason: String,
     },
@@ -110,7 +143,7 @@ impl Scene {
 
     /// Load a scene file; relative paths inside it are resolved against its folder.
     pub fn load(path: &Path, overrides: &Overrides) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|e| SceneError::Read {
+        let text = crate::io::read_text(path).map_err(|e| SceneError::Read {
             file: path.to_path_buf(),
             message: e.to_string(),
         })?;
@@ -135,11 +168,39 @@ impl Scene {
         base: &Path,
         overrides: &Overrides,
     ) -> Result<Scene, SceneError> {
-        let parsed: SceneFile = toml::from_str(text).map_err(|e| SceneError::Parse {
+        let parse_error = |e: toml::de::Error| SceneError::Parse {
             file: file.to_path_buf(),
             message: e.to_string(),
-        })?;
+        };
+        let table: toml::Table = toml::from_str(text).map_err(parse_error)?;
+        if let Some((key, value)) = beyond_f32(&toml::Value::Table(table), String::new()) {
+            return Err(invalid(
+                file,
+                key,
+                format_args!("{value:e}"),
+                "is beyond the range of a 32-bit float (about 3.4e38)",
+            ));
+        }
+        let parsed: SceneFile = toml::from_str(text).map_err(parse_error)?;
         build(parsed, file, base, overrides)
+    }
+}
+
+/// The first finite number of the file that a 32-bit float cannot hold (`1e39` would become
+/// infinity and be reported as `inf`), with its key: `shapes[2].radius`, `camera.position`.
+fn beyond_f32(value: &toml::Value, key: String) -> Option<(String, f64)> {
+    let join = |k: &str| match key.is_empty() {
+        true => k.to_string(),
+        false => format!("{key}.{k}"),
+    };
+    match value {
+        toml::Value::Float(v) if v.is_finite() && v.abs() > f32::MAX as f64 => Some((key, *v)),
+        toml::Value::Table(t) => t.iter().find_map(|(k, v)| beyond_f32(v, join(k))),
+        toml::Value::Array(items) => items.iter().enumerate().find_map(|(i, v)| match v {
+            toml::Value::Table(_) => beyond_f32(v, format!("{key}[{i}]")),
+            _ => beyond_f32(v, key.clone()),
+        }),
+        _ => None,
     }
 }
 
@@ -154,6 +215,25 @@ fn invalid(
         key: key.into(),
         value: format!("{value:?}"),
         reason: reason.to_string(),
+    }
+}
+
+/// The largest coordinate a point or vector of the scene file may have. Beyond it `f32`
+/// positions are spaced more than 1e8 apart and squared distances overflow, so a combined
+/// check downstream would fail and blame another key.
+pub const MAX_COORDINATE: f32 = 1e15;
+
+/// A point or vector key checked on its own: finite and within [`MAX_COORDINATE`].
+fn coordinates(file: &Path, key: impl Into<String>, v: [f32; 3]) -> Result<Vec3, SceneError> {
+    if v.iter().all(|x| x.abs() <= MAX_COORDINATE) {
+        Ok(Vec3::from_array(v))
+    } else {
+        Err(invalid(
+            file,
+            key,
+            v,
+            format!("each component must be finite and within +-{MAX_COORDINATE:e}"),
+        ))
     }
 }
 
@@ -285,6 +365,7 @@ fn render_settings(
     file: &Path,
     o: &Overrides,
 ) -> Result<RenderSettings, SceneError> {
+    o.validate()?;
     let r = &f.render;
     let (width, height) = o.resolution.unwrap_or((r.width, r.height));
     let sampler = match o.sampler {
@@ -316,7 +397,7 @@ fn render_settings(
             format!("must lie in 1..={}", crate::sampler::MAX_SPP),
         ));
     }
-    if width == 0 || height == 0 || width > 1 << 15 || height > 1 << 15 {
+    if !resolution_in_range(width, height) {
         return Err(invalid(
             file,
             "render.width/height",
@@ -343,8 +424,9 @@ fn camera(
 ) -> Result<PerspectiveCamera, SceneError> {
     let (width, height) = (settings.width, settings.height);
     let c = &f.camera;
-    let position = Vec3::from_array(c.position);
-    let look_at = Vec3::from_array(c.look_at);
+    let position = coordinates(file, "camera.position", c.position)?;
+    let look_at = coordinates(file, "camera.look_at", c.look_at)?;
+    coordinates(file, "camera.up", c.up)?;
     let focus = c.focus_distance.unwrap_or((look_at - position).length());
     PerspectiveCamera::new(
         position,
@@ -618,7 +700,12 @@ fn shape_geometry(
         ShapeType::Box => ShapeGeometry::Mesh(TriangleMesh::cuboid()),
         ShapeType::Sphere => {
             let radius = s.radius.unwrap_or(1.0);
-            ShapeGeometry::sphere(Vec3::from_array(s.center.unwrap_or([0.0; 3])), radius)
+            let center = coordinates(
+                file,
+                format!("shapes[{i}].center"),
+                s.center.unwrap_or([0.0; 3]),
+            )?;
+            ShapeGeometry::sphere(center, radius)
                 .map_err(|e| invalid(file, format!("shapes[{i}].radius"), radius, e))?
         }
     })

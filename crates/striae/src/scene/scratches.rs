@@ -165,7 +165,9 @@ pub struct ScratchedDesc {
     pub ior: Option<f32>,
     /// Metal: a conductor preset (see `bsdf::CONDUCTOR_PRESETS`) or `eta` and `k`.
     pub preset: Option<String>,
+    #[serde(default, deserialize_with = "crate::strict_array::optional")]
     pub eta: Option<[f32; 3]>,
+    #[serde(default, deserialize_with = "crate::strict_array::optional")]
     pub k: Option<[f32; 3]>,
     #[serde(default)]
     pub scratches: ScratchSpec,
