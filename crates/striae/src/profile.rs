@@ -50,6 +50,8 @@ pub enum ProfileError {
     },
     #[error("profile {what}: has {segments} segment(s), at least 2 are needed")]
     TooFewSegments { what: String, segments: usize },
+    #[error("profile {what}: has more than {MAX_SEGMENTS} segments (the most a profile may have)")]
+    TooManySegments { what: String },
     #[error("profile {what}: point {index} ({x}, {z}) is not finite")]
     NonFinite {
         what: String,
@@ -130,12 +132,12 @@ impl Profile {
                 "must be at most 0.5 (a half circle)",
             ));
         }
-        if !(2..=100_000).contains(&segments) {
+        if !(2..=MAX_SEGMENTS).contains(&segments) {
             return Err(bad(
                 &spec,
                 "segments",
                 segments as f64,
-                "must be in 2..=100000",
+                "must be in 2..=4096 (profile::MAX_SEGMENTS)",
             ));
         }
         // Radius r and centre (0, c) with r^2 = 1/4 + c^2 and c - r = -d.
@@ -205,6 +207,11 @@ impl Profile {
                 .filter(|s| !s.is_empty())
                 .collect();
             let parsed: Option<Vec<f64>> = nums.iter().map(|s| s.parse::<f64>().ok()).collect();
+            if raw.len() > MAX_SEGMENTS {
+                return Err(ProfileError::TooManySegments {
+                    what: format!("file {}", path.display()),
+                });
+            }
             match parsed {
                 Some(v) if v.len() == 2 => raw.push([v[0], v[1]]),
                 _ => {
@@ -328,12 +335,12 @@ impl Profile {
             },
             "round" => {
                 let segs = get("segments").unwrap_or(64.0);
-                if segs.fract() != 0.0 || !(2.0..=100_000.0).contains(&segs) {
+                if segs.fract() != 0.0 || !(2.0..=MAX_SEGMENTS as f64).contains(&segs) {
                     return Err(bad(
                         spec,
                         "segments",
                         segs,
-                        "must be an integer in 2..=100000",
+                        "must be an integer in 2..=4096 (profile::MAX_SEGMENTS)",
                     ));
                 }
                 Profile::round(need("depth")?, segs as usize)?
@@ -397,9 +404,18 @@ fn segments_touch(p1: [f64; 2], p2: [f64; 2], q1: [f64; 2], q2: [f64; 2]) -> boo
     on(q1, q2, p1, d1) || on(q1, q2, p2, d2) || on(p1, p2, q1, d3) || on(p1, p2, q2, d4)
 }
 
+/// The most segments a profile may have: 4096. Every bounce of the 2D and 2.5D tracers tests
+/// all walls and the self-intersection check tests all pairs (8 million at the limit, about
+/// 30 ms), so a 200,000-vertex file would take minutes to validate and hours to trace; a real
+/// scratch profile needs tens.
+pub const MAX_SEGMENTS: usize = 4096;
+
 fn validate(what: &str, points: &[[f64; 2]]) -> Result<(), ProfileError> {
     let what = what.to_string();
     let segs = points.len().saturating_sub(1);
+    if segs > MAX_SEGMENTS {
+        return Err(ProfileError::TooManySegments { what });
+    }
     if segs < 2 {
         return Err(ProfileError::TooFewSegments {
             what,
@@ -566,6 +582,37 @@ mod tests {
         ));
         // Right shape accepted.
         assert!(p(vec![[-0.5, 0.0], [-0.1, -0.5], [0.2, -0.3], [0.5, 0.0]]).is_ok());
+    }
+
+    #[test]
+    fn profiles_over_the_segment_limit_are_refused_at_once() {
+        // 200,000 vertices: the pairwise self-intersection check once took minutes on this.
+        let dir = std::env::temp_dir().join(format!("striae-profile-big-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("big.txt");
+        let n = 200_000;
+        let text: String = (0..n)
+            .map(|i| {
+                let x = -0.5 + i as f64 / (n - 1) as f64;
+                let z = if i == 0 || i == n - 1 {
+                    0.0
+                } else {
+                    -0.1 - 0.01 * (i % 2) as f64
+                };
+                format!("{x} {z}\n")
+            })
+            .collect();
+        std::fs::write(&path, text).unwrap();
+        let start = std::time::Instant::now();
+        let e = Profile::from_file(&path).unwrap_err().to_string();
+        assert!(e.contains("more than 4096 segments"), "{e}");
+        assert!(start.elapsed().as_secs_f64() < 1.0);
+        let e = Profile::parse("round:depth=0.3,segments=100000")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("segments"), "{e}");
+        assert!(Profile::parse("round:depth=0.3,segments=4096").is_ok());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
