@@ -209,6 +209,61 @@ pub enum TableError {
     },
     #[error("table {path}: bad parameters in `params_json`: {why}")]
     Params { path: PathBuf, why: String },
+    #[error("table {path}: key `{key}` row {row} (phi_i bin) reflects {albedo} of the incident energy; eq. (1') bounds it by 1")]
+    Energy {
+        path: PathBuf,
+        key: &'static str,
+        row: usize,
+        albedo: f64,
+    },
+    #[error(
+        "table {path}: stored `albedo_2d` row {row} is {stored}, its `rho_m` gives {computed}"
+    )]
+    Inconsistent {
+        path: PathBuf,
+        row: usize,
+        stored: f64,
+        computed: f64,
+    },
+}
+
+/// Eq. (1') makes every row's 2D albedo at most 1: a table beyond it (plus round-off) is not
+/// one striae computed. `rho_m` and each `rho_s` slice are checked, and a stored `albedo_2d`
+/// must be what `rho_m` gives.
+fn check_energy(path: &Path, t: &ScratchTable, stored: Option<&[f64]>) -> Result<(), TableError> {
+    let m = t.m;
+    let row_albedo = |values: &[f64], i: usize| -> f64 {
+        (0..m)
+            .map(|j| values[i * m + j] * t.phi[j].cos() * PI / m as f64)
+            .sum()
+    };
+    let arrays = std::iter::once(("rho_m", &t.rho_m[..]))
+        .chain(t.rho_s.chunks(m * m).map(|slice| ("rho_s", slice)));
+    for (key, values) in arrays {
+        if let Some((row, albedo)) = (0..m)
+            .map(|i| (i, row_albedo(values, i)))
+            .find(|&(_, a)| a > 1.0 + 1e-6)
+        {
+            return Err(TableError::Energy {
+                path: path.into(),
+                key,
+                row,
+                albedo,
+            });
+        }
+    }
+    if let Some(stored) = stored {
+        let computed = t.albedo_2d();
+        if let Some(row) = (0..m).find(|&i| (stored[i] - computed[i]).abs() > 1e-9) {
+            return Err(TableError::Inconsistent {
+                path: path.into(),
+                row,
+                stored: stored[row],
+                computed: computed[row],
+            });
+        }
+    }
+    Ok(())
 }
 
 /// A table file being read: its archive, the names of its entries, and the path every error
@@ -514,9 +569,13 @@ impl ScratchTable {
         } else {
             vec![0.0; m]
         };
+        let stored_albedo = match f.has("albedo_2d") {
+            true => Some(f.floats("albedo_2d", &[m], true)?),
+            false => None,
+        };
         check_grid(path, "phi", &phi, (0..m).map(|k| bin_centre(k, m)))?;
         check_grid(path, "theta", &theta, THETA_SLICES.iter().copied())?;
-        Ok(ScratchTable {
+        let table = ScratchTable {
             params,
             m,
             phi,
@@ -525,7 +584,9 @@ impl ScratchTable {
             gamma,
             dropped,
             version,
-        })
+        };
+        check_energy(path, &table, stored_albedo.as_deref())?;
+        Ok(table)
     }
 
     /// `rho_s` slice `c` at `[phi_i bin i][phi_o bin o]`.
@@ -1226,6 +1287,32 @@ mod tests {
     }
 
     #[test]
+    fn tables_beyond_eq_1_prime_or_contradicting_themselves_are_rejected() {
+        let p = params("v:depth=0.4", Walls::Diffuse, FresnelMode::Seed);
+        let t = ScratchTable::compute(&p, &|_| {}).unwrap();
+        let dir = tmpdir();
+        let good = dir.join("energy-good.npz");
+        t.save(&good).unwrap();
+        ScratchTable::load(&good).unwrap();
+        // Twice the energy of a lossless groove, or ten times a slice's: beyond eq. (1').
+        for (key, scale) in [("rho_m", 2.0), ("rho_s", 10.0)] {
+            let mut hot = t.clone();
+            match key {
+                "rho_m" => hot.rho_m.iter_mut().for_each(|v| *v *= scale),
+                _ => hot.rho_s.iter_mut().for_each(|v| *v *= scale),
+            }
+            let f = dir.join(format!("energy-hot-{key}.npz"));
+            hot.save(&f).unwrap();
+            let err = ScratchTable::load(&f).unwrap_err();
+            assert!(
+                matches!(err, TableError::Energy { key: k, .. } if k == key),
+                "{err}"
+            );
+        }
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
     fn bad_files_are_rejected() {
         let p = params("v:depth=0.4", Walls::Specular, FresnelMode::Seed);
         let t = ScratchTable::compute(&p, &|_| {}).unwrap();
@@ -1299,10 +1386,10 @@ mod tests {
         };
         // Sanity: the hand-made good file loads.
         let ok = write("ok.npz", &|w| {
-            full(w, FORMAT_VERSION, &json, vec![m, m], 0.5)
+            full(w, FORMAT_VERSION, &json, vec![m, m], 0.25)
         });
         ScratchTable::load(&ok).unwrap();
-        let f = write("version.npz", &|w| full(w, 99, &json, vec![m, m], 0.5));
+        let f = write("version.npz", &|w| full(w, 99, &json, vec![m, m], 0.25));
         assert!(matches!(
             ScratchTable::load(&f),
             Err(TableError::Incompatible { found: 99, .. })
@@ -1329,7 +1416,7 @@ mod tests {
             Err(TableError::BadValue { key: "rho_m", .. })
         ));
         let f = write("json.npz", &|w| {
-            full(w, FORMAT_VERSION, "{not json", vec![m, m], 0.5)
+            full(w, FORMAT_VERSION, "{not json", vec![m, m], 0.25)
         });
         assert!(matches!(
             ScratchTable::load(&f),
@@ -1338,7 +1425,7 @@ mod tests {
         let bad_m = json.replace(&format!("\"m\":{m}"), "\"m\":0");
         assert_ne!(bad_m, json);
         let f = write("m0.npz", &|w| {
-            full(w, FORMAT_VERSION, &bad_m, vec![m, m], 0.5)
+            full(w, FORMAT_VERSION, &bad_m, vec![m, m], 0.25)
         });
         assert!(matches!(
             ScratchTable::load(&f),
