@@ -191,26 +191,23 @@ def render(
     )
 
 
-def render_part(
-    scene: SceneLike,
-    index: int,
-    count: int,
-    spp: Optional[int] = None,
-    res: Optional[Tuple[int, int]] = None,
-    seed: Optional[int] = None,
-    threads: Optional[int] = None,
-    max_depth: Optional[int] = None,
-    sampler: Optional[str] = None,
-    progress: Optional[Callable[[int], Any]] = None,
-) -> bytes:
+def render_part(scene: SceneLike, index: int, count: int, **settings: Any) -> bytes:
     """Render part ``index`` of ``count`` of the image (its tiles ``t % count == index``) and
     return it as the bytes of a part file (``striae render --tile index/count`` writes the
-    same bytes). :func:`merge` joins the parts."""
+    same bytes); ``settings`` are :func:`render`'s keywords. :func:`merge` joins the parts."""
     kind, source = _scene_source(scene)
+    s = dict(_SETTINGS, **settings)
+    if set(s) != set(_SETTINGS):
+        raise TypeError(f"unknown settings {sorted(set(s) - set(_SETTINGS))}")
     return _striae.render(
-        kind, source, spp, _res(res), seed, threads, max_depth, sampler, progress,
-        (index, count),
+        kind, source, s["spp"], _res(s["res"]), s["seed"], s["threads"], s["max_depth"],
+        s["sampler"], s["progress"], (index, count),
     )
+
+
+_SETTINGS = dict(
+    spp=None, res=None, seed=None, threads=None, max_depth=None, sampler=None, progress=None
+)
 
 
 def _res(res):

@@ -15,7 +15,7 @@ names, relative to the worker's working folder, must exist there).
 
 from __future__ import annotations
 
-from typing import Any, Optional, Tuple
+from typing import Any, Callable, Iterator, Tuple
 
 import numpy as np
 
@@ -23,48 +23,44 @@ from . import SceneLike, merge, render_part
 
 
 def render(
-    scene: SceneLike,
-    client: Any,
-    parts: int = 0,
-    spp: Optional[int] = None,
-    res: Optional[Tuple[int, int]] = None,
-    seed: Optional[int] = None,
-    threads: Optional[int] = None,
-    max_depth: Optional[int] = None,
-    sampler: Optional[str] = None,
-    retries: int = 2,
+    scene: SceneLike, client: Any, parts: int = 0, retries: int = 2, **settings: Any
 ) -> np.ndarray:
     """Render ``scene`` over the Dask ``client`` in ``parts`` tasks (default: 4 per worker
-    thread the cluster has, so that faster workers take more) and return the ``(h, w, 3)``
-    float32 image. ``threads`` is the render threads per task (default: the worker's cores);
-    ``retries`` how often a failed task is re-run (a worker that dies is re-run by the
-    scheduler in any case)."""
-    if parts <= 0:
-        parts = max(1, 4 * sum(client.nthreads().values()))
-    kwargs = dict(
-        spp=spp, res=res, seed=seed, threads=threads, max_depth=max_depth, sampler=sampler
-    )
-    futures = [
-        client.submit(render_part, scene, i, parts, pure=True, retries=retries, **kwargs)
-        for i in range(parts)
-    ]
+    thread of the cluster, so that faster workers take more) and return the ``(h, w, 3)``
+    float32 image. ``settings`` are :func:`striae.render`'s keywords (``spp``, ``res``,
+    ``seed``, ``max_depth``, ``sampler``; ``threads``: render threads per task, default the
+    worker's cores). ``retries``: how often a failed task is run again (a task on a worker
+    that dies is re-run by the scheduler in any case)."""
+    parts = parts if parts > 0 else _default_parts(client)
+    futures = _submit(client, scene, parts, retries, settings)
     return merge(client.gather(futures))
 
 
-def render_frames(scene_for_frame, frames: int, client: Any, parts: int = 0, **kwargs):
+def _default_parts(client: Any) -> int:
+    return max(1, 4 * sum(client.nthreads().values()))
+
+
+def _submit(client: Any, scene: SceneLike, parts: int, retries: int, settings: dict) -> list:
+    return [
+        client.submit(render_part, scene, i, parts, pure=True, retries=retries, **settings)
+        for i in range(parts)
+    ]
+
+
+def render_frames(
+    scene_for_frame: Callable[[int], SceneLike],
+    frames: int,
+    client: Any,
+    parts: int = 0,
+    retries: int = 2,
+    **settings: Any,
+) -> Iterator[Tuple[int, np.ndarray]]:
     """Render ``frames`` images over ``client``, frame ``f`` from the scene
-    ``scene_for_frame(f)`` (a dict or TOML text, e.g. a camera moved around a turntable), every
-    frame's parts in flight at once; yields ``(f, image)`` in frame order."""
-    if parts <= 0:
-        parts = max(1, 4 * sum(client.nthreads().values()))
-    per_frame = []
-    for f in range(frames):
-        scene = scene_for_frame(f)
-        per_frame.append(
-            [
-                client.submit(render_part, scene, i, parts, pure=True, retries=2, **kwargs)
-                for i in range(parts)
-            ]
-        )
+    ``scene_for_frame(f)`` (a dict or TOML text, e.g. a camera moved around a turntable),
+    every frame's parts in flight at once; yields ``(f, image)`` in frame order."""
+    parts = parts if parts > 0 else _default_parts(client)
+    per_frame = [
+        _submit(client, scene_for_frame(f), parts, retries, settings) for f in range(frames)
+    ]
     for f, futures in enumerate(per_frame):
         yield f, merge(client.gather(futures))

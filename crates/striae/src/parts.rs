@@ -372,46 +372,9 @@ mod tests {
     use super::*;
     use crate::scene::{Overrides, Scene};
 
-    /// Scratched glass (both coverage caches at work) over a diffuse floor, 70 x 40 pixels:
+    /// Scratched glass over a diffuse floor (also the Python tests' scene), 70 x 40 pixels:
     /// 5 x 3 = 15 tiles, the last column and row cut short.
-    const SCENE: &str = r#"
-[render]
-width = 70
-height = 40
-spp = 4
-seed = 5
-[camera]
-position = [0, 1, 4]
-look_at = [0, 0.5, 0]
-fov = 40
-[materials.floor]
-type = "diffuse"
-reflectance = 0.6
-[materials.glass]
-type = "scratched"
-base = "glass"
-[materials.glass.scratches]
-m = 32
-n = 400
-nr = 10
-length = 0.3
-width = 0.06
-threshold = 0.3
-layers = 4
-seed = 3
-[[shapes]]
-type = "rectangle"
-material = "floor"
-transform = [{ scale = 6.0 }, { rotate = { axis = [1, 0, 0], angle = -90 } }]
-[[shapes]]
-type = "sphere"
-material = "glass"
-center = [0, 0.6, 0]
-radius = 0.6
-[environment]
-type = "constant"
-radiance = [0.8, 0.9, 1.0]
-"#;
+    const SCENE: &str = include_str!("../tests/data/scratched-sphere.toml");
 
     fn scene() -> Scene {
         Scene::parse(
