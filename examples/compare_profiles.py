@@ -1,6 +1,7 @@
 """Compare the scratch lobes of two groove profiles with striae's Python API.
 
-Precomputes two small tables (a 90-degree V groove and a round one), then plots, for light
+Precomputes two small tables (a 60-degree V groove and a round one; diffuse walls, no Fresnel
+factor), then plots, for light
 arriving at phi_i = 30 degrees across the scratch, the lobe of each in the scratch's cross-
 section plane (theta = 0: `table.eval` over outgoing angles phi_o), and the directions
 `table.sample` draws for that light. Writes compare_profiles.png (or the path given).
@@ -19,7 +20,7 @@ import numpy as np  # noqa: E402
 
 import striae  # noqa: E402
 
-PROFILES = ["v:angle=90", "round:depth=0.5"]
+PROFILES = ["v:angle=60", "round:depth=0.5"]
 PHI_I = np.radians(30.0)
 
 
@@ -35,7 +36,7 @@ def main(out):
     phi_o = np.linspace(-np.pi / 2 + 1e-3, np.pi / 2 - 1e-3, 721)
     rng = np.random.default_rng(1)
     for spec in PROFILES:
-        table = striae.precompute(profile=spec, m=128, n=4000, nr=20, seed=1)
+        table = striae.precompute(profile=spec, m=128, n=4000, nr=20, seed=1, fresnel_law="none")
         wi = np.repeat(directions([PHI_I]), len(phi_o), axis=0)
         f, _ = table.eval(directions(phi_o), wi)
         lobe.plot(np.degrees(phi_o), f * np.cos(phi_o), label=spec)
@@ -49,7 +50,7 @@ def main(out):
     hist.set(xlabel="sampled phi (degrees)", ylabel="density",
              title="directions drawn by table.sample")
     for ax in (lobe, hist):
-        ax.axvline(-30, color="grey", lw=0.8, ls=":")
+        ax.axvline(-30, color="grey", lw=0.8, ls=":", label="mirror direction")
         ax.legend()
     fig.tight_layout()
     fig.savefig(out, dpi=90)
