@@ -31,6 +31,8 @@ enum Command {
     /// Render a scene file (or the built-in default scene) to EXR and PNG.
     #[command(allow_negative_numbers = true)]
     Render(commands::render::Args),
+    /// Merge the part files of one render (`render --tile I/N`) into its EXR and PNG.
+    Merge(commands::merge::Args),
     /// Regenerate the seed's figures (Fig. 2, 4, 6, 7, 8a) as PNGs plus an index.html.
     #[command(allow_negative_numbers = true)]
     Figures(commands::figures::Args),
@@ -58,6 +60,7 @@ fn main() {
         Command::Plot(a) => commands::plot::run(a),
         Command::Layers(a) => commands::layers::run(a),
         Command::Render(a) => commands::render::run(a),
+        Command::Merge(a) => commands::merge::run(a),
         Command::Figures(a) => commands::figures::run(a),
         Command::Gonio(a) => commands::gonio::run(a),
     };

@@ -160,3 +160,60 @@ fn outputs_that_would_be_wrong_or_would_replace_what_is_not_a_file_are_refused()
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `striae render --tile I/N` for I in 0..3 and `striae merge` give the EXR of the whole
+/// render byte for byte (37 x 21 pixels: 6 tiles, 3 parts of 2); an index out of range, and a
+/// missing or foreign part, are errors that say so.
+#[test]
+fn tiles_merge_to_the_whole_render_and_bad_parts_are_refused() {
+    let dir = std::env::temp_dir().join(format!("striae-tiles-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = dir.join("s.toml");
+    std::fs::write(
+        &scene,
+        "[render]\nwidth = 37\nheight = 21\nspp = 2\n[camera]\nposition = [0, 1, 4]\n\
+         look_at = [0, 0.5, 0]\nfov = 40\n[materials.glass]\ntype = \"dielectric\"\n[[shapes]]\n\
+         type = \"sphere\"\nmaterial = \"glass\"\ncenter = [0, 0.6, 0]\nradius = 0.6\n\
+         [environment]\ntype = \"constant\"\nradiance = [0.8, 0.9, 1.0]\n",
+    )
+    .unwrap();
+    let s = scene.to_str().unwrap();
+    let (ok, err) = striae(&["render", s, "-q"], &dir.join("whole"));
+    assert!(ok, "{err}");
+    let part = |i: u32| dir.join(format!("p{i}.part"));
+    for i in 0..3 {
+        let (ok, err) = striae(&["render", s, "-q", "--tile", &format!("{i}/3")], &part(i));
+        assert!(ok, "{err}");
+    }
+    let p: Vec<String> = (0..3).map(|i| part(i).display().to_string()).collect();
+    let (ok, err) = striae(&["merge", &p[2], &p[0], &p[1]], &dir.join("merged"));
+    assert!(ok, "{err}");
+    let read = |name: &str| std::fs::read(dir.join(name)).unwrap();
+    assert!(
+        read("merged.exr") == read("whole.exr"),
+        "merged EXR differs"
+    );
+    assert!(
+        read("merged.png") == read("whole.png"),
+        "merged PNG differs"
+    );
+
+    let (ok, err) = striae(&["merge", &p[0], &p[1]], &dir.join("bad"));
+    assert!(!ok && err.contains("parts missing: [2]"), "{err}");
+    let (ok, err) = striae(
+        &["render", s, "-q", "--seed", "2", "--tile", "2/3"],
+        &part(2),
+    );
+    assert!(ok, "{err}");
+    let (ok, err) = striae(&["merge", &p[0], &p[1], &p[2]], &dir.join("bad"));
+    assert!(!ok && err.contains("different renders: seed"), "{err}");
+    let (ok, err) = striae(&["render", s, "-q", "--tile", "3/3"], &part(3));
+    assert!(
+        !ok && err.contains("--tile") && err.contains("0..N"),
+        "{err}"
+    );
+    let (ok, err) = striae(&["render", s, "-q", "--tile", "0/7"], &part(3));
+    assert!(!ok && err.contains("only 6 tiles"), "{err}");
+    assert!(!dir.join("bad.exr").exists() && !part(3).exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -46,7 +46,7 @@ use crate::shading::{footprint_dp, hit_context, spawn_differentials, PixelHit, S
 use arrayvec::ArrayVec;
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 /// Side of a square tile of pixels, the unit of parallel work.
 pub const TILE: u32 = 16;
@@ -409,49 +409,91 @@ pub fn render_with(
     progress: &(dyn Fn(u64) + Sync),
     simd: Simd,
 ) -> (Image, RenderStats) {
+    let (w, h) = scene.camera.resolution();
+    let tiles: Vec<u32> = (0..tile_count(w, h)).collect();
+    let (pixels, stats) = render_tiles(scene, &tiles, progress, &AtomicBool::new(false), simd)
+        .expect("a render nothing cancels runs to the end");
+    let mut image = Image::new(w, h);
+    for (&tile, px) in tiles.iter().zip(&pixels) {
+        place_tile(&mut image, tile, px);
+    }
+    (image, stats)
+}
+
+/// The number of [`TILE`] x [`TILE`] tiles of a `w x h` film (the last row and column may be
+/// cut short), numbered row by row from the top left: the renderer's unit of work.
+pub fn tile_count(w: u32, h: u32) -> u32 {
+    w.div_ceil(TILE) * h.div_ceil(TILE)
+}
+
+/// The pixels `[x0, y0, x1, y1)` of tile `tile` of a `w x h` film.
+pub fn tile_rect(w: u32, h: u32, tile: u32) -> [u32; 4] {
+    let tiles_x = w.div_ceil(TILE);
+    let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
+    [x0, y0, (x0 + TILE).min(w), (y0 + TILE).min(h)]
+}
+
+/// Copy the pixels of tile `tile` ([`render_tiles`]'s order: row by row) into `image`.
+pub fn place_tile(image: &mut Image, tile: u32, pixels: &[Rgb]) {
+    let [x0, y0, x1, _] = tile_rect(image.width, image.height, tile);
+    let tw = x1 - x0;
+    for (i, &p) in pixels.iter().enumerate() {
+        let (x, y) = (x0 + i as u32 % tw, y0 + i as u32 / tw);
+        image.pixels[(y * image.width + x) as usize] = p;
+    }
+}
+
+/// A render stopped by its caller ([`render_tiles`]' `cancel`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("the render was cancelled")]
+pub struct Cancelled;
+
+/// The pixels of the tiles `tiles` of the film ([`tile_rect`]), each row by row, in the order
+/// given: the one render loop of whole renders ([`render_with`]) and of parts of an image
+/// (`parts`). A pixel's value depends only on the scene and the pixel (its samples draw from
+/// the pixel's own streams; the workers' caches never change a value), so the pixels of a
+/// tile are the same whichever other tiles are rendered with it, and by which thread.
+/// `progress` is called (from worker threads) with the camera samples each finished tile
+/// traced; once `cancel` is set, the tiles not started yet are skipped and the result is
+/// [`Cancelled`].
+pub fn render_tiles(
+    scene: &Scene,
+    tiles: &[u32],
+    progress: &(dyn Fn(u64) + Sync),
+    cancel: &AtomicBool,
+    simd: Simd,
+) -> Result<(Vec<Vec<Rgb>>, RenderStats), Cancelled> {
     let copy = LoopCopy::chosen(simd);
     let start = std::time::Instant::now();
     let (w, h) = scene.camera.resolution();
-    let tiles_x = w.div_ceil(TILE);
-    let tiles_y = h.div_ceil(TILE);
     let rays = AtomicU64::new(0);
     let nonfinite = AtomicU64::new(0);
     let spp = scene.settings.spp;
     let pass = Pass {
         differentials: scene.materials.iter().any(Material::reads_footprint),
     };
-    let tiles: Vec<(u32, Vec<Rgb>)> = (0..tiles_x * tiles_y)
-        .into_par_iter()
-        .map_init(Worker::default, |worker, tile| {
-            let (tx, ty) = (tile % tiles_x, tile / tiles_x);
-            let (x0, y0) = (tx * TILE, ty * TILE);
-            let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
-            let out = render_tile(scene, [x0, y0, x1, y1], pass, copy, worker);
+    let pixels: Vec<Option<Vec<Rgb>>> = tiles
+        .par_iter()
+        .map_init(Worker::default, |worker, &tile| {
+            if cancel.load(Ordering::Relaxed) {
+                return None;
+            }
+            let out = render_tile(scene, tile_rect(w, h, tile), pass, copy, worker);
             rays.fetch_add(std::mem::take(&mut worker.rays), Ordering::Relaxed);
             nonfinite.fetch_add(std::mem::take(&mut worker.nonfinite), Ordering::Relaxed);
             progress(out.len() as u64 * spp as u64);
-            (tile, out)
+            Some(out)
         })
         .collect();
-    let mut image = Image::new(w, h);
-    for (tile, px) in tiles {
-        let (tx, ty) = (tile % tiles_x, tile / tiles_x);
-        let (x0, y0) = (tx * TILE, ty * TILE);
-        let x1 = (x0 + TILE).min(w);
-        let tw = x1 - x0;
-        for (i, p) in px.into_iter().enumerate() {
-            let (x, y) = (x0 + i as u32 % tw, y0 + i as u32 / tw);
-            image.pixels[(y * w + x) as usize] = p;
-        }
-    }
+    let pixels: Vec<Vec<Rgb>> = pixels.into_iter().collect::<Option<_>>().ok_or(Cancelled)?;
     let stats = RenderStats {
-        samples: w as u64 * h as u64 * spp as u64,
+        samples: pixels.iter().map(|p| p.len() as u64).sum::<u64>() * spp as u64,
         rays: rays.into_inner(),
         nonfinite: nonfinite.into_inner(),
         seconds: start.elapsed().as_secs_f64(),
         copy,
     };
-    (image, stats)
+    Ok((pixels, stats))
 }
 
 /// The pixels of the tile `[x0, y0, x1, y1)` (row by row), by the render loop's `copy`

@@ -58,6 +58,7 @@ pub mod geometry;
 pub mod integrator;
 pub mod lights;
 pub mod material;
+pub mod parts;
 pub mod sampler;
 pub mod scene;
 pub mod shading;

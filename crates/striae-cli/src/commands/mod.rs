@@ -1,6 +1,7 @@
 pub mod figures;
 pub mod gonio;
 pub mod layers;
+pub mod merge;
 pub mod plot;
 pub mod precompute;
 pub mod render;

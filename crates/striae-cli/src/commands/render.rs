@@ -44,9 +44,27 @@ pub struct Args {
     /// same geometry to Mitsuba 3. Spheres are analytic and are skipped.
     #[arg(long, value_name = "DIR")]
     pub export_meshes: Option<PathBuf>,
+    /// Render only part I of N of the image (its tiles `t` with `t % N == I`, counting from
+    /// 0) and write it as a part file (`-o`, default `NAME-I-of-N.part`) for `striae merge`.
+    #[arg(long, value_name = "I/N", value_parser = parse_tile)]
+    pub tile: Option<(u32, u32)>,
     /// No progress bar.
     #[arg(long, short = 'q')]
     pub quiet: bool,
+}
+
+/// `--tile I/N`: two counts; the range is checked against the image (`parts::part_tiles`).
+fn parse_tile(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("`{s}` is not I/N (part I of N, counting from 0, e.g. 0/4)");
+    let (i, n) = s.split_once('/').ok_or_else(bad)?;
+    let i: u32 = i.trim().parse().map_err(|_| bad())?;
+    let n: u32 = n.trim().parse().map_err(|_| bad())?;
+    if i >= n {
+        return Err(format!(
+            "`{s}`: the part index I must lie in 0..N (0 to N-1)"
+        ));
+    }
+    Ok((i, n))
 }
 
 /// Most worker threads a command accepts: more than any machine's cores, and few enough that a
@@ -129,9 +147,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     striae::integrator::LoopCopy::env_cap().map_err(anyhow::Error::msg)?;
     super::print_library_messages(args.quiet);
-    let mut scene = match &args.scene {
-        Some(path) => Scene::load(path, &overrides).context("cannot load the scene")?,
-        None => Scene::default_scene(&overrides).context("building the built-in default scene")?,
+    let (mut scene, scene_text) = match &args.scene {
+        Some(path) => Scene::load_with_text(path, &overrides).context("cannot load the scene")?,
+        None => (
+            Scene::default_scene(&overrides).context("building the built-in default scene")?,
+            striae::scene::DEFAULT_SCENE.to_string(),
+        ),
     };
     if let Some(e) = args.exposure {
         scene.settings.exposure = e;
@@ -139,12 +160,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(dir) = &args.export_meshes {
         return export_meshes(&scene, dir);
     }
-    let (exr_path, png_path) = output_paths(args.output.as_deref(), args.scene.as_deref())?;
-    for path in [&exr_path, &png_path] {
-        striae::io::check_destination(path).with_context(|| format!("-o {}", path.display()))?;
-    }
     let s = &scene.settings;
-    let total = s.width as u64 * s.height as u64 * s.spp as u64;
+    let pixels = match args.tile {
+        Some((i, n)) => striae::parts::part_pixel_count((s.width, s.height), i, n)? as u64,
+        None => s.width as u64 * s.height as u64,
+    };
+    let total = pixels * s.spp as u64;
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
     eprintln!(
         "rendering {} at {}x{}, {} spp, max depth {}, seed {}, {} thread(s)",
@@ -159,7 +180,63 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         s.seed,
         threads
     );
-    let bar = if args.quiet {
+    let bar = progress_bar(total, args.quiet);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("starting the thread pool")?;
+    if let Some(tile) = args.tile {
+        let path = part_path(args.output.as_deref(), args.scene.as_deref(), tile);
+        let cancel = std::sync::atomic::AtomicBool::new(false);
+        let (part, stats) = pool.install(|| {
+            striae::parts::Part::render(&scene, &scene_text, tile, &|n| bar.inc(n), &cancel)
+        })?;
+        bar.finish_and_clear();
+        part.write(&path)?;
+        print_summary(&stats);
+        eprintln!("wrote {}", path.display());
+        return Ok(());
+    }
+    let (exr_path, png_path) = image_outputs(args.output.as_deref(), args.scene.as_deref())?;
+    let (image, stats) = pool.install(|| striae::integrator::render(&scene, &|n| bar.inc(n)));
+    bar.finish_and_clear();
+
+    image
+        .write_exr_and_png(&exr_path, &png_path, scene.settings.exposure)
+        .with_context(|| format!("writing {} and {}", exr_path.display(), png_path.display()))?;
+    print_summary(&stats);
+    eprintln!("wrote {} and {}", exr_path.display(), png_path.display());
+    Ok(())
+}
+
+/// The EXR and PNG paths of `-o` ([`output_paths`]), each checked as a destination before
+/// anything is rendered.
+pub(crate) fn image_outputs(
+    output: Option<&Path>,
+    scene: Option<&Path>,
+) -> anyhow::Result<(PathBuf, PathBuf)> {
+    let (exr, png) = output_paths(output, scene)?;
+    for path in [&exr, &png] {
+        striae::io::check_destination(path).with_context(|| format!("-o {}", path.display()))?;
+    }
+    Ok((exr, png))
+}
+
+/// `-o` for a part file, or `NAME-I-of-N.part` after the scene file's name (`striae` for the
+/// built-in scene).
+fn part_path(output: Option<&Path>, scene: Option<&Path>, (i, n): (u32, u32)) -> PathBuf {
+    output.map(Path::to_path_buf).unwrap_or_else(|| {
+        let stem = scene
+            .and_then(|s| s.file_stem())
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "striae".into());
+        PathBuf::from(format!("{stem}-{i}-of-{n}.part"))
+    })
+}
+
+/// A progress bar over `total` camera samples (samples/s, time left); hidden when `quiet`.
+fn progress_bar(total: u64, quiet: bool) -> ProgressBar {
+    let bar = if quiet {
         ProgressBar::hidden()
     } else {
         ProgressBar::new(total)
@@ -174,16 +251,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         })
         .progress_chars("=> "),
     );
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .context("starting the thread pool")?;
-    let (image, stats) = pool.install(|| striae::integrator::render(&scene, &|n| bar.inc(n)));
-    bar.finish_and_clear();
+    bar
+}
 
-    image
-        .write_exr_and_png(&exr_path, &png_path, scene.settings.exposure)
-        .with_context(|| format!("writing {} and {}", exr_path.display(), png_path.display()))?;
+/// The render's summary line: wall time, samples/s, rays/s.
+fn print_summary(stats: &striae::integrator::RenderStats) {
     eprintln!(
         "done in {:.2} s: {:.3} M samples/s, {:.2} M rays/s ({} rays, {} render loop){}",
         stats.seconds,
@@ -197,8 +269,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             String::new()
         }
     );
-    eprintln!("wrote {} and {}", exr_path.display(), png_path.display());
-    Ok(())
 }
 
 fn export_meshes(scene: &Scene, dir: &Path) -> anyhow::Result<()> {

@@ -143,12 +143,21 @@ impl Scene {
 
     /// Load a scene file; relative paths inside it are resolved against its folder.
     pub fn load(path: &Path, overrides: &Overrides) -> Result<Scene, SceneError> {
+        Scene::load_with_text(path, overrides).map(|(scene, _)| scene)
+    }
+
+    /// [`Scene::load`], with the text it was read from (which names the render of a part,
+    /// `parts::RenderId`).
+    pub fn load_with_text(
+        path: &Path,
+        overrides: &Overrides,
+    ) -> Result<(Scene, String), SceneError> {
         let text = crate::io::read_text(path).map_err(|e| SceneError::Read {
             file: path.to_path_buf(),
             message: e.to_string(),
         })?;
         let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
-        Scene::parse(&text, path, &base, overrides)
+        Ok((Scene::parse(&text, path, &base, overrides)?, text))
     }
 
     /// The built-in default scene.
