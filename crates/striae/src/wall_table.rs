@@ -117,6 +117,19 @@ pub fn centres(n: usize) -> Vec<f64> {
         .collect()
 }
 
+/// The exit `theta_o` of lobe `l` ([`LOBES`]) for smooth walls at incident `theta_i`: `beta = n
+/// w.y` is conserved (METHOD.md 8.1), so reflection gives `-theta_i`, transmission into the
+/// glass `-asin(sin theta_i / n)` and out of it `-asin(n sin theta_i)` (clamped at grazing,
+/// where total internal reflection leaves no transmitted light).
+pub fn exit_theta(l: usize, theta_i: f64, n: f64) -> f64 {
+    let s = theta_i.sin();
+    match l {
+        1 => -(s / n).asin(),
+        3 => -(n * s).clamp(-1.0, 1.0).asin(),
+        _ => -theta_i,
+    }
+}
+
 /// The four lobes, in the order of the file: R and T from outside, R and T from inside.
 pub const LOBES: [&str; 4] = ["r_out", "t_out", "r_in", "t_in"];
 
@@ -178,32 +191,47 @@ impl WallTable {
         &self.lobes[l][k..k + b2]
     }
 
-    /// The four lobes at incident `(theta_i, phi_i)`, interpolated bilinearly between the
-    /// grid's centres (clamped at its edges), into `out[l]` (each `B x B`).
+    /// The four lobes at incident `(theta_i, phi_i)` into `out[l]` (each `B x B`): bilinear in
+    /// `(theta_i, phi_i)` between the grid's centres (clamped at its edges), each slice first
+    /// moved along `theta_o` by the change of its smooth-wall exit angle ([`exit_theta`]), so
+    /// that the delta of smooth walls lands where it belongs instead of being split between
+    /// the two slices' places (displacement interpolation).
     pub fn lobes_at(&self, theta_i: f64, phi_i: f64, out: &mut [Vec<f64>; 4]) {
         let weights = |c: &[f64], x: f64| -> [(usize, f64); 2] {
             let n = c.len();
-            let step = PI / n as f64;
-            let f = ((x - c[0]) / step).clamp(0.0, (n - 1) as f64);
-            let i = (f.floor() as usize).min(n.saturating_sub(2));
             if n == 1 {
                 return [(0, 1.0), (0, 0.0)];
             }
+            let f = ((x - c[0]) / (PI / n as f64)).clamp(0.0, (n - 1) as f64);
+            let i = (f.floor() as usize).min(n - 2);
             let w = f - i as f64;
             [(i, 1.0 - w), (i + 1, w)]
         };
         let (wt, wp) = (weights(&self.theta_i, theta_i), weights(&self.phi_i, phi_i));
-        let b2 = self.params.bins * self.params.bins;
+        let b = self.params.bins;
+        let bin = PI / b as f64;
         for (l, o) in out.iter_mut().enumerate() {
             o.clear();
-            o.resize(b2, 0.0);
+            o.resize(b * b, 0.0);
             for &(t, a) in &wt {
-                for &(p, b) in &wp {
-                    if a * b == 0.0 {
+                let n = self.params.ior;
+                let shift = (exit_theta(l, theta_i, n) - exit_theta(l, self.theta_i[t], n)) / bin;
+                let (whole, frac) = (shift.floor(), shift - shift.floor());
+                for &(p, c) in &wp {
+                    if a * c == 0.0 {
                         continue;
                     }
-                    for (x, y) in o.iter_mut().zip(self.slice(l, t, p)) {
-                        *x += a * b * y;
+                    let slice = self.slice(l, t, p);
+                    for (row, src) in slice.chunks_exact(b).enumerate() {
+                        // Row `row` moves to `row + shift`: split between two rows, clamped.
+                        let to = row as f64 + whole;
+                        for (k, f) in [(to, 1.0 - frac), (to + 1.0, frac)] {
+                            let k = k.clamp(0.0, (b - 1) as f64) as usize;
+                            let wgt = a * c * f;
+                            for (x, y) in o[k * b..(k + 1) * b].iter_mut().zip(src) {
+                                *x += wgt * y;
+                            }
+                        }
                     }
                 }
             }
@@ -361,18 +389,17 @@ impl WallTable {
     }
 
     /// The table against a fresh exact trace at incident `(theta_i, phi_i)` (off the grid, with
-    /// `paths` paths and another seed): per lobe, the L1 distance between the interpolated and
-    /// the traced histograms (the fraction of the incident energy put in the wrong exit bins, at
-    /// most 2) and the difference of the lobe's albedos.
+    /// `paths` paths and another seed), per lobe ([`LobeError`]).
     pub fn error_against_trace(
         &self,
         theta_i: f64,
         phi_i: f64,
         paths: u64,
-    ) -> Result<[(f64, f64); 4], GonioError> {
+    ) -> Result<[LobeError; 4], GonioError> {
         let mut table = std::array::from_fn(|_| Vec::new());
         self.lobes_at(theta_i, phi_i, &mut table);
-        let mut out = [(0.0, 0.0); 4];
+        let b = self.params.bins;
+        let mut out = [LobeError::default(); 4];
         for (s, side) in [LightSide::Outside, LightSide::Inside].iter().enumerate() {
             let mut set = self.params.settings(theta_i, phi_i, *side);
             set.paths = paths;
@@ -380,13 +407,52 @@ impl WallTable {
             let exact = trace_groove(&self.params.profile, &set, &|_| {})?;
             for (k, hist) in [&exact.reflected, &exact.transmitted].iter().enumerate() {
                 let l = 2 * s + k;
-                let l1 = table[l].iter().zip(hist.iter()).map(|(a, b)| (a - b).abs());
-                let albedo = table[l].iter().sum::<f64>() - hist.iter().sum::<f64>();
-                out[l] = (l1.sum(), albedo);
+                let (mine, theirs) = (&table[l], *hist);
+                let marginal = |h: &[f64], j: usize| h.iter().skip(j).step_by(b).sum::<f64>();
+                let mean_theta = |h: &[f64]| {
+                    let e: f64 = h.iter().sum();
+                    let m: f64 = h
+                        .chunks_exact(b)
+                        .zip(&self.exit)
+                        .map(|(r, t)| r.iter().sum::<f64>() * t)
+                        .sum();
+                    if e > 0.0 {
+                        m / e
+                    } else {
+                        0.0
+                    }
+                };
+                let (ea, eb) = (mine.iter().sum::<f64>(), theirs.iter().sum::<f64>());
+                out[l] = LobeError {
+                    albedo: ea - eb,
+                    l1: mine.iter().zip(theirs).map(|(x, y)| (x - y).abs()).sum(),
+                    phi_l1: (0..b)
+                        .map(|j| (marginal(mine, j) - marginal(theirs, j)).abs())
+                        .sum(),
+                    theta_shift: if ea > 1e-3 && eb > 1e-3 {
+                        mean_theta(mine) - mean_theta(theirs)
+                    } else {
+                        0.0
+                    },
+                };
             }
         }
         Ok(out)
     }
+}
+
+/// A lobe of the table against the exact trace ([`WallTable::error_against_trace`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LobeError {
+    /// Albedo, table less trace.
+    pub albedo: f64,
+    /// L1 distance of the `B x B` histograms (fractions of the incident energy, at most 2;
+    /// a delta one bin off counts 2).
+    pub l1: f64,
+    /// L1 distance of the `phi_o` marginals.
+    pub phi_l1: f64,
+    /// Mean `theta_o` (radians), table less trace (where both lobes hold energy).
+    pub theta_shift: f64,
 }
 
 #[cfg(test)]

@@ -208,13 +208,21 @@ fn dielectric(profile: Profile, a: &Args) -> anyhow::Result<()> {
         let row: Vec<String> = LOBES
             .iter()
             .zip(err)
-            .map(|(n, (l1, da))| format!("{n} L1 {l1:.4} dalbedo {da:+.4}"))
+            .map(|(n, e)| {
+                format!(
+                    "{n}: dalbedo {:+.4} L1 {:.3} phi-L1 {:.3} dtheta {:+.2} deg",
+                    e.albedo,
+                    e.l1,
+                    e.phi_l1,
+                    e.theta_shift.to_degrees()
+                )
+            })
             .collect();
         println!(
-            "check theta_i {:+6.1} phi_i {:+6.1}: {}",
+            "check theta_i {:+6.1} phi_i {:+6.1}:\n  {}",
             ti.to_degrees(),
             pi.to_degrees(),
-            row.join("  ")
+            row.join("\n  ")
         );
     }
     println!("wrote {}", a.output.display());
