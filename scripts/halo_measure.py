@@ -11,7 +11,9 @@ light's mirror image (or its image through the pane): the halo's centre is its c
 (second moments) and reports the angle between that axis and the radial direction from the
 centre to the piece's centroid: 90 degrees is a piece running around the centre (a halo arc),
 0 one pointing at it (a spoke). Prints the count, the median and the mean of the angle, the
-share of pieces above 60 degrees, and the same statistics weighted by piece size.
+share of pieces above 60 degrees, and the same statistics weighted by piece size; and how evenly
+the lit pixels spread around the centre (the share held by the 9 fullest of 36 sectors of polar
+angle: 0.25 when even, as halos are; spokes crowd a few sectors).
 """
 import struct
 import sys
@@ -121,6 +123,17 @@ def main():
         rad = math.atan2(ry, rx)
         d = abs((ax - rad + math.pi / 2) % math.pi - math.pi / 2)
         angles.append((math.degrees(d), n))
+    # Where the lit pixels lie around the centre: 36 sectors of polar angle. Halos fill them
+    # evenly (the 9 fullest hold about a quarter); spokes crowd a few.
+    sectors = [0] * 36
+    for c in comps:
+        for (px, py) in c:
+            a = math.atan2(py - centre[1], px - centre[0])
+            sectors[int((a + math.pi) / (2 * math.pi) * 36) % 36] += 1
+    total = sum(sectors)
+    if total:
+        top = sum(sorted(sectors, reverse=True)[:9]) / total
+        print(f"{path}: lit pixels in the 9 fullest of 36 sectors around the centre: {top:.2f} (even: 0.25)")
     if not angles:
         print("no elongated pieces")
         return

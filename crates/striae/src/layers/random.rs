@@ -463,6 +463,13 @@ mod tests {
         assert_ne!(r.angle(3, 4), other.angle(3, 4));
     }
 
+    /// The share of an `n x n` grid of cell centres `(s, t)` in `[-1/2, 1/2]^2` where `inside`.
+    fn grid_share(n: usize, inside: impl Fn(f64, f64) -> bool) -> f64 {
+        let c = |k: usize| (k as f64 + 0.5) / n as f64 - 0.5;
+        let hits = (0..n * n).filter(|&k| inside(c(k % n), c(k / n))).count();
+        hits as f64 / (n * n) as f64
+    }
+
     /// The union area against a fine grid of point tests, for crossing ellipses clipped to a
     /// parallelogram (a reference the area code does not share).
     #[test]
@@ -484,19 +491,10 @@ mod tests {
             let qb = DVec2::new(-0.3, 1.1);
             let shape = Parallelogram::new(qa, qb);
             let exact = union_ellipses_area(&ellipses, &shape.poly);
-            let n = 1000;
-            let mut inside = 0u64;
-            for y in 0..n {
-                for x in 0..n {
-                    let (s, t) = (
-                        (x as f64 + 0.5) / n as f64 - 0.5,
-                        (y as f64 + 0.5) / n as f64 - 0.5,
-                    );
-                    let pt = qa * s + qb * t;
-                    inside += ellipses.iter().any(|e| e.norm2(pt) < 1.0) as u64;
-                }
-            }
-            let sampled = inside as f64 / (n * n) as f64 * shape.area;
+            let sampled = grid_share(1000, |s, t| {
+                let pt = qa * s + qb * t;
+                ellipses.iter().any(|e| e.norm2(pt) < 1.0)
+            }) * shape.area;
             assert!(
                 (exact - sampled).abs() < 2e-3 * shape.area,
                 "case {case}: exact {exact} sampled {sampled}"
@@ -504,8 +502,7 @@ mod tests {
         }
     }
 
-    /// A single ellipse: the union code and the closed form agree; and a footprint's coverage
-    /// against point sampling over it, with crossings.
+    /// A footprint's coverage against point sampling over it, crossings included.
     #[test]
     fn coverage_matches_point_sampling() {
         let r = RandomScratches::new(9, &params()).unwrap();
@@ -515,18 +512,7 @@ mod tests {
             let ea = DVec2::new(0.05, 0.01);
             let eb = DVec2::new(-0.01, 0.04);
             let c = r.coverage(p, ea, eb, 4096).unwrap();
-            let n = 400;
-            let mut inside = 0u64;
-            for y in 0..n {
-                for x in 0..n {
-                    let (s, t) = (
-                        (x as f64 + 0.5) / n as f64 - 0.5,
-                        (y as f64 + 0.5) / n as f64 - 0.5,
-                    );
-                    inside += r.is_scratched(p + ea * s + eb * t) as u64;
-                }
-            }
-            let sampled = inside as f64 / (n * n) as f64;
+            let sampled = grid_share(400, |s, t| r.is_scratched(p + ea * s + eb * t));
             assert!(
                 (c - sampled).abs() < 4e-3,
                 "at {p:?}: exact {c} sampled {sampled}"
