@@ -45,6 +45,7 @@ pub mod angle_bins;
 pub(crate) mod cross_section;
 pub mod gonio;
 pub mod groove;
+pub mod wall_table;
 
 // Scratch layers from Worley cell noise (section 5).
 pub mod layers;

@@ -12,7 +12,7 @@
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 use striae::layers::raster::{self, CombinedImage};
-use striae::layers::{LayerParams, LayerSet};
+use striae::layers::{LayerParams, LayerSet, Orientation};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -35,6 +35,10 @@ pub struct Args {
     /// Image side R in pixels.
     #[arg(long, default_value_t = 1024)]
     res: usize,
+    /// `layer` (the seed: every scratch of a layer along the layer's direction) or `random`
+    /// (each scratch along its own direction).
+    #[arg(long, value_enum, default_value_t = OrientationArg::Layer)]
+    orientation: OrientationArg,
     /// Seed of the layer set (angles and noise of every layer).
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -44,6 +48,12 @@ pub struct Args {
     /// Output folder (created if missing).
     #[arg(short = 'o', long = "out")]
     out: PathBuf,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum OrientationArg {
+    Layer,
+    Random,
 }
 
 /// Available memory from /proc/meminfo (Linux), if readable.
@@ -67,7 +77,12 @@ pub fn run(args: Args) -> Result<()> {
         _ => bail!("give either --setting or all of --length, --width and --threshold"),
     };
     params.layers = args.layers;
-    let set = LayerSet::new(params, args.seed).context("invalid scratch layer parameters")?;
+    let orientation = match args.orientation {
+        OrientationArg::Layer => Orientation::Layer,
+        OrientationArg::Random => Orientation::Random,
+    };
+    let set = LayerSet::with_orientation(params, args.seed, orientation)
+        .context("invalid scratch layer parameters")?;
     let res = args.res;
     raster::check_resolution(res).context("invalid --res")?;
     // Peak memory: one layer's coverage and mips (f32, 4/3), the combined image (3 f32), the

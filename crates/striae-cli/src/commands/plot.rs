@@ -12,6 +12,10 @@ pub struct Args {
     /// Incident angle phi_i in degrees for the polar lobe plot.
     #[arg(long, default_value_t = 30.0, allow_hyphen_values = true)]
     phi_i: f64,
+    /// Incident angle theta_i in degrees (dielectric-wall tables: their R and T lobes at
+    /// (theta_i, phi_i)).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    theta_i: f64,
     /// Plot the whole rho_m table as a heat map instead of one lobe.
     #[arg(long)]
     heatmap: bool,
@@ -21,6 +25,13 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    let walls = striae::wall_table::WallTable::load(&a.table)
+        .with_context(|| format!("loading {}", a.table.display()))?;
+    if let Some(walls) = walls {
+        walls.plot(a.theta_i.to_radians(), a.phi_i.to_radians(), &a.output)?;
+        println!("wrote {}", a.output.display());
+        return Ok(());
+    }
     let table =
         ScratchTable::load(&a.table).with_context(|| format!("loading {}", a.table.display()))?;
     if a.heatmap {

@@ -51,6 +51,13 @@ pub struct Args {
     /// convex profiles (see docs/table-format.md).
     #[arg(long, value_enum, default_value_t = EstimatorArg::Walks)]
     estimator: EstimatorArg,
+    /// GGX roughness (alpha, in [0, 1]) of dielectric walls.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    roughness: f64,
+    /// Dielectric walls: also trace N off-grid incident directions per side exactly and print
+    /// the table's error against them.
+    #[arg(long, default_value_t = 0)]
+    check: usize,
     /// Worker threads, 1 to 4096 (default: all cores).
     #[arg(long, value_parser = super::render::parse_threads)]
     threads: Option<usize>,
@@ -63,6 +70,9 @@ pub struct Args {
 enum WallsArg {
     Specular,
     Diffuse,
+    /// Glass walls of index --ior (optionally GGX-rough, --roughness): the four-lobe table of
+    /// METHOD.md 8.1 from the exact 2.5D trace (docs/table-format.md).
+    Dielectric,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -87,10 +97,14 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .with_context(|| format!("-o {}", a.output.display()))?;
     let profile =
         Profile::parse(&a.profile).with_context(|| format!("--profile `{}`", a.profile))?;
+    if let WallsArg::Dielectric = a.walls {
+        return dielectric(profile, &a);
+    }
     let trace = TraceSettings {
         walls: match a.walls {
             WallsArg::Specular => Walls::Specular,
             WallsArg::Diffuse => Walls::Diffuse,
+            WallsArg::Dielectric => unreachable!("handled above"),
         },
         m: a.m,
         n: a.n,
@@ -156,5 +170,63 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         a.output.display(),
         &params.hash()[..16]
     );
+    Ok(())
+}
+
+/// `--walls dielectric`: the four-lobe table (`striae::wall_table`), and with `--check N` its
+/// error against the exact trace at N off-grid incident directions.
+fn dielectric(profile: Profile, a: &Args) -> anyhow::Result<()> {
+    use striae::wall_table::{WallTable, WallTableParams, LOBES};
+    let params = WallTableParams {
+        seed: a.seed,
+        ..WallTableParams::new(profile, a.ior, a.roughness)
+    };
+    params.validate().context("invalid precompute parameters")?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()?;
+    let start = Instant::now();
+    let table = pool.install(|| WallTable::compute(&params))?;
+    let secs = start.elapsed().as_secs_f64();
+    table
+        .save(&a.output)
+        .with_context(|| format!("writing {}", a.output.display()))?;
+    let incident = params.theta_bins * params.phi_bins;
+    println!(
+        "dielectric walls: profile {}  ior {}  roughness {}  {} x {} incident directions x 2 sides, {} x {} exit bins, {} paths each",
+        params.profile.spec, params.ior, params.roughness, params.theta_bins, params.phi_bins,
+        params.bins, params.bins, params.paths
+    );
+    println!(
+        "wall time {secs:.3} s ({} paths, {} threads)",
+        2 * incident as u64 * params.paths,
+        pool.current_num_threads()
+    );
+    for k in 0..a.check {
+        // Off-grid directions: quasi-random (golden ratio) in (-80, 80) degrees.
+        let g = |x: f64| ((x * 0.618_033_988_749_895).fract() - 0.5) * 160f64.to_radians();
+        let (ti, pi) = (g(k as f64 + 0.37), g(k as f64 * 1.7 + 0.11));
+        let err = pool.install(|| table.error_against_trace(ti, pi, 200_000))?;
+        let row: Vec<String> = LOBES
+            .iter()
+            .zip(err)
+            .map(|(n, e)| {
+                format!(
+                    "{n}: dalbedo {:+.4} L1 {:.3} phi-L1 {:.3} dtheta {:+.2} deg",
+                    e.albedo,
+                    e.l1,
+                    e.phi_l1,
+                    e.theta_shift.to_degrees()
+                )
+            })
+            .collect();
+        println!(
+            "check theta_i {:+6.1} phi_i {:+6.1}:\n  {}",
+            ti.to_degrees(),
+            pi.to_degrees(),
+            row.join("\n  ")
+        );
+    }
+    println!("wrote {}", a.output.display());
     Ok(())
 }

@@ -3,6 +3,7 @@
 //! what fraction of a footprint do the scratches cover.
 
 use super::footprint::{union_discs_polygon_area, MAX_DISCS};
+use super::random::RandomScratches;
 use super::worley::{floor_i64, Worley, WorleySample};
 use super::{LayerError, LayerParams, LAYER_NOISE_PERIOD};
 use crate::math::Vec2;
@@ -39,6 +40,9 @@ pub struct ScratchLayer {
     m: [DVec2; 2],
     /// Rows of `M^-1 = R(alpha) S`.
     m_inv: [DVec2; 2],
+    /// `orientation = "random"`: the scratches, each with its own direction; the queries
+    /// below then answer for them.
+    random: Option<RandomScratches>,
 }
 
 impl ScratchLayer {
@@ -61,7 +65,23 @@ impl ScratchLayer {
             width: w,
             m: [DVec2::new(c / l, s / l), DVec2::new(-s / w, c / w)],
             m_inv: [DVec2::new(c * l, -s * w), DVec2::new(s * l, c * w)],
+            random: None,
         })
+    }
+
+    /// The same layer with a direction per scratch ([`RandomScratches`], same noise seed).
+    pub fn into_random(
+        mut self,
+        noise_seed: u64,
+        params: &LayerParams,
+    ) -> Result<Self, LayerError> {
+        self.random = Some(RandomScratches::new(noise_seed, params)?);
+        Ok(self)
+    }
+
+    /// The randomly oriented scratches, where the layer has them.
+    pub fn random(&self) -> Option<&RandomScratches> {
+        self.random.as_ref()
     }
 
     pub fn index(&self) -> usize {
@@ -119,6 +139,9 @@ impl ScratchLayer {
     /// `F1(q(p)) < tau` at an `f64` texture point.
     #[inline]
     pub fn is_scratched_at(&self, p: DVec2) -> bool {
+        if let Some(r) = &self.random {
+            return r.is_scratched(p);
+        }
         self.noise.any_within(self.to_noise(p), self.tau)
     }
 
@@ -203,6 +226,9 @@ impl ScratchLayer {
         max_cells: usize,
         centres: &mut [DVec2; CANDIDATE_ROOM],
     ) -> Option<f64> {
+        if let Some(r) = &self.random {
+            return r.coverage(p, a, b, max_cells);
+        }
         match self.footprint_candidates(p, a, b, max_cells, centres) {
             Candidates::Done(c) => c,
             Candidates::Discs(f) => Some(f.coverage(&centres[..f.n])),

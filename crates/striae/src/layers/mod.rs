@@ -29,6 +29,7 @@ pub mod cache;
 pub mod footprint;
 pub mod lattice;
 pub mod layer;
+pub mod random;
 pub mod raster;
 pub mod worley;
 
@@ -130,6 +131,17 @@ impl LayerParams {
     }
 }
 
+/// Which way a layer's scratches run.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Orientation {
+    /// Every scratch of a layer along the layer's direction (METHOD.md section 5, the seed).
+    #[default]
+    Layer,
+    /// Each scratch along its own uniform direction, hashed from its cell ([`random`]).
+    Random,
+}
+
 /// `K` scratch layers drawn from one seed (METHOD.md section 5). Layer `k`'s angle and noise
 /// seed depend only on `(seed, k)`, so adding layers keeps the first ones unchanged.
 #[derive(Clone, Debug)]
@@ -137,6 +149,7 @@ pub struct LayerSet {
     params: LayerParams,
     seed: u64,
     layers: Vec<ScratchLayer>,
+    orientation: Orientation,
     expected_coverage: f64,
     /// Names the set in per-thread caches ([`lattice`]); unique per process, from 1.
     id: u64,
@@ -154,6 +167,16 @@ impl LayerSet {
     /// Validate `params` and draw the layers: `alpha_k` uniform in `[0, 2 pi)` (a direction, not
     /// just an axis: an asymmetric scratch profile tells `d` from `-d`) and a 64-bit noise seed.
     pub fn new(params: LayerParams, seed: u64) -> Result<Self, LayerError> {
+        Self::with_orientation(params, seed, Orientation::Layer)
+    }
+
+    /// [`Self::new`] with the scratches' [`Orientation`]: `Random` keeps each layer's noise
+    /// seed and gives every scratch its own direction ([`random`]).
+    pub fn with_orientation(
+        params: LayerParams,
+        seed: u64,
+        orientation: Orientation,
+    ) -> Result<Self, LayerError> {
         params.validate()?;
         let layers = (0..params.layers)
             .map(|k| {
@@ -164,14 +187,22 @@ impl LayerSet {
                 );
                 let alpha = (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64) * std::f64::consts::TAU;
                 let noise_seed = crate::hash::mix64(h ^ 0x9e37_79b9_7f4a_7c15);
-                ScratchLayer::new(k, alpha, noise_seed, &params)
+                let layer = ScratchLayer::new(k, alpha, noise_seed, &params)?;
+                match orientation {
+                    Orientation::Layer => Ok(layer),
+                    Orientation::Random => layer.into_random(noise_seed, &params),
+                }
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let expected_coverage = footprint::expected_coverage(params.threshold, 48);
+        let expected_coverage = match layers[0].random() {
+            None => footprint::expected_coverage(params.threshold, 48),
+            Some(r) => r.expected_coverage(),
+        };
         Ok(LayerSet {
             params,
             seed,
             layers,
+            orientation,
             expected_coverage,
             id: NEXT_SET_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         })
@@ -208,6 +239,25 @@ impl LayerSet {
             index: k,
             count: self.layers.len(),
         })
+    }
+
+    pub fn orientation(&self) -> Orientation {
+        self.orientation
+    }
+
+    /// The scratch direction of layer `k` at texture point `uv`: the layer's (`Layer`), or that
+    /// of the scratch nearest to `uv` in its own metric (`Random`: the one covering `uv`, or the
+    /// nearest where none does), as `(cos, sin)`.
+    /// # Panics
+    /// If `k >= len()`.
+    pub fn direction_at(&self, k: usize, uv: Vec2) -> [f64; 2] {
+        match self.layers[k]
+            .random()
+            .and_then(|r| r.nearest(uv.as_dvec2()))
+        {
+            Some((_, beta)) => [beta.cos(), beta.sin()],
+            None => self.layers[k].direction(),
+        }
     }
 
     /// Layer `k`'s scratch direction `d_k = (cos alpha_k, sin alpha_k)` in texture space.
@@ -311,6 +361,17 @@ impl LayerSet {
         let (p, a, b) = (uv.as_dvec2(), duvdx.as_dvec2(), duvdy.as_dvec2());
         let n = self.layers.len();
         let out = &mut out[..n];
+        if self.orientation == Orientation::Random {
+            // No bounds to prune with: every layer's exact coverage, then the ties kept.
+            self.coverage_all_within(uv, duvdx, duvdy, max_cells, out);
+            let best = out.iter().fold(0.0f32, |m, &c| m.max(c)) as f64;
+            for c in out.iter_mut() {
+                if (*c as f64) < best - TIE {
+                    *c = 0.0;
+                }
+            }
+            return;
+        }
         // Pass 1: exact values that need no area work, bounds (and the candidate discs) for
         // the rest.
         let mut bound = [0.0f64; MAX_LAYERS];

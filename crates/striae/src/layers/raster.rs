@@ -251,6 +251,16 @@ struct Scratch {
 /// it keeps the sum of their areas, clamped to 1.
 pub fn rasterize(layer: &ScratchLayer, res: usize) -> Result<CoverageRaster, LayerError> {
     check_resolution(res)?;
+    if let Some(r) = layer.random() {
+        // Randomly oriented scratches: each texel's exact coverage.
+        let t = 1.0 / res as f64;
+        let (a, b) = (DVec2::new(t, 0.0), DVec2::new(0.0, t));
+        let data = per_texel(res, |p| {
+            r.coverage(p, a, b, usize::MAX)
+                .unwrap_or_else(|| r.is_scratched(p) as u8 as f64)
+        });
+        return Ok(CoverageRaster::from_coverage(res, data));
+    }
     let shape = EllipseShape::of(layer);
     let scratches = reaching_scratches(layer, res, &shape)?;
     let r = res as f64;

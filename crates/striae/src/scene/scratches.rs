@@ -26,7 +26,7 @@
 use super::materials::{conductor_ior, invalid, MaterialError};
 use crate::bsdf::{ConductorIor, ScratchLobeTable, ScratchedBase};
 use crate::fresnel::FresnelLaw;
-use crate::layers::{LayerError, LayerParams, LayerSet, MAX_LAYERS};
+use crate::layers::{LayerError, LayerParams, LayerSet, Orientation, MAX_LAYERS};
 use crate::math::Rgb;
 use crate::profile::Profile;
 use crate::scratched::{CoverageMode, LayerMix, ScratchedMaterial};
@@ -86,6 +86,9 @@ pub struct ScratchSpec {
     pub layers: Option<usize>,
     /// Seed of the layer set (default 1).
     pub seed: Option<u64>,
+    /// `layer` (default, the seed: a direction per layer) or `random` (a direction per scratch).
+    #[serde(default, deserialize_with = "keyed::orientation")]
+    pub orientation: Option<Orientation>,
     #[serde(default, deserialize_with = "keyed::layer_mix")]
     pub layer_mix: Option<LayerMix>,
     /// `footprint` (default, section 6) or `point` (see [`CoverageMode`]).
@@ -100,7 +103,7 @@ pub struct ScratchSpec {
 /// A material is an internally tagged enum, which serde buffers, so `toml` can point only at the
 /// material's table and its message would name the bad word but not the key.
 mod keyed {
-    use super::{BaseKind, CoverageMode, FresnelMode, LayerMix, Walls};
+    use super::{BaseKind, CoverageMode, FresnelMode, LayerMix, Orientation, Walls};
     use serde::de::{Deserialize, Deserializer, Error};
 
     fn named<'de, T: Deserialize<'de>, D: Deserializer<'de>>(
@@ -125,6 +128,9 @@ mod keyed {
     pub fn coverage<'de, D: Deserializer<'de>>(d: D) -> Result<Option<CoverageMode>, D::Error> {
         named(d, "scratches.coverage")
     }
+    pub fn orientation<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Orientation>, D::Error> {
+        named(d, "scratches.orientation")
+    }
 }
 
 /// Where a material's table comes from.
@@ -142,6 +148,7 @@ pub struct Resolved {
     pub table: TableSource,
     pub layers: LayerParams,
     pub layer_seed: u64,
+    pub orientation: Orientation,
     pub mix: LayerMix,
     pub coverage: CoverageMode,
 }
@@ -217,6 +224,7 @@ impl ScratchedDesc {
             table,
             layers: self.resolve_layers()?,
             layer_seed: s.seed.unwrap_or(DEFAULT_LAYER_SEED),
+            orientation: s.orientation.unwrap_or_default(),
             mix: s.layer_mix.unwrap_or_default(),
             coverage: s.coverage.unwrap_or_default(),
         })
@@ -409,7 +417,8 @@ impl ScratchedDesc {
             },
             source: Box::new(e),
         })?;
-        let layers = LayerSet::new(r.layers, r.layer_seed).map_err(layer_error)?;
+        let layers = LayerSet::with_orientation(r.layers, r.layer_seed, r.orientation)
+            .map_err(layer_error)?;
         Ok(ScratchedMaterial::new(
             r.base, r.tint, table, layers, r.mix, r.coverage,
         ))

@@ -19,7 +19,7 @@ use crate::bsdf::{
 use crate::layers::cache::PixelKey;
 use crate::layers::lattice::TileQuery;
 use crate::layers::layer::MAX_FOOTPRINT_CELLS;
-use crate::layers::{CoverageCache, LayerSet, MAX_LAYERS};
+use crate::layers::{CoverageCache, LayerSet, Orientation, MAX_LAYERS};
 use crate::math::{Rgb, Vec3};
 use crate::shading::ShadingContext;
 use serde::Deserialize;
@@ -290,7 +290,13 @@ impl ScratchedMaterial {
 /// Scratch lobe of `layer` with coverage `c`: `t = d.x dP/du + d.y dP/dv` in the shading
 /// plane, as `(cos beta, sin beta)` against the frame's `s` axis (METHOD.md section 1).
 fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32) -> ScratchLobe {
-    let d = p.directions[layer];
+    let d = if p.layers.orientation() == Orientation::Random {
+        // The scratch at the hit point (or nearest to it): the hit is spread uniformly over the
+        // footprint, so each scratch of the footprint is chosen in proportion to its share.
+        p.layers.direction_at(layer, ctx.uv).map(|x| x as f32)
+    } else {
+        p.directions[layer]
+    };
     let t: Vec3 = ctx.dpdu * d[0] + ctx.dpdv * d[1];
     let (x, y) = (t.dot(ctx.frame.s), t.dot(ctx.frame.t));
     let len = (x * x + y * y).sqrt();

@@ -24,9 +24,15 @@ fn keys_are_validated() {
         }
     );
     assert_eq!(
-        (r.mix, r.coverage),
-        (LayerMix::Sum, CoverageMode::Footprint)
+        (r.mix, r.coverage, r.orientation),
+        (LayerMix::Sum, CoverageMode::Footprint, Orientation::Layer)
     );
+    let random =
+        parse("type = \"scratched\"\nbase = \"glass\"\n[scratches]\norientation = \"random\"")
+            .unwrap()
+            .resolve(Path::new("."))
+            .unwrap();
+    assert_eq!(random.orientation, Orientation::Random);
     let TableSource::Compute(p) = r.table else {
         panic!()
     };
@@ -126,6 +132,10 @@ fn keys_are_validated() {
         (
             "base = \"glass\"\n[scratches]\ncoverage = \"pixel\"",
             &["`scratches.coverage`", "pixel"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\norientation = \"spiral\"",
+            &["`scratches.orientation`", "spiral"],
         ),
         ("base = \"glass\"\n[scratches]\nfoo = 1", &["foo"]),
         ("base = \"glass\"\nroughness = 0.1", &["roughness"]),
