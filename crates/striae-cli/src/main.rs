@@ -30,6 +30,9 @@ enum Command {
     /// The exact BSDF of an extruded groove by 2.5D tracing: a virtual gonioreflectometer
     /// (METHOD.md 8.1).
     Gonio(commands::gonio::Args),
+    /// The scratch model's 3D BRDF against the exact groove: L1 and albedo errors, noise,
+    /// heat maps (docs/fidelity.md).
+    Fidelity(commands::fidelity::Args),
 }
 
 fn main() {
@@ -42,6 +45,7 @@ fn main() {
         Command::Render(a) => commands::render::run(a),
         Command::Figures(a) => commands::figures::run(a),
         Command::Gonio(a) => commands::gonio::run(a),
+        Command::Fidelity(a) => commands::fidelity::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");
