@@ -22,11 +22,12 @@
 //! Lambertian walls every path leaves from a Lambertian bounce, so the exact BRDF does not
 //! depend on `theta_o` at all, only on `theta_i` (through the Fresnel factor at each hit) and
 //! the two `phi`; it tabulates `rho(theta_i, phi_o, phi_i)` from the goniometer at a few
-//! `theta_i` and interpolates linearly in `theta_i`.
+//! `theta_i` and interpolates between them in `theta_i` (see its notes).
 
 pub mod study;
 
 use crate::angle_bins::{bin_centre, AngleBins};
+use crate::fresnel::FresnelLaw;
 use crate::groove::{trace_groove, GonioError, GonioSettings};
 use crate::profile::Profile;
 use rayon::prelude::*;
@@ -166,15 +167,20 @@ pub fn compare(model: &[f64], r: &Reference) -> Comparison {
 
 /// A scratch BRDF tabulated from the exact groove at `theta_i` slices (an alternative to the
 /// seed's three `theta_o` slices, see the module notes): `rho[k][phi_i bin][phi_o bin]`
-/// normalised by eq. (1'), `f = (2/pi) rho`, linear in `|theta_i|` between the slices and
-/// constant beyond the first and last. Exact for Lambertian walls with any per-hit Fresnel
-/// law up to that interpolation, the `phi` bins and the Monte Carlo noise.
+/// normalised by eq. (1'), `f = (2/pi) rho`. Between slices it interpolates, linearly in
+/// `|theta_i|`, `rho / F(cos theta_i)` (constant beyond the first and last slice) and
+/// multiplies by `F(cos theta_i)` again: the first wall hit's Fresnel factor carries most of
+/// the steep rise towards grazing incidence, and the ratio left is smooth. Exact for
+/// Lambertian walls with any per-hit Fresnel law up to that interpolation, the `phi` bins and
+/// the Monte Carlo noise.
 #[derive(Clone, Debug)]
 pub struct GrooveSlices {
     m: usize,
     /// The slices' `theta_i`: `(k + 1/2) (pi/2) / S`, radians.
     pub theta: Vec<f64>,
-    rho: Vec<f64>,
+    /// `rho / F(cos theta_k)` per slice `k`.
+    ratio: Vec<f64>,
+    law: FresnelLaw,
     phi_bins: AngleBins,
 }
 
@@ -191,8 +197,10 @@ impl GrooveSlices {
         let theta: Vec<f64> = (0..slices)
             .map(|k| (k as f64 + 0.5) * FRAC_PI_2 / slices as f64)
             .collect();
-        let mut rho = Vec::with_capacity(slices * m * m);
+        let law = base.fresnel_law;
+        let mut ratio = Vec::with_capacity(slices * m * m);
         for (k, &theta_i) in theta.iter().enumerate() {
+            let fresnel = law.reflectance(theta_i.cos()).max(1e-12);
             for i in 0..m {
                 let s = GonioSettings {
                     theta_i,
@@ -202,16 +210,17 @@ impl GrooveSlices {
                     ..base.clone()
                 };
                 let out = trace_groove(profile, &s, &|_| {})?;
-                rho.extend((0..m).map(|j| {
+                ratio.extend((0..m).map(|j| {
                     let frac: f64 = (0..m).map(|a| out.reflected[a * m + j]).sum();
-                    frac * m as f64 / (PI * bin_centre(j, m).cos())
+                    frac * m as f64 / (PI * bin_centre(j, m).cos()) / fresnel
                 }));
             }
         }
         Ok(GrooveSlices {
             m,
             theta,
-            rho,
+            ratio,
+            law,
             phi_bins: AngleBins::new(m),
         })
     }
@@ -231,26 +240,27 @@ impl GrooveSlices {
             self.phi_bins.bin_xz(wi[0], wi[2]),
             self.phi_bins.bin_xz(wo[0], wo[2]),
         );
-        let t = wi[1].clamp(-1.0, 1.0).asin().abs();
+        let y = wi[1].clamp(-1.0, 1.0);
+        let t = y.asin().abs();
         let s = self.theta.len();
         let step = FRAC_PI_2 / s as f64;
         let x = (t / step - 0.5).clamp(0.0, (s - 1) as f64);
         let k = (x as usize).min(s.saturating_sub(2));
         let w = x - k as f64;
-        let at = |k: usize| self.rho[(k * m + i) * m + o];
-        let rho = if s == 1 {
+        let at = |k: usize| self.ratio[(k * m + i) * m + o];
+        let ratio = if s == 1 {
             at(0)
         } else {
             (1.0 - w) * at(k) + w * at(k + 1)
         };
-        2.0 / PI * rho
+        let cos_theta_i = (1.0 - y * y).max(0.0).sqrt();
+        2.0 / PI * ratio * self.law.reflectance(cos_theta_i)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fresnel::FresnelLaw;
     use crate::groove::GrooveWalls;
     use crate::table::{ScratchBrdf, ScratchTable, TableParams};
     use crate::trace2d::{FresnelMode, TraceSettings, Walls};

@@ -298,7 +298,7 @@ pub fn plot_case(case: &Case, models: &[&str], path: &Path) -> Result<(), StudyE
         .iter()
         .filter(|m| models.contains(&m.name.as_str()))
         .collect();
-    let (pw, ph) = (560u32, 420u32);
+    let (pw, ph) = (470u32, 360u32);
     let (w, h) = (3 * pw, rows.len().max(1) as u32 * ph + 40);
     let title = format!(
         "{}: theta_i {} deg, phi_i {} deg (fraction of the incident energy per bin)",
@@ -340,7 +340,7 @@ pub fn plot_case(case: &Case, models: &[&str], path: &Path) -> Result<(), StudyE
                 (
                     &diff,
                     max(&diff),
-                    format!("|diff|: L1 {:.4} (noise {:.4})", c.l1, c.noise_l1),
+                    format!("|diff|: L1 {:.4}, noise {:.4}", c.l1, c.noise_l1),
                 ),
             ];
             for (j, (values, vmax, caption)) in panels.into_iter().enumerate() {
