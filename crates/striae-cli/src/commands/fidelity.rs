@@ -37,13 +37,9 @@ pub struct Args {
     /// Independent goniometer runs per incident direction (their spread is the noise).
     #[arg(long, default_value_t = 4)]
     runs: usize,
-    /// Table angle bins M, entry points N and walks N_r (the seed's by default).
-    #[arg(long, default_value_t = 256)]
-    m: usize,
-    #[arg(long, default_value_t = 10_000)]
-    n: usize,
-    #[arg(long, default_value_t = 100)]
-    nr: usize,
+    /// The tables' M,N,N_r: angle bins, entry points and walks per entry (the seed's).
+    #[arg(long, value_delimiter = ',', default_value = "256,10000,100")]
+    table: Vec<usize>,
     /// Index of refraction of the walls' Schlick law.
     #[arg(long, default_value_t = 1.5)]
     ior: f64,
@@ -105,10 +101,13 @@ fn settings(a: &Args) -> anyhow::Result<StudySettings> {
             a.runs
         );
     }
+    let [m, n, nr] = a.table[..] else {
+        anyhow::bail!("--table: expected M,N,N_r (three integers)");
+    };
     let table = TraceSettings {
-        m: a.m,
-        n: a.n,
-        nr: a.nr,
+        m,
+        n,
+        nr,
         fresnel_law: FresnelLaw::Schlick { n: a.ior },
         ..TraceSettings::default()
     };

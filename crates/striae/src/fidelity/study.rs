@@ -359,3 +359,48 @@ pub fn plot_case(case: &Case, models: &[&str], path: &Path) -> Result<(), StudyE
     })?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_small_study_writes_its_csv_and_plot() {
+        let s = StudySettings {
+            profiles: vec![("v90".into(), Profile::parse("v:angle=90").unwrap())],
+            theta_i_deg: vec![0.0, 60.0],
+            phi_i_deg: vec![30.0],
+            bins: 8,
+            paths: 4000,
+            runs: 2,
+            table: TraceSettings {
+                m: 16,
+                n: 400,
+                nr: 4,
+                ..TraceSettings::default()
+            },
+            slices: 2,
+            slice_m: 8,
+            slice_paths: 2000,
+            lossless: true,
+            quad: 2,
+            seed: 0,
+        };
+        let cases = run_study(&s, &|_| {}).unwrap();
+        assert_eq!(cases.len(), 2);
+        let text = csv(&cases);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines[0], CSV_HEADER);
+        // Five models per case, eleven columns each.
+        assert_eq!(lines.len(), 1 + 2 * 5);
+        assert!(lines[1..].iter().all(|l| l.split(',').count() == 11));
+        assert!(text.contains("v90,groove_slices2,60,30,"));
+        let dir = std::env::temp_dir().join(format!("striae-fidelity-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let png = dir.join("case.png");
+        plot_case(&cases[1], &["seed", "lossless"], &png).unwrap();
+        let img = image::open(&png).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (3 * 470, 2 * 360 + 40));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
