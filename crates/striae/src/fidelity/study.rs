@@ -298,7 +298,7 @@ pub fn plot_case(case: &Case, models: &[&str], path: &Path) -> Result<(), StudyE
         .iter()
         .filter(|m| models.contains(&m.name.as_str()))
         .collect();
-    let (pw, ph) = (470u32, 360u32);
+    let (pw, ph) = (560u32, 420u32);
     let (w, h) = (3 * pw, rows.len().max(1) as u32 * ph + 40);
     let title = format!(
         "{}: theta_i {} deg, phi_i {} deg (fraction of the incident energy per bin)",
@@ -400,7 +400,7 @@ mod tests {
         let png = dir.join("case.png");
         plot_case(&cases[1], &["seed", "lossless"], &png).unwrap();
         let img = image::open(&png).unwrap().to_rgb8();
-        assert_eq!(img.dimensions(), (3 * 470, 2 * 360 + 40));
+        assert_eq!(img.dimensions(), (3 * 560, 2 * 420 + 40));
         std::fs::remove_dir_all(&dir).ok();
     }
 }
