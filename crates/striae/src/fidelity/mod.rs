@@ -194,6 +194,15 @@ impl GrooveSlices {
         m: usize,
         slices: usize,
     ) -> Result<Self, GonioError> {
+        for (key, n) in [("slices", slices), ("slice-m", m)] {
+            if !(1..=4096).contains(&n) {
+                return Err(GonioError {
+                    key,
+                    value: n.to_string(),
+                    why: "must be in 1..=4096",
+                });
+            }
+        }
         let theta: Vec<f64> = (0..slices)
             .map(|k| (k as f64 + 0.5) * FRAC_PI_2 / slices as f64)
             .collect();
@@ -359,6 +368,10 @@ mod tests {
             paths: 60_000,
             ..gonio(law, 0.0, 0.0, b)
         };
+        assert_eq!(
+            GrooveSlices::compute(&p, &base, 0, 2).unwrap_err().key,
+            "slice-m"
+        );
         let slices = GrooveSlices::compute(&p, &base, m, 2).unwrap();
         let (theta_i, phi_i) = (slices.theta[1], bin_centre(5, m));
         let r = reference(&p, &gonio(law, theta_i, phi_i, b), 4).unwrap();
