@@ -40,6 +40,9 @@ enum Command {
     /// (METHOD.md 8.1).
     #[command(allow_negative_numbers = true)]
     Gonio(commands::gonio::Args),
+    /// The scratch model's 3D BRDF against the exact groove: L1 and albedo errors, noise,
+    /// heat maps (docs/fidelity.md).
+    Fidelity(commands::fidelity::Args),
 }
 
 fn main() {
@@ -63,6 +66,7 @@ fn main() {
         Command::Merge(a) => commands::merge::run(a),
         Command::Figures(a) => commands::figures::run(a),
         Command::Gonio(a) => commands::gonio::run(a),
+        Command::Fidelity(a) => commands::fidelity::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

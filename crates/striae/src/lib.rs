@@ -43,6 +43,7 @@ pub mod trace2d;
 // The exact groove (METHOD.md 8.1): shared cross-section geometry, angle bins, the 2.5D tracer.
 pub mod angle_bins;
 pub(crate) mod cross_section;
+pub mod fidelity;
 pub mod gonio;
 pub mod groove;
 pub mod wall_table;

@@ -1,3 +1,4 @@
+pub mod fidelity;
 pub mod figures;
 pub mod gonio;
 pub mod layers;
