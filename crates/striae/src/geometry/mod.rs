@@ -6,6 +6,7 @@
 //! * [`mesh`]: [`TriangleMesh`] with the rectangle and box; [`obj`] loads OBJ files (tobj);
 //!   [`teapot`] tessellates Newell's 32 Bezier patches with per-vertex uv and tangents.
 //! * [`sphere`]: the analytic sphere.
+//! * [`carve`]: explicit scratch grooves carved into planar faces (METHOD.md 8.3).
 //! * [`bvh`]: [`Geometry`], the BVH (an 8-wide SSE BVH, `bvh8`, by default) with the watertight
 //!   ray-triangle test.
 //! * [`uv_footprint`]: texture-space footprint of a pixel from ray differentials (pbrt-v4).
@@ -15,6 +16,7 @@
 
 pub mod bvh;
 mod bvh8;
+pub mod carve;
 pub mod mesh;
 pub mod obj;
 pub mod sphere;
