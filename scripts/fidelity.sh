@@ -6,4 +6,6 @@
 set -e
 cd "$(dirname "$0")/.."
 [ $# -gt 0 ] || set -- validation/fidelity/*.toml
-cargo run --release -p striae --example fidelity -- docs/fidelity "${FACTOR:-4}" "$@"
+# (Built with the CLI, so the two share one build of the library.)
+cargo build --release -p striae -p striae-cli --bins --example fidelity
+target/release/examples/fidelity docs/fidelity "${FACTOR:-4}" "$@"

@@ -485,6 +485,18 @@ impl Geometry {
             .is_some_and(|c| c.rejects(p.shape, p.prim, ray.at(t)))
     }
 
+    /// The origin of a ray leaving a hit at `p` (geometric normal `ng`) on shape `shape`
+    /// toward `dir`: moved off the surface by [`super::OFFSET`], or by
+    /// [`super::CARVED_OFFSET`] on explicit scratch geometry.
+    #[inline(always)]
+    pub fn spawn_origin(&self, p: Vec3, ng: Vec3, shape: u32, dir: Vec3) -> Vec3 {
+        let rel = match &self.carve {
+            Some(c) if c.is_carved(shape) => super::CARVED_OFFSET,
+            _ => super::OFFSET,
+        };
+        super::offset_origin_by(p, ng, dir, rel)
+    }
+
     /// The explicit scratch geometry, if the scene has any.
     pub fn carve(&self) -> Option<&Carve> {
         self.carve.as_deref()

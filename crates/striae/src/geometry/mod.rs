@@ -32,6 +32,27 @@ pub use transform::Transform;
 
 use crate::math::{RayDifferential, Vec2, Vec3, PI};
 
+/// The relative distance a new ray's origin is moved off the surface it leaves
+/// ([`offset_origin_by`]): above float error at any position.
+pub const OFFSET: f32 = 1e-4;
+/// The same for the faces and walls of explicit scratch grooves ([`carve`]), whose features
+/// are 2e-4 of the face's size for the seed's setting 1: small enough to leave a groove's
+/// wall without crossing the groove, still 20 times the float error of a hit's position.
+pub const CARVED_OFFSET: f32 = 2e-6;
+
+/// Moves a ray origin off the surface at `p` (geometric normal `ng`) toward the side `dir`
+/// leaves to, by `rel (1 + max |p_i|)`: scaled with the magnitude of `p` to stay above float
+/// error.
+#[inline]
+pub fn offset_origin_by(p: Vec3, ng: Vec3, dir: Vec3, rel: f32) -> Vec3 {
+    let eps = rel * (1.0 + p.abs().max_element());
+    if dir.dot(ng) >= 0.0 {
+        p + eps * ng
+    } else {
+        p - eps * ng
+    }
+}
+
 /// Everything the renderer needs to know about a ray-surface intersection.
 #[derive(Clone, Copy, Debug)]
 pub struct SurfaceHit {
