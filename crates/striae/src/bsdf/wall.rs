@@ -4,10 +4,9 @@
 //! weight a path by `F` at the cosine of the light's arrival); `Specular`: a mirror of
 //! reflectance `tint F(cos theta)`.
 
-use super::BsdfSample;
+use super::{BsdfSample, Diffuse};
 use crate::fresnel::FresnelLaw;
 use crate::math::{Rgb, Vec2, Vec3, INV_PI};
-use crate::sampling::{cosine_hemisphere_pdf, square_to_cosine_hemisphere};
 
 /// An opaque groove wall.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -32,12 +31,17 @@ impl GrooveWall {
         self.fresnel(wi.z) * INV_PI
     }
 
+    /// The Lambertian lobe the diffuse wall samples (cosine-weighted, `Diffuse`'s).
+    const LAMBERT: Diffuse = Diffuse {
+        reflectance: Rgb::ONE,
+    };
+
     #[inline]
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        if self.specular || wo.z <= 0.0 {
+        if self.specular {
             return 0.0;
         }
-        cosine_hemisphere_pdf(wi)
+        Self::LAMBERT.pdf(wo, wi)
     }
 
     #[inline]
@@ -54,18 +58,11 @@ impl GrooveWall {
                 eta: 1.0,
             });
         }
-        let wi = square_to_cosine_hemisphere(u);
-        let pdf = cosine_hemisphere_pdf(wi);
-        if pdf <= 0.0 {
-            return None;
-        }
-        // f cos / pdf = tint F(cos_i).
+        // Lambert's weight is 1, so f cos / pdf = tint F(cos_i).
+        let s = Self::LAMBERT.sample(wo, u)?;
         Some(BsdfSample {
-            wi,
-            weight: self.fresnel(wi.z),
-            pdf,
-            delta: false,
-            eta: 1.0,
+            weight: self.fresnel(s.wi.z),
+            ..s
         })
     }
 }
