@@ -95,12 +95,7 @@ struct Worker {
 /// leaves to, by a distance scaled with the magnitude of `p` to stay above float error.
 #[inline]
 pub fn offset_origin(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
-    let eps = 1e-4 * (1.0 + p.abs().max_element());
-    if dir.dot(ng) >= 0.0 {
-        p + eps * ng
-    } else {
-        p - eps * ng
-    }
+    crate::geometry::offset_origin_by(p, ng, dir, crate::geometry::OFFSET)
 }
 
 /// The shading normals at the starts of a delta bounce's offset rays
@@ -294,7 +289,10 @@ pub fn trace_contexts(scene: &Scene, film: Vec2, max_hits: usize) -> Vec<Shading
             eta: if transmitted { 1.0 / bs.eta } else { 1.0 },
         };
         rd = bounce.spawn(&scene.geometry, &rd);
-        ray = Ray::new(offset_origin(hit.p, hit.ng, wi), wi);
+        ray = Ray::new(
+            scene.geometry.spawn_origin(hit.p, hit.ng, hit.shape, wi),
+            wi,
+        );
     }
     out
 }
@@ -819,7 +817,12 @@ fn radiance<const DIFFERENTIALS: bool>(
                 },
             );
         }
-        ray = Ray::new(offset_origin(hit.p, hit.ng, wi_world), wi_world);
+        ray = Ray::new(
+            scene
+                .geometry
+                .spawn_origin(hit.p, hit.ng, hit.shape, wi_world),
+            wi_world,
+        );
 
         depth += 1;
         if depth >= settings.rr_depth && !path.survives_roulette(sampler) {
@@ -1001,7 +1004,7 @@ fn direct_light(
     if f == Rgb::ZERO {
         return None;
     }
-    let origin = offset_origin(hit.p, hit.ng, ls.wi);
+    let origin = scene.geometry.spawn_origin(hit.p, hit.ng, hit.shape, ls.wi);
     let t_max = if ls.dist.is_finite() {
         (ls.dist - (origin - hit.p).length()) * (1.0 - 1e-3)
     } else {

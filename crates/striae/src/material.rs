@@ -4,7 +4,7 @@
 //! at a hit, [`Material::shade`].
 
 use crate::bsdf::{Bsdf, Conductor, ConductorIor, Dielectric, Diffuse};
-use crate::bsdf::{RoughConductor, RoughDielectric};
+use crate::bsdf::{GrooveWall, RoughConductor, RoughDielectric};
 use crate::geometry::SurfaceHit;
 use crate::layers::CoverageCache;
 use crate::math::{Frame, RayDifferential, Vec2, Vec3};
@@ -24,6 +24,8 @@ pub enum Material {
     Conductor { ior: ConductorIor, roughness: f32 },
     /// A smooth glass or metal base with scratches.
     Scratched(Box<ScratchedMaterial>),
+    /// The opaque wall of an explicit scratch groove (METHOD.md 8.3).
+    GrooveWall(GrooveWall),
 }
 
 /// How a hit is seen, for [`Material::shade`].
@@ -48,7 +50,9 @@ impl Material {
     pub fn has_transmission(&self) -> bool {
         match self {
             Material::Dielectric { .. } => true,
-            Material::Diffuse { .. } | Material::Conductor { .. } => false,
+            Material::Diffuse { .. } | Material::Conductor { .. } | Material::GrooveWall(_) => {
+                false
+            }
             Material::Scratched(m) => m.has_transmission(),
         }
     }
@@ -132,6 +136,7 @@ impl Material {
                 }
             }
             Material::Scratched(m) => m.base_bsdf(),
+            Material::GrooveWall(w) => Bsdf::Wall(*w),
         }
     }
 }

@@ -39,11 +39,13 @@ mod diffuse;
 mod fresnel_f32;
 pub mod microfacet;
 pub mod scratched;
+mod wall;
 
 pub use conductor::{Conductor, ConductorIor, RoughConductor, CONDUCTOR_PRESETS};
 pub use dielectric::{Dielectric, RoughDielectric};
 pub use diffuse::Diffuse;
 pub use scratched::{ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf};
+pub use wall::GrooveWall;
 
 use crate::math::{Rgb, Vec2, Vec3};
 
@@ -73,6 +75,8 @@ pub enum Bsdf<'a> {
     RoughConductor(RoughConductor),
     /// A smooth dielectric or conductor with scratches (METHOD.md section 6).
     Scratched(ScratchedBsdf<'a>),
+    /// The wall of an explicit scratch groove (METHOD.md 8.3).
+    Wall(GrooveWall),
 }
 
 impl Bsdf<'_> {
@@ -85,6 +89,7 @@ impl Bsdf<'_> {
             Bsdf::RoughDielectric(b) => b.eval(wo, wi),
             Bsdf::RoughConductor(b) => b.eval(wo, wi),
             Bsdf::Scratched(b) => b.eval(wo, wi),
+            Bsdf::Wall(b) => b.eval(wo, wi),
         }
     }
 
@@ -97,6 +102,7 @@ impl Bsdf<'_> {
             Bsdf::RoughDielectric(b) => b.pdf(wo, wi),
             Bsdf::RoughConductor(b) => b.pdf(wo, wi),
             Bsdf::Scratched(b) => b.pdf(wo, wi),
+            Bsdf::Wall(b) => b.pdf(wo, wi),
         }
     }
 
@@ -111,6 +117,7 @@ impl Bsdf<'_> {
             Bsdf::RoughDielectric(b) => b.eval_pdf(wo, wi),
             Bsdf::RoughConductor(b) => b.eval_pdf(wo, wi),
             Bsdf::Scratched(b) => b.eval_pdf(wo, wi),
+            Bsdf::Wall(b) => (b.eval(wo, wi), b.pdf(wo, wi)),
         }
     }
 
@@ -141,6 +148,7 @@ impl Bsdf<'_> {
             Bsdf::RoughDielectric(b) => b.sample(wo, u_lobe, u),
             Bsdf::RoughConductor(b) => b.sample(wo, u),
             Bsdf::Scratched(b) => b.sample(wo, u_lobe, u),
+            Bsdf::Wall(b) => b.sample(wo, u),
         }
     }
 
@@ -161,6 +169,7 @@ impl Bsdf<'_> {
         match self {
             Bsdf::Dielectric(_) | Bsdf::Conductor(_) => true,
             Bsdf::Scratched(b) => b.is_delta(),
+            Bsdf::Wall(b) => b.specular,
             _ => false,
         }
     }

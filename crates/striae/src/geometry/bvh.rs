@@ -22,6 +22,7 @@ use obvhs::ploc::PlocSearchDistance;
 use obvhs::BvhBuildParams;
 
 use super::bvh8::{AnyLeaf, Bvh8, ClosestLeaf, Leaf, BLOCK, PACKET};
+use super::carve::Carve;
 use super::sphere::{intersect_sphere, sphere_surface};
 use super::{Shape, ShapeGeometry, SurfaceHit};
 use crate::math::{Ray, Vec3};
@@ -323,6 +324,8 @@ pub struct Geometry {
     /// Number of distinct primitives.
     prim_count: usize,
     accel: Accel,
+    /// Explicit scratch geometry's hit filter (METHOD.md 8.3); `None` in other scenes.
+    carve: Option<Box<Carve>>,
 }
 
 impl std::fmt::Debug for Geometry {
@@ -357,6 +360,17 @@ impl Geometry {
 
     /// Builds the chosen kind of BVH (for benchmarks and tests).
     pub fn with_bvh(shapes: Vec<Shape>, kind: BvhKind) -> Geometry {
+        Geometry::build(shapes, kind, None)
+    }
+
+    /// Builds the BVH over `shapes`, some of them carved by explicit scratch grooves whose
+    /// hits `carve` filters ([`Carve::rejects`]). Their triangles go to scalar leaves, where
+    /// each hit is tested before it counts.
+    pub fn with_carve(shapes: Vec<Shape>, carve: Carve) -> Geometry {
+        Geometry::build(shapes, BvhKind::default(), Some(Box::new(carve)))
+    }
+
+    fn build(shapes: Vec<Shape>, kind: BvhKind, carve: Option<Box<Carve>>) -> Geometry {
         let mut prims = Vec::new();
         for (s, shape) in shapes.iter().enumerate() {
             match &shape.geometry {
@@ -386,6 +400,7 @@ impl Geometry {
                 tri4: Vec::new(),
                 prim_count,
                 accel: Accel::None,
+                carve,
             };
         }
         let aabbs: Vec<Aabb> = prims.iter().map(prim_aabb).collect();
@@ -417,7 +432,11 @@ impl Geometry {
                 };
                 let bvh = build_bvh2(&aabbs, params, &mut Duration::default());
                 let order = bvh.primitive_indices.clone();
-                match Bvh8::from_bvh2(&bvh, |i| prims[i as usize].prim == SPHERE) {
+                let scalar = |i: u32| {
+                    let p = &prims[i as usize];
+                    p.prim == SPHERE || carve.as_ref().is_some_and(|c| c.is_carved(p.shape))
+                };
+                match Bvh8::from_bvh2(&bvh, scalar) {
                     Some((bvh8, order)) => (Accel::Bvh8(bvh8), order),
                     // Too deep for the BVH8's fixed stack: keep the binary BVH.
                     None => (Accel::Bvh2(bvh), order),
@@ -453,7 +472,34 @@ impl Geometry {
             tri4,
             prim_count,
             accel,
+            carve,
         }
+    }
+
+    /// Whether the triangle hit of primitive `p` at ray parameter `t` is dropped by the
+    /// explicit scratch geometry's filter.
+    #[inline(always)]
+    fn carved_away(&self, p: &Prim, ray: &Ray, t: f32) -> bool {
+        self.carve
+            .as_ref()
+            .is_some_and(|c| c.rejects(p.shape, p.prim, ray.at(t)))
+    }
+
+    /// The origin of a ray leaving a hit at `p` (geometric normal `ng`) on shape `shape`
+    /// toward `dir`: moved off the surface by [`super::OFFSET`], or by
+    /// [`super::CARVED_OFFSET`] on explicit scratch geometry.
+    #[inline(always)]
+    pub fn spawn_origin(&self, p: Vec3, ng: Vec3, shape: u32, dir: Vec3) -> Vec3 {
+        let rel = match &self.carve {
+            Some(c) if c.is_carved(shape) => super::CARVED_OFFSET,
+            _ => super::OFFSET,
+        };
+        super::offset_origin_by(p, ng, dir, rel)
+    }
+
+    /// The explicit scratch geometry, if the scene has any.
+    pub fn carve(&self) -> Option<&Carve> {
+        self.carve.as_deref()
     }
 
     pub fn shapes(&self) -> &[Shape] {
@@ -486,6 +532,7 @@ impl Geometry {
             intersect_sphere(p.v[0], p.v[1].x, ray, t_max).map(|t| (t, 0.0, 0.0))
         } else {
             wray.intersect(p.v[0], p.v[1], p.v[2], t_max)
+                .filter(|h| !self.carved_away(p, ray, h.0))
         }
     }
 
@@ -503,6 +550,7 @@ impl Geometry {
             intersect_sphere(p.v[0], p.v[1].x, ray, t_max).map(|t| (t, 0.0, 0.0))
         } else {
             wray.intersect_axis::<KZ>(p.v[0], p.v[1], p.v[2], t_max)
+                .filter(|h| !self.carved_away(p, ray, h.0))
         }
     }
 

@@ -6,6 +6,7 @@
 //! * [`mesh`]: [`TriangleMesh`] with the rectangle and box; [`obj`] loads OBJ files (tobj);
 //!   [`teapot`] tessellates Newell's 32 Bezier patches with per-vertex uv and tangents.
 //! * [`sphere`]: the analytic sphere.
+//! * [`carve`]: explicit scratch grooves carved into planar faces (METHOD.md 8.3).
 //! * [`bvh`]: [`Geometry`], the BVH (an 8-wide SSE BVH, `bvh8`, by default) with the watertight
 //!   ray-triangle test.
 //! * [`uv_footprint`]: texture-space footprint of a pixel from ray differentials (pbrt-v4).
@@ -15,6 +16,7 @@
 
 pub mod bvh;
 mod bvh8;
+pub mod carve;
 pub mod mesh;
 pub mod obj;
 pub mod sphere;
@@ -29,6 +31,27 @@ pub use mesh::TriangleMesh;
 pub use transform::Transform;
 
 use crate::math::{RayDifferential, Vec2, Vec3, PI};
+
+/// The relative distance a new ray's origin is moved off the surface it leaves
+/// ([`offset_origin_by`]): above float error at any position.
+pub const OFFSET: f32 = 1e-4;
+/// The same for the faces and walls of explicit scratch grooves ([`carve`]), whose features
+/// are 2e-4 of the face's size for the seed's setting 1: small enough to leave a groove's
+/// wall without crossing the groove, still 20 times the float error of a hit's position.
+pub const CARVED_OFFSET: f32 = 2e-6;
+
+/// Moves a ray origin off the surface at `p` (geometric normal `ng`) toward the side `dir`
+/// leaves to, by `rel (1 + max |p_i|)`: scaled with the magnitude of `p` to stay above float
+/// error.
+#[inline]
+pub fn offset_origin_by(p: Vec3, ng: Vec3, dir: Vec3, rel: f32) -> Vec3 {
+    let eps = rel * (1.0 + p.abs().max_element());
+    if dir.dot(ng) >= 0.0 {
+        p + eps * ng
+    } else {
+        p - eps * ng
+    }
+}
 
 /// Everything the renderer needs to know about a ray-surface intersection.
 #[derive(Clone, Copy, Debug)]

@@ -142,6 +142,17 @@ pub enum Orientation {
     Random,
 }
 
+/// One scratch of a layer in texture space: the ellipse of half-axes `half_length` along the
+/// unit `direction` and `half_width` across it, about `centre` ([`LayerSet::scratches`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Scratch {
+    pub layer: usize,
+    pub centre: glam::DVec2,
+    pub direction: glam::DVec2,
+    pub half_length: f64,
+    pub half_width: f64,
+}
+
 /// `K` scratch layers drawn from one seed (METHOD.md section 5). Layer `k`'s angle and noise
 /// seed depend only on `(seed, k)`, so adding layers keeps the first ones unchanged.
 #[derive(Clone, Debug)]
@@ -456,6 +467,50 @@ impl LayerSet {
                 *c = 0.0;
             }
         }
+    }
+
+    /// Every scratch of every layer whose ellipse reaches the texture-space box `[lo, hi]`,
+    /// layer by layer, each once: the one enumeration of the scratches as objects (explicit
+    /// geometry, METHOD.md 8.3). A scratch is one feature point's ellipse `F1 < tau`
+    /// (section 5; where two of a layer's ellipses overlap, the layer's scratch is their
+    /// union, as `F1 < tau` is).
+    pub fn scratches(&self, lo: glam::DVec2, hi: glam::DVec2) -> Vec<Scratch> {
+        let mut out = Vec::new();
+        for layer in &self.layers {
+            let (a, b) = layer.half_axes();
+            // Noise-space box of the texture box, grown by the ellipse's reach (tau cells).
+            let corners = [
+                lo,
+                glam::DVec2::new(hi.x, lo.y),
+                hi,
+                glam::DVec2::new(lo.x, hi.y),
+            ]
+            .map(|p| layer.to_noise(p));
+            let tau = layer.threshold();
+            let qlo = corners.iter().fold(glam::DVec2::INFINITY, |m, &q| m.min(q)) - tau;
+            let qhi = corners
+                .iter()
+                .fold(glam::DVec2::NEG_INFINITY, |m, &q| m.max(q))
+                + tau;
+            let d = glam::DVec2::from(layer.direction());
+            // The ellipse's half extents along u and v.
+            let reach = glam::DVec2::new((a * d.x).hypot(b * d.y), (a * d.y).hypot(b * d.x));
+            for j in worley::floor_i64(qlo.y)..=worley::floor_i64(qhi.y) {
+                for i in worley::floor_i64(qlo.x)..=worley::floor_i64(qhi.x) {
+                    let centre = layer.to_texture(layer.noise().feature_point(i, j));
+                    if (centre + reach).cmpge(lo).all() && (centre - reach).cmple(hi).all() {
+                        out.push(Scratch {
+                            layer: layer.index(),
+                            centre,
+                            direction: d,
+                            half_length: a,
+                            half_width: b,
+                        });
+                    }
+                }
+            }
+        }
+        out
     }
 
     /// Rasterise layer `k` at `res x res` (see [`raster`]).

@@ -10,6 +10,7 @@
 // `!(x > 0.0)` is meant: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+mod explicit;
 pub mod file;
 pub mod materials;
 pub mod scratches;
@@ -22,7 +23,8 @@ use crate::material::Material;
 use crate::math::Vec3;
 use crate::sampler::SamplerKind;
 use file::{EnvironmentType, LightType, SceneFile, ShapeSection, ShapeType};
-use materials::MaterialError;
+use materials::{MaterialDesc, MaterialError};
+use scratches::ExplicitSpec;
 use std::path::{Path, PathBuf};
 
 /// The built-in default scene (`striae render` with no argument): the glass teapot with the
@@ -349,9 +351,17 @@ fn with_causes(e: &dyn std::error::Error) -> String {
 fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene, SceneError> {
     let settings = render_settings(&f, file, o)?;
     let camera = camera(&f, file, &settings)?;
-    let (names, materials) = materials(&f, file, base)?;
+    let (names, mut materials, explicit) = materials(&f, file, base)?;
     // Area lights first (in shape order), then the environment, then suns.
-    let (shapes, mut lights) = shapes(&f, file, base, &names)?;
+    let (mut shapes, mut lights) = shapes(&f, file, base, &names)?;
+    let carve = explicit::carve(
+        &f.shapes,
+        file,
+        &names,
+        &explicit,
+        &mut materials,
+        &mut shapes,
+    )?;
     let mut environment = None;
     if let Some(env) = self::environment(&f, file, base)? {
         lights.push(env);
@@ -360,7 +370,19 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
     lights.extend(suns(&f, file)?);
     Ok(Scene {
         camera,
-        geometry: Geometry::new(shapes),
+        geometry: match carve {
+            Some(carve) => {
+                let start = std::time::Instant::now();
+                let g = Geometry::with_carve(shapes, carve);
+                crate::log::info(&format!(
+                    "BVH over {} primitives built in {:.2} s",
+                    g.primitive_count(),
+                    start.elapsed().as_secs_f64()
+                ));
+                g
+            }
+            None => Geometry::new(shapes),
+        },
         materials,
         lights,
         environment,
@@ -451,18 +473,29 @@ fn camera(
 }
 
 /// The materials, prepared, in the order of their names (sorted: the file's table is a
-/// `BTreeMap`), and the names.
-fn materials<'a>(
-    f: &'a SceneFile,
-    file: &Path,
-    base: &Path,
-) -> Result<(Vec<&'a String>, Vec<Material>), SceneError> {
+/// `BTreeMap`), the names, and per material what explicit scratch geometry needs of it (for a
+/// scratched material with `scratches.explicit = true`, whose prepared material is then its
+/// smooth base: the grooves replace the SV-BRDF).
+type Materials<'a> = (Vec<&'a String>, Vec<Material>, Vec<Option<ExplicitSpec>>);
+fn materials<'a>(f: &'a SceneFile, file: &Path, base: &Path) -> Result<Materials<'a>, SceneError> {
     let names: Vec<&String> = f.materials.keys().collect();
     let mut materials: Vec<Material> = Vec::with_capacity(names.len());
+    let mut explicit = Vec::with_capacity(names.len());
     for (name, m) in &f.materials {
-        materials.push(m.prepare(base).map_err(|e| material_error(file, name, e))?);
+        let error = |e| material_error(file, name, e);
+        match m {
+            MaterialDesc::Scratched(d) if d.is_explicit() => {
+                let spec = d.explicit(base).map_err(error)?;
+                materials.push(spec.face.clone());
+                explicit.push(Some(spec));
+            }
+            _ => {
+                materials.push(m.prepare(base).map_err(error)?);
+                explicit.push(None);
+            }
+        }
     }
-    Ok((names, materials))
+    Ok((names, materials, explicit))
 }
 
 /// The shapes (`[[shapes]]`), and an area light for each that emits.

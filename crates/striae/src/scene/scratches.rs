@@ -21,12 +21,15 @@
 //! seed = 1
 //! layer_mix = "max"              # or "sum" ([Raymond16])
 //! # table = "my-table.npz"       # load a table instead of computing one
+//! # explicit = true              # real grooves on planar faces (METHOD.md 8.3)
 //! ```
 
 use super::materials::{conductor_ior, invalid, MaterialError};
+use crate::bsdf::GrooveWall;
 use crate::bsdf::{ConductorIor, ScratchLobeTable, ScratchedBase};
 use crate::fresnel::FresnelLaw;
 use crate::layers::{LayerError, LayerParams, LayerSet, Orientation, MAX_LAYERS};
+use crate::material::Material;
 use crate::math::Rgb;
 use crate::profile::Profile;
 use crate::scratched::{CoverageMode, LayerMix, ScratchedMaterial};
@@ -97,6 +100,9 @@ pub struct ScratchSpec {
     /// A table file (`.npz`, relative to the scene file) to load instead of computing one;
     /// excludes the table keys above.
     pub table: Option<PathBuf>,
+    /// Build the scratches as real grooves on the shape's planar faces instead of the
+    /// SV-BRDF (METHOD.md 8.3; `scene::explicit`).
+    pub explicit: Option<bool>,
 }
 
 /// Deserialisers of the scratched material's word-valued keys that put the key in the error.
@@ -422,6 +428,70 @@ impl ScratchedDesc {
         Ok(ScratchedMaterial::new(
             r.base, r.tint, table, layers, r.mix, r.coverage,
         ))
+    }
+}
+
+/// What explicit scratch geometry (METHOD.md 8.3) takes from a scratched material: its layers
+/// and profile, the material of the flat face (the smooth base) and of the groove walls (the
+/// BSDF the table assumes: glass walls smooth glass; metal walls Lambertian or mirror times
+/// the table's Fresnel law and the lobe's tint).
+#[derive(Clone, Debug)]
+pub struct ExplicitSpec {
+    pub layers: LayerSet,
+    pub profile: Profile,
+    pub face: Material,
+    pub wall: Material,
+}
+
+impl ScratchedDesc {
+    /// Whether `scratches.explicit = true`.
+    pub fn is_explicit(&self) -> bool {
+        self.scratches.explicit == Some(true)
+    }
+
+    /// The explicit geometry's ingredients (validated like [`ScratchedDesc::resolve`]).
+    pub fn explicit(&self, base_dir: &Path) -> Result<ExplicitSpec, MaterialError> {
+        let r = self.resolve(base_dir)?;
+        let TableSource::Compute(params) = r.table else {
+            return Err(invalid(
+                "scratches.explicit",
+                true,
+                "explicit grooves need the profile and walls: give them instead of `scratches.table`",
+            ));
+        };
+        if r.orientation != Orientation::Layer {
+            return Err(invalid(
+                "scratches.explicit",
+                true,
+                "explicit grooves follow the layers' directions: they cannot be carved with `orientation = \"random\"`",
+            ));
+        }
+        let (face, wall) = match r.base {
+            ScratchedBase::Glass { eta } => {
+                let glass = Material::Dielectric {
+                    eta,
+                    roughness: 0.0,
+                };
+                (glass.clone(), glass)
+            }
+            ScratchedBase::Metal { ior } => (
+                Material::Conductor {
+                    ior,
+                    roughness: 0.0,
+                },
+                Material::GrooveWall(GrooveWall {
+                    specular: params.trace.walls == Walls::Specular,
+                    law: params.trace.fresnel_law,
+                    tint: r.tint,
+                }),
+            ),
+        };
+        Ok(ExplicitSpec {
+            layers: LayerSet::new(r.layers, r.layer_seed).map_err(layer_error)?,
+            profile: params.profile,
+            face,
+            wall,
+        })
     }
 }
 

@@ -34,6 +34,10 @@ pub enum LayerMix {
     Max,
     /// `(1 - sum c_k) f_base + sum c_k f_scratch,k` over every layer ([Raymond16]).
     Sum,
+    /// As `Sum`, with the coverages scaled to add up to the union's, `1 - prod(1 - c_k)`
+    /// (exact for independent layers): `max` takes one layer's share of a footprint that holds
+    /// scratches of several, `sum` counts their overlaps twice (`docs/fidelity.md`).
+    Union,
 }
 
 /// How a hit measures the layers' scratch coverage.
@@ -160,6 +164,14 @@ impl ScratchedMaterial {
         let count = match self.mix {
             LayerMix::Max => self.largest_lobe(ctx, &cov[..k], &mut lobes),
             LayerMix::Sum => self.covering_lobes(ctx, &cov[..k], &mut lobes),
+            LayerMix::Union => {
+                let n = self.covering_lobes(ctx, &cov[..k], &mut lobes);
+                let scale = union_scale(&cov[..k]);
+                for l in &mut lobes[..n] {
+                    l.coverage *= scale;
+                }
+                n
+            }
         };
         if count == 0 {
             return self.base_bsdf();
@@ -183,7 +195,7 @@ impl ScratchedMaterial {
     ) -> bool {
         let query = match self.mix {
             LayerMix::Max => TileQuery::Max,
-            LayerMix::Sum => TileQuery::All,
+            LayerMix::Sum | LayerMix::Union => TileQuery::All,
         };
         match self.coverage {
             CoverageMode::Footprint => match ctx.pixel {
@@ -285,6 +297,17 @@ impl ScratchedMaterial {
         }
         n
     }
+}
+
+/// The factor that takes the coverages `cov` to add up to their union's coverage
+/// `1 - prod(1 - c_k)` (layers independent), `<= 1`; 1 where nothing is covered.
+pub fn union_scale(cov: &[f32]) -> f32 {
+    let sum: f32 = cov.iter().sum();
+    if sum <= 0.0 || sum.is_nan() {
+        return 1.0;
+    }
+    let uncovered: f32 = cov.iter().map(|c| 1.0 - c.clamp(0.0, 1.0)).product();
+    ((1.0 - uncovered) / sum).min(1.0)
 }
 
 /// Scratch lobe of `layer` with coverage `c`: `t = d.x dP/du + d.y dP/dv` in the shading

@@ -687,3 +687,15 @@ fn wo_cache_changes_no_result() {
         }
     }
 }
+
+#[test]
+fn union_mix_scales_coverages_to_their_union() {
+    use super::union_scale;
+    // Two halves: union 3/4 of a sum of 1; one layer alone keeps its coverage.
+    assert!((union_scale(&[0.5, 0.5]) - 0.75).abs() < 1e-6);
+    assert_eq!(union_scale(&[0.3, 0.0, 0.0]), 1.0);
+    assert_eq!(union_scale(&[0.0, 0.0]), 1.0);
+    // Eight layers of 3 %: a union of 21.6 %, not 24 %.
+    let s = union_scale(&[0.03; 8]) * 0.24;
+    assert!((s - 0.2163).abs() < 1e-3, "{s}");
+}
