@@ -217,3 +217,41 @@ fn tiles_merge_to_the_whole_render_and_bad_parts_are_refused() {
     assert!(!dir.join("bad.exr").exists() && !part(3).exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Jobs larger than memory allows are refused up front with the estimate and the flag that set
+/// the size, before anything is allocated or written.
+#[test]
+fn jobs_over_the_memory_limit_are_refused_with_the_estimate() {
+    let dir = std::env::temp_dir().join(format!("striae-memory-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("out");
+    for (args, expect) in [
+        (&["layers", "--res", "16384"][..], "--res 16384"),
+        (&["precompute", "--m", "8192"][..], "--m 8192"),
+        (
+            &["render", "--res", "8192x8192", "-q"][..],
+            "--res 8192x8192",
+        ),
+    ] {
+        let mut all = args.to_vec();
+        all.extend(["--max-memory", "1G"]);
+        let start = std::time::Instant::now();
+        let (ok, err) = striae(&all, &out);
+        assert!(
+            !ok && err.contains(expect) && err.contains("GiB"),
+            "{args:?}: {err}"
+        );
+        assert!(
+            start.elapsed().as_secs_f64() < 30.0,
+            "{args:?} ran before refusing"
+        );
+        assert_eq!(
+            std::fs::read_dir(&dir).unwrap().count(),
+            0,
+            "{args:?} wrote"
+        );
+    }
+    let (ok, err) = striae(&["layers", "--res", "64", "--max-memory", "3X"], &out);
+    assert!(!ok && err.contains("--max-memory"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

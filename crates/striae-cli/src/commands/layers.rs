@@ -48,20 +48,16 @@ pub struct Args {
     /// Output folder (created if missing).
     #[arg(short = 'o', long = "out")]
     out: PathBuf,
+    /// Refuse the job if its estimated memory exceeds this (bytes, or with K, M, G, T); the
+    /// memory available is always a limit.
+    #[arg(long, value_parser = super::memory::parse_size)]
+    max_memory: Option<u64>,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum OrientationArg {
     Layer,
     Random,
-}
-
-/// Available memory from /proc/meminfo (Linux), if readable.
-fn mem_available() -> Option<u64> {
-    let s = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = s.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -85,20 +81,9 @@ pub fn run(args: Args) -> Result<()> {
         .context("invalid scratch layer parameters")?;
     let res = args.res;
     raster::check_resolution(res).context("invalid --res")?;
-    // Peak memory: one layer's coverage and mips (f32, 4/3), the combined image (3 f32), the
-    // stage images (f32) and the encoded PNGs (at most about one byte per texel each).
     let texels = (res as u64) * (res as u64);
-    let need =
-        texels * (6 + 12 + if args.stages { 8 } else { 0 }) + texels * (set.len() as u64 + 4);
-    if let Some(avail) = mem_available() {
-        if need > avail {
-            bail!(
-                "invalid --res {res}: the layers would need about {:.1} GiB of memory, {:.1} GiB is available",
-                need as f64 / (1u64 << 30) as f64,
-                avail as f64 / (1u64 << 30) as f64
-            );
-        }
-    }
+    let per_texel = 14 + set.len() as u64 + if args.stages { 6 } else { 0 };
+    super::memory::check(&format!("--res {res}"), texels * per_texel, args.max_memory)?;
     if args.out.exists() && !args.out.is_dir() {
         bail!("output {} exists and is not a folder", args.out.display());
     }

@@ -2,6 +2,7 @@ pub mod fidelity;
 pub mod figures;
 pub mod gonio;
 pub mod layers;
+pub mod memory;
 pub mod merge;
 pub mod plot;
 pub mod precompute;

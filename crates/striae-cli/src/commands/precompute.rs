@@ -64,6 +64,10 @@ pub struct Args {
     /// Output table (.npz).
     #[arg(short, long)]
     output: PathBuf,
+    /// Refuse the job if its estimated memory exceeds this (bytes, or with K, M, G, T); the
+    /// memory available is always a limit.
+    #[arg(long, value_parser = super::memory::parse_size)]
+    max_memory: Option<u64>,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -100,6 +104,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if let WallsArg::Dielectric = a.walls {
         return dielectric(profile, &a);
     }
+    let m = a.m as u64;
+    super::memory::check(&format!("--m {m}"), 80 * m * m, a.max_memory)?;
     let trace = TraceSettings {
         walls: match a.walls {
             WallsArg::Specular => Walls::Specular,

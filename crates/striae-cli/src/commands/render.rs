@@ -48,6 +48,10 @@ pub struct Args {
     /// 0) and write it as a part file (`-o`, default `NAME-I-of-N.part`) for `striae merge`.
     #[arg(long, value_name = "I/N", value_parser = parse_tile)]
     pub tile: Option<(u32, u32)>,
+    /// Refuse the job if its estimated memory exceeds this (bytes, or with K, M, G, T); the
+    /// memory available is always a limit.
+    #[arg(long, value_parser = super::memory::parse_size)]
+    pub max_memory: Option<u64>,
     /// No progress bar.
     #[arg(long, short = 'q')]
     pub quiet: bool,
@@ -165,6 +169,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some((i, n)) => striae::parts::part_pixel_count((s.width, s.height), i, n)? as u64,
         None => s.width as u64 * s.height as u64,
     };
+    let size = format!("--res {}x{}", s.width, s.height);
+    super::memory::check(&size, pixels * 24, args.max_memory)?;
     let total = pixels * s.spp as u64;
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
     eprintln!(
