@@ -251,6 +251,17 @@ fn jobs_over_the_memory_limit_are_refused_with_the_estimate() {
             "{args:?} wrote"
         );
     }
+    // A command's output never replaces its own input.
+    let profile = dir.join("p.txt");
+    std::fs::write(&profile, "-1 0\n0 -0.5\n1 0\n").unwrap();
+    let spec = format!("file:{}", profile.display());
+    let (ok, err) = striae(&["precompute", "--profile", &spec, "--m", "4"], &profile);
+    assert!(!ok && err.contains("would overwrite"), "{err}");
+    assert_eq!(
+        std::fs::read_to_string(&profile).unwrap(),
+        "-1 0\n0 -0.5\n1 0\n"
+    );
+    std::fs::remove_file(&profile).unwrap();
     let (ok, err) = striae(&["layers", "--res", "64", "--max-memory", "3X"], &out);
     assert!(!ok && err.contains("--max-memory"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);

@@ -25,6 +25,12 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    if striae::io::same_file(&a.table, &a.output) {
+        anyhow::bail!(
+            "-o {} would overwrite the table it plots",
+            a.output.display()
+        );
+    }
     let walls = striae::wall_table::WallTable::load(&a.table)
         .with_context(|| format!("loading {}", a.table.display()))?;
     if let Some(walls) = walls {

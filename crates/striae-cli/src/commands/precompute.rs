@@ -99,6 +99,14 @@ fn parse_law(s: &str, ior: f64) -> anyhow::Result<FresnelLaw> {
 pub fn run(a: Args) -> anyhow::Result<()> {
     striae::io::check_destination(&a.output)
         .with_context(|| format!("-o {}", a.output.display()))?;
+    if let Some(file) = a.profile.strip_prefix("file:") {
+        if striae::io::same_file(std::path::Path::new(file), &a.output) {
+            anyhow::bail!(
+                "-o {} would overwrite the profile file it reads",
+                a.output.display()
+            );
+        }
+    }
     let profile =
         Profile::parse(&a.profile).with_context(|| format!("--profile `{}`", a.profile))?;
     if let WallsArg::Dielectric = a.walls {
