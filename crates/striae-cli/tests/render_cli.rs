@@ -266,3 +266,25 @@ fn jobs_over_the_memory_limit_are_refused_with_the_estimate() {
     assert!(!ok && err.contains("--max-memory"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Finite inputs whose light overflows 32-bit floats are an error, not an image of `inf`.
+#[test]
+fn radiance_that_overflows_is_an_error() {
+    let dir = std::env::temp_dir().join(format!("striae-overflow-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = dir.join("hot.toml");
+    std::fs::write(
+        &scene,
+        "[render]\nwidth = 8\nheight = 6\nspp = 16\n[camera]\nposition = [0, 1, 3]\n\
+         look_at = [0, 0, 0]\nfov = 40\n[materials.white]\ntype = \"diffuse\"\nreflectance = 1.0\n\
+         [[shapes]]\ntype = \"rectangle\"\nmaterial = \"white\"\n\
+         transform = { rotate = { axis = [1, 0, 0], angle = -90 } }\n\
+         [[lights]]\ntype = \"sun\"\ndirection = [0, 1, 0]\nirradiance = 3e38\n",
+    )
+    .unwrap();
+    let out = dir.join("hot");
+    let (ok, err) = striae(&["render", scene.to_str().unwrap(), "-q"], &out);
+    assert!(!ok && err.contains("overflowed"), "{err}");
+    assert!(!out.with_extension("exr").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -23,6 +23,9 @@ pub enum FilmError {
     /// destination that is a folder, a rename); its message names the file.
     #[error("{0}")]
     Outputs(String),
+    /// Finite inputs whose light overflowed 32-bit floats: an error, not an image of `inf`.
+    #[error("the render overflowed: pixel ({x}, {y}) is not finite; the scene's emission, irradiance or environment radiance is too large for 32-bit floats")]
+    Overflow { x: u32, y: u32 },
 }
 
 impl From<std::io::Error> for FilmError {
@@ -75,6 +78,13 @@ impl Image {
         png: &Path,
         exposure: f32,
     ) -> Result<(), FilmError> {
+        if let Some(i) = self.pixels.iter().position(|p| !p.is_finite()) {
+            let w = self.width.max(1) as usize;
+            return Err(FilmError::Overflow {
+                x: (i % w) as u32,
+                y: (i / w) as u32,
+            });
+        }
         crate::io::write_all_atomically(vec![
             (exr, Box::new(|tmp: &Path| self.exr_into(tmp, exr))),
             (
