@@ -183,6 +183,9 @@ impl Scene {
             file: file.to_path_buf(),
             message: e.to_string(),
         };
+        // Parsed twice: as a plain table, to find numbers an `f32` field would turn into
+        // infinity (serde casts silently), then into `SceneFile`, straight from the text so
+        // that errors keep `toml`'s line and caret.
         let table: toml::Table = toml::from_str(text).map_err(parse_error)?;
         if let Some((key, value)) = beyond_f32(&toml::Value::Table(table), String::new()) {
             return Err(invalid(
