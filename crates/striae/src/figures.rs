@@ -16,6 +16,7 @@ use crate::film::FilmError;
 use crate::layers::{raster, LayerError, LayerParams, LayerSet};
 use crate::material::Material;
 use crate::plot::PlotError;
+use crate::scratched::ScratchModel;
 use crate::scene::{Overrides, Scene, SceneError};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -141,7 +142,10 @@ fn scratch_params(scene: &Scene, name: &str) -> Result<Vec<(String, String)>, Fi
             _ => None,
         })
         .ok_or_else(|| FigureError::NoScratches(name.to_string()))?;
-    let t = &m.table.table().params;
+    let ScratchModel::Seed(table) = &m.model else {
+        return Err(FigureError::NoScratches(name.to_string()));
+    };
+    let t = &table.table().params;
     let l = m.layers.params();
     Ok(vec![
         ("base".into(), format!("{:?}", m.base)),

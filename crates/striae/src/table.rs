@@ -171,6 +171,8 @@ fn npy_header_bytes(header: &str) -> Option<u64> {
 pub enum TableError {
     #[error(transparent)]
     Trace(#[from] TraceError),
+    #[error(transparent)]
+    Walls(#[from] crate::groove::GonioError),
     #[error("cannot read or write table {path}")]
     Io {
         path: PathBuf,
