@@ -55,6 +55,8 @@ pub struct WallLobeTable {
     mass: Vec<f32>,
     /// Inclusive prefix sums of `mass` within each `[t][p][side]` slice.
     cdf: Vec<f32>,
+    /// The smooth-wall exit angles of the `theta` grid's centres, `[t][side][lobe]`.
+    grid_exit: Vec<[[f32; 2]; 2]>,
     hash: String,
 }
 
@@ -78,15 +80,23 @@ impl WallLobeTable {
                 acc as f32
             }));
         }
-        WallLobeTable {
+        let mut t = WallLobeTable {
             nt,
             np,
             b,
             n: table.params.ior as f32,
             mass,
             cdf,
+            grid_exit: Vec::new(),
             hash: table.params.hash(),
-        }
+        };
+        t.grid_exit = (0..nt)
+            .map(|i| {
+                let centre = -FRAC_PI_2 + (i as f32 + 0.5) * PI / nt as f32;
+                std::array::from_fn(|side| std::array::from_fn(|l| t.exit_theta(side, l, centre)))
+            })
+            .collect();
+        t
     }
 
     /// The table's parameter hash (`WallTableParams::hash`).
@@ -144,7 +154,6 @@ impl WallLobeTable {
             let w = f - i as f32;
             [(i, 1.0 - w), (i + 1, w)]
         };
-        let centre = |n: usize, i: usize| -FRAC_PI_2 + (i as f32 + 0.5) * PI / n as f32;
         let (wt, wp) = (weights(self.nt, theta), weights(self.np, phi));
         let e_o = [
             self.exit_theta(side, 0, theta),
@@ -161,11 +170,7 @@ impl WallLobeTable {
         };
         let len = self.slice_len();
         for &(t, a) in &wt {
-            let tc = centre(self.nt, t);
-            let e_c = [
-                self.exit_theta(side, 0, tc),
-                self.exit_theta(side, 1, tc),
-            ];
+            let e_c = self.grid_exit[t][side];
             for &(p, bw) in &wp {
                 let w = a * bw;
                 if !(w > 0.0) {
