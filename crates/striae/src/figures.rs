@@ -71,7 +71,7 @@ pub const BEYOND_SCENES: [(&str, &str, &str, &str, &str); 3] = [
         "Halos in reflection: a small light beside the camera",
         "halo-reflection.toml",
         include_str!("../../../scenes/halo-reflection.toml"),
-        "Smooth mirror walls on both sides. With a direction per scratch the lit pieces form arcs around the light's mirror image, each perpendicular to the radius; the seed's layers share one direction each, so the lit pieces line up on a few spokes.",
+        "Smooth glass walls and a direction per scratch: the lit pieces form arcs around the light's mirror image, each perpendicular to the radius. The seed's model (diffuse walls, one direction per layer) spreads each scratch's light over its whole lobe, and its layers' pieces line up along a few directions.",
     ),
     (
         "window",
@@ -477,7 +477,7 @@ pub fn index_html(figures: &[Figure], opts: &FigureOptions) -> String {
             &["halo-t-seed", "halo-t"],
         ),
         (
-            "Beyond the seed: halos in reflection (the seed's layers, a direction per scratch)",
+            "Beyond the seed: halos in reflection (seed's model, dielectric walls)",
             &["halo-r-seed", "halo-r"],
         ),
         (
