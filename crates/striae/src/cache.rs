@@ -135,7 +135,7 @@ pub fn load_or_compute_walls(
 /// Read a table file of either kind: a dielectric-wall table (its `kind` says so) or the
 /// seed's scratch table.
 pub fn load_any_table_file(path: &Path) -> Result<ScratchModel, TableError> {
-    let walls = WallTable::load(path).map_err(|e| TableError::Npz {
+    let walls = WallTable::load(path).map_err(|e| TableError::WallFile {
         path: path.into(),
         why: e.to_string(),
     });
@@ -306,6 +306,62 @@ mod tests {
         assert_eq!(loaded.params.profile.points, params.profile.points);
         assert_eq!(loaded.params.trace, params.trace);
         assert_eq!(loaded.params.hash(), hash);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// A table file of either kind loads as its model; a dielectric-wall file with a negative
+    /// fraction, or more energy out than in, is refused naming the array; the disk cache of
+    /// wall tables recovers from a corrupt file.
+    #[test]
+    fn table_files_of_both_kinds_and_corrupt_wall_tables() {
+        let dir = std::env::temp_dir().join(format!("striae-walls-cache-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let walls = WallTableParams {
+            theta_bins: 2,
+            phi_bins: 2,
+            bins: 4,
+            paths: 200,
+            seed: 5,
+            ..WallTableParams::new(Profile::parse("v:angle=90").unwrap(), 1.5, 0.0)
+        };
+        let hash = walls.hash();
+        let a = load_or_compute_walls(&walls, &hash, Some(&dir)).unwrap();
+        let file = wall_cache_file(&dir, &hash);
+        assert!(matches!(
+            load_any_table_file(&file).unwrap(),
+            ScratchModel::DielectricWalls(_)
+        ));
+        std::fs::write(&file, b"garbage").unwrap();
+        let b = load_or_compute_walls(&walls, &hash, Some(&dir)).unwrap();
+        assert_eq!(a.lobes, b.lobes);
+        // Corrupt values: negative, and R + T > 1.
+        for (value, needle) in [(-0.5, "r_out"), (0.9, "send out")] {
+            let mut bad = a.clone();
+            bad.lobes[0][3] = value;
+            let path = dir.join("bad.npz");
+            bad.save(&path).unwrap();
+            let e = load_any_table_file(&path).unwrap_err().to_string();
+            assert!(e.contains(needle), "{e}");
+        }
+        let seed = TableParams::new(
+            Profile::parse("v:angle=90").unwrap(),
+            TraceSettings {
+                m: 8,
+                n: 50,
+                nr: 2,
+                ..TraceSettings::default()
+            },
+        );
+        let path = dir.join("seed.npz");
+        ScratchTable::compute(&seed, &|_| {})
+            .unwrap()
+            .save(&path)
+            .unwrap();
+        assert!(matches!(
+            load_any_table_file(&path).unwrap(),
+            ScratchModel::Seed(_)
+        ));
         std::fs::remove_dir_all(&dir).ok();
     }
 }

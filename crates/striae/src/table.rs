@@ -173,6 +173,8 @@ pub enum TableError {
     Trace(#[from] TraceError),
     #[error(transparent)]
     Walls(#[from] crate::groove::GonioError),
+    #[error("dielectric-wall table {path}: {why}")]
+    WallFile { path: PathBuf, why: String },
     #[error("cannot read or write table {path}")]
     Io {
         path: PathBuf,

@@ -302,7 +302,7 @@ impl WallTable {
             Ok(a.to_vec())
         };
         let (theta_i, phi_i, exit) = (vec("theta_i")?, vec("phi_i")?, vec("theta_o")?);
-        let bad = |why: String| std::io::Error::other(format!("{}: {why}", path.display()));
+        let bad = std::io::Error::other;
         let params = WallTableParams {
             profile,
             ior,
