@@ -161,6 +161,19 @@ fn outputs_that_would_be_wrong_or_would_replace_what_is_not_a_file_are_refused()
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A glass sphere under a constant sky, 37 x 21 pixels (6 tiles) at `spp`, as `dir/s.toml`.
+fn glass_sphere(dir: &Path, spp: u32) -> std::path::PathBuf {
+    let scene = dir.join("s.toml");
+    let text = format!(
+        "[render]\nwidth = 37\nheight = 21\nspp = {spp}\n[camera]\nposition = [0, 1, 4]\n\
+         look_at = [0, 0.5, 0]\nfov = 40\n[materials.glass]\ntype = \"dielectric\"\n[[shapes]]\n\
+         type = \"sphere\"\nmaterial = \"glass\"\ncenter = [0, 0.6, 0]\nradius = 0.6\n\
+         [environment]\ntype = \"constant\"\nradiance = [0.8, 0.9, 1.0]\n"
+    );
+    std::fs::write(&scene, text).unwrap();
+    scene
+}
+
 /// `striae render --tile I/N` for I in 0..3 and `striae merge` give the EXR of the whole
 /// render byte for byte (37 x 21 pixels: 6 tiles, 3 parts of 2); an index out of range, and a
 /// missing or foreign part, are errors that say so.
@@ -168,15 +181,7 @@ fn outputs_that_would_be_wrong_or_would_replace_what_is_not_a_file_are_refused()
 fn tiles_merge_to_the_whole_render_and_bad_parts_are_refused() {
     let dir = std::env::temp_dir().join(format!("striae-tiles-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let scene = dir.join("s.toml");
-    std::fs::write(
-        &scene,
-        "[render]\nwidth = 37\nheight = 21\nspp = 2\n[camera]\nposition = [0, 1, 4]\n\
-         look_at = [0, 0.5, 0]\nfov = 40\n[materials.glass]\ntype = \"dielectric\"\n[[shapes]]\n\
-         type = \"sphere\"\nmaterial = \"glass\"\ncenter = [0, 0.6, 0]\nradius = 0.6\n\
-         [environment]\ntype = \"constant\"\nradiance = [0.8, 0.9, 1.0]\n",
-    )
-    .unwrap();
+    let scene = glass_sphere(&dir, 2);
     let s = scene.to_str().unwrap();
     let (ok, err) = striae(&["render", s, "-q"], &dir.join("whole"));
     assert!(ok, "{err}");
@@ -225,15 +230,7 @@ fn tiles_merge_to_the_whole_render_and_bad_parts_are_refused() {
 fn sample_ranges_merge_and_bad_ranges_are_refused() {
     let dir = std::env::temp_dir().join(format!("striae-samples-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let scene = dir.join("s.toml");
-    std::fs::write(
-        &scene,
-        "[render]\nwidth = 37\nheight = 21\nspp = 5\n[camera]\nposition = [0, 1, 4]\n\
-         look_at = [0, 0.5, 0]\nfov = 40\n[materials.glass]\ntype = \"dielectric\"\n[[shapes]]\n\
-         type = \"sphere\"\nmaterial = \"glass\"\ncenter = [0, 0.6, 0]\nradius = 0.6\n\
-         [environment]\ntype = \"constant\"\nradiance = [0.8, 0.9, 1.0]\n",
-    )
-    .unwrap();
+    let scene = glass_sphere(&dir, 5);
     let s = scene.to_str().unwrap();
     let path = |name: &str| dir.join(name).display().to_string();
     let render = |extra: &[&str], name: &str| {
