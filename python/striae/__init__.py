@@ -226,8 +226,9 @@ def _res(res):
 
 def merge(parts: Sequence[Union[bytes, str, "os.PathLike[str]"]]) -> np.ndarray:
     """The ``(h, w, 3)`` image of every part of one render, given as part-file bytes or paths:
-    bit for bit the whole render. Raises :class:`StriaeError` for parts of different renders,
-    missing or repeated parts and damaged files."""
+    bit for bit the whole render (within Monte Carlo noise where parts hold sample ranges:
+    docs/distributed.md). Raises :class:`StriaeError` for parts of different renders,
+    missing or repeated parts, overlapping or missing sample ranges and damaged files."""
     data, names = [], []
     for i, p in enumerate(parts):
         if isinstance(p, (bytes, bytearray, memoryview)):
