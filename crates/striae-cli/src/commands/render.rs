@@ -194,7 +194,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let total = pixels * args.samples.map_or(s.spp, |[a, b]| b - a) as u64;
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
     eprintln!(
-        "rendering {} at {}x{}, {} spp, max depth {}, seed {}, {} thread(s)",
+        "rendering {} at {}x{}, {} spp{}, max depth {}, seed {}, {} thread(s)",
         args.scene
             .as_ref()
             .map(|p| p.display().to_string())
@@ -202,6 +202,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         s.width,
         s.height,
         s.spp,
+        args.samples
+            .map(|[a, b]| format!(" (samples {a}..{b})"))
+            .unwrap_or_default(),
         s.max_depth,
         s.seed,
         threads
