@@ -191,10 +191,19 @@ def render(
     )
 
 
-def render_part(scene: SceneLike, index: int, count: int, **settings: Any) -> bytes:
+def render_part(
+    scene: SceneLike,
+    index: int,
+    count: int,
+    samples: Optional[Tuple[int, int]] = None,
+    **settings: Any,
+) -> bytes:
     """Render part ``index`` of ``count`` of the image (its tiles ``t % count == index``) and
     return it as the bytes of a part file (``striae render --tile index/count`` writes the
-    same bytes); ``settings`` are :func:`render`'s keywords. :func:`merge` joins the parts."""
+    same bytes); ``samples = (a, b)`` renders only the samples ``a`` to ``b - 1`` of each
+    pixel (``--samples a..b``); ``settings`` are :func:`render`'s keywords. :func:`merge`
+    joins the parts (parts of sample ranges within Monte Carlo noise of the whole render, not
+    bit for bit: docs/distributed.md)."""
     kind, source = _scene_source(scene)
     s = dict(_SETTINGS, **settings)
     if set(s) != set(_SETTINGS):
@@ -202,6 +211,7 @@ def render_part(scene: SceneLike, index: int, count: int, **settings: Any) -> by
     return _striae.render(
         kind, source, s["spp"], _res(s["res"]), s["seed"], s["threads"], s["max_depth"],
         s["sampler"], s["progress"], (index, count),
+        None if samples is None else (int(samples[0]), int(samples[1])),
     )
 
 
@@ -216,8 +226,9 @@ def _res(res):
 
 def merge(parts: Sequence[Union[bytes, str, "os.PathLike[str]"]]) -> np.ndarray:
     """The ``(h, w, 3)`` image of every part of one render, given as part-file bytes or paths:
-    bit for bit the whole render. Raises :class:`StriaeError` for parts of different renders,
-    missing or repeated parts and damaged files."""
+    bit for bit the whole render (within Monte Carlo noise where parts hold sample ranges:
+    docs/distributed.md). Raises :class:`StriaeError` for parts of different renders,
+    missing or repeated parts, overlapping or missing sample ranges and damaged files."""
     data, names = [], []
     for i, p in enumerate(parts):
         if isinstance(p, (bytes, bytearray, memoryview)):

@@ -97,9 +97,11 @@ def render(
     sampler: Optional[str] = None,
     progress: Optional[Callable[[int], object]] = None,
     tile: Optional[Tuple[int, int]] = None,
+    samples: Optional[Tuple[int, int]] = None,
 ) -> object:
     """Render the scene (``kind``: ``"path"``, ``"toml"`` or ``"json"``): an ``(h, w, 3)``
-    float32 array, or with ``tile = (index, count)`` that part's file contents (bytes)."""
+    float32 array, or with ``tile = (index, count)`` that part's file contents (bytes), of the
+    samples ``samples = (a, b)`` of each pixel only where given."""
 
 def merge(parts: List[bytes], names: List[str]) -> Tuple[npt.NDArray[np.float32], float]:
     """The image of every part of one render, and the preview exposure they carry."""

@@ -31,7 +31,7 @@ enum Command {
     /// Render a scene file (or the built-in default scene) to EXR and PNG.
     #[command(allow_negative_numbers = true)]
     Render(commands::render::Args),
-    /// Merge the part files of one render (`render --tile I/N`) into its EXR and PNG.
+    /// Merge the part files of one render (`render --tile I/N`, `--samples A..B`) into its EXR and PNG.
     Merge(commands::merge::Args),
     /// Regenerate the seed's figures (Fig. 2, 4, 6, 7, 8a) as PNGs plus an index.html.
     #[command(allow_negative_numbers = true)]

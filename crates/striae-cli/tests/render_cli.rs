@@ -161,6 +161,19 @@ fn outputs_that_would_be_wrong_or_would_replace_what_is_not_a_file_are_refused()
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A glass sphere under a constant sky, 37 x 21 pixels (6 tiles) at `spp`, as `dir/s.toml`.
+fn glass_sphere(dir: &Path, spp: u32) -> std::path::PathBuf {
+    let scene = dir.join("s.toml");
+    let text = format!(
+        "[render]\nwidth = 37\nheight = 21\nspp = {spp}\n[camera]\nposition = [0, 1, 4]\n\
+         look_at = [0, 0.5, 0]\nfov = 40\n[materials.glass]\ntype = \"dielectric\"\n[[shapes]]\n\
+         type = \"sphere\"\nmaterial = \"glass\"\ncenter = [0, 0.6, 0]\nradius = 0.6\n\
+         [environment]\ntype = \"constant\"\nradiance = [0.8, 0.9, 1.0]\n"
+    );
+    std::fs::write(&scene, text).unwrap();
+    scene
+}
+
 /// `striae render --tile I/N` for I in 0..3 and `striae merge` give the EXR of the whole
 /// render byte for byte (37 x 21 pixels: 6 tiles, 3 parts of 2); an index out of range, and a
 /// missing or foreign part, are errors that say so.
@@ -168,15 +181,7 @@ fn outputs_that_would_be_wrong_or_would_replace_what_is_not_a_file_are_refused()
 fn tiles_merge_to_the_whole_render_and_bad_parts_are_refused() {
     let dir = std::env::temp_dir().join(format!("striae-tiles-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let scene = dir.join("s.toml");
-    std::fs::write(
-        &scene,
-        "[render]\nwidth = 37\nheight = 21\nspp = 2\n[camera]\nposition = [0, 1, 4]\n\
-         look_at = [0, 0.5, 0]\nfov = 40\n[materials.glass]\ntype = \"dielectric\"\n[[shapes]]\n\
-         type = \"sphere\"\nmaterial = \"glass\"\ncenter = [0, 0.6, 0]\nradius = 0.6\n\
-         [environment]\ntype = \"constant\"\nradiance = [0.8, 0.9, 1.0]\n",
-    )
-    .unwrap();
+    let scene = glass_sphere(&dir, 2);
     let s = scene.to_str().unwrap();
     let (ok, err) = striae(&["render", s, "-q"], &dir.join("whole"));
     assert!(ok, "{err}");
@@ -215,6 +220,76 @@ fn tiles_merge_to_the_whole_render_and_bad_parts_are_refused() {
     let (ok, err) = striae(&["render", s, "-q", "--tile", "0/7"], &part(3));
     assert!(!ok && err.contains("only 6 tiles"), "{err}");
     assert!(!dir.join("bad.exr").exists() && !part(3).exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `striae render --samples A..B` (alone and with `--tile`) and `striae merge`: the merged
+/// pixels are the whole render's within `f32` rounding (a dielectric scene: no scratch
+/// footprints); bad ranges name `--samples`, overlaps and gaps name the files and samples.
+#[test]
+fn sample_ranges_merge_and_bad_ranges_are_refused() {
+    let dir = std::env::temp_dir().join(format!("striae-samples-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = glass_sphere(&dir, 5);
+    let s = scene.to_str().unwrap();
+    let path = |name: &str| dir.join(name).display().to_string();
+    let render = |extra: &[&str], name: &str| {
+        let (ok, err) = striae(&[&["render", s, "-q"], extra].concat(), &dir.join(name));
+        assert!(ok, "{err}");
+    };
+    render(&["--tile", "0/1"], "whole.part");
+    render(&["--samples", "0..2"], "a.part");
+    render(&["--samples", "2..5"], "b.part");
+    render(&["--tile", "0/2", "--samples", "0..4"], "t0a.part");
+    render(&["--tile", "0/2", "--samples", "4..5"], "t0b.part");
+    render(&["--tile", "1/2"], "t1.part");
+    let read = |name: &str| {
+        (
+            dir.join(name),
+            striae::parts::Part::read(&dir.join(name)).unwrap(),
+        )
+    };
+    let (whole, _) = striae::parts::merge(&[read("whole.part")]).unwrap();
+    for set in [
+        vec!["b.part", "a.part"],
+        vec!["t0b.part", "t1.part", "t0a.part"],
+    ] {
+        let parts: Vec<_> = set.iter().map(|n| read(n)).collect();
+        let (merged, _) = striae::parts::merge(&parts).unwrap();
+        for (p, q) in merged.pixels.iter().zip(&whole.pixels) {
+            assert!(
+                (*p - *q).abs().max_element() <= 1e-5 * q.max_element(),
+                "{set:?}: {p} {q}"
+            );
+        }
+        let files: Vec<String> = set.iter().map(|n| path(n)).collect();
+        let files: Vec<&str> = files.iter().map(String::as_str).collect();
+        let (ok, err) = striae(&[&["merge"], &files[..]].concat(), &dir.join("merged"));
+        assert!(ok && dir.join("merged.exr").exists(), "{err}");
+    }
+
+    let (ok, err) = striae(&["merge", &path("a.part")], &dir.join("bad"));
+    assert!(
+        !ok && err.contains("no part file holds samples 2..5") && err.contains("a.part (0..2)"),
+        "{err}"
+    );
+    render(&["--samples", "1..3"], "c.part");
+    let (ok, err) = striae(
+        &["merge", &path("a.part"), &path("c.part"), &path("b.part")],
+        &dir.join("bad"),
+    );
+    assert!(
+        !ok && err.contains("c.part (samples 1..3) overlap"),
+        "{err}"
+    );
+    for bad in ["3..2", "2..2", "0..6", "1-2", "x"] {
+        let (ok, err) = striae(
+            &["render", s, "-q", "--samples", bad],
+            &dir.join("bad.part"),
+        );
+        assert!(!ok && err.contains("--samples"), "{bad}: {err}");
+    }
+    assert!(!dir.join("bad.exr").exists() && !dir.join("bad.part").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -155,9 +155,10 @@ fn scene_with(
     load_scene(kind, source, &overrides)
 }
 
-/// Render a scene (or part `tile = (index, count)` of it, returned as part-file bytes).
+/// Render a scene (or part `tile = (index, count)` of it, of the samples `samples = (A, B)`
+/// only where given, returned as part-file bytes).
 #[pyfunction]
-#[pyo3(signature = (kind, source, spp=None, res=None, seed=None, threads=None, max_depth=None, sampler=None, progress=None, tile=None))]
+#[pyo3(signature = (kind, source, spp=None, res=None, seed=None, threads=None, max_depth=None, sampler=None, progress=None, tile=None, samples=None))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -171,6 +172,7 @@ fn render<'py>(
     sampler: Option<&str>,
     progress: Option<Bound<'py, PyAny>>,
     tile: Option<(u32, u32)>,
+    samples: Option<(u32, u32)>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let (scene, text) = scene_with(kind, source, spp, res, seed, max_depth, sampler)?;
     let pool = pool(threads)?;
@@ -181,7 +183,8 @@ fn render<'py>(
             let count = |n| {
                 done.fetch_add(n, Ordering::Relaxed);
             };
-            pool.install(|| Part::render(&scene, &text, tile, &count, cancel))
+            let samples = samples.map(|(a, b)| [a, b]);
+            pool.install(|| Part::render(&scene, &text, tile, samples, &count, cancel))
         })?
         .map_err(err)?
         .0;

@@ -76,10 +76,11 @@ impl RenderStats {
 }
 
 /// What every pixel of one render shares: whether paths carry ray differentials (only when a
-/// material reads the footprint).
+/// material reads the footprint), and which of its samples are traced (`first..end`).
 #[derive(Clone, Copy)]
 struct Pass {
     differentials: bool,
+    samples: (u32, u32),
 }
 
 /// What one render worker owns: its counters, summed at the end of each tile, and its
@@ -461,14 +462,37 @@ pub fn render_tiles(
     cancel: &AtomicBool,
     simd: Simd,
 ) -> Result<(Vec<Vec<Rgb>>, RenderStats), Cancelled> {
+    let spp = scene.settings.spp;
+    let (mut pixels, stats) = render_tile_sums(scene, tiles, 0..spp, progress, cancel, simd)?;
+    for p in pixels.iter_mut().flatten() {
+        *p /= spp as f32;
+    }
+    Ok((pixels, stats))
+}
+
+/// [`render_tiles`] of the samples `samples` (a range of `0..spp`) of each pixel only: each
+/// pixel's sum of those samples' radiance (`f32`, added in sample order, non-finite samples
+/// dropped), not divided by anything. With `0..spp`, the sum [`render_tiles`] divides by the
+/// spp. A sample's radiance depends on the pixel's earlier samples only through the pixel's
+/// scratch-coverage footprints (`layers::CoverageCache::of_pixel`), which a range starting
+/// after 0 takes from its own first samples.
+pub fn render_tile_sums(
+    scene: &Scene,
+    tiles: &[u32],
+    samples: std::ops::Range<u32>,
+    progress: &(dyn Fn(u64) + Sync),
+    cancel: &AtomicBool,
+    simd: Simd,
+) -> Result<(Vec<Vec<Rgb>>, RenderStats), Cancelled> {
     let copy = LoopCopy::chosen(simd);
     let start = std::time::Instant::now();
     let (w, h) = scene.camera.resolution();
     let rays = AtomicU64::new(0);
     let nonfinite = AtomicU64::new(0);
-    let spp = scene.settings.spp;
+    let n = samples.len() as u64;
     let pass = Pass {
         differentials: scene.materials.iter().any(Material::reads_footprint),
+        samples: (samples.start, samples.end),
     };
     let pixels: Vec<Option<Vec<Rgb>>> = tiles
         .par_iter()
@@ -479,13 +503,13 @@ pub fn render_tiles(
             let out = render_tile(scene, tile_rect(w, h, tile), pass, copy, worker);
             rays.fetch_add(std::mem::take(&mut worker.rays), Ordering::Relaxed);
             nonfinite.fetch_add(std::mem::take(&mut worker.nonfinite), Ordering::Relaxed);
-            progress(out.len() as u64 * spp as u64);
+            progress(out.len() as u64 * n);
             Some(out)
         })
         .collect();
     let pixels: Vec<Vec<Rgb>> = pixels.into_iter().collect::<Option<_>>().ok_or(Cancelled)?;
     let stats = RenderStats {
-        samples: pixels.iter().map(|p| p.len() as u64).sum::<u64>() * spp as u64,
+        samples: pixels.iter().map(|p| p.len() as u64).sum::<u64>() * n,
         rays: rays.into_inner(),
         nonfinite: nonfinite.into_inner(),
         seconds: start.elapsed().as_secs_f64(),
@@ -512,26 +536,26 @@ fn render_tile(
         // SAFETY: `copy` is at most `LoopCopy::available()`, so the CPU has the features.
         LoopCopy::Avx512 => unsafe {
             return if pass.differentials {
-                render_tile_avx512::<true>(scene, rect, worker)
+                render_tile_avx512::<true>(scene, rect, pass.samples, worker)
             } else {
-                render_tile_avx512::<false>(scene, rect, worker)
+                render_tile_avx512::<false>(scene, rect, pass.samples, worker)
             };
         },
         // SAFETY: as above.
         LoopCopy::Avx2 => unsafe {
             return if pass.differentials {
-                render_tile_avx2::<true>(scene, rect, worker)
+                render_tile_avx2::<true>(scene, rect, pass.samples, worker)
             } else {
-                render_tile_avx2::<false>(scene, rect, worker)
+                render_tile_avx2::<false>(scene, rect, pass.samples, worker)
             };
         },
         LoopCopy::Portable => {}
     }
     let _ = copy;
     if pass.differentials {
-        render_tile_body::<true>(scene, rect, worker)
+        render_tile_body::<true>(scene, rect, pass.samples, worker)
     } else {
-        render_tile_body::<false>(scene, rect, worker)
+        render_tile_body::<false>(scene, rect, pass.samples, worker)
     }
 }
 
@@ -569,9 +593,10 @@ macro_rules! render_loop_copy {
             unsafe fn $name<const DIFFERENTIALS: bool>(
                 scene: &Scene,
                 rect: [u32; 4],
+                samples: (u32, u32),
                 worker: &mut Worker,
             ) -> Vec<Rgb> {
-                render_tile_body::<DIFFERENTIALS>(scene, rect, worker)
+                render_tile_body::<DIFFERENTIALS>(scene, rect, samples, worker)
             }
         }
     };
@@ -580,18 +605,19 @@ macro_rules! render_loop_copy {
 render_loop_copy!(loop_copy_avx2, render_tile_avx2);
 render_loop_copy!(loop_copy_avx512, render_tile_avx512);
 
-/// The tile's pixels, with (`DIFFERENTIALS`, `pass.differentials`) or without ray
-/// differentials.
+/// The tile's pixels' sums of the samples `samples`, with (`DIFFERENTIALS`,
+/// `pass.differentials`) or without ray differentials.
 #[inline(always)]
 fn render_tile_body<const DIFFERENTIALS: bool>(
     scene: &Scene,
     [x0, y0, x1, y1]: [u32; 4],
+    samples: (u32, u32),
     worker: &mut Worker,
 ) -> Vec<Rgb> {
     let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
     for y in y0..y1 {
         for x in x0..x1 {
-            out.push(render_pixel::<DIFFERENTIALS>(scene, x, y, worker));
+            out.push(render_pixel::<DIFFERENTIALS>(scene, x, y, samples, worker));
         }
     }
     out
@@ -651,20 +677,21 @@ fn camera_sample<const DIFFERENTIALS: bool>(
 /// teapot and smooth close-up, whole process).
 const PACKET_MIN_SPP: u32 = 4;
 
-/// The mean of `spp` samples of pixel `(x, y)` (box filter: uniform positions in the pixel).
-/// From [`PACKET_MIN_SPP`] samples on, in chunks of up to [`PACKET`]: a chunk's camera rays
-/// are traced together (`Geometry::intersect_coherent`), then its paths run one after another,
-/// in sample order. The hits are the same, so the image is too.
+/// The sum of the samples `first..end` of pixel `(x, y)` (box filter: uniform positions in the
+/// pixel), added in sample order; divided by the spp, the pixel's value when they are all of
+/// them. From [`PACKET_MIN_SPP`] samples on, in chunks of up to [`PACKET`]: a chunk's camera
+/// rays are traced together (`Geometry::intersect_coherent`), then its paths run one after
+/// another, in sample order. The hits are the same, so the image is too.
 #[inline(always)]
 fn render_pixel<const DIFFERENTIALS: bool>(
     scene: &Scene,
     x: u32,
     y: u32,
+    (start, end): (u32, u32),
     worker: &mut Worker,
 ) -> Rgb {
     let (w, _) = scene.camera.resolution();
     let pixel_index = y as u64 * w as u64 + x as u64;
-    let spp = scene.settings.spp;
     worker.coverage.start_pixel();
     let mut sum = Rgb::ZERO;
     let mut add = |l: Rgb, worker: &mut Worker| {
@@ -675,21 +702,21 @@ fn render_pixel<const DIFFERENTIALS: bool>(
         }
     };
     // (A thin lens's rays share no origin: no packet.)
-    if spp < PACKET_MIN_SPP || !scene.camera.is_pinhole() {
-        for s in 0..spp {
+    if end - start < PACKET_MIN_SPP || !scene.camera.is_pinhole() {
+        for s in start..end {
             let mut sample = camera_sample::<DIFFERENTIALS>(scene, (x, y), pixel_index, s);
             let l = radiance::<DIFFERENTIALS>(scene, &mut sample, CameraHit::Untraced, worker);
             add(l, worker);
         }
-        return sum / spp as f32;
+        return sum;
     }
     // (`ArrayVec`s: only what a chunk holds is written.)
     let mut samples = ArrayVec::<CameraSample, PACKET>::new();
     let mut rays = ArrayVec::<Ray, PACKET>::new();
     let mut hits = ArrayVec::<Option<SurfaceHit>, PACKET>::new();
-    let mut first = 0;
-    while first < spp {
-        let n = (spp - first).min(PACKET as u32);
+    let mut first = start;
+    while first < end {
+        let n = (end - first).min(PACKET as u32);
         samples.clear();
         rays.clear();
         for s in first..first + n {
@@ -704,7 +731,7 @@ fn render_pixel<const DIFFERENTIALS: bool>(
         }
         first += n;
     }
-    sum / spp as f32
+    sum
 }
 
 /// Radiance arriving at the camera along a camera sample's ray (one path sample), whose closest

@@ -1,5 +1,7 @@
 //! `striae merge PART... -o NAME`: the image of the part files of one render (`striae render
-//! --tile I/N`), as NAME.exr and NAME.png, identical bit for bit to the render made at once.
+//! --tile I/N`, `--samples A..B`), as NAME.exr and NAME.png: identical bit for bit to the render
+//! made at once where every part holds all its samples, within Monte Carlo noise where samples
+//! are split (`striae::parts`).
 
 use anyhow::Context;
 use std::path::PathBuf;
@@ -7,7 +9,11 @@ use striae::parts::{merge, Part};
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The part files, every part of one render once, in any order.
+    /// The part files, every part of one render once, in any order. Parts of sample ranges
+    /// (`render --samples A..B`) must cover 0..spp without overlap, per tile part; their merge
+    /// adds the ranges' sums in f64 and is not the one-machine render bit for bit: it differs
+    /// by f32 rounding, and in the few pixels whose scratch-coverage footprint a range takes
+    /// from its own first sample, by less than the noise (docs/distributed.md).
     #[arg(required = true)]
     pub parts: Vec<PathBuf>,
     /// Output path: `NAME.exr`, `NAME.png` or `NAME`; both NAME.exr and NAME.png are written.

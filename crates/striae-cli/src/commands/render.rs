@@ -48,6 +48,12 @@ pub struct Args {
     /// 0) and write it as a part file (`-o`, default `NAME-I-of-N.part`) for `striae merge`.
     #[arg(long, value_name = "I/N", value_parser = parse_tile)]
     pub tile: Option<(u32, u32)>,
+    /// Render only the samples A to B-1 (counting from 0, B at most the spp) of every pixel (of
+    /// the `--tile` part's, with `--tile`) and write their sums as a part file (`-o`, default
+    /// `NAME-samples-A-B.part` or `NAME-I-of-N-samples-A-B.part`) for `striae merge`; the merge
+    /// is the whole render within Monte Carlo noise, not bit for bit (docs/distributed.md).
+    #[arg(long, value_name = "A..B", value_parser = parse_samples)]
+    pub samples: Option<[u32; 2]>,
     /// Refuse the job if its estimated memory exceeds this (bytes, or with K, M, G, T); the
     /// memory available is always a limit.
     #[arg(long, value_parser = super::memory::parse_size)]
@@ -69,6 +75,16 @@ fn parse_tile(s: &str) -> Result<(u32, u32), String> {
         ));
     }
     Ok((i, n))
+}
+
+/// `--samples A..B`: two sample indices, `A < B`; `B` is checked against the spp
+/// (`parts::check_samples`).
+fn parse_samples(s: &str) -> Result<[u32; 2], String> {
+    let range = striae::parts::parse_samples(s)?;
+    if range[0] >= range[1] {
+        return Err(format!("`{s}`: A must be less than B (A..B excludes B)"));
+    }
+    Ok(range)
 }
 
 /// Most worker threads a command accepts: more than any machine's cores, and few enough that a
@@ -165,16 +181,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return export_meshes(&scene, dir);
     }
     let s = &scene.settings;
-    let pixels = match args.tile {
+    if let Some(range) = args.samples {
+        striae::parts::check_samples(range, s.spp).context("--samples")?;
+    }
+    let tile = args.tile.or(args.samples.map(|_| (0, 1)));
+    let pixels = match tile {
         Some((i, n)) => striae::parts::part_pixel_count((s.width, s.height), i, n)? as u64,
         None => s.width as u64 * s.height as u64,
     };
     let size = format!("--res {}x{}", s.width, s.height);
     super::memory::check(&size, pixels * 24, args.max_memory)?;
-    let total = pixels * s.spp as u64;
+    let total = pixels * args.samples.map_or(s.spp, |[a, b]| b - a) as u64;
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
     eprintln!(
-        "rendering {} at {}x{}, {} spp, max depth {}, seed {}, {} thread(s)",
+        "rendering {} at {}x{}, {} spp{}, max depth {}, seed {}, {} thread(s)",
         args.scene
             .as_ref()
             .map(|p| p.display().to_string())
@@ -182,6 +202,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         s.width,
         s.height,
         s.spp,
+        args.samples
+            .map(|[a, b]| format!(" (samples {a}..{b})"))
+            .unwrap_or_default(),
         s.max_depth,
         s.seed,
         threads
@@ -191,11 +214,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .num_threads(threads)
         .build()
         .context("starting the thread pool")?;
-    if let Some(tile) = args.tile {
-        let path = part_path(args.output.as_deref(), args.scene.as_deref(), tile);
+    if let Some(tile) = tile {
+        let path = part_path(&args, tile);
         let cancel = std::sync::atomic::AtomicBool::new(false);
         let (part, stats) = pool.install(|| {
-            striae::parts::Part::render(&scene, &scene_text, tile, &|n| bar.inc(n), &cancel)
+            let progress = |n| bar.inc(n);
+            striae::parts::Part::render(&scene, &scene_text, tile, args.samples, &progress, &cancel)
         })?;
         bar.finish_and_clear();
         part.write(&path)?;
@@ -228,15 +252,25 @@ pub(crate) fn image_outputs(
     Ok((exr, png))
 }
 
-/// `-o` for a part file, or `NAME-I-of-N.part` after the scene file's name (`striae` for the
-/// built-in scene).
-fn part_path(output: Option<&Path>, scene: Option<&Path>, (i, n): (u32, u32)) -> PathBuf {
-    output.map(Path::to_path_buf).unwrap_or_else(|| {
-        let stem = scene
+/// `-o` for a part file, or after the scene file's name (`striae` for the built-in scene)
+/// `NAME-I-of-N.part`, `NAME-samples-A-B.part` or `NAME-I-of-N-samples-A-B.part`.
+fn part_path(args: &Args, (i, n): (u32, u32)) -> PathBuf {
+    args.output.clone().unwrap_or_else(|| {
+        let stem = args
+            .scene
+            .as_deref()
             .and_then(|s| s.file_stem())
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "striae".into());
-        PathBuf::from(format!("{stem}-{i}-of-{n}.part"))
+        let tile = args
+            .tile
+            .map(|_| format!("-{i}-of-{n}"))
+            .unwrap_or_default();
+        let samples = args
+            .samples
+            .map(|[a, b]| format!("-samples-{a}-{b}"))
+            .unwrap_or_default();
+        PathBuf::from(format!("{stem}{tile}{samples}.part"))
     })
 }
 
