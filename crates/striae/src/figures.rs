@@ -16,8 +16,8 @@ use crate::film::FilmError;
 use crate::layers::{raster, LayerError, LayerParams, LayerSet};
 use crate::material::Material;
 use crate::plot::PlotError;
-use crate::scratched::ScratchModel;
 use crate::scene::{Overrides, Scene, SceneError};
+use crate::scratched::ScratchModel;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 

@@ -327,7 +327,11 @@ impl WallTable {
                     (theta_i.len(), phi_i.len(), exit.len(), exit.len())
                 )));
             }
-            if let Some((i, v)) = a.iter().enumerate().find(|(_, v)| !(**v >= 0.0 && v.is_finite())) {
+            if let Some((i, v)) = a
+                .iter()
+                .enumerate()
+                .find(|(_, v)| !(**v >= 0.0 && v.is_finite()))
+            {
                 return Err(bad(format!("`{name}` holds {v} at flat index {i}")));
             }
             *lobe = a.iter().copied().collect();

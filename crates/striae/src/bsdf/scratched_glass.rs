@@ -162,10 +162,7 @@ impl WallLobeTable {
         let len = self.slice_len();
         for &(t, a) in &wt {
             let tc = centre(self.nt, t);
-            let e_c = [
-                self.exit_theta(side, 0, tc),
-                self.exit_theta(side, 1, tc),
-            ];
+            let e_c = [self.exit_theta(side, 0, tc), self.exit_theta(side, 1, tc)];
             for &(p, bw) in &wp {
                 let w = a * bw;
                 if !(w > 0.0) {

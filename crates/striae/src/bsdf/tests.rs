@@ -517,8 +517,14 @@ mod scratched_glass {
                     },
                     |wi| bsdf.pdf(wo, wi) as f64,
                 );
-                assert!(bad_pdf <= n / 10_000, "rough {rough} wo {wo:?}: {bad_pdf} pdfs");
-                assert!(bad_weight <= n / 10_000, "rough {rough} wo {wo:?}: {bad_weight}");
+                assert!(
+                    bad_pdf <= n / 10_000,
+                    "rough {rough} wo {wo:?}: {bad_pdf} pdfs"
+                );
+                assert!(
+                    bad_weight <= n / 10_000,
+                    "rough {rough} wo {wo:?}: {bad_weight}"
+                );
                 assert!(
                     r.p_value > 1e-3 && (r.pdf_mass - 0.55).abs() < 0.02,
                     "rough {rough} wo {wo:?}: {r:?}"
@@ -542,7 +548,10 @@ mod scratched_glass {
                 if rough == 0.0 {
                     assert!(a.agrees_with(1.0, 4.0, 1e-3), "wo {wo:?}: {a:?}");
                 } else {
-                    assert!(a.mean() < 1.0 + 4.0 * a.std_error() && a.mean() > 0.8, "{a:?}");
+                    assert!(
+                        a.mean() < 1.0 + 4.0 * a.std_error() && a.mean() > 0.8,
+                        "{a:?}"
+                    );
                 }
                 // Quadrature with the radiance factor undone on the far side.
                 let s2 = if wo.z > 0.0 { 1.5f64 * 1.5 } else { 1.0 / 2.25 };
@@ -551,7 +560,11 @@ mod scratched_glass {
                     ..SphereGrid::new(100, 200)
                 }
                 .integrate(|wi| {
-                    let undo = if (wi.z > 0.0) == (wo.z > 0.0) { 1.0 } else { s2 };
+                    let undo = if (wi.z > 0.0) == (wo.z > 0.0) {
+                        1.0
+                    } else {
+                        s2
+                    };
                     (bsdf.eval(wo, wi).x * wi.z.abs()) as f64 * undo
                 })
                 .iter()

@@ -348,7 +348,9 @@ impl ScratchedDesc {
         }
         .map_err(|e| invalid("scratches.profile", format!("{spec:?}"), e.to_string()))?;
         if s.walls == Some(WallsKey::Dielectric) {
-            return self.resolve_walls(defaults, profile).map(TableSource::Walls);
+            return self
+                .resolve_walls(defaults, profile)
+                .map(TableSource::Walls);
         }
         if let Some(r) = s.roughness {
             return Err(invalid(
@@ -442,16 +444,14 @@ impl ScratchedDesc {
             seed: s.trace_seed.unwrap_or(0),
             ..WallTableParams::new(profile, eta as f64, roughness)
         };
-        params
-            .validate()
-            .map_err(|e| {
-                let key = match e.key {
-                    "roughness" => "scratches.roughness",
-                    "ior" => "ior",
-                    _ => "scratches",
-                };
-                invalid(key, e.value, e.why)
-            })?;
+        params.validate().map_err(|e| {
+            let key = match e.key {
+                "roughness" => "scratches.roughness",
+                "ior" => "ior",
+                _ => "scratches",
+            };
+            invalid(key, e.value, e.why)
+        })?;
         Ok(params)
     }
 
@@ -511,15 +511,15 @@ impl ScratchedDesc {
             TableSource::Walls(params) => ScratchModel::DielectricWalls(
                 crate::cache::obtain_wall_table(params).map_err(table_error)?,
             ),
-            TableSource::File(path) => match crate::cache::load_any_table_file(path)
-                .map_err(table_error)?
-            {
-                model @ ScratchModel::Seed(_) => model,
-                ScratchModel::DielectricWalls(walls) => {
-                    self.check_wall_table_base(&r.base, &walls)?;
-                    ScratchModel::DielectricWalls(walls)
+            TableSource::File(path) => {
+                match crate::cache::load_any_table_file(path).map_err(table_error)? {
+                    model @ ScratchModel::Seed(_) => model,
+                    ScratchModel::DielectricWalls(walls) => {
+                        self.check_wall_table_base(&r.base, &walls)?;
+                        ScratchModel::DielectricWalls(walls)
+                    }
                 }
-            },
+            }
         };
         let layers = LayerSet::with_orientation(r.layers, r.layer_seed, r.orientation)
             .map_err(layer_error)?;
@@ -538,7 +538,10 @@ impl ScratchedDesc {
             ScratchedBase::Glass { eta } if (eta - walls.ior()).abs() <= 1e-6 * eta => Ok(()),
             ScratchedBase::Glass { eta } => Err(invalid(
                 "scratches.table",
-                format!("{:?}", self.scratches.table.as_deref().unwrap_or(Path::new(""))),
+                format!(
+                    "{:?}",
+                    self.scratches.table.as_deref().unwrap_or(Path::new(""))
+                ),
                 format!(
                     "a dielectric-wall table traced for index {}, on glass of ior {eta}",
                     walls.ior()
@@ -546,7 +549,10 @@ impl ScratchedDesc {
             )),
             ScratchedBase::Metal { .. } => Err(invalid(
                 "scratches.table",
-                format!("{:?}", self.scratches.table.as_deref().unwrap_or(Path::new(""))),
+                format!(
+                    "{:?}",
+                    self.scratches.table.as_deref().unwrap_or(Path::new(""))
+                ),
                 "a dielectric-wall table needs base = \"glass\"",
             )),
         }

@@ -121,14 +121,7 @@ impl ScratchedMaterial {
         mix: LayerMix,
         coverage: CoverageMode,
     ) -> ScratchedMaterial {
-        Self::with_model(
-            base,
-            tint,
-            ScratchModel::Seed(table),
-            layers,
-            mix,
-            coverage,
-        )
+        Self::with_model(base, tint, ScratchModel::Seed(table), layers, mix, coverage)
     }
 
     /// A material of any [`ScratchModel`] (dielectric walls: `base` must be glass).
@@ -225,11 +218,7 @@ impl ScratchedMaterial {
                 let ScratchedBase::Glass { eta } = self.base else {
                     return self.base_bsdf();
                 };
-                return Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(
-                    eta,
-                    walls,
-                    &lobes[..count],
-                ));
+                return Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(eta, walls, &lobes[..count]));
             }
         };
         // The integrator evaluates and samples it with `wo` in this frame: precompute the
