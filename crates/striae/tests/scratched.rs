@@ -170,7 +170,9 @@ fn white_furnace_scratched_glass() {
 /// `tau = 0.1`, `1 - (1 - pi tau^2)^8 = 0.225` on average; a path through the sphere meets its
 /// surface about twice (in and out) and rarely more than a few times, so by Jensen's inequality
 /// the mean keeps at least `(1 - C (1 - a_min))^4 = 0.79`. Asserted: `0.79 <= mean <= 1 + 4
-/// sigma` (rough walls may not create energy), and below the smooth walls' furnace.
+/// sigma` (rough walls may not create energy), and below the smooth walls' furnace. Measured:
+/// 0.93 at both settings (smooth walls 0.997 and 1.003, +- 0.002), the loss of about two
+/// scratched hits at the table's average `R + T`.
 #[test]
 fn white_furnace_scratched_glass_dielectric_walls() {
     let glass = "type = \"scratched\"\nbase = \"glass\"\nior = 1.5";
