@@ -171,8 +171,8 @@ fn white_furnace_scratched_glass() {
 /// surface about twice (in and out) and rarely more than a few times, so by Jensen's inequality
 /// the mean keeps at least `(1 - C (1 - a_min))^4 = 0.79`. Asserted: `0.79 <= mean <= 1 + 4
 /// sigma` (rough walls may not create energy), and below the smooth walls' furnace. Measured:
-/// 0.93 at both settings (smooth walls 0.997 and 1.003, +- 0.002), the loss of about two
-/// scratched hits at the table's average `R + T`.
+/// 0.93 at both settings (smooth walls 0.997 and 1.003, +- 0.002): about what two surface
+/// hits (in and out), a fraction `C` of each scratched, lose at the table's average `R + T`.
 #[test]
 fn white_furnace_scratched_glass_dielectric_walls() {
     let glass = "type = \"scratched\"\nbase = \"glass\"\nior = 1.5";
