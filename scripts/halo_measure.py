@@ -14,6 +14,11 @@ centre to the piece's centroid: 90 degrees is a piece running around the centre 
 share of pieces above 60 degrees, and the same statistics weighted by piece size; and how evenly
 the lit pixels spread around the centre (the share held by the 9 fullest of 36 sectors of polar
 angle: 0.25 when even, as halos are; spokes crowd a few sectors).
+
+The centre as docs/fidelity.md gives it (pixel coordinates, pixel centres at +0.5): the light's
+mirror image for scenes/halo-reflection.toml, `--centre 216.7 173.5`; the light seen through the
+pane for scenes/halo-transmission.toml, `--centre 166.4 209.4` (there the brightest arcs touch
+the light's image, so the largest piece is not the light alone).
 """
 import struct
 import sys
