@@ -92,21 +92,10 @@ pub fn load_or_compute_walls(
     hash: &str,
     dir: Option<&Path>,
 ) -> Result<WallTable, TableError> {
-    if let Some(dir) = dir {
-        crate::io::sweep_stale_temporaries(dir, None);
-        let file = wall_cache_file(dir, hash);
-        if file.exists() {
-            match WallTable::load(&file) {
-                Ok(Some(t)) if t.params.hash() == hash => return Ok(t),
-                Ok(_) => crate::log::warn(&format!(
-                    "cached table {} holds other parameters; recomputing it",
-                    file.display()
-                )),
-                Err(e) => {
-                    crate::log::warn(&format!("cached table unreadable ({e}); recomputing it"))
-                }
-            }
-        }
+    if let Some(t) = read_cached(dir, wall_cache_file, WallTable::load, hash, |t| {
+        t.params.hash()
+    }) {
+        return Ok(t);
     }
     let start = std::time::Instant::now();
     crate::log::info(&format!(
@@ -165,28 +154,42 @@ pub fn load_table_file(path: &Path) -> Result<Arc<ScratchLobeTable>, TableError>
     shared(table.params.hash(), || Ok(table))
 }
 
+/// The table cached in `dir` under `hash` (file name by `file`), if it reads and holds the
+/// parameters of that hash; else a warning, and `None`: the caller recomputes it. Temporaries
+/// of killed processes (which could not clean up) are swept first: they would stay forever.
+fn read_cached<T, E: std::fmt::Display>(
+    dir: Option<&Path>,
+    file: fn(&Path, &str) -> PathBuf,
+    load: impl Fn(&Path) -> Result<Option<T>, E>,
+    hash: &str,
+    hash_of: impl Fn(&T) -> String,
+) -> Option<T> {
+    let dir = dir?;
+    crate::io::sweep_stale_temporaries(dir, None);
+    let file = file(dir, hash);
+    if !file.exists() {
+        return None;
+    }
+    match load(&file) {
+        Ok(Some(t)) if hash_of(&t) == hash => return Some(t),
+        Ok(_) => crate::log::warn(&format!(
+            "cached table {} holds other parameters; recomputing it",
+            file.display()
+        )),
+        Err(e) => crate::log::warn(&format!("cached table unreadable ({e}); recomputing it")),
+    }
+    None
+}
+
 /// The disk-cache step of [`obtain_table`] with an explicit cache folder (`None`: no cache).
 pub fn load_or_compute(
     params: &TableParams,
     hash: &str,
     dir: Option<&Path>,
 ) -> Result<ScratchTable, TableError> {
-    if let Some(dir) = dir {
-        // Temporaries of killed processes (which could not clean up) would stay forever.
-        crate::io::sweep_stale_temporaries(dir, None);
-        let file = cache_file(dir, hash);
-        if file.exists() {
-            match ScratchTable::load(&file) {
-                Ok(t) if t.params.hash() == hash => return Ok(t),
-                Ok(_) => crate::log::warn(&format!(
-                    "cached table {} holds other parameters; recomputing it",
-                    file.display()
-                )),
-                Err(e) => {
-                    crate::log::warn(&format!("cached table unreadable ({e}); recomputing it"))
-                }
-            }
-        }
+    let load = |f: &Path| ScratchTable::load(f).map(Some);
+    if let Some(t) = read_cached(dir, cache_file, load, hash, |t| t.params.hash()) {
+        return Ok(t);
     }
     let start = std::time::Instant::now();
     let t = &params.trace;

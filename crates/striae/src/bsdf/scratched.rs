@@ -194,6 +194,34 @@ impl ScratchLobe {
     }
 }
 
+/// The lobes with coverage `c_k > 0`, at most [`MAX_SCRATCH_LOBES`] (extra ones ignored), each
+/// `c_k` clamped to 1 and all rescaled so that `C = sum c_k <= 1` (the `sum` mode's
+/// normalisation): `(lobes, count, C)`.
+pub(super) fn normalised_lobes(
+    lobes: &[ScratchLobe],
+) -> ([ScratchLobe; MAX_SCRATCH_LOBES], usize, f32) {
+    let mut out = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
+    let mut count = 0;
+    let mut total = 0.0f32;
+    for l in lobes
+        .iter()
+        .filter(|l| l.coverage > 0.0)
+        .take(MAX_SCRATCH_LOBES)
+    {
+        out[count] = *l;
+        total += l.coverage.min(1.0);
+        out[count].coverage = l.coverage.min(1.0);
+        count += 1;
+    }
+    if total > 1.0 {
+        for l in &mut out[..count] {
+            l.coverage /= total;
+        }
+        total = 1.0;
+    }
+    (out, count, total)
+}
+
 /// What one lobe's lookups need of `wo`: the table's `wo` terms in the lobe's scratch frame
 /// (`phi_o` bin, `theta_o`, eq. (4)'s common `R`) and [`ScratchLobeTable::scaled_albedo`].
 #[derive(Clone, Copy, Debug, Default)]
@@ -252,25 +280,7 @@ impl<'a> ScratchedBsdf<'a> {
         tint: Rgb,
         lobes: &[ScratchLobe],
     ) -> Self {
-        let mut out = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
-        let mut count = 0;
-        let mut total = 0.0f32;
-        for l in lobes
-            .iter()
-            .filter(|l| l.coverage > 0.0)
-            .take(MAX_SCRATCH_LOBES)
-        {
-            out[count] = *l;
-            total += l.coverage.min(1.0);
-            out[count].coverage = l.coverage.min(1.0);
-            count += 1;
-        }
-        if total > 1.0 {
-            for l in &mut out[..count] {
-                l.coverage /= total;
-            }
-            total = 1.0;
-        }
+        let (out, count, total) = normalised_lobes(lobes);
         ScratchedBsdf {
             base,
             table,

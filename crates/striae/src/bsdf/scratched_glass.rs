@@ -31,7 +31,7 @@
 //! the value `pdf` returns, so MIS with light sampling is consistent; for a lossless groove and
 //! one slice, the weight is exactly `s`.
 
-use super::scratched::MAX_SCRATCH_LOBES;
+use super::scratched::{normalised_lobes, MAX_SCRATCH_LOBES};
 use super::{fresnel_f32, BsdfSample, ScratchLobe};
 use crate::math::{reflect_z, Rgb, Vec2, Vec3};
 use crate::wall_table::WallTable;
@@ -313,25 +313,7 @@ impl<'a> ScratchedGlassBsdf<'a> {
     /// `lobes` with coverages `c_k >= 0`, at most [`MAX_SCRATCH_LOBES`], rescaled so that
     /// `sum c_k <= 1`.
     pub fn new(eta: f32, table: &'a WallLobeTable, lobes: &[ScratchLobe]) -> Self {
-        let mut out = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
-        let mut count = 0;
-        let mut total = 0.0f32;
-        for l in lobes
-            .iter()
-            .filter(|l| l.coverage > 0.0)
-            .take(MAX_SCRATCH_LOBES)
-        {
-            out[count] = *l;
-            out[count].coverage = l.coverage.min(1.0);
-            total += out[count].coverage;
-            count += 1;
-        }
-        if total > 1.0 {
-            for l in &mut out[..count] {
-                l.coverage /= total;
-            }
-            total = 1.0;
-        }
+        let (out, count, total) = normalised_lobes(lobes);
         ScratchedGlassBsdf {
             eta,
             table,

@@ -320,18 +320,11 @@ impl ScratchedDesc {
             ("scratches.profile", s.profile.is_some()),
             ("scratches.walls", s.walls.is_some()),
             ("scratches.roughness", s.roughness.is_some()),
-            ("scratches.fresnel", s.fresnel.is_some()),
-            ("scratches.fresnel_law", s.fresnel_law.is_some()),
-            ("scratches.ior", s.ior.is_some()),
-            ("scratches.m", s.m.is_some()),
-            ("scratches.n", s.n.is_some()),
-            ("scratches.nr", s.nr.is_some()),
-            ("scratches.albedo", s.albedo.is_some()),
-            ("scratches.max_bounces", s.max_bounces.is_some()),
             ("scratches.trace_seed", s.trace_seed.is_some()),
         ];
         if let Some(path) = &s.table {
-            if let Some((key, _)) = table_keys.iter().find(|(_, given)| *given) {
+            let two_d = self.two_d_table_keys();
+            if let Some((key, _)) = table_keys.iter().chain(&two_d).find(|(_, given)| *given) {
                 return Err(invalid(key, "(given)", "`scratches.table` loads a precomputed table; its parameters cannot be given too"));
             }
             return Ok(TableSource::File(base_dir.join(path)));
@@ -407,6 +400,21 @@ impl ScratchedDesc {
         Ok(TableSource::Compute(TableParams::new(profile, trace)))
     }
 
+    /// The keys of the 2D table alone, each with whether it is given.
+    fn two_d_table_keys(&self) -> [(&'static str, bool); 8] {
+        let s = &self.scratches;
+        [
+            ("scratches.fresnel", s.fresnel.is_some()),
+            ("scratches.fresnel_law", s.fresnel_law.is_some()),
+            ("scratches.ior", s.ior.is_some()),
+            ("scratches.m", s.m.is_some()),
+            ("scratches.n", s.n.is_some()),
+            ("scratches.nr", s.nr.is_some()),
+            ("scratches.albedo", s.albedo.is_some()),
+            ("scratches.max_bounces", s.max_bounces.is_some()),
+        ]
+    }
+
     /// `walls = "dielectric"`: glass only; the 2D table's keys do not apply; `roughness` in
     /// `[0, 1]`; `trace_seed` seeds the trace.
     fn resolve_walls(
@@ -422,17 +430,7 @@ impl ScratchedDesc {
                 "dielectric walls are glass: they need base = \"glass\"",
             ));
         };
-        let seed_keys = [
-            ("scratches.fresnel", s.fresnel.is_some()),
-            ("scratches.fresnel_law", s.fresnel_law.is_some()),
-            ("scratches.ior", s.ior.is_some()),
-            ("scratches.m", s.m.is_some()),
-            ("scratches.n", s.n.is_some()),
-            ("scratches.nr", s.nr.is_some()),
-            ("scratches.albedo", s.albedo.is_some()),
-            ("scratches.max_bounces", s.max_bounces.is_some()),
-        ];
-        if let Some((key, _)) = seed_keys.iter().find(|(_, given)| *given) {
+        if let Some((key, _)) = self.two_d_table_keys().iter().find(|(_, given)| *given) {
             return Err(invalid(
                 key,
                 "(given)",
