@@ -27,6 +27,10 @@ fn table(profile: &str, walls: Walls, law: FresnelLaw, m: usize) -> Arc<ScratchL
         fresnel_law: law,
         ..TraceSettings::default()
     };
+    lobe_table(profile, trace)
+}
+
+fn lobe_table(profile: &str, trace: TraceSettings) -> Arc<ScratchLobeTable> {
     let t = ScratchTable::compute(
         &TableParams::new(Profile::parse(profile).unwrap(), trace),
         &|_| {},
@@ -48,12 +52,7 @@ fn groove(profile: &str, law: FresnelLaw) -> Arc<ScratchLobeTable> {
         groove_slices: 3,
         ..TraceSettings::default()
     };
-    let t = ScratchTable::compute(
-        &TableParams::new(Profile::parse(profile).unwrap(), trace),
-        &|_| {},
-    )
-    .unwrap();
-    Arc::new(ScratchLobeTable::new(t))
+    lobe_table(profile, trace)
 }
 
 fn groove_schlick() -> Arc<ScratchLobeTable> {

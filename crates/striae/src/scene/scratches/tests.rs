@@ -12,6 +12,14 @@ fn parse(text: &str) -> Result<ScratchedDesc, String> {
     }
 }
 
+/// The parameters of the table a valid material computes.
+fn computed(text: &str) -> TableParams {
+    match parse(text).unwrap().resolve(Path::new(".")).unwrap().table {
+        TableSource::Compute(p) => p,
+        TableSource::File(f) => panic!("{f:?}"),
+    }
+}
+
 #[test]
 fn keys_are_validated() {
     let ok = parse("type = \"scratched\"\nbase = \"glass\"\nior = 1.5\n[scratches]\nsetting = 2\nlayers = 3\nlayer_mix = \"sum\"\nm = 16").unwrap();
@@ -59,13 +67,7 @@ fn keys_are_validated() {
         .unwrap();
     assert!(r.tint.x == 1.0 && r.tint.z < 0.6, "{:?}", r.tint);
     // Exact-groove slices: `fresnel` defaults to `walls`; explicit grooves refuse them.
-    let r = parse("type = \"scratched\"\nbase = \"glass\"\n[scratches]\ngroove_slices = 6")
-        .unwrap()
-        .resolve(Path::new("."))
-        .unwrap();
-    let TableSource::Compute(p) = r.table else {
-        panic!()
-    };
+    let p = computed("type = \"scratched\"\nbase = \"glass\"\n[scratches]\ngroove_slices = 6");
     assert_eq!(
         (p.trace.groove_slices, p.trace.fresnel_mode),
         (6, FresnelMode::Walls)
