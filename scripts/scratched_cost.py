@@ -5,7 +5,8 @@
 For each scene (a scratched-glass scene file whose glass material is `[materials.glass]`), the
 script writes variants of it: `smooth` (the glass swapped for `type = "dielectric"` with the same
 `ior`), and the scratched material with each coverage mode (`footprint`, the default; `sample`;
-`point`). It renders each with one thread and measures the CPU time (user + sys) of
+`point`), and `dielectric`: the scratches with dielectric walls (METHOD.md 8.2, the 2D table's
+keys dropped), whose ratio to `footprint` is the complete glass model's cost over the seed's. It renders each with one thread and measures the CPU time (user + sys) of
 `--spp SPP` minus that of `--spp 1`, so that the set-up (table, layers, BVH) cancels, and prints
 the medians over interleaved rounds and the ratios to `smooth`, with the compiled copy of the
 render loop that ran (the CPU's widest; `STRIAE_SIMD=avx2` or `portable` in the environment
@@ -34,6 +35,12 @@ def variant(text, kind):
     if kind == "smooth":
         ior = re.search(r"^ior = ([0-9.]+)", m.group(1), flags=re.M)
         body = f'type = "dielectric"\nior = {ior.group(1) if ior else 1.5}\n'
+        return text[: m.start(1)] + body + text[m.end(1):]
+    if kind == "dielectric":
+        table_keys = r"^(walls|fresnel|fresnel_law|ior|m|n|nr|albedo|max_bounces) = .*\n"
+        head, _, scratches = m.group(1).partition("[materials.glass.scratches]\n")
+        body = head + '[materials.glass.scratches]\nwalls = "dielectric"\n' + re.sub(
+            table_keys, "", scratches, flags=re.M)
         return text[: m.start(1)] + body + text[m.end(1):]
     body = re.sub(r'^coverage = .*\n', "", m.group(1), flags=re.M)
     body = body.rstrip("\n") + f'\ncoverage = "{kind}"\n'

@@ -1,13 +1,16 @@
-//! Scratch tables shared and cached: in memory by parameter hash ([`TableParams::hash`]), so
-//! each distinct table is computed or loaded once per process however many materials use it,
-//! and on disk in [`cache_dir`] as `scratch-table-HASH.npz`, written atomically
+//! Scratch tables shared and cached: in memory by parameter hash ([`TableParams::hash`],
+//! [`WallTableParams::hash`]), so each distinct table is computed or loaded once per process
+//! however many materials use it, and on disk in [`cache_dir`] as `scratch-table-HASH.npz`
+//! (dielectric-wall tables: `wall-table-HASH.npz`), written atomically
 //! ([`crate::io::write_atomically`], a temporary name unique to the call), so concurrent renders
 //! sharing a cache folder never read a half-written file. A cache file that cannot be read, or
 //! holds other parameters, is recomputed with a warning ([`crate::log`]); temporary files of
 //! processes killed while writing are swept ([`crate::io::sweep_stale_temporaries`]).
 
-use crate::bsdf::ScratchLobeTable;
+use crate::bsdf::{ScratchLobeTable, WallLobeTable};
+use crate::scratched::ScratchModel;
 use crate::table::{ScratchTable, TableError, TableParams};
+use crate::wall_table::{WallTable, WallTableParams};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock, Weak};
@@ -30,28 +33,121 @@ pub fn cache_file(dir: &Path, hash: &str) -> PathBuf {
     dir.join(format!("scratch-table-{hash}.npz"))
 }
 
-type Registry = Mutex<HashMap<String, Weak<ScratchLobeTable>>>;
+type Registry<T> = Mutex<HashMap<String, Weak<T>>>;
 
-/// The live tables of the process by parameter hash.
-fn registry() -> &'static Registry {
-    static REGISTRY: OnceLock<Registry> = OnceLock::new();
-    REGISTRY.get_or_init(|| Mutex::new(HashMap::new()))
+/// The live table of `hash` in `registry`, or the one `make` gives (then registered). The
+/// registry lock is held meanwhile, so two materials needing one table compute it once.
+fn shared_in<T>(
+    registry: &Registry<T>,
+    hash: String,
+    make: impl FnOnce() -> Result<T, TableError>,
+) -> Result<Arc<T>, TableError> {
+    let mut reg = registry.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(t) = reg.get(&hash).and_then(Weak::upgrade) {
+        return Ok(t);
+    }
+    let t = Arc::new(make()?);
+    reg.retain(|_, w| w.strong_count() > 0);
+    reg.insert(hash, Arc::downgrade(&t));
+    Ok(t)
 }
 
-/// The live table of `hash`, or the one `make` gives (then registered). The registry lock is
-/// held meanwhile, so two materials needing one table compute it once.
+/// The live scratch tables of the process by parameter hash.
 fn shared(
     hash: String,
     make: impl FnOnce() -> Result<ScratchTable, TableError>,
 ) -> Result<Arc<ScratchLobeTable>, TableError> {
-    let mut reg = registry().lock().unwrap_or_else(|e| e.into_inner());
-    if let Some(t) = reg.get(&hash).and_then(Weak::upgrade) {
-        return Ok(t);
+    static REGISTRY: OnceLock<Registry<ScratchLobeTable>> = OnceLock::new();
+    let registry = REGISTRY.get_or_init(|| Mutex::new(HashMap::new()));
+    shared_in(registry, hash, || make().map(ScratchLobeTable::new))
+}
+
+/// The live dielectric-wall tables of the process by parameter hash.
+fn shared_walls(
+    hash: String,
+    make: impl FnOnce() -> Result<WallTable, TableError>,
+) -> Result<Arc<WallLobeTable>, TableError> {
+    static REGISTRY: OnceLock<Registry<WallLobeTable>> = OnceLock::new();
+    let registry = REGISTRY.get_or_init(|| Mutex::new(HashMap::new()));
+    shared_in(registry, hash, || make().map(|t| WallLobeTable::new(&t)))
+}
+
+/// The cache file of a dielectric-wall table: `wall-table-HASH.npz`.
+pub fn wall_cache_file(dir: &Path, hash: &str) -> PathBuf {
+    dir.join(format!("wall-table-{hash}.npz"))
+}
+
+/// The dielectric-wall table of `params`: shared in memory, else read from the disk cache,
+/// else traced (seconds at the default sizes) and cached.
+pub fn obtain_wall_table(params: &WallTableParams) -> Result<Arc<WallLobeTable>, TableError> {
+    let hash = params.hash();
+    shared_walls(hash.clone(), || {
+        load_or_compute_walls(params, &hash, cache_dir().as_deref())
+    })
+}
+
+/// The disk-cache step of [`obtain_wall_table`] with an explicit cache folder.
+pub fn load_or_compute_walls(
+    params: &WallTableParams,
+    hash: &str,
+    dir: Option<&Path>,
+) -> Result<WallTable, TableError> {
+    if let Some(dir) = dir {
+        crate::io::sweep_stale_temporaries(dir, None);
+        let file = wall_cache_file(dir, hash);
+        if file.exists() {
+            match WallTable::load(&file) {
+                Ok(Some(t)) if t.params.hash() == hash => return Ok(t),
+                Ok(_) => crate::log::warn(&format!(
+                    "cached table {} holds other parameters; recomputing it",
+                    file.display()
+                )),
+                Err(e) => {
+                    crate::log::warn(&format!("cached table unreadable ({e}); recomputing it"))
+                }
+            }
+        }
     }
-    let t = Arc::new(ScratchLobeTable::new(make()?));
-    reg.retain(|_, w| w.strong_count() > 0);
-    reg.insert(hash, Arc::downgrade(&t));
-    Ok(t)
+    let start = std::time::Instant::now();
+    crate::log::info(&format!(
+        "computing dielectric-wall table {} ({}, ior {}, roughness {}) ...",
+        &hash[..12],
+        params.profile.spec,
+        params.ior,
+        params.roughness
+    ));
+    let table = WallTable::compute(params)?;
+    crate::log::info(&format!(
+        "dielectric-wall table {} computed in {:.2} s",
+        &hash[..12],
+        start.elapsed().as_secs_f64()
+    ));
+    if let Some(dir) = dir {
+        let file = wall_cache_file(dir, hash);
+        let result = std::fs::create_dir_all(dir).and_then(|_| table.save(&file));
+        if let Err(e) = result {
+            crate::log::warn(&format!("could not cache the dielectric-wall table ({e})"));
+        }
+    }
+    Ok(table)
+}
+
+/// Read a table file of either kind: a dielectric-wall table (its `kind` says so) or the
+/// seed's scratch table.
+pub fn load_any_table_file(path: &Path) -> Result<ScratchModel, TableError> {
+    let walls = WallTable::load(path).map_err(|e| TableError::Npz {
+        path: path.into(),
+        why: e.to_string(),
+    });
+    match walls {
+        Ok(Some(t)) => Ok(ScratchModel::DielectricWalls(shared_walls(
+            t.params.hash(),
+            || Ok(t),
+        )?)),
+        Err(e) if crate::wall_table::declares_kind(path) => Err(e),
+        // Not a dielectric-wall table (or not an .npz at all): the seed's reader says why.
+        _ => load_table_file(path).map(ScratchModel::Seed),
+    }
 }
 
 /// The table of `params`: shared in memory if a live one has the same hash, else read from the

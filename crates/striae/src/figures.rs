@@ -17,6 +17,7 @@ use crate::layers::{raster, LayerError, LayerParams, LayerSet};
 use crate::material::Material;
 use crate::plot::PlotError;
 use crate::scene::{Overrides, Scene, SceneError};
+use crate::scratched::ScratchModel;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -53,6 +54,46 @@ pub const FIGURE_SCENES: [(&str, &str, &str, &str); 5] = [
         include_str!("../../../scenes/glass-plate-closeup.toml"),
     ),
 ];
+
+/// The "beyond the seed" figures (METHOD.md 8.2, 8.4): `(id, caption, file name, text, what
+/// differs)`, each rendered as written (dielectric walls, or a direction per scratch) and
+/// under the seed's model ([`seed_variant`]), side by side.
+pub const BEYOND_SCENES: [(&str, &str, &str, &str, &str); 3] = [
+    (
+        "halo-t",
+        "Halos in transmission: a small light behind a scratched pane",
+        "halo-transmission.toml",
+        include_str!("../../../scenes/halo-transmission.toml"),
+        "Dielectric walls carry light through each scratch along its cone of directions: the lit pieces form arcs around the light seen through the pane. The seed's scratches only reflect: against the light they are invisible.",
+    ),
+    (
+        "halo-r",
+        "Halos in reflection: a small light beside the camera",
+        "halo-reflection.toml",
+        include_str!("../../../scenes/halo-reflection.toml"),
+        "Smooth glass walls and a direction per scratch: the lit pieces form arcs around the light's mirror image, each perpendicular to the radius. The seed's model (diffuse walls, one direction per layer) spreads each scratch's light over its whole lobe, and its layers' pieces line up along a few directions.",
+    ),
+    (
+        "window",
+        "A scratched window against the sky",
+        "backlit-window.toml",
+        include_str!("../../../scenes/backlit-window.toml"),
+        "Below the sky's edge, against the dark, the scratches glow with sky light carried through them (dielectric walls); the seed's model transmits nothing at a scratch but the smooth refraction, so they stay dark.",
+    ),
+];
+
+/// The seed's model of a scene written for dielectric walls: the walls back to the default
+/// (`diffuse`, the seed's glass scratches), their `roughness` dropped, one direction per layer.
+pub fn seed_variant(text: &str) -> String {
+    text.lines()
+        .filter(|l| {
+            let key = l.trim_start();
+            !(key.starts_with("walls = \"dielectric\"") || key.starts_with("roughness ="))
+        })
+        .map(|l| l.replace("orientation = \"random\"", "orientation = \"layer\""))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
 
 /// Incident angle of Fig. 2 (degrees).
 pub const FIG2_PHI_I_DEG: f64 = 30.0;
@@ -141,8 +182,31 @@ fn scratch_params(scene: &Scene, name: &str) -> Result<Vec<(String, String)>, Fi
             _ => None,
         })
         .ok_or_else(|| FigureError::NoScratches(name.to_string()))?;
-    let t = &m.table.table().params;
     let l = m.layers.params();
+    let ScratchModel::Seed(table) = &m.model else {
+        return Ok(vec![
+            ("base".into(), format!("{:?}", m.base)),
+            (
+                "scratch length L / width W / threshold tau".into(),
+                format!("{} / {} / {}", l.length, l.width, l.threshold),
+            ),
+            (
+                "layers".into(),
+                format!(
+                    "{} (seed {}, mix {:?}, orientation {:?})",
+                    l.layers,
+                    m.layers.seed(),
+                    m.mix,
+                    m.layers.orientation()
+                ),
+            ),
+            (
+                "table".into(),
+                format!("dielectric walls (hash {})", &m.model.hash()[..12]),
+            ),
+        ]);
+    };
+    let t = &table.table().params;
     Ok(vec![
         ("base".into(), format!("{:?}", m.base)),
         (
@@ -327,10 +391,28 @@ fn render_figures(
         max_depth: None,
         sampler: None,
     };
+    let mut jobs: Vec<(String, String, &str, String)> = FIGURE_SCENES
+        .iter()
+        .map(|&(id, caption, name, text)| (id.into(), caption.into(), name, text.into()))
+        .collect();
+    for (id, caption, name, text, differs) in BEYOND_SCENES {
+        jobs.push((
+            format!("{id}-seed"),
+            format!("{caption}: the seed's model"),
+            name,
+            seed_variant(text),
+        ));
+        jobs.push((
+            id.into(),
+            format!("{caption}: as the scene file says. {differs}"),
+            name,
+            text.into(),
+        ));
+    }
     let mut figures = Vec::new();
-    for (id, caption, name, text) in FIGURE_SCENES {
+    for (id, caption, name, text) in jobs {
         let start = Instant::now();
-        let scene = Scene::parse(text, Path::new(name), Path::new("."), &overrides)?;
+        let scene = Scene::parse(&text, Path::new(name), Path::new("."), &overrides)?;
         let mut params = scratch_params(&scene, name)?;
         let load = start.elapsed().as_secs_f64();
         let (image, stats) = crate::integrator::render(&scene, &|_| {});
@@ -361,8 +443,8 @@ fn render_figures(
             s.width, s.height, s.spp
         ));
         figures.push(Figure {
-            id: id.into(),
-            caption: caption.into(),
+            id,
+            caption,
             file,
             params,
             seconds,
@@ -381,7 +463,7 @@ fn escape(s: &str) -> String {
 /// The page: one row per figure group, images side by side, each with its caption, parameters
 /// and time.
 pub fn index_html(figures: &[Figure], opts: &FigureOptions) -> String {
-    let groups: [(&str, &[&str]); 5] = [
+    let groups: [(&str, &[&str]); 8] = [
         ("Fig. 2: the scratch BRDF lobe", &["fig2"]),
         (
             "Fig. 4: scratch layer from cell noise",
@@ -390,6 +472,18 @@ pub fn index_html(figures: &[Figure], opts: &FigureOptions) -> String {
         ("Fig. 6: setting 1 (plate, teapot)", &["fig6a", "fig6b"]),
         ("Fig. 7: setting 2 (plate, teapot)", &["fig7a", "fig7b"]),
         ("Fig. 8: close-up", &["fig8a"]),
+        (
+            "Beyond the seed: halos in transmission (seed's model, dielectric walls)",
+            &["halo-t-seed", "halo-t"],
+        ),
+        (
+            "Beyond the seed: halos in reflection (seed's model, dielectric walls)",
+            &["halo-r-seed", "halo-r"],
+        ),
+        (
+            "Beyond the seed: a scratched window against the sky (seed's model, dielectric walls)",
+            &["window-seed", "window"],
+        ),
     ];
     let total: f64 = figures.iter().map(|f| f.seconds).sum();
     let mut h = String::new();
@@ -457,6 +551,45 @@ mod tests {
                 .unwrap_or_else(|e| panic!("{name}: {e}"));
             let p = scratch_params(&scene, name).unwrap();
             assert!(p.iter().any(|(k, _)| k == "layers"));
+        }
+    }
+
+    /// Each "beyond the seed" scene goes past the seed (dielectric walls or a direction per
+    /// scratch), and its seed variant is the seed's table model with one direction per layer.
+    #[test]
+    fn beyond_the_seed_scenes_and_their_seed_variants() {
+        let o = Overrides {
+            spp: Some(1),
+            resolution: Some((8, 6)),
+            ..Overrides::default()
+        };
+        let model = |text: &str, name: &str| {
+            let scene = Scene::parse(text, Path::new(name), Path::new("."), &o)
+                .unwrap_or_else(|e| panic!("{name}: {e}"));
+            scratch_params(&scene, name).unwrap();
+            scene
+                .materials
+                .iter()
+                .find_map(|m| match m {
+                    Material::Scratched(s) => Some((
+                        matches!(s.model, ScratchModel::DielectricWalls(_)),
+                        s.layers.orientation(),
+                    )),
+                    _ => None,
+                })
+                .unwrap()
+        };
+        for (_, _, name, text, _) in BEYOND_SCENES {
+            let (walls, orientation) = model(text, name);
+            assert!(
+                walls || orientation == crate::layers::Orientation::Random,
+                "{name}"
+            );
+            let (walls, orientation) = model(&seed_variant(text), name);
+            assert!(
+                !walls && orientation == crate::layers::Orientation::Layer,
+                "{name}"
+            );
         }
     }
 

@@ -177,6 +177,8 @@ pub enum TableError {
     Trace(#[from] TraceError),
     #[error("exact-groove slices: {0}")]
     Groove(GonioError),
+    #[error(transparent)]
+    Walls(#[from] crate::groove::GonioError),
     #[error("cannot read or write table {path}")]
     Io {
         path: PathBuf,

@@ -277,24 +277,15 @@ impl WallTable {
     }
 
     /// Read a table written by [`Self::save`]; `None` where the file is not a dielectric-wall
-    /// table (no `kind` array saying so), an error where it is one but unreadable.
+    /// table (no `kind` array saying so), an error where it is one but unreadable, or holds
+    /// values no trace can give (negative or non-finite fractions, more energy out than in).
     pub fn load(path: &Path) -> std::io::Result<Option<Self>> {
         use ndarray::{Array0, Ix0, Ix1, Ix4, OwnedRepr};
-        use ndarray_npy::NpzReader;
-        let err = |e: ndarray_npy::ReadNpzError| std::io::Error::other(e.to_string());
-        let mut r = NpzReader::new(std::fs::File::open(path)?).map_err(err)?;
-        let names = r.names().map_err(err)?;
-        if !names.iter().any(|n| n == "kind" || n == "kind.npy") {
+        let Some(mut r) = open_kind(path)? else {
             return Ok(None);
-        }
-        let text = |r: &mut NpzReader<std::fs::File>, k: &str| -> std::io::Result<String> {
-            let a: Array1<u8> = r.by_name::<OwnedRepr<u8>, Ix1>(k).map_err(err)?;
-            String::from_utf8(a.to_vec()).map_err(std::io::Error::other)
         };
-        if text(&mut r, "kind")? != "dielectric-walls" {
-            return Ok(None);
-        }
-        let spec = text(&mut r, "profile")?;
+        let err = |e: ndarray_npy::ReadNpzError| std::io::Error::other(e.to_string());
+        let spec = read_text(&mut r, "profile")?;
         let profile = Profile::parse(&spec).map_err(|e| std::io::Error::other(e.to_string()))?;
         let mut f64s = |k: &str| -> std::io::Result<f64> {
             let a: Array0<f64> = r.by_name::<OwnedRepr<f64>, Ix0>(k).map_err(err)?;
@@ -311,20 +302,7 @@ impl WallTable {
             Ok(a.to_vec())
         };
         let (theta_i, phi_i, exit) = (vec("theta_i")?, vec("phi_i")?, vec("theta_o")?);
-        let mut lobes: [Vec<f64>; 4] = std::array::from_fn(|_| Vec::new());
-        for (name, lobe) in LOBES.iter().zip(&mut lobes) {
-            let a: Array4<f64> = r.by_name::<OwnedRepr<f64>, Ix4>(name).map_err(err)?;
-            let (t, p, b, b2) = a.dim();
-            if (t, p, b, b2) != (theta_i.len(), phi_i.len(), exit.len(), exit.len()) {
-                return Err(std::io::Error::other(format!(
-                    "{}: `{name}` has shape {:?}, the grids ask for {:?}",
-                    path.display(),
-                    (t, p, b, b2),
-                    (theta_i.len(), phi_i.len(), exit.len(), exit.len())
-                )));
-            }
-            *lobe = a.iter().copied().collect();
-        }
+        let bad = |why: String| std::io::Error::other(format!("{}: {why}", path.display()));
         let params = WallTableParams {
             profile,
             ior,
@@ -335,13 +313,61 @@ impl WallTable {
             paths,
             seed,
         };
-        Ok(Some(WallTable {
+        params
+            .validate()
+            .map_err(|e| bad(format!("bad parameters: {e}")))?;
+        let mut lobes: [Vec<f64>; 4] = std::array::from_fn(|_| Vec::new());
+        for (name, lobe) in LOBES.iter().zip(&mut lobes) {
+            let a: Array4<f64> = r.by_name::<OwnedRepr<f64>, Ix4>(name).map_err(err)?;
+            let (t, p, b, b2) = a.dim();
+            if (t, p, b, b2) != (theta_i.len(), phi_i.len(), exit.len(), exit.len()) {
+                return Err(bad(format!(
+                    "`{name}` has shape {:?}, the grids ask for {:?}",
+                    (t, p, b, b2),
+                    (theta_i.len(), phi_i.len(), exit.len(), exit.len())
+                )));
+            }
+            if let Some((i, v)) = a
+                .iter()
+                .enumerate()
+                .find(|(_, v)| !(**v >= 0.0 && v.is_finite()))
+            {
+                return Err(bad(format!("`{name}` holds {v} at flat index {i}")));
+            }
+            *lobe = a.iter().copied().collect();
+        }
+        let table = WallTable {
             params,
             theta_i,
             phi_i,
             exit,
             lobes,
-        }))
+        };
+        table.check_energy().map_err(bad)?;
+        Ok(Some(table))
+    }
+
+    /// Every incident direction's R + T from either side is at most 1 (lossless walls give
+    /// exactly 1; a rounding margin of `1e-6`).
+    fn check_energy(&self) -> Result<(), String> {
+        for t in 0..self.theta_i.len() {
+            for p in 0..self.phi_i.len() {
+                for side in [0, 2] {
+                    let e: f64 = [side, side + 1]
+                        .iter()
+                        .map(|&l| self.slice(l, t, p).iter().sum::<f64>())
+                        .sum();
+                    if e > 1.0 + 1e-6 {
+                        return Err(format!(
+                            "`{}` + `{}` at incident ({t}, {p}) send out {e} of the energy that arrives",
+                            LOBES[side],
+                            LOBES[side + 1]
+                        ));
+                    }
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Heat maps of the four lobes at incident `(theta_i, phi_i)` (interpolated), 2 x 2: R and
@@ -439,6 +465,34 @@ impl WallTable {
         }
         Ok(out)
     }
+}
+
+/// The file as an `.npz` reader when its `kind` array says it is a dielectric-wall table.
+fn open_kind(path: &Path) -> std::io::Result<Option<ndarray_npy::NpzReader<std::fs::File>>> {
+    use ndarray_npy::NpzReader;
+    let err = |e: ndarray_npy::ReadNpzError| std::io::Error::other(e.to_string());
+    let file = crate::io::open_regular(path, crate::io::MAX_BINARY_BYTES)?;
+    let mut r = NpzReader::new(file).map_err(err)?;
+    let names = r.names().map_err(err)?;
+    if !names.iter().any(|n| n == "kind" || n == "kind.npy") {
+        return Ok(None);
+    }
+    Ok((read_text(&mut r, "kind")? == "dielectric-walls").then_some(r))
+}
+
+/// A text array (bytes) of the file.
+fn read_text(r: &mut ndarray_npy::NpzReader<std::fs::File>, key: &str) -> std::io::Result<String> {
+    use ndarray::{Ix1, OwnedRepr};
+    let a: Array1<u8> = r
+        .by_name::<OwnedRepr<u8>, Ix1>(key)
+        .map_err(|e| std::io::Error::other(e.to_string()))?;
+    String::from_utf8(a.to_vec()).map_err(std::io::Error::other)
+}
+
+/// Whether `path` is an `.npz` whose `kind` says it is a dielectric-wall table (its other
+/// arrays unread).
+pub fn declares_kind(path: &Path) -> bool {
+    matches!(open_kind(path), Ok(Some(_)))
 }
 
 /// A lobe of the table against the exact trace ([`WallTable::error_against_trace`]).

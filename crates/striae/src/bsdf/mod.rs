@@ -39,12 +39,14 @@ mod diffuse;
 mod fresnel_f32;
 pub mod microfacet;
 pub mod scratched;
+pub mod scratched_glass;
 mod wall;
 
 pub use conductor::{Conductor, ConductorIor, RoughConductor, CONDUCTOR_PRESETS};
 pub use dielectric::{Dielectric, RoughDielectric};
 pub use diffuse::Diffuse;
 pub use scratched::{ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf};
+pub use scratched_glass::{ScratchedGlassBsdf, WallLobeTable};
 pub use wall::GrooveWall;
 
 use crate::math::{Rgb, Vec2, Vec3};
@@ -75,6 +77,8 @@ pub enum Bsdf<'a> {
     RoughConductor(RoughConductor),
     /// A smooth dielectric or conductor with scratches (METHOD.md section 6).
     Scratched(ScratchedBsdf<'a>),
+    /// Glass with dielectric-wall scratches, reflecting and transmitting (METHOD.md 8.2).
+    ScratchedGlass(ScratchedGlassBsdf<'a>),
     /// The wall of an explicit scratch groove (METHOD.md 8.3).
     Wall(GrooveWall),
 }
@@ -89,6 +93,7 @@ impl Bsdf<'_> {
             Bsdf::RoughDielectric(b) => b.eval(wo, wi),
             Bsdf::RoughConductor(b) => b.eval(wo, wi),
             Bsdf::Scratched(b) => b.eval(wo, wi),
+            Bsdf::ScratchedGlass(b) => b.eval(wo, wi),
             Bsdf::Wall(b) => b.eval(wo, wi),
         }
     }
@@ -102,6 +107,7 @@ impl Bsdf<'_> {
             Bsdf::RoughDielectric(b) => b.pdf(wo, wi),
             Bsdf::RoughConductor(b) => b.pdf(wo, wi),
             Bsdf::Scratched(b) => b.pdf(wo, wi),
+            Bsdf::ScratchedGlass(b) => b.pdf(wo, wi),
             Bsdf::Wall(b) => b.pdf(wo, wi),
         }
     }
@@ -117,6 +123,7 @@ impl Bsdf<'_> {
             Bsdf::RoughDielectric(b) => b.eval_pdf(wo, wi),
             Bsdf::RoughConductor(b) => b.eval_pdf(wo, wi),
             Bsdf::Scratched(b) => b.eval_pdf(wo, wi),
+            Bsdf::ScratchedGlass(b) => b.eval_pdf(wo, wi),
             Bsdf::Wall(b) => (b.eval(wo, wi), b.pdf(wo, wi)),
         }
     }
@@ -129,6 +136,10 @@ impl Bsdf<'_> {
     pub fn eval_for_light(&self, wo: Vec3, wi: Vec3, delta_light: bool) -> (Rgb, Option<f32>) {
         match self {
             Bsdf::Scratched(b) if !delta_light => {
+                let (f, pdf) = b.eval_pdf(wo, wi);
+                (f, Some(pdf))
+            }
+            Bsdf::ScratchedGlass(b) if !delta_light => {
                 let (f, pdf) = b.eval_pdf(wo, wi);
                 (f, Some(pdf))
             }
@@ -148,6 +159,7 @@ impl Bsdf<'_> {
             Bsdf::RoughDielectric(b) => b.sample(wo, u_lobe, u),
             Bsdf::RoughConductor(b) => b.sample(wo, u),
             Bsdf::Scratched(b) => b.sample(wo, u_lobe, u),
+            Bsdf::ScratchedGlass(b) => b.sample(wo, u_lobe, u),
             Bsdf::Wall(b) => b.sample(wo, u),
         }
     }
@@ -157,7 +169,7 @@ impl Bsdf<'_> {
     #[inline]
     pub fn has_transmission(&self) -> bool {
         match self {
-            Bsdf::Dielectric(_) | Bsdf::RoughDielectric(_) => true,
+            Bsdf::Dielectric(_) | Bsdf::RoughDielectric(_) | Bsdf::ScratchedGlass(_) => true,
             Bsdf::Scratched(b) => b.has_transmission(),
             _ => false,
         }

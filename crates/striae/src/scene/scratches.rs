@@ -10,7 +10,10 @@
 //! ior = 1.5                      # glass only
 //! [materials.glass.scratches]
 //! profile = "v:angle=90"         # the syntax of `striae precompute --profile`
-//! walls = "diffuse"              # "specular" = mirror walls, [Raymond16]'s delta lobe
+//! walls = "diffuse"              # "specular" = mirror walls, [Raymond16]'s delta lobe;
+//!                                # "dielectric" = glass walls, reflecting and transmitting
+//!                                # from both sides (METHOD.md 8.1-8.2, glass only)
+//! # roughness = 0.2              # GGX alpha of dielectric walls (default 0, smooth)
 //! fresnel = "seed"               # or "walls"
 //! fresnel_law = "schlick"        # dielectric | conductor:ETA,K | none
 //! m = 256                        # table size M, N, N_r (default: the seed's,
@@ -27,18 +30,18 @@
 
 use super::materials::{conductor_ior, invalid, MaterialError};
 use crate::bsdf::GrooveWall;
-use crate::bsdf::{ConductorIor, ScratchLobeTable, ScratchedBase};
+use crate::bsdf::{ConductorIor, ScratchedBase, WallLobeTable};
 use crate::fresnel::FresnelLaw;
 use crate::layers::{LayerError, LayerParams, LayerSet, Orientation, MAX_LAYERS};
 use crate::material::Material;
 use crate::math::Rgb;
 use crate::profile::Profile;
-use crate::scratched::{CoverageMode, LayerMix, ScratchedMaterial};
+use crate::scratched::{CoverageMode, LayerMix, ScratchModel, ScratchedMaterial};
 use crate::table::{TableError, TableParams};
 use crate::trace2d::{FresnelMode, TraceError, TraceSettings, Walls};
+use crate::wall_table::WallTableParams;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 /// The smooth base under the scratches.
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
@@ -62,9 +65,12 @@ pub const DEFAULT_LAYER_SEED: u64 = 1;
 pub struct ScratchSpec {
     /// Profile spec, as `striae precompute --profile` (`file:` paths are relative to the scene).
     pub profile: Option<String>,
-    /// Wall micro-BRDF: glass default `diffuse` (the seed), metal `specular` ([Raymond16]).
+    /// Wall micro-BRDF: glass default `diffuse` (the seed), metal `specular` ([Raymond16]);
+    /// `dielectric`: the groove's own glass (METHOD.md 8.1-8.2).
     #[serde(default, deserialize_with = "keyed::walls")]
-    pub walls: Option<Walls>,
+    pub walls: Option<WallsKey>,
+    /// GGX `alpha` of dielectric walls, in `[0, 1]` (default 0: smooth).
+    pub roughness: Option<f64>,
     /// Where Fresnel is applied: glass default `seed`, metal `walls`.
     #[serde(default, deserialize_with = "keyed::fresnel")]
     pub fresnel: Option<FresnelMode>,
@@ -113,7 +119,7 @@ pub struct ScratchSpec {
 /// A material is an internally tagged enum, which serde buffers, so `toml` can point only at the
 /// material's table and its message would name the bad word but not the key.
 mod keyed {
-    use super::{BaseKind, CoverageMode, FresnelMode, LayerMix, Orientation, Walls};
+    use super::{BaseKind, CoverageMode, FresnelMode, LayerMix, Orientation, WallsKey};
     use serde::de::{Deserialize, Deserializer, Error};
 
     fn named<'de, T: Deserialize<'de>, D: Deserializer<'de>>(
@@ -126,7 +132,7 @@ mod keyed {
     pub fn base<'de, D: Deserializer<'de>>(d: D) -> Result<BaseKind, D::Error> {
         named(d, "base")
     }
-    pub fn walls<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Walls>, D::Error> {
+    pub fn walls<'de, D: Deserializer<'de>>(d: D) -> Result<Option<WallsKey>, D::Error> {
         named(d, "scratches.walls")
     }
     pub fn fresnel<'de, D: Deserializer<'de>>(d: D) -> Result<Option<FresnelMode>, D::Error> {
@@ -143,10 +149,22 @@ mod keyed {
     }
 }
 
+/// `scratches.walls`: the 2D table's walls ([`Walls`]) or the groove's own glass.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum WallsKey {
+    Diffuse,
+    Specular,
+    Dielectric,
+}
+
 /// Where a material's table comes from.
 #[derive(Clone, Debug, PartialEq)]
 pub enum TableSource {
     Compute(TableParams),
+    /// A dielectric-wall table (METHOD.md 8.1), computed or cached.
+    Walls(WallTableParams),
+    /// A table file: the seed's or a dielectric-wall one (`kind` says which).
     File(PathBuf),
 }
 
@@ -307,6 +325,7 @@ impl ScratchedDesc {
         let table_keys = [
             ("scratches.profile", s.profile.is_some()),
             ("scratches.walls", s.walls.is_some()),
+            ("scratches.roughness", s.roughness.is_some()),
             ("scratches.fresnel", s.fresnel.is_some()),
             ("scratches.fresnel_law", s.fresnel_law.is_some()),
             ("scratches.ior", s.ior.is_some()),
@@ -335,6 +354,18 @@ impl ScratchedDesc {
             _ => Profile::parse(&spec),
         }
         .map_err(|e| invalid("scratches.profile", format!("{spec:?}"), e.to_string()))?;
+        if s.walls == Some(WallsKey::Dielectric) {
+            return self
+                .resolve_walls(defaults, profile)
+                .map(TableSource::Walls);
+        }
+        if let Some(r) = s.roughness {
+            return Err(invalid(
+                "scratches.roughness",
+                r,
+                "applies to walls = \"dielectric\" only (the 2D table's walls are smooth or Lambertian)",
+            ));
+        }
         let law = match &s.fresnel_law {
             Some(text) => {
                 let n = s.ior.unwrap_or(match defaults.base {
@@ -374,8 +405,13 @@ impl ScratchedDesc {
             0 => defaults.mode,
             _ => FresnelMode::Walls,
         };
+        let walls = match s.walls {
+            Some(WallsKey::Specular) => Walls::Specular,
+            Some(WallsKey::Diffuse) => Walls::Diffuse,
+            Some(WallsKey::Dielectric) | None => defaults.walls,
+        };
         let trace = TraceSettings {
-            walls: s.walls.unwrap_or(defaults.walls),
+            walls,
             m: s.m.unwrap_or(seed.m),
             n: s.n.unwrap_or(seed.n),
             nr: s.nr.unwrap_or(seed.nr),
@@ -392,6 +428,55 @@ impl ScratchedDesc {
             invalid(trace_key(key), value, why)
         })?;
         Ok(TableSource::Compute(TableParams::new(profile, trace)))
+    }
+
+    /// `walls = "dielectric"`: glass only; the 2D table's keys do not apply; `roughness` in
+    /// `[0, 1]`; `trace_seed` seeds the trace.
+    fn resolve_walls(
+        &self,
+        defaults: &BaseDefaults,
+        profile: Profile,
+    ) -> Result<WallTableParams, MaterialError> {
+        let s = &self.scratches;
+        let ScratchedBase::Glass { eta } = defaults.base else {
+            return Err(invalid(
+                "scratches.walls",
+                "\"dielectric\"",
+                "dielectric walls are glass: they need base = \"glass\"",
+            ));
+        };
+        let seed_keys = [
+            ("scratches.fresnel", s.fresnel.is_some()),
+            ("scratches.fresnel_law", s.fresnel_law.is_some()),
+            ("scratches.ior", s.ior.is_some()),
+            ("scratches.m", s.m.is_some()),
+            ("scratches.n", s.n.is_some()),
+            ("scratches.nr", s.nr.is_some()),
+            ("scratches.albedo", s.albedo.is_some()),
+            ("scratches.max_bounces", s.max_bounces.is_some()),
+            ("scratches.groove_slices", s.groove_slices.is_some()),
+        ];
+        if let Some((key, _)) = seed_keys.iter().find(|(_, given)| *given) {
+            return Err(invalid(
+                key,
+                "(given)",
+                "applies to the 2D table (walls = \"diffuse\" or \"specular\"); dielectric walls take the glass's `ior` and `roughness`",
+            ));
+        }
+        let roughness = s.roughness.unwrap_or(0.0);
+        let params = WallTableParams {
+            seed: s.trace_seed.unwrap_or(0),
+            ..WallTableParams::new(profile, eta as f64, roughness)
+        };
+        params.validate().map_err(|e| {
+            let key = match e.key {
+                "roughness" => "scratches.roughness",
+                "ior" => "ior",
+                _ => "scratches",
+            };
+            invalid(key, e.value, e.why)
+        })?;
+        Ok(params)
     }
 
     /// The layer parameters: a `setting` of the seed's Table 1, or all of `length`, `width`
@@ -434,23 +519,67 @@ impl ScratchedDesc {
     /// layer set.
     pub fn prepare(&self, base_dir: &Path) -> Result<ScratchedMaterial, MaterialError> {
         let r = self.resolve(base_dir)?;
-        let table: Result<Arc<ScratchLobeTable>, TableError> = match &r.table {
-            TableSource::Compute(params) => crate::cache::obtain_table(params),
-            TableSource::File(path) => crate::cache::load_table_file(path),
+        let key = if self.scratches.table.is_some() {
+            "scratches.table"
+        } else {
+            "scratches"
         };
-        let table = table.map_err(|e| MaterialError::ScratchTable {
-            key: if self.scratches.table.is_some() {
-                "scratches.table"
-            } else {
-                "scratches"
-            },
+        let table_error = |e: TableError| MaterialError::ScratchTable {
+            key,
             source: Box::new(e),
-        })?;
+        };
+        let model = match &r.table {
+            TableSource::Compute(params) => {
+                ScratchModel::Seed(crate::cache::obtain_table(params).map_err(table_error)?)
+            }
+            TableSource::Walls(params) => ScratchModel::DielectricWalls(
+                crate::cache::obtain_wall_table(params).map_err(table_error)?,
+            ),
+            TableSource::File(path) => {
+                match crate::cache::load_any_table_file(path).map_err(table_error)? {
+                    model @ ScratchModel::Seed(_) => model,
+                    ScratchModel::DielectricWalls(walls) => {
+                        self.check_wall_table_base(&r.base, &walls)?;
+                        ScratchModel::DielectricWalls(walls)
+                    }
+                }
+            }
+        };
         let layers = LayerSet::with_orientation(r.layers, r.layer_seed, r.orientation)
             .map_err(layer_error)?;
-        Ok(ScratchedMaterial::new(
-            r.base, r.tint, table, layers, r.mix, r.coverage,
+        Ok(ScratchedMaterial::with_model(
+            r.base, r.tint, model, layers, r.mix, r.coverage,
         ))
+    }
+
+    /// A dielectric-wall table file fits a glass base of its own index only.
+    fn check_wall_table_base(
+        &self,
+        base: &ScratchedBase,
+        walls: &WallLobeTable,
+    ) -> Result<(), MaterialError> {
+        match *base {
+            ScratchedBase::Glass { eta } if (eta - walls.ior()).abs() <= 1e-6 * eta => Ok(()),
+            ScratchedBase::Glass { eta } => Err(invalid(
+                "scratches.table",
+                format!(
+                    "{:?}",
+                    self.scratches.table.as_deref().unwrap_or(Path::new(""))
+                ),
+                format!(
+                    "a dielectric-wall table traced for index {}, on glass of ior {eta}",
+                    walls.ior()
+                ),
+            )),
+            ScratchedBase::Metal { .. } => Err(invalid(
+                "scratches.table",
+                format!(
+                    "{:?}",
+                    self.scratches.table.as_deref().unwrap_or(Path::new(""))
+                ),
+                "a dielectric-wall table needs base = \"glass\"",
+            )),
+        }
     }
 }
 
@@ -475,6 +604,9 @@ impl ScratchedDesc {
     /// The explicit geometry's ingredients (validated like [`ScratchedDesc::resolve`]).
     pub fn explicit(&self, base_dir: &Path) -> Result<ExplicitSpec, MaterialError> {
         let r = self.resolve(base_dir)?;
+        if let TableSource::Walls(params) = &r.table {
+            return self.explicit_glass(&r, params);
+        }
         let TableSource::Compute(params) = r.table else {
             return Err(invalid(
                 "scratches.explicit",
@@ -521,6 +653,37 @@ impl ScratchedDesc {
             profile: params.profile,
             face,
             wall,
+        })
+    }
+}
+
+impl ScratchedDesc {
+    /// Explicit grooves with dielectric walls: smooth glass faces, walls of the glass with the
+    /// walls' roughness.
+    fn explicit_glass(
+        &self,
+        r: &Resolved,
+        params: &WallTableParams,
+    ) -> Result<ExplicitSpec, MaterialError> {
+        if r.orientation != Orientation::Layer {
+            return Err(invalid(
+                "scratches.explicit",
+                true,
+                "explicit grooves follow the layers' directions: they cannot be carved with `orientation = \"random\"`",
+            ));
+        }
+        let eta = params.ior as f32;
+        Ok(ExplicitSpec {
+            layers: LayerSet::new(r.layers, r.layer_seed).map_err(layer_error)?,
+            profile: params.profile.clone(),
+            face: Material::Dielectric {
+                eta,
+                roughness: 0.0,
+            },
+            wall: Material::Dielectric {
+                eta,
+                roughness: params.roughness as f32,
+            },
         })
     }
 }

@@ -15,6 +15,7 @@
 use crate::bsdf::scratched::MAX_SCRATCH_LOBES;
 use crate::bsdf::{
     Bsdf, Conductor, Dielectric, ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf,
+    ScratchedGlassBsdf, WallLobeTable,
 };
 use crate::layers::cache::PixelKey;
 use crate::layers::lattice::TileQuery;
@@ -64,13 +65,33 @@ pub enum CoverageMode {
     Point,
 }
 
+/// The scratch model and its shared table.
+#[derive(Clone, Debug)]
+pub enum ScratchModel {
+    /// The seed's (METHOD.md sections 3-6): the scratch BRDF replaces the base's reflection.
+    Seed(Arc<ScratchLobeTable>),
+    /// Dielectric walls (METHOD.md 8.1-8.2, glass only): the groove's four lobes, reflected
+    /// and transmitted from either side ([`ScratchedGlassBsdf`]).
+    DielectricWalls(Arc<WallLobeTable>),
+}
+
+impl ScratchModel {
+    /// The table's parameter hash.
+    pub fn hash(&self) -> &str {
+        match self {
+            ScratchModel::Seed(t) => t.hash(),
+            ScratchModel::DielectricWalls(t) => t.hash(),
+        }
+    }
+}
+
 /// A prepared scratched material: the base, the shared table, the layer set.
 #[derive(Clone)]
 pub struct ScratchedMaterial {
     pub base: ScratchedBase,
     /// RGB factor on the scratch lobe (metal: the base's colour; glass: 1).
     pub tint: Rgb,
-    pub table: Arc<ScratchLobeTable>,
+    pub model: ScratchModel,
     pub layers: LayerSet,
     /// Each layer's scratch direction `d_k` in texture space ([`LayerSet::direction`]), as `f32`,
     /// computed once here rather than with a `sin_cos` per hit.
@@ -83,7 +104,7 @@ impl std::fmt::Debug for ScratchedMaterial {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("ScratchedMaterial")
             .field("base", &self.base)
-            .field("table", &self.table.hash())
+            .field("table", &self.model.hash())
             .field("layers", &self.layers.len())
             .field("mix", &self.mix)
             .field("coverage", &self.coverage)
@@ -100,13 +121,25 @@ impl ScratchedMaterial {
         mix: LayerMix,
         coverage: CoverageMode,
     ) -> ScratchedMaterial {
+        Self::with_model(base, tint, ScratchModel::Seed(table), layers, mix, coverage)
+    }
+
+    /// A material of any [`ScratchModel`] (dielectric walls: `base` must be glass).
+    pub fn with_model(
+        base: ScratchedBase,
+        tint: Rgb,
+        model: ScratchModel,
+        layers: LayerSet,
+        mix: LayerMix,
+        coverage: CoverageMode,
+    ) -> ScratchedMaterial {
         let directions = (0..layers.len())
             .map(|k| layers.direction(k).map(|x| x as f32))
             .collect();
         ScratchedMaterial {
             base,
             tint,
-            table,
+            model,
             layers,
             directions,
             mix,
@@ -143,10 +176,13 @@ impl ScratchedMaterial {
         !self.seen_from_inside(wo, ng)
     }
 
-    /// Glass seen from inside: the scratches are on the outer side only (`bsdf::scratched`).
+    /// Glass seen from inside under the seed's model, which has no scratches there
+    /// (`bsdf::scratched`); dielectric walls scatter from both sides.
     #[inline]
     fn seen_from_inside(&self, wo: Vec3, ng: Vec3) -> bool {
-        matches!(self.base, ScratchedBase::Glass { .. }) && wo.dot(ng) <= 0.0
+        matches!(self.base, ScratchedBase::Glass { .. })
+            && matches!(self.model, ScratchModel::Seed(_))
+            && wo.dot(ng) <= 0.0
     }
 
     /// The BSDF at a hit (see the module notes), with the render worker's coverage caches.
@@ -176,10 +212,19 @@ impl ScratchedMaterial {
         if count == 0 {
             return self.base_bsdf();
         }
+        let table = match &self.model {
+            ScratchModel::Seed(table) => table,
+            ScratchModel::DielectricWalls(walls) => {
+                let ScratchedBase::Glass { eta } = self.base else {
+                    return self.base_bsdf();
+                };
+                return Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(eta, walls, &lobes[..count]));
+            }
+        };
         // The integrator evaluates and samples it with `wo` in this frame: precompute the
         // first lobe's `wo` terms once (`ScratchedBsdf::at_wo`; the same results bit for bit).
         Bsdf::Scratched(
-            ScratchedBsdf::new(self.base, &self.table, self.tint, &lobes[..count])
+            ScratchedBsdf::new(self.base, table, self.tint, &lobes[..count])
                 .at_wo(ctx.frame.to_local(ctx.wo)),
         )
     }

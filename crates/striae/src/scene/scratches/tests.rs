@@ -16,7 +16,7 @@ fn parse(text: &str) -> Result<ScratchedDesc, String> {
 fn computed(text: &str) -> TableParams {
     match parse(text).unwrap().resolve(Path::new(".")).unwrap().table {
         TableSource::Compute(p) => p,
-        TableSource::File(f) => panic!("{f:?}"),
+        other => panic!("{other:?}"),
     }
 }
 
@@ -41,6 +41,15 @@ fn keys_are_validated() {
             .resolve(Path::new("."))
             .unwrap();
     assert_eq!(random.orientation, Orientation::Random);
+    // Dielectric walls: the glass's index, the walls' roughness, the trace seed.
+    let walls = parse("type = \"scratched\"\nbase = \"glass\"\nior = 1.4\n[scratches]\nwalls = \"dielectric\"\nroughness = 0.25\ntrace_seed = 7")
+        .unwrap()
+        .resolve(Path::new("."))
+        .unwrap();
+    let TableSource::Walls(w) = walls.table else {
+        panic!("{:?}", walls.table)
+    };
+    assert_eq!((w.ior, w.roughness, w.seed), (1.4f32 as f64, 0.25, 7));
     let TableSource::Compute(p) = r.table else {
         panic!()
     };
@@ -182,10 +191,38 @@ fn keys_are_validated() {
             &["`scratches.m`", "2048", "groove_slices"],
         ),
         (
+            "base = \"glass\"\n[scratches]\nwalls = \"dielectric\"\ngroove_slices = 6",
+            &["`scratches.groove_slices`", "dielectric"],
+        ),
+        (
             "base = \"glass\"\n[scratches]\ntable = \"t.npz\"\ngroove_slices = 6",
             &["`scratches.groove_slices`", "table"],
         ),
         ("base = \"glass\"\n[scratches]\nfoo = 1", &["foo"]),
+        (
+            "base = \"metal\"\npreset = \"gold\"\n[scratches]\nwalls = \"dielectric\"",
+            &["`scratches.walls`", "glass"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nwalls = \"dielectric\"\nroughness = 1.5",
+            &["`scratches.roughness`", "1.5"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nwalls = \"dielectric\"\nroughness = -0.1",
+            &["`scratches.roughness`", "-0.1"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nroughness = 0.2",
+            &["`scratches.roughness`", "dielectric"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nwalls = \"dielectric\"\nm = 64",
+            &["`scratches.m`", "dielectric"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nwalls = \"dielectric\"\nfresnel_law = \"schlick\"",
+            &["`scratches.fresnel_law`", "dielectric"],
+        ),
         ("base = \"glass\"\nroughness = 0.1", &["roughness"]),
     ];
     for (body, needles) in cases {

@@ -1,0 +1,439 @@
+//! The complete scratched-glass BSDF (METHOD.md 8.1-8.2, `walls = "dielectric"`): a smooth
+//! dielectric mixed with the four lobes of a groove cut into glass, from either side,
+//! `f = (1 - C) f_smooth + sum_k c_k f_groove,k` (`C = sum_k c_k`, the footprint coverages).
+//!
+//! **The groove lobes from the table.** [`WallLobeTable`] is the render form of a
+//! [`WallTable`]: for each incident grid point and side, the fractions `m_b` of the energy that
+//! leaves through each exit bin `b` of `(theta, phi)` (METHOD.md section 1 angles, a direction
+//! inside the glass mirrored up), reflected then transmitted. The BSDF at `(wo, wi)` reads the
+//! table with `wo` as the incident direction and `wi` as the exit, which physics allows:
+//! reflection is reciprocal, and transmission obeys the generalised reciprocity of 8.1,
+//! `f(wi -> wo) = (n_o / n_i)^2 f(wo -> wi)` (`n_o`, `n_i`: the indices on `wo`'s and `wi`'s
+//! sides), the factor that makes light entering glass `1 / n^2` as bright per solid angle
+//! (radiance transport, as [`super::Dielectric`]). Within a bin the exit density is uniform
+//! in `(theta, phi)`, so with `dw = cos(theta) dtheta dphi`
+//!
+//! `f(wo, wi) = s m_b / (J dtheta dphi cos(theta_i) |wi.z|)`,  `s = 1` (R), `(n_o / n_i)^2` (T).
+//!
+//! **Between grid points** the four nearest incident slices are blended bilinearly in
+//! `(theta_o, phi_o)` of `wo`, each first warped along `theta`: the piecewise-linear map of
+//! `(-pi/2, pi/2)` onto itself that carries the slice's smooth-wall exit angle
+//! ([`crate::wall_table::exit_theta`], `beta = n w.y` conserved) to `wo`'s, with slope `J`. A
+//! smooth wall's delta in `beta` so lands where it belongs (within one exit bin) wherever `wo`
+//! lies between the grid's points, and beyond the grid's last `theta` centres the warp
+//! extrapolates.
+//!
+//! **Sampling.** One component with the probability of its energy: the smooth reflection
+//! `(1 - C) F`, the smooth refraction `(1 - C)(1 - F)` (both deltas, weight 1 and `1 / eta^2`),
+//! groove lobe `k` with `c_k`; within a groove lobe, a grid slice with its bilinear weight, an
+//! exit bin in proportion to `m_b` (reflected and transmitted together, one CDF per slice), a
+//! point uniform in the bin, warped. The density of the non-delta part is `sum_k c_k pdf_k`,
+//! the value `pdf` returns, so MIS with light sampling is consistent; for a lossless groove and
+//! one slice, the weight is exactly `s`.
+
+use super::scratched::MAX_SCRATCH_LOBES;
+use super::{fresnel_f32, BsdfSample, ScratchLobe};
+use crate::math::{reflect_z, Rgb, Vec2, Vec3};
+use crate::wall_table::WallTable;
+use std::f32::consts::{FRAC_PI_2, PI};
+
+/// How far from `+-pi/2` the warp's fixed points are kept (radians), so that its slopes stay
+/// finite where an exit angle grazes (total internal reflection clamps it to `+-pi/2`).
+const WARP_MARGIN: f32 = 1e-3;
+
+/// A dielectric-wall table ready for rendering (see the module notes).
+#[derive(Debug)]
+pub struct WallLobeTable {
+    /// Incident grid sizes and the exit bins per angle.
+    nt: usize,
+    np: usize,
+    b: usize,
+    /// The glass's index `n`.
+    n: f32,
+    /// `[t][p][side][lobe][theta bin][phi bin]`, side 0: from outside, 1: from inside; lobe 0
+    /// reflected, 1 transmitted.
+    mass: Vec<f32>,
+    /// Inclusive prefix sums of `mass` within each `[t][p][side]` slice.
+    cdf: Vec<f32>,
+    /// The smooth-wall exit angles of the `theta` grid's centres, `[t][side][lobe]`.
+    grid_exit: Vec<[[f32; 2]; 2]>,
+    hash: String,
+}
+
+impl WallLobeTable {
+    pub fn new(table: &WallTable) -> Self {
+        let (nt, np, b) = (table.theta_i.len(), table.phi_i.len(), table.params.bins);
+        let b2 = b * b;
+        let mut mass = Vec::with_capacity(nt * np * 4 * b2);
+        for t in 0..nt {
+            for p in 0..np {
+                for l in 0..4 {
+                    mass.extend(table.slice(l, t, p).iter().map(|&m| m.max(0.0) as f32));
+                }
+            }
+        }
+        let mut cdf = Vec::with_capacity(mass.len());
+        for slice in mass.chunks_exact(2 * b2) {
+            let mut acc = 0.0f64;
+            cdf.extend(slice.iter().map(|&m| {
+                acc += m as f64;
+                acc as f32
+            }));
+        }
+        let mut t = WallLobeTable {
+            nt,
+            np,
+            b,
+            n: table.params.ior as f32,
+            mass,
+            cdf,
+            grid_exit: Vec::new(),
+            hash: table.params.hash(),
+        };
+        t.grid_exit = (0..nt)
+            .map(|i| {
+                let centre = -FRAC_PI_2 + (i as f32 + 0.5) * PI / nt as f32;
+                std::array::from_fn(|side| std::array::from_fn(|l| t.exit_theta(side, l, centre)))
+            })
+            .collect();
+        t
+    }
+
+    /// The table's parameter hash (`WallTableParams::hash`).
+    pub fn hash(&self) -> &str {
+        &self.hash
+    }
+
+    /// The glass's index the table was traced with.
+    pub fn ior(&self) -> f32 {
+        self.n
+    }
+
+    #[inline]
+    fn slice_len(&self) -> usize {
+        2 * self.b * self.b
+    }
+
+    #[inline]
+    fn bin_width(&self) -> f32 {
+        PI / self.b as f32
+    }
+
+    /// The exit bin of an angle in `(-pi/2, pi/2)`.
+    #[inline]
+    fn bin(&self, a: f32) -> usize {
+        (((a + FRAC_PI_2) / self.bin_width()) as usize).min(self.b - 1)
+    }
+
+    /// The smooth-wall exit `theta` of lobe `l` (0: R, 1: T) for incident `theta` from
+    /// `side` (METHOD.md 8.1, [`crate::wall_table::exit_theta`]), kept off `+-pi/2`.
+    #[inline]
+    fn exit_theta(&self, side: usize, l: usize, theta: f32) -> f32 {
+        let s = theta.sin();
+        let e = match (side, l) {
+            (_, 0) => -theta,
+            (0, _) => -(s / self.n).asin(),
+            _ => -(self.n * s).clamp(-1.0, 1.0).asin(),
+        };
+        e.clamp(-FRAC_PI_2 + WARP_MARGIN, FRAC_PI_2 - WARP_MARGIN)
+    }
+
+    /// The slices around `wo` (scratch frame, `wo.z != 0`) and their warps ([`Corners`]).
+    fn corners(&self, wo: Vec3) -> Corners {
+        let side = (wo.z < 0.0) as usize;
+        let theta = wo.y.clamp(-1.0, 1.0).asin();
+        let phi = wo.x.atan2(wo.z.abs());
+        // Bilinear weights between the grid's centres, clamped at its edges.
+        let weights = |n: usize, x: f32| -> [(usize, f32); 2] {
+            if n == 1 {
+                return [(0, 1.0), (0, 0.0)];
+            }
+            let step = PI / n as f32;
+            let f = ((x + FRAC_PI_2) / step - 0.5).clamp(0.0, (n - 1) as f32);
+            let i = (f as usize).min(n - 2);
+            let w = f - i as f32;
+            [(i, 1.0 - w), (i + 1, w)]
+        };
+        let (wt, wp) = (weights(self.nt, theta), weights(self.np, phi));
+        let e_o = [
+            self.exit_theta(side, 0, theta),
+            self.exit_theta(side, 1, theta),
+        ];
+        let mut c = Corners {
+            side,
+            count: 0,
+            slice: [0; 4],
+            weight: [0.0; 4],
+            total: [0.0; 4],
+            e_c: [[0.0; 2]; 4],
+            e_o,
+        };
+        let len = self.slice_len();
+        for &(t, a) in &wt {
+            let e_c = self.grid_exit[t][side];
+            for &(p, bw) in &wp {
+                let w = a * bw;
+                if !(w > 0.0) {
+                    continue;
+                }
+                let k = c.count;
+                let start = ((t * self.np + p) * 2 + side) * len;
+                c.slice[k] = start as u32;
+                c.weight[k] = w;
+                c.total[k] = self.cdf[start + len - 1];
+                c.e_c[k] = e_c;
+                c.count += 1;
+            }
+        }
+        c
+    }
+
+    /// `(f, pdf)` of one groove lobe at `wi` (scratch frame), the pdf as the lobe's sampler's
+    /// ([`Self::sample`]) given the corners of `wo`.
+    #[inline]
+    fn eval_pdf(&self, c: &Corners, wi: Vec3) -> (f32, f32) {
+        let below = wi.z < 0.0;
+        if wi.z == 0.0 {
+            return (0.0, 0.0);
+        }
+        let l = (below != (c.side == 1)) as usize;
+        let theta = wi.y.clamp(-1.0, 1.0).asin();
+        let cos_theta = theta.cos();
+        if !(cos_theta > 0.0) {
+            return (0.0, 0.0);
+        }
+        let col = self.bin(wi.x.atan2(wi.z.abs()));
+        let b2 = self.b * self.b;
+        let (mut f, mut p) = (0.0f32, 0.0f32);
+        for k in 0..c.count {
+            let (src, slope) = unwarp(theta, c.e_c[k][l], c.e_o[l]);
+            let m = self.mass[c.slice[k] as usize + l * b2 + self.bin(src) * self.b + col];
+            if m > 0.0 && c.total[k] > 0.0 {
+                let m = c.weight[k] * m / slope;
+                f += m;
+                p += m / c.total[k];
+            }
+        }
+        let area = self.bin_width() * self.bin_width() * cos_theta;
+        let s = if l == 0 {
+            1.0
+        } else if c.side == 0 {
+            1.0 / (self.n * self.n)
+        } else {
+            self.n * self.n
+        };
+        (s * f / (area * wi.z.abs()), p / area)
+    }
+
+    /// A direction from one groove lobe (see the module notes): `u0` picks the slice, `u` the
+    /// bin and the point in it. `None` where the chosen slice holds no energy.
+    #[inline]
+    fn sample(&self, c: &Corners, u0: f32, u: Vec2) -> Option<(Vec3, usize)> {
+        let mut k = 0;
+        let mut acc = c.weight[0];
+        while u0 >= acc && k + 1 < c.count {
+            k += 1;
+            acc += c.weight[k];
+        }
+        if !(c.total[k] > 0.0) {
+            return None;
+        }
+        let start = c.slice[k] as usize;
+        let cdf = &self.cdf[start..start + self.slice_len()];
+        let x = u.x * c.total[k];
+        let j = cdf.partition_point(|&v| v <= x).min(cdf.len() - 1);
+        let lo = if j == 0 { 0.0 } else { cdf[j - 1] };
+        let frac = if cdf[j] > lo {
+            ((x - lo) / (cdf[j] - lo)).clamp(0.0, 1.0)
+        } else {
+            0.5
+        };
+        let b2 = self.b * self.b;
+        let (l, row, col) = (j / b2, (j % b2) / self.b, j % self.b);
+        let h = self.bin_width();
+        let src = -FRAC_PI_2 + (row as f32 + frac) * h;
+        let theta = warp(src, c.e_c[k][l], c.e_o[l]);
+        let phi = -FRAC_PI_2 + (col as f32 + u.y) * h;
+        let (st, ct) = theta.sin_cos();
+        let (sp, cp) = phi.sin_cos();
+        let up = (c.side == 0) == (l == 0);
+        let z = if up { ct * cp } else { -ct * cp };
+        Some((Vec3::new(ct * sp, st, z), l))
+    }
+}
+
+/// The slices a `wo` reads: up to four, with bilinear weights, each slice's total energy and
+/// the warp's fixed points (`e_c` the slice's smooth exit angle per lobe, `e_o` `wo`'s).
+#[derive(Clone, Copy, Debug, Default)]
+struct Corners {
+    side: usize,
+    count: usize,
+    slice: [u32; 4],
+    weight: [f32; 4],
+    total: [f32; 4],
+    e_c: [[f32; 2]; 4],
+    e_o: [f32; 2],
+}
+
+/// The piecewise-linear map of `(-pi/2, pi/2)` onto itself carrying `from` to `to`.
+#[inline]
+fn warp(x: f32, from: f32, to: f32) -> f32 {
+    if x <= from {
+        -FRAC_PI_2 + (x + FRAC_PI_2) * (to + FRAC_PI_2) / (from + FRAC_PI_2)
+    } else {
+        FRAC_PI_2 - (FRAC_PI_2 - x) * (FRAC_PI_2 - to) / (FRAC_PI_2 - from)
+    }
+}
+
+/// The inverse of [`warp`] at `y` and the warp's slope there.
+#[inline]
+fn unwarp(y: f32, from: f32, to: f32) -> (f32, f32) {
+    if y <= to {
+        let slope = (to + FRAC_PI_2) / (from + FRAC_PI_2);
+        (-FRAC_PI_2 + (y + FRAC_PI_2) / slope, slope)
+    } else {
+        let slope = (FRAC_PI_2 - to) / (FRAC_PI_2 - from);
+        (FRAC_PI_2 - (FRAC_PI_2 - y) / slope, slope)
+    }
+}
+
+/// The scratched-glass BSDF at one hit (see the module notes).
+#[derive(Clone, Copy, Debug)]
+pub struct ScratchedGlassBsdf<'a> {
+    /// Relative index of the smooth base, inside over outside.
+    pub eta: f32,
+    pub table: &'a WallLobeTable,
+    lobes: [ScratchLobe; MAX_SCRATCH_LOBES],
+    count: u8,
+    /// `C = sum_k c_k <= 1`.
+    total: f32,
+}
+
+impl<'a> ScratchedGlassBsdf<'a> {
+    /// `lobes` with coverages `c_k >= 0`, at most [`MAX_SCRATCH_LOBES`], rescaled so that
+    /// `sum c_k <= 1`.
+    pub fn new(eta: f32, table: &'a WallLobeTable, lobes: &[ScratchLobe]) -> Self {
+        let mut out = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
+        let mut count = 0;
+        let mut total = 0.0f32;
+        for l in lobes
+            .iter()
+            .filter(|l| l.coverage > 0.0)
+            .take(MAX_SCRATCH_LOBES)
+        {
+            out[count] = *l;
+            out[count].coverage = l.coverage.min(1.0);
+            total += out[count].coverage;
+            count += 1;
+        }
+        if total > 1.0 {
+            for l in &mut out[..count] {
+                l.coverage /= total;
+            }
+            total = 1.0;
+        }
+        ScratchedGlassBsdf {
+            eta,
+            table,
+            lobes: out,
+            count: count as u8,
+            total,
+        }
+    }
+
+    fn lobes(&self) -> &[ScratchLobe] {
+        &self.lobes[..self.count as usize]
+    }
+
+    /// `(sum_k c_k f_k, sum_k c_k pdf_k)`: the groove lobes' value and the density of the
+    /// sampler's non-delta part.
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        if wo.z == 0.0 {
+            return (Rgb::ZERO, 0.0);
+        }
+        let (mut f, mut p) = (0.0f32, 0.0f32);
+        for l in self.lobes() {
+            let c = self.table.corners(l.to_scratch(wo));
+            let (fk, pk) = self.table.eval_pdf(&c, l.to_scratch(wi));
+            f += l.coverage * fk;
+            p += l.coverage * pk;
+        }
+        (Rgb::splat(f), p)
+    }
+
+    #[inline]
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
+        self.eval_pdf(wo, wi).0
+    }
+
+    #[inline]
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        self.eval_pdf(wo, wi).1
+    }
+
+    /// `u_lobe` picks the component (module notes) and, rescaled, a groove lobe's slice; `u`
+    /// the direction.
+    #[inline]
+    pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+        if wo.z == 0.0 {
+            return None;
+        }
+        let (fr, cos_t, eta_it) = fresnel_f32::dielectric(wo.z, self.eta);
+        let base = 1.0 - self.total;
+        let p_reflect = base * fr;
+        if u_lobe < p_reflect {
+            return Some(BsdfSample {
+                wi: reflect_z(wo),
+                weight: Rgb::ONE,
+                pdf: p_reflect,
+                delta: true,
+                eta: 1.0,
+            });
+        }
+        let p_transmit = base * (1.0 - fr);
+        let mut acc = p_reflect + p_transmit;
+        if u_lobe < acc || self.count == 0 {
+            if !(p_transmit > 0.0) {
+                return None;
+            }
+            let eta_ti = 1.0 / eta_it;
+            return Some(BsdfSample {
+                wi: Vec3::new(-eta_ti * wo.x, -eta_ti * wo.y, cos_t),
+                weight: Rgb::splat(eta_ti * eta_ti),
+                pdf: p_transmit,
+                delta: true,
+                eta: eta_it,
+            });
+        }
+        let count = self.count as usize;
+        let mut k = 0;
+        while k + 1 < count && u_lobe >= acc + self.lobes[k].coverage {
+            acc += self.lobes[k].coverage;
+            k += 1;
+        }
+        let l = &self.lobes[k];
+        let u0 = ((u_lobe - acc) / l.coverage).clamp(0.0, 1.0);
+        let corners = self.table.corners(l.to_scratch(wo));
+        let (wi_s, lobe) = self.table.sample(&corners, u0, u)?;
+        let wi = l.from_scratch(wi_s);
+        let (f, pdf) = self.eval_pdf(wo, wi);
+        if !(pdf > 0.0) {
+            return None;
+        }
+        let eta = if lobe == 0 {
+            1.0
+        } else if wo.z > 0.0 {
+            self.table.n
+        } else {
+            1.0 / self.table.n
+        };
+        Some(BsdfSample {
+            wi,
+            weight: f * (wi.z.abs() / pdf),
+            pdf,
+            delta: false,
+            eta,
+        })
+    }
+}
