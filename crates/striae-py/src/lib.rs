@@ -459,6 +459,7 @@ fn precompute(
         fresnel_law: striae::fresnel::FresnelLaw::parse(fresnel_law, ior)
             .map_err(|e| PyValueError::new_err(format!("fresnel_law: {e}")))?,
         estimator: named("estimator", estimator)?,
+        groove_slices: 0,
     };
     trace.validate().map_err(err)?;
     let params = TableParams::new(profile, trace);

@@ -193,8 +193,12 @@ pub fn load_or_compute(
     }
     let start = std::time::Instant::now();
     let t = &params.trace;
+    let slices = match t.groove_slices {
+        0 => String::new(),
+        s => format!(", {s} exact-groove slices"),
+    };
     crate::log::info(&format!(
-        "computing scratch table {} ({}, {:?} walls, M {} N {} N_r {}) ...",
+        "computing scratch table {} ({}, {:?} walls, M {} N {} N_r {}{slices}) ...",
         &hash[..12],
         params.profile.spec,
         t.walls,

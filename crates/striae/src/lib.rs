@@ -46,6 +46,7 @@ pub(crate) mod cross_section;
 pub mod fidelity;
 pub mod gonio;
 pub mod groove;
+pub mod groove_slices;
 pub mod wall_table;
 
 // Scratch layers from Worley cell noise (section 5).

@@ -6,10 +6,14 @@
 //! Fresnel at every wall hit, [Raymond16]) and fits `gamma` per bin by eq. (4).
 //! [`ScratchBrdf`] evaluates the 3D BRDF by eq. (3) with the `2/pi` unit factor of section 4
 //! and samples it as section 6 prescribes; for mirror walls it is the delta-in-theta lobe.
+//! With `groove_slices = S` a table also carries the exact groove's BRDF at `S` slices of
+//! `theta_i` ([`crate::groove_slices`]), which [`ScratchBrdf`] then evaluates instead of eq. (3).
 //! The file layout is documented in `docs/table-format.md`.
 
 use crate::angle_bins::AngleBins;
 use crate::fresnel::FresnelLaw;
+use crate::groove::{GonioError, GonioSettings};
+use crate::groove_slices::{slice_angles, GrooveSlices};
 use crate::math::Vec3;
 use crate::profile::Profile;
 use crate::sampling::Distribution1D;
@@ -171,6 +175,8 @@ fn npy_header_bytes(header: &str) -> Option<u64> {
 pub enum TableError {
     #[error(transparent)]
     Trace(#[from] TraceError),
+    #[error("exact-groove slices: {0}")]
+    Groove(GonioError),
     #[error(transparent)]
     Walls(#[from] crate::groove::GonioError),
     #[error("dielectric-wall table {path}: {why}")]
@@ -242,7 +248,12 @@ fn check_energy(path: &Path, t: &ScratchTable, stored: Option<&[f64]>) -> Result
             .sum()
     };
     let arrays = std::iter::once(("rho_m", &t.rho_m[..]))
-        .chain(t.rho_s.chunks(m * m).map(|slice| ("rho_s", slice)));
+        .chain(t.rho_s.chunks(m * m).map(|slice| ("rho_s", slice)))
+        .chain(
+            t.groove_rho
+                .chunks(m * m)
+                .map(|slice| ("groove_rho", slice)),
+        );
     for (key, values) in arrays {
         if let Some((row, albedo)) = (0..m)
             .map(|i| (i, row_albedo(values, i)))
@@ -368,6 +379,32 @@ impl<'a> TableFile<'a> {
     }
 }
 
+impl TableFile<'_> {
+    /// The exact-groove slices' `groove_rho` (`slices x m x m`, after `groove_theta` is checked
+    /// against [`slice_angles`]); empty, and neither key read, for `slices = 0`.
+    fn groove_rho(&mut self, m: usize, slices: usize) -> Result<Vec<f64>, TableError> {
+        if slices == 0 {
+            return Ok(Vec::new());
+        }
+        for key in ["groove_theta", "groove_rho"] {
+            if !self.has(key) {
+                return Err(TableError::MissingKey {
+                    path: self.path.into(),
+                    key,
+                });
+            }
+        }
+        let theta = self.floats("groove_theta", &[slices], false)?;
+        check_grid(
+            self.path,
+            "groove_theta",
+            &theta,
+            slice_angles(slices).into_iter(),
+        )?;
+        self.floats("groove_rho", &[slices, m, m], true)
+    }
+}
+
 /// `got` equals the grid `expected` within `1e-12`, or the first value that does not.
 fn check_grid(
     path: &Path,
@@ -406,6 +443,9 @@ pub struct ScratchTable {
     pub gamma: Vec<f64>,
     /// Per `phi_i`: energy fraction dropped by the bounce cap.
     pub dropped: Vec<f64>,
+    /// `rho` of the exact-groove slices ([`crate::groove_slices`]), `S x M x M` for
+    /// `S = params.trace.groove_slices`; empty without them.
+    pub groove_rho: Vec<f64>,
     /// The striae version that computed it.
     pub version: String,
 }
@@ -456,6 +496,7 @@ impl ScratchTable {
         let gamma = (0..mm)
             .map(|k| fit_gamma(rho_s[k], rho_s[mm + k], rho_s[2 * mm + k]))
             .collect();
+        let groove_rho = Self::compute_groove(params, progress)?;
         Ok(ScratchTable {
             params: params.clone(),
             m,
@@ -464,8 +505,31 @@ impl ScratchTable {
             rho_s,
             gamma,
             dropped: out.dropped,
+            groove_rho,
             version: crate::VERSION.to_string(),
         })
+    }
+
+    /// The exact-groove slices' `rho` (empty for `groove_slices = 0`): `N N_r` goniometer
+    /// paths per slice and `phi_i` bin with the table's Fresnel law, bounce cap and seed.
+    fn compute_groove(
+        params: &TableParams,
+        progress: &(dyn Fn(u64) + Sync),
+    ) -> Result<Vec<f64>, TableError> {
+        let t = &params.trace;
+        if t.groove_slices == 0 {
+            return Ok(Vec::new());
+        }
+        let base = GonioSettings {
+            fresnel_law: t.fresnel_law,
+            paths: t.n as u64 * t.nr as u64,
+            max_bounces: t.max_bounces,
+            seed: t.seed,
+            ..GonioSettings::default()
+        };
+        let g = GrooveSlices::compute(&params.profile, &base, t.m, t.groove_slices, progress)
+            .map_err(TableError::Groove)?;
+        Ok(g.rho)
     }
 
     /// Per `phi_i` row: the 2D albedo `sum_j rho_m cos(phi_j) pi/M` (eq. 1' makes it <= 1).
@@ -505,6 +569,13 @@ impl ScratchTable {
                 .map_err(npz_err)?;
             w.add_array("albedo_2d", &Array1::from(self.albedo_2d()))
                 .map_err(npz_err)?;
+            let slices = self.groove_rho.len() / (m * m);
+            if slices > 0 {
+                w.add_array("groove_theta", &Array1::from(slice_angles(slices)))
+                    .map_err(npz_err)?;
+                w.add_array("groove_rho", &sh(&self.groove_rho, &[slices, m, m]))
+                    .map_err(npz_err)?;
+            }
             w.add_array("params_json", &Array1::from(json.as_bytes().to_vec()))
                 .map_err(npz_err)?;
             w.add_array("version", &Array1::from(self.version.as_bytes().to_vec()))
@@ -579,6 +650,7 @@ impl ScratchTable {
         };
         check_grid(path, "phi", &phi, (0..m).map(|k| bin_centre(k, m)))?;
         check_grid(path, "theta", &theta, THETA_SLICES.iter().copied())?;
+        let groove_rho = f.groove_rho(m, params.trace.groove_slices)?;
         let table = ScratchTable {
             params,
             m,
@@ -587,6 +659,7 @@ impl ScratchTable {
             rho_s,
             gamma,
             dropped,
+            groove_rho,
             version,
         };
         check_energy(path, &table, stored_albedo.as_deref())?;
@@ -664,13 +737,19 @@ pub struct DeltaTerm {
 /// The 3D scratch BRDF of a table in the scratch frame: `x` across the scratch, `y` along it,
 /// `z` the normal; `wo`, `wi` point away from the surface (METHOD.md section 1:
 /// `phi = atan2(x, z)`, `theta = asin(y)`). Angles are looked up in the nearest bin
-/// (piecewise-constant in `phi_o`, `phi_i`; no interpolation).
+/// (piecewise-constant in `phi_o`, `phi_i`; no interpolation). A table with exact-groove
+/// slices is evaluated by them ([`GrooveSlices::rho_at`], a function of `theta_i`, `phi_i`,
+/// `phi_o`) instead of eq. (3); the sampler is the same with other rows.
 #[derive(Clone, Debug)]
 pub struct ScratchBrdf {
     table: ScratchTable,
     delta: bool,
-    /// Per `phi_o` bin: distribution over `phi_i` bins of `rho_s(pi/2, phi_o, phi_i) cos(phi_i)`.
+    /// Per `phi_o` bin: distribution over `phi_i` bins of `rho_s(pi/2, phi_o, phi_i) cos(phi_i)`
+    /// (with exact-groove slices: of [`GrooveSlices::mean_rho`] times `cos(phi_i)`, the lobe's
+    /// `f cos` integrated over `theta_i` in each `phi_i` bin).
     rows: Vec<Distribution1D>,
+    /// The exact-groove slices, if the table has them.
+    groove: Option<GrooveSlices>,
     /// The `phi` binner of `wo` and `wi` ([`Self::phi_bin`]).
     phi_bins: AngleBins,
     /// The eq. (4) exponent most bins share ([`common_gamma`]), NaN if none is shared widely.
@@ -846,10 +925,17 @@ impl ScratchBrdf {
     pub fn new(table: ScratchTable) -> Self {
         let m = table.m;
         let delta = table.params.trace.walls == Walls::Specular;
+        let groove = (!table.groove_rho.is_empty()).then(|| {
+            GrooveSlices::from_rho(m, table.groove_rho.clone(), table.params.trace.fresnel_law)
+        });
+        let mean = groove.as_ref().map(GrooveSlices::mean_rho);
         let rows = (0..m)
             .map(|o| {
                 let w: Vec<f64> = (0..m)
-                    .map(|i| table.slice(2, i, o) * table.phi[i].cos())
+                    .map(|i| match &mean {
+                        Some(mean) => mean[i * m + o] * table.phi[i].cos(),
+                        None => table.slice(2, i, o) * table.phi[i].cos(),
+                    })
                     .collect();
                 Distribution1D::new(&w)
             })
@@ -860,6 +946,7 @@ impl ScratchBrdf {
             table,
             delta,
             rows,
+            groove,
             phi_bins: AngleBins::new(m),
             gamma_common,
             theta_grid,
@@ -898,6 +985,21 @@ impl ScratchBrdf {
             eq4_r(wt.t, g)
         };
         r * t.slice(2, i, o) + (1.0 - r) * t.slice(0, i, o)
+    }
+
+    /// `rho(wo, wi)` for `wi` in `phi_i` bin `i`: eq. (3) ([`Self::rho_at`]) or, with
+    /// exact-groove slices, theirs at `theta_i` of `wi`.
+    #[inline]
+    fn rho_wi(&self, wt: &WoTerms, i: usize, wi: Vec3) -> f64 {
+        match &self.groove {
+            None => self.rho_at(wt, i),
+            Some(g) => g.rho_at(wi.y as f64, i, wt.o),
+        }
+    }
+
+    /// The exact-groove slices, if the table has them.
+    pub fn groove(&self) -> Option<&GrooveSlices> {
+        self.groove.as_ref()
     }
 
     /// The `phi` bin of a direction above the surface (`z > 0`), `phi = atan2(x, z)`
@@ -947,7 +1049,7 @@ impl ScratchBrdf {
         if self.delta || wi.z <= 0.0 {
             return 0.0;
         }
-        2.0 / PI * self.rho_at(wt, self.phi_bin(wi.x as f64, wi.z as f64))
+        2.0 / PI * self.rho_wi(wt, self.phi_bin(wi.x as f64, wi.z as f64), wi)
     }
 
     /// [`Self::eval_pdf`] with the `wo` terms of [`Self::wo_terms`] (`wo.z > 0`).
@@ -958,7 +1060,7 @@ impl ScratchBrdf {
         }
         let m = self.table.m;
         let i = self.phi_bin(wi.x as f64, wi.z as f64);
-        let f = 2.0 / PI * self.rho_at(wt, i);
+        let f = 2.0 / PI * self.rho_wi(wt, i, wi);
         let row = &self.rows[wt.o];
         if row.integral() <= 0.0 {
             return (f, 0.0);

@@ -114,6 +114,15 @@ pub struct TraceSettings {
     /// tables and their hashes are unchanged).
     #[serde(default, skip_serializing_if = "Estimator::is_walks")]
     pub estimator: Estimator,
+    /// Exact-groove `theta_i` slices traced besides the 2D trace (`crate::groove_slices`;
+    /// 0, the default: the seed's model only, absent from a table's parameters so that older
+    /// tables and their hashes are unchanged).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub groove_slices: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 impl Default for TraceSettings {
@@ -130,6 +139,7 @@ impl Default for TraceSettings {
             fresnel_mode: FresnelMode::Seed,
             fresnel_law: FresnelLaw::Schlick { n: 1.5 },
             estimator: Estimator::Walks,
+            groove_slices: 0,
         }
     }
 }
@@ -138,6 +148,12 @@ impl TraceSettings {
     /// Walks traced in total: `M N N_r` for diffuse walls, `M N` for mirrors.
     pub fn total_paths(&self) -> u64 {
         self.m as u64 * self.n as u64 * self.walks_per_entry() as u64
+    }
+
+    /// Goniometer paths of the exact-groove slices: `N N_r` per slice and `phi_i` bin, the
+    /// 2D trace's walks per incident angle.
+    pub fn groove_paths(&self) -> u64 {
+        (self.groove_slices * self.m) as u64 * self.n as u64 * self.nr as u64
     }
 
     pub fn walks_per_entry(&self) -> usize {
@@ -220,6 +236,7 @@ impl TraceSettings {
             }
             FresnelLaw::None => {}
         }
+        self.validate_groove_slices()?;
         if self.estimator == Estimator::Kernel {
             if self.walls != Walls::Diffuse {
                 return bad(
@@ -236,6 +253,59 @@ impl TraceSettings {
                      wall the weights depend on each path's cosines)",
                 );
             }
+        }
+        Ok(())
+    }
+}
+
+impl TraceSettings {
+    /// `groove_slices`: at most [`crate::groove_slices::MAX_SLICES`], and only where the exact
+    /// groove is what the table stands for (diffuse walls, Fresnel at every wall hit, no facet
+    /// albedo, which the groove tracer does not model).
+    fn validate_groove_slices(&self) -> Result<(), TraceError> {
+        let s = self.groove_slices;
+        if s == 0 {
+            return Ok(());
+        }
+        let bad = |key, value: String, why| Err(TraceError::BadParameter { key, value, why });
+        if s > crate::groove_slices::MAX_SLICES {
+            return bad("groove_slices", s.to_string(), "must be in 0..=32");
+        }
+        if self.walls != Walls::Diffuse {
+            return bad(
+                "groove_slices",
+                s.to_string(),
+                "exact-groove slices need diffuse walls (the mirror-wall lobe is a delta in \
+                 theta, exact already with fresnel = walls)",
+            );
+        }
+        if self.fresnel_mode != FresnelMode::Walls {
+            return bad(
+                "fresnel",
+                "seed".into(),
+                "exact-groove slices apply Fresnel at every wall hit: they need fresnel = walls",
+            );
+        }
+        if self.albedo != 1.0 {
+            return bad(
+                "albedo",
+                self.albedo.to_string(),
+                "the exact groove has no facet albedo: with groove_slices it must be 1",
+            );
+        }
+        if self.m > 1024 {
+            return bad(
+                "m",
+                self.m.to_string(),
+                "with groove_slices M must be in 1..=1024 (the goniometer bins M x M)",
+            );
+        }
+        if self.n as u64 * self.nr as u64 > 1 << 40 {
+            return bad(
+                "nr",
+                self.nr.to_string(),
+                "with groove_slices N N_r (paths per slice and phi_i) must be at most 2^40",
+            );
         }
         Ok(())
     }

@@ -29,9 +29,9 @@ pub struct Args {
     /// Index of refraction for schlick / dielectric.
     #[arg(long, default_value_t = 1.5)]
     ior: f64,
-    /// Where Fresnel is applied.
-    #[arg(long, value_enum, default_value_t = ModeArg::Seed)]
-    fresnel: ModeArg,
+    /// Where Fresnel is applied [default: seed; walls with --groove-slices].
+    #[arg(long, value_enum)]
+    fresnel: Option<ModeArg>,
     /// Fresnel law: schlick, dielectric, conductor:ETA,K or none (F = 1).
     #[arg(long, default_value = "schlick")]
     fresnel_law: String,
@@ -51,6 +51,11 @@ pub struct Args {
     /// convex profiles (see docs/table-format.md).
     #[arg(long, value_enum, default_value_t = EstimatorArg::Walks)]
     estimator: EstimatorArg,
+    /// Also tabulate the exact groove (the 2.5D goniometer, N N_r paths per slice and phi_i)
+    /// at this many theta_i slices, 1 to 32; the renderer then evaluates them instead of
+    /// eq. (3) (diffuse walls, Fresnel at every wall hit; docs/table-format.md).
+    #[arg(long)]
+    groove_slices: Option<usize>,
     /// GGX roughness (alpha, in [0, 1]) of dielectric walls.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     roughness: f64,
@@ -112,8 +117,15 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if let WallsArg::Dielectric = a.walls {
         return dielectric(profile, &a);
     }
+    if a.groove_slices == Some(0) {
+        anyhow::bail!("--groove-slices 0: must be in 1..=32 (leave it out for the seed's eq. (3))");
+    }
     let m = a.m as u64;
-    super::memory::check(&format!("--m {m}"), 80 * m * m, a.max_memory)?;
+    // The slices: rho and its ratio to F, and the goniometer's two M x M histograms per thread.
+    let groove = a
+        .groove_slices
+        .map_or(0, |s| (16 * s as u64 + 16 * 64) * m * m);
+    super::memory::check(&format!("--m {m}"), 80 * m * m + groove, a.max_memory)?;
     let trace = TraceSettings {
         walls: match a.walls {
             WallsArg::Specular => Walls::Specular,
@@ -127,18 +139,21 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         max_bounces: a.max_bounces,
         seed: a.seed,
         fresnel_mode: match a.fresnel {
-            ModeArg::Seed => FresnelMode::Seed,
-            ModeArg::Walls => FresnelMode::Walls,
+            Some(ModeArg::Seed) => FresnelMode::Seed,
+            Some(ModeArg::Walls) => FresnelMode::Walls,
+            None if a.groove_slices.is_some() => FresnelMode::Walls,
+            None => FresnelMode::Seed,
         },
         fresnel_law: parse_law(&a.fresnel_law, a.ior)?,
         estimator: match a.estimator {
             EstimatorArg::Walks => Estimator::Walks,
             EstimatorArg::Kernel => Estimator::Kernel,
         },
+        groove_slices: a.groove_slices.unwrap_or(0),
     };
     trace.validate().context("invalid precompute parameters")?;
     let params = TableParams::new(profile, trace);
-    let total = params.trace.total_paths();
+    let total = params.trace.total_paths() + params.trace.groove_paths();
     let bar = indicatif::ProgressBar::new(total);
     bar.set_style(
         indicatif::ProgressStyle::with_template(
@@ -167,6 +182,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         "profile {}  walls {:?}  M {}  N {}  N_r {}",
         params.profile.spec, params.trace.walls, table.m, params.trace.n, params.trace.nr
     );
+    if params.trace.groove_slices > 0 {
+        println!(
+            "exact-groove slices {} (theta_i), {} goniometer paths",
+            params.trace.groove_slices,
+            params.trace.groove_paths()
+        );
+    }
     let estimator = match params.trace.estimator {
         Estimator::Walks => "",
         Estimator::Kernel => " (kernel estimator: equivalent N_r-scheme paths)",

@@ -78,6 +78,19 @@ impl ScratchLobeTable {
             }
         });
         let mut albedo = vec![0.0f32; m * N];
+        if let Some(g) = brdf.groove() {
+            // Exact-groove slices: `f` does not depend on `theta_o`, one value per `phi_o`.
+            let mean = g.mean_rho();
+            for o in 0..m {
+                let a: f64 = w
+                    .iter()
+                    .enumerate()
+                    .map(|(j, wj)| mean[j * m + o] * wj)
+                    .sum();
+                albedo[o * N..(o + 1) * N].fill(a.max(0.0) as f32);
+            }
+            return ScratchLobeTable { brdf, albedo, hash };
+        }
         let mut rho = [0.0f64; N];
         for o in 0..m {
             let mut acc = [0.0f64; N];

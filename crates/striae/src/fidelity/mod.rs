@@ -18,17 +18,13 @@
 //! lobe scores `l1 / noise_l1` about 1, so "off by more than the noise" is that ratio well
 //! above 1.
 //!
-//! [`GrooveSlices`] is a representation that the comparison motivates (docs/fidelity.md): for
-//! Lambertian walls every path leaves from a Lambertian bounce, so the exact BRDF does not
-//! depend on `theta_o` at all, only on `theta_i` (through the Fresnel factor at each hit) and
-//! the two `phi`; it tabulates `rho(theta_i, phi_o, phi_i)` from the goniometer at a few
-//! `theta_i` and interpolates between them in `theta_i` (see its notes).
+//! [`GrooveSlices`] ([`crate::groove_slices`]) is the representation that the comparison
+//! motivates (docs/fidelity.md), a table option (`groove_slices = S`) of the renderer.
 
 pub mod study;
 
-use crate::angle_bins::{bin_centre, AngleBins};
-use crate::fresnel::FresnelLaw;
 use crate::groove::{trace_groove, GonioError, GonioSettings};
+pub use crate::groove_slices::GrooveSlices;
 use crate::profile::Profile;
 use rayon::prelude::*;
 use std::f64::consts::{FRAC_PI_2, PI};
@@ -165,125 +161,32 @@ pub fn compare(model: &[f64], r: &Reference) -> Comparison {
     }
 }
 
-/// A scratch BRDF tabulated from the exact groove at `theta_i` slices (an alternative to the
-/// seed's three `theta_o` slices, see the module notes): `rho[k][phi_i bin][phi_o bin]`
-/// normalised by eq. (1'), `f = (2/pi) rho`. Between slices it interpolates, linearly in
-/// `|theta_i|`, `rho / F(cos theta_i)` (constant beyond the first and last slice) and
-/// multiplies by `F(cos theta_i)` again: the first wall hit's Fresnel factor carries most of
-/// the steep rise towards grazing incidence, and the ratio left is smooth. Exact for
-/// Lambertian walls with any per-hit Fresnel law up to that interpolation, the `phi` bins and
-/// the Monte Carlo noise.
-#[derive(Clone, Debug)]
-pub struct GrooveSlices {
-    m: usize,
-    /// The slices' `theta_i`: `(k + 1/2) (pi/2) / S`, radians.
-    pub theta: Vec<f64>,
-    /// `rho / F(cos theta_k)` per slice `k`.
-    ratio: Vec<f64>,
-    law: FresnelLaw,
-    phi_bins: AngleBins,
-}
-
-impl GrooveSlices {
-    /// Trace `slices` values of `theta_i` times `m` values of `phi_i` (the bin centres), each
-    /// with `base.paths` paths, the walls and Fresnel law of `base` (its angles, bins and seed
-    /// are replaced).
-    pub fn compute(
-        profile: &Profile,
-        base: &GonioSettings,
-        m: usize,
-        slices: usize,
-    ) -> Result<Self, GonioError> {
-        for (key, n) in [("slices", slices), ("slice-m", m)] {
-            if !(1..=4096).contains(&n) {
-                return Err(GonioError {
-                    key,
-                    value: n.to_string(),
-                    why: "must be in 1..=4096",
-                });
-            }
-        }
-        let theta: Vec<f64> = (0..slices)
-            .map(|k| (k as f64 + 0.5) * FRAC_PI_2 / slices as f64)
-            .collect();
-        let law = base.fresnel_law;
-        let mut ratio = Vec::with_capacity(slices * m * m);
-        for (k, &theta_i) in theta.iter().enumerate() {
-            let fresnel = law.reflectance(theta_i.cos()).max(1e-12);
-            for i in 0..m {
-                let s = GonioSettings {
-                    theta_i,
-                    phi_i: bin_centre(i, m),
-                    bins: m,
-                    seed: base.seed.wrapping_add((k * m + i) as u64),
-                    ..base.clone()
-                };
-                let out = trace_groove(profile, &s, &|_| {})?;
-                ratio.extend((0..m).map(|j| {
-                    let frac: f64 = (0..m).map(|a| out.reflected[a * m + j]).sum();
-                    frac * m as f64 / (PI * bin_centre(j, m).cos()) / fresnel
-                }));
-            }
-        }
-        Ok(GrooveSlices {
-            m,
-            theta,
-            ratio,
-            law,
-            phi_bins: AngleBins::new(m),
-        })
-    }
-
-    /// The number of `phi` bins.
-    pub fn m(&self) -> usize {
-        self.m
-    }
-
-    /// `f(wo, wi)` without the cosine (0 below the surface).
-    pub fn eval(&self, wo: [f64; 3], wi: [f64; 3]) -> f64 {
-        if wo[2] <= 0.0 || wi[2] <= 0.0 {
-            return 0.0;
-        }
-        let m = self.m;
-        let (i, o) = (
-            self.phi_bins.bin_xz(wi[0], wi[2]),
-            self.phi_bins.bin_xz(wo[0], wo[2]),
-        );
-        let y = wi[1].clamp(-1.0, 1.0);
-        let t = y.asin().abs();
-        let s = self.theta.len();
-        let step = FRAC_PI_2 / s as f64;
-        let x = (t / step - 0.5).clamp(0.0, (s - 1) as f64);
-        let k = (x as usize).min(s.saturating_sub(2));
-        let w = x - k as f64;
-        let at = |k: usize| self.ratio[(k * m + i) * m + o];
-        let ratio = if s == 1 {
-            at(0)
-        } else {
-            (1.0 - w) * at(k) + w * at(k + 1)
-        };
-        let cos_theta_i = (1.0 - y * y).max(0.0).sqrt();
-        2.0 / PI * ratio * self.law.reflectance(cos_theta_i)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::angle_bins::bin_centre;
+    use crate::fresnel::FresnelLaw;
     use crate::groove::GrooveWalls;
+    use crate::groove_slices::slice_angles;
     use crate::table::{ScratchBrdf, ScratchTable, TableParams};
     use crate::trace2d::{FresnelMode, TraceSettings, Walls};
 
     fn table(spec: &str, law: FresnelLaw, m: usize) -> ScratchBrdf {
-        let trace = TraceSettings {
-            walls: Walls::Diffuse,
-            m,
-            n: 20_000,
-            nr: 20,
-            fresnel_mode: FresnelMode::Seed,
-            fresnel_law: law,
-            ..TraceSettings::default()
-        };
+        table_with(
+            spec,
+            TraceSettings {
+                walls: Walls::Diffuse,
+                m,
+                n: 20_000,
+                nr: 20,
+                fresnel_mode: FresnelMode::Seed,
+                fresnel_law: law,
+                ..TraceSettings::default()
+            },
+        )
+    }
+
+    fn table_with(spec: &str, trace: TraceSettings) -> ScratchBrdf {
         let p = TableParams::new(Profile::parse(spec).unwrap(), trace);
         ScratchBrdf::new(ScratchTable::compute(&p, &|_| {}).unwrap())
     }
@@ -357,26 +260,41 @@ mod tests {
     }
 
     /// With Schlick Fresnel at every wall hit the seed's one factor per path is measurably
-    /// wrong, while the exact-groove slices are right at their own `theta_i`.
+    /// wrong, while the renderer's BRDF of a table with exact-groove slices
+    /// (`groove_slices = 2`) is right at its own `theta_i`.
     #[test]
     fn per_hit_fresnel_separates_the_seed_model_from_groove_slices() {
         let (m, b) = (16, 16);
         let law = FresnelLaw::Schlick { n: 1.5 };
         let seed = table("v:angle=90", law, m);
         let p = Profile::parse("v:angle=90").unwrap();
-        let base = GonioSettings {
-            paths: 60_000,
-            ..gonio(law, 0.0, 0.0, b)
-        };
+        let base = gonio(law, 0.0, 0.0, b);
         assert_eq!(
-            GrooveSlices::compute(&p, &base, 0, 2).unwrap_err().key,
+            GrooveSlices::compute(&p, &base, 0, 2, &|_| {})
+                .unwrap_err()
+                .key,
             "slice-m"
         );
-        let slices = GrooveSlices::compute(&p, &base, m, 2).unwrap();
-        let (theta_i, phi_i) = (slices.theta[1], bin_centre(5, m));
+        let slices = table_with(
+            "v:angle=90",
+            TraceSettings {
+                walls: Walls::Diffuse,
+                m,
+                n: 60_000,
+                nr: 1,
+                fresnel_mode: FresnelMode::Walls,
+                fresnel_law: law,
+                groove_slices: 2,
+                ..TraceSettings::default()
+            },
+        );
+        assert_eq!(slices.groove().unwrap().slices(), 2);
+        let (theta_i, phi_i) = (slice_angles(2)[1], bin_centre(5, m));
         let r = reference(&p, &gonio(law, theta_i, phi_i, b), 4).unwrap();
-        let f = |wo, wi| slices.eval(wo, wi);
-        let good = compare(&model_histogram(&f, theta_i, phi_i, b, m, 4), &r);
+        let good = compare(
+            &model_histogram(&study::table_model(&slices), theta_i, phi_i, b, m, 4),
+            &r,
+        );
         let bad = compare(
             &model_histogram(&study::table_model(&seed), theta_i, phi_i, b, m, 4),
             &r,

@@ -1,7 +1,7 @@
 //! The table of docs/fidelity.md: the model's lobes against the exact groove for a set of
 //! profiles and incident directions, written as CSV and drawn as side-by-side heat maps.
 
-use super::{compare, model_histogram, reference, Comparison, GrooveSlices, Reference};
+use super::{compare, model_histogram, reference, Comparison, Reference};
 use crate::fresnel::FresnelLaw;
 use crate::groove::{GonioError, GonioSettings, GrooveWalls};
 use crate::math::Vec3;
@@ -28,7 +28,8 @@ pub struct StudySettings {
     /// The tables' trace settings (diffuse walls; `m`, `n`, `nr`, the Fresnel law); the study
     /// makes a `seed` and a `walls` table from them, and a lossless one (`FresnelLaw::None`).
     pub table: TraceSettings,
-    /// [`GrooveSlices`]: slices (0: not computed), `phi` bins and paths per slice and `phi_i`.
+    /// A table with exact-groove slices ([`crate::groove_slices`], `groove_slices = S`): `S`
+    /// (0: not computed), its `M` and the paths per slice and `phi_i` (its `N`, with `N_r = 1`).
     pub slices: usize,
     pub slice_m: usize,
     pub slice_paths: u64,
@@ -81,7 +82,7 @@ struct Models {
     seed: ScratchBrdf,
     walls: ScratchBrdf,
     lossless: Option<ScratchBrdf>,
-    slices: Option<GrooveSlices>,
+    slices: Option<ScratchBrdf>,
 }
 
 fn brdf(profile: &Profile, trace: &TraceSettings) -> Result<ScratchBrdf, TableError> {
@@ -138,14 +139,17 @@ impl StudySettings {
             fresnel_law: FresnelLaw::None,
             ..seed.clone()
         };
+        // The renderer's option: a `fresnel = "walls"` table with `groove_slices = S`.
+        let groove = TraceSettings {
+            m: self.slice_m,
+            n: self.slice_paths as usize,
+            nr: 1,
+            seed: self.seed,
+            groove_slices: self.slices,
+            ..walls.clone()
+        };
         let slices = (self.slices > 0)
-            .then(|| {
-                let base = GonioSettings {
-                    paths: self.slice_paths,
-                    ..self.gonio(self.table.fresnel_law, 0.0, 0.0)
-                };
-                GrooveSlices::compute(profile, &base, self.slice_m, self.slices)
-            })
+            .then(|| brdf(profile, &groove))
             .transpose()?;
         Ok(Models {
             seed: brdf(profile, &seed)?,
@@ -193,9 +197,9 @@ impl StudySettings {
             ),
         ];
         if let Some(g) = &ms.slices {
-            let f = |wo, wi| g.eval(wo, wi);
-            let name = format!("groove_slices{}", g.theta.len());
-            hists.push((name, model_histogram(&f, ti, fi, b, g.m(), q), false));
+            let name = format!("groove_slices{}", self.slices);
+            let hist = model_histogram(&table_model(g), ti, fi, b, self.slice_m, q);
+            hists.push((name, hist, false));
         }
         if let Some(l) = &ms.lossless {
             hists.push((

@@ -19,6 +19,7 @@
 //! m = 256                        # table size M, N, N_r (default: the seed's,
 //! n = 10000                      # `TraceSettings::default`)
 //! nr = 100
+//! # groove_slices = 6           # exact-groove theta_i slices instead of eq. (3) (diffuse walls)
 //! setting = 1                    # the seed's Table 1, or length / width / threshold
 //! layers = 8
 //! seed = 1
@@ -86,6 +87,9 @@ pub struct ScratchSpec {
     pub max_bounces: Option<usize>,
     /// Seed of the 2D trace (default 0).
     pub trace_seed: Option<u64>,
+    /// Exact-groove `theta_i` slices (`crate::groove_slices`, 1 to 32) evaluated instead of
+    /// eq. (3); diffuse walls, `fresnel` then defaults to (and must be) `walls`.
+    pub groove_slices: Option<usize>,
     /// The seed's Table 1 (1 or 2); excludes `length`, `width`, `threshold`.
     pub setting: Option<u32>,
     pub length: Option<f64>,
@@ -214,6 +218,8 @@ fn trace_key(key: &str) -> &'static str {
         "max_bounces" => "scratches.max_bounces",
         "fresnel_law" => "scratches.fresnel_law",
         "ior" => "scratches.ior",
+        "fresnel" => "scratches.fresnel",
+        "groove_slices" => "scratches.groove_slices",
         _ => "scratches",
     }
 }
@@ -376,6 +382,21 @@ impl ScratchedDesc {
             ));
         }
         let seed = TraceSettings::default();
+        let groove_slices = match s.groove_slices {
+            Some(0) => {
+                return Err(invalid(
+                    "scratches.groove_slices",
+                    0,
+                    "must be in 1..=32 (leave the key out for the seed's eq. (3))",
+                ))
+            }
+            Some(n) => n,
+            None => 0,
+        };
+        let mode = match groove_slices {
+            0 => defaults.mode,
+            _ => FresnelMode::Walls,
+        };
         let walls = match s.walls {
             Some(WallsKey::Specular) => Walls::Specular,
             Some(WallsKey::Diffuse) => Walls::Diffuse,
@@ -389,8 +410,9 @@ impl ScratchedDesc {
             albedo: s.albedo.unwrap_or(seed.albedo),
             max_bounces: s.max_bounces.unwrap_or(seed.max_bounces),
             seed: s.trace_seed.unwrap_or(seed.seed),
-            fresnel_mode: s.fresnel.unwrap_or(defaults.mode),
+            fresnel_mode: s.fresnel.unwrap_or(mode),
             fresnel_law: law,
+            groove_slices,
             ..seed
         };
         trace.validate().map_err(|e| {
@@ -401,7 +423,7 @@ impl ScratchedDesc {
     }
 
     /// The keys of the 2D table alone, each with whether it is given.
-    fn two_d_table_keys(&self) -> [(&'static str, bool); 8] {
+    fn two_d_table_keys(&self) -> [(&'static str, bool); 9] {
         let s = &self.scratches;
         [
             ("scratches.fresnel", s.fresnel.is_some()),
@@ -412,6 +434,7 @@ impl ScratchedDesc {
             ("scratches.nr", s.nr.is_some()),
             ("scratches.albedo", s.albedo.is_some()),
             ("scratches.max_bounces", s.max_bounces.is_some()),
+            ("scratches.groove_slices", s.groove_slices.is_some()),
         ]
     }
 
@@ -588,6 +611,13 @@ impl ScratchedDesc {
                 "explicit grooves need the profile and walls: give them instead of `scratches.table`",
             ));
         };
+        if let Some(n) = self.scratches.groove_slices {
+            return Err(invalid(
+                "scratches.groove_slices",
+                n,
+                "applies to the SV-BRDF's table; explicit grooves are traced exactly",
+            ));
+        }
         if r.orientation != Orientation::Layer {
             return Err(invalid(
                 "scratches.explicit",

@@ -27,12 +27,40 @@ fn table(profile: &str, walls: Walls, law: FresnelLaw, m: usize) -> Arc<ScratchL
         fresnel_law: law,
         ..TraceSettings::default()
     };
+    lobe_table(profile, trace)
+}
+
+fn lobe_table(profile: &str, trace: TraceSettings) -> Arc<ScratchLobeTable> {
     let t = ScratchTable::compute(
         &TableParams::new(Profile::parse(profile).unwrap(), trace),
         &|_| {},
     )
     .unwrap();
     Arc::new(ScratchLobeTable::new(t))
+}
+
+/// A `fresnel = "walls"` table with 3 exact-groove slices (`groove_slices = 3`).
+fn groove(profile: &str, law: FresnelLaw) -> Arc<ScratchLobeTable> {
+    let trace = TraceSettings {
+        walls: Walls::Diffuse,
+        m: 24,
+        n: 1600,
+        nr: 4,
+        seed: 4,
+        fresnel_mode: FresnelMode::Walls,
+        fresnel_law: law,
+        groove_slices: 3,
+        ..TraceSettings::default()
+    };
+    lobe_table(profile, trace)
+}
+
+fn groove_schlick() -> Arc<ScratchLobeTable> {
+    groove("round:depth=0.4", FresnelLaw::Schlick { n: 1.5 })
+}
+
+fn groove_lossless() -> Arc<ScratchLobeTable> {
+    groove("v:angle=100", FresnelLaw::None)
 }
 
 fn lossless_diffuse() -> Arc<ScratchLobeTable> {
@@ -97,7 +125,12 @@ fn sample(b: &ScratchedBsdf, wo: Vec3, rng: &mut Pcg64) -> Option<BsdfSample> {
 
 #[test]
 fn albedo_table_matches_quadrature() {
-    for t in [lossless_diffuse(), schlick_diffuse()] {
+    for t in [
+        lossless_diffuse(),
+        schlick_diffuse(),
+        groove_schlick(),
+        groove_lossless(),
+    ] {
         for wo in wos() {
             let a = t.albedo(wo) as f64;
             let q = albedo_by_quadrature(&t, wo);
@@ -109,6 +142,7 @@ fn albedo_table_matches_quadrature() {
     }
     // Lossless walls keep (almost) everything; Schlick glass at normal incidence about 4 %.
     assert!(lossless_diffuse().albedo(Vec3::Z) > 0.97);
+    assert!(groove_lossless().albedo(Vec3::Z) > 0.97);
     // Where the noisy table's column sum exceeds 1 the lobe is scaled down to albedo 1.
     let t = lossless_diffuse();
     let b = ScratchedBsdf::new(
@@ -145,7 +179,13 @@ fn albedo_table_matches_quadrature() {
 
 #[test]
 fn nondelta_sampler_chi2_pdf_and_weight() {
-    let t = lossless_diffuse();
+    // The seed's eq. (3) and the exact-groove slices (a function of theta_i).
+    for t in [lossless_diffuse(), groove_schlick()] {
+        nondelta_sampler_chi2(&t);
+    }
+}
+
+fn nondelta_sampler_chi2(t: &ScratchLobeTable) {
     let grid = SphereGrid::new(24, 48);
     let mut rng = Pcg64::seed_from_u64(21);
     let glass = ScratchedBase::Glass { eta: 1.5 };
@@ -161,7 +201,7 @@ fn nondelta_sampler_chi2_pdf_and_weight() {
         (metal, vec![lobe(0.8, -1.0)]),
     ];
     for (base, lobes) in &cases {
-        let b = ScratchedBsdf::new(*base, &t, Rgb::ONE, lobes);
+        let b = ScratchedBsdf::new(*base, t, Rgb::ONE, lobes);
         assert!(!b.is_delta());
         for wo in wos() {
             let (mut mismatch, mut bad_weight) = (0, 0);
@@ -219,10 +259,16 @@ fn nondelta_sampler_chi2_pdf_and_weight() {
 fn glass_delta_choices_weights_and_energy() {
     // Schlick-glass scratches: the lobe probabilities against (1 - C) F, sum c a (albedo by
     // quadrature, independent of the table's) and the rest; weights 1 and 1 / eta^2; energy 1.
-    let t = schlick_diffuse();
+    // The seed's eq. (3) and the exact-groove slices.
+    for t in [schlick_diffuse(), groove_schlick()] {
+        glass_delta_choices(&t);
+    }
+}
+
+fn glass_delta_choices(t: &ScratchLobeTable) {
     let eta = 1.5f32;
     let lobes = [lobe(0.35, 0.4), lobe(0.25, -1.3)];
-    let b = ScratchedBsdf::new(ScratchedBase::Glass { eta }, &t, Rgb::ONE, &lobes);
+    let b = ScratchedBsdf::new(ScratchedBase::Glass { eta }, t, Rgb::ONE, &lobes);
     assert!(b.has_transmission());
     let mut rng = Pcg64::seed_from_u64(22);
     for wo in wos() {
@@ -230,7 +276,7 @@ fn glass_delta_choices_weights_and_energy() {
         let p_reflect = (1.0 - 0.6) * f;
         let p_scatter: f64 = lobes
             .iter()
-            .map(|l| l.coverage as f64 * albedo_by_quadrature(&t, l.to_scratch(wo)))
+            .map(|l| l.coverage as f64 * albedo_by_quadrature(t, l.to_scratch(wo)))
             .sum();
         let expected = [p_reflect, 1.0 - p_reflect - p_scatter, p_scatter];
         let n = 200_000;
@@ -278,18 +324,24 @@ fn glass_delta_choices_weights_and_energy() {
 #[test]
 fn metal_energy_is_base_plus_scratch_albedo() {
     // F = 1 mirror base: E[weight] = (1 - C) + sum c_k a_k with a_k by quadrature (about 1:
-    // the lossless walls keep everything but the bounce cap's share).
-    let t = lossless_diffuse();
+    // the lossless walls keep everything but the bounce cap's share), for the seed's eq. (3)
+    // and the exact-groove slices.
+    for t in [lossless_diffuse(), groove_lossless()] {
+        metal_energy(&t);
+    }
+}
+
+fn metal_energy(t: &ScratchLobeTable) {
     let lobes = [lobe(0.5, 0.9)];
     let none = ConductorIor {
         eta: Rgb::ZERO,
         k: Rgb::ONE,
     };
-    let b = ScratchedBsdf::new(ScratchedBase::Metal { ior: none }, &t, Rgb::ONE, &lobes);
+    let b = ScratchedBsdf::new(ScratchedBase::Metal { ior: none }, t, Rgb::ONE, &lobes);
     assert!(!b.has_transmission());
     let mut rng = Pcg64::seed_from_u64(23);
     for wo in wos() {
-        let expect = 0.5 + 0.5 * albedo_by_quadrature(&t, lobes[0].to_scratch(wo)).min(1.0);
+        let expect = 0.5 + 0.5 * albedo_by_quadrature(t, lobes[0].to_scratch(wo)).min(1.0);
         let mut e = MeanEstimate::default();
         for _ in 0..100_000 {
             e.push(sample(&b, wo, &mut rng).map_or(0.0, |s| s.weight.x as f64));

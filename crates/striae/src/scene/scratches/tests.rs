@@ -12,6 +12,14 @@ fn parse(text: &str) -> Result<ScratchedDesc, String> {
     }
 }
 
+/// The parameters of the table a valid material computes.
+fn computed(text: &str) -> TableParams {
+    match parse(text).unwrap().resolve(Path::new(".")).unwrap().table {
+        TableSource::Compute(p) => p,
+        other => panic!("{other:?}"),
+    }
+}
+
 #[test]
 fn keys_are_validated() {
     let ok = parse("type = \"scratched\"\nbase = \"glass\"\nior = 1.5\n[scratches]\nsetting = 2\nlayers = 3\nlayer_mix = \"sum\"\nm = 16").unwrap();
@@ -67,6 +75,18 @@ fn keys_are_validated() {
         .resolve(Path::new("."))
         .unwrap();
     assert!(r.tint.x == 1.0 && r.tint.z < 0.6, "{:?}", r.tint);
+    // Exact-groove slices: `fresnel` defaults to `walls`; explicit grooves refuse them.
+    let p = computed("type = \"scratched\"\nbase = \"glass\"\n[scratches]\ngroove_slices = 6");
+    assert_eq!(
+        (p.trace.groove_slices, p.trace.fresnel_mode),
+        (6, FresnelMode::Walls)
+    );
+    let e = parse("type = \"scratched\"\nbase = \"metal\"\npreset = \"gold\"\n[scratches]\nwalls = \"diffuse\"\ngroove_slices = 4\nexplicit = true")
+        .unwrap()
+        .explicit(Path::new("."))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("`scratches.groove_slices`"), "{e}");
     let cases: &[(&str, &[&str])] = &[
         ("base = \"wood\"", &["`base`", "wood"]),
         ("base = \"glass\"\nior = 0.5", &["`ior`", "0.5"]),
@@ -145,6 +165,38 @@ fn keys_are_validated() {
         (
             "base = \"glass\"\n[scratches]\norientation = \"spiral\"",
             &["`scratches.orientation`", "spiral"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\ngroove_slices = 0",
+            &["`scratches.groove_slices`", "0", "1..=32"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\ngroove_slices = 33",
+            &["`scratches.groove_slices`", "33", "0..=32"],
+        ),
+        (
+            "base = \"metal\"\npreset = \"gold\"\n[scratches]\ngroove_slices = 6",
+            &["`scratches.groove_slices`", "6", "diffuse walls"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\ngroove_slices = 6\nfresnel = \"seed\"",
+            &["`scratches.fresnel`", "seed", "fresnel = walls"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\ngroove_slices = 6\nalbedo = 0.5",
+            &["`scratches.albedo`", "0.5"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\ngroove_slices = 6\nm = 2048",
+            &["`scratches.m`", "2048", "groove_slices"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nwalls = \"dielectric\"\ngroove_slices = 6",
+            &["`scratches.groove_slices`", "dielectric"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\ntable = \"t.npz\"\ngroove_slices = 6",
+            &["`scratches.groove_slices`", "table"],
         ),
         ("base = \"glass\"\n[scratches]\nfoo = 1", &["foo"]),
         (
