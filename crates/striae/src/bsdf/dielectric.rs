@@ -37,23 +37,36 @@ impl Dielectric {
     pub fn sample(&self, wo: Vec3, u_lobe: f32) -> Option<BsdfSample> {
         let (r, cos_t, eta_it) = fresnel_f32::dielectric(wo.z, self.eta);
         if u_lobe < r || r >= 1.0 {
-            return Some(BsdfSample {
-                wi: reflect_z(wo),
-                weight: Rgb::ONE,
-                pdf: r,
-                delta: true,
-                eta: 1.0,
-            });
+            return Some(mirror_sample(wo, r));
         }
-        let eta_ti = 1.0 / eta_it;
-        let wi = Vec3::new(-eta_ti * wo.x, -eta_ti * wo.y, cos_t);
-        Some(BsdfSample {
-            wi,
-            weight: Rgb::splat(eta_ti * eta_ti),
-            pdf: 1.0 - r,
-            delta: true,
-            eta: eta_it,
-        })
+        Some(refraction_sample(wo, cos_t, eta_it, 1.0 - r))
+    }
+}
+
+/// The smooth interface's mirror reflection of `wo`, chosen with probability `pdf` (weight 1).
+#[inline(always)]
+pub(super) fn mirror_sample(wo: Vec3, pdf: f32) -> BsdfSample {
+    BsdfSample {
+        wi: reflect_z(wo),
+        weight: Rgb::ONE,
+        pdf,
+        delta: true,
+        eta: 1.0,
+    }
+}
+
+/// The smooth interface's refraction of `wo` (`cos_t`, `eta_it` from
+/// [`fresnel_f32::dielectric`]), chosen with probability `pdf`: weight `1 / eta_it^2`, the
+/// radiance factor.
+#[inline(always)]
+pub(super) fn refraction_sample(wo: Vec3, cos_t: f32, eta_it: f32, pdf: f32) -> BsdfSample {
+    let eta_ti = 1.0 / eta_it;
+    BsdfSample {
+        wi: Vec3::new(-eta_ti * wo.x, -eta_ti * wo.y, cos_t),
+        weight: Rgb::splat(eta_ti * eta_ti),
+        pdf,
+        delta: true,
+        eta: eta_it,
     }
 }
 

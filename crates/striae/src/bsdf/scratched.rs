@@ -28,6 +28,7 @@
 //! `eval cos / pdf` with `pdf(wi) = sum_k P_k pdf_k(wi)` the probability of its lobe times its
 //! density, the same value `pdf` returns, so MIS with light sampling is consistent.
 
+use super::dielectric::{mirror_sample, refraction_sample};
 use super::{fresnel_f32, BsdfSample};
 use crate::math::{reflect_z, Rgb, Vec2, Vec3};
 use crate::table::{self, ScratchBrdf, ScratchTable, WoTerms};
@@ -428,13 +429,7 @@ impl<'a> ScratchedBsdf<'a> {
                 let base = 1.0 - self.total;
                 let p_reflect = base * fr;
                 if u_lobe < p_reflect {
-                    return Some(BsdfSample {
-                        wi: reflect_z(wo),
-                        weight: Rgb::ONE,
-                        pdf: p_reflect,
-                        delta: true,
-                        eta: 1.0,
-                    });
+                    return Some(mirror_sample(wo, p_reflect));
                 }
                 let mut p_scatter = [0.0f32; MAX_SCRATCH_LOBES];
                 let mut p_transmit = base * (1.0 - fr);
@@ -445,15 +440,7 @@ impl<'a> ScratchedBsdf<'a> {
                 }
                 let mut acc = p_reflect + p_transmit;
                 if u_lobe < acc || self.count == 0 {
-                    let eta_ti = 1.0 / eta_it;
-                    let wi = Vec3::new(-eta_ti * wo.x, -eta_ti * wo.y, cos_t);
-                    return Some(BsdfSample {
-                        wi,
-                        weight: Rgb::splat(eta_ti * eta_ti),
-                        pdf: p_transmit,
-                        delta: true,
-                        eta: eta_it,
-                    });
+                    return Some(refraction_sample(wo, cos_t, eta_it, p_transmit));
                 }
                 let count = self.count as usize;
                 for (k, &pk) in p_scatter[..count].iter().enumerate() {

@@ -31,9 +31,10 @@
 //! the value `pdf` returns, so MIS with light sampling is consistent; for a lossless groove and
 //! one slice, the weight is exactly `s`.
 
+use super::dielectric::{mirror_sample, refraction_sample};
 use super::scratched::{normalised_lobes, MAX_SCRATCH_LOBES};
 use super::{fresnel_f32, BsdfSample, ScratchLobe};
-use crate::math::{reflect_z, Rgb, Vec2, Vec3};
+use crate::math::{Rgb, Vec2, Vec3};
 use crate::wall_table::WallTable;
 use std::f32::consts::{FRAC_PI_2, PI};
 
@@ -365,13 +366,7 @@ impl<'a> ScratchedGlassBsdf<'a> {
         let base = 1.0 - self.total;
         let p_reflect = base * fr;
         if u_lobe < p_reflect {
-            return Some(BsdfSample {
-                wi: reflect_z(wo),
-                weight: Rgb::ONE,
-                pdf: p_reflect,
-                delta: true,
-                eta: 1.0,
-            });
+            return Some(mirror_sample(wo, p_reflect));
         }
         let p_transmit = base * (1.0 - fr);
         let mut acc = p_reflect + p_transmit;
@@ -379,14 +374,7 @@ impl<'a> ScratchedGlassBsdf<'a> {
             if !(p_transmit > 0.0) {
                 return None;
             }
-            let eta_ti = 1.0 / eta_it;
-            return Some(BsdfSample {
-                wi: Vec3::new(-eta_ti * wo.x, -eta_ti * wo.y, cos_t),
-                weight: Rgb::splat(eta_ti * eta_ti),
-                pdf: p_transmit,
-                delta: true,
-                eta: eta_it,
-            });
+            return Some(refraction_sample(wo, cos_t, eta_it, p_transmit));
         }
         let count = self.count as usize;
         let mut k = 0;
