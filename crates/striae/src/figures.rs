@@ -119,7 +119,7 @@ pub struct FigureOptions {
 }
 
 impl Default for FigureOptions {
-    /// Sized to finish in a few seconds on 2 cores (`BENCHMARKS.md`, "Main jobs").
+    /// Sized to finish in about 20 s on 2 cores (`BENCHMARKS.md`, "Main jobs").
     fn default() -> Self {
         FigureOptions {
             spp: 32,
