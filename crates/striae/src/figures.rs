@@ -183,13 +183,37 @@ fn scratch_params(scene: &Scene, name: &str) -> Result<Vec<(String, String)>, Fi
         })
         .ok_or_else(|| FigureError::NoScratches(name.to_string()))?;
     let l = m.layers.params();
-    let ScratchModel::Seed(table) = &m.model else {
-        return Ok(vec![
-            ("base".into(), format!("{:?}", m.base)),
-            (
-                "scratch length L / width W / threshold tau".into(),
-                format!("{} / {} / {}", l.length, l.width, l.threshold),
-            ),
+    let mut params = vec![
+        ("base".into(), format!("{:?}", m.base)),
+        (
+            "scratch length L / width W / threshold tau".into(),
+            format!("{} / {} / {}", l.length, l.width, l.threshold),
+        ),
+    ];
+    match &m.model {
+        ScratchModel::Seed(table) => {
+            let t = &table.table().params;
+            params.extend([
+                (
+                    "layers".into(),
+                    format!("{} (seed {}, mix {:?})", l.layers, m.layers.seed(), m.mix),
+                ),
+                ("profile".into(), t.profile.spec.clone()),
+                (
+                    "table".into(),
+                    format!(
+                        "{:?} walls, Fresnel {:?} ({:?}), M {} N {} N_r {}",
+                        t.trace.walls,
+                        t.trace.fresnel_mode,
+                        t.trace.fresnel_law,
+                        t.trace.m,
+                        t.trace.n,
+                        t.trace.nr
+                    ),
+                ),
+            ]);
+        }
+        ScratchModel::DielectricWalls(_) => params.extend([
             (
                 "layers".into(),
                 format!(
@@ -204,33 +228,9 @@ fn scratch_params(scene: &Scene, name: &str) -> Result<Vec<(String, String)>, Fi
                 "table".into(),
                 format!("dielectric walls (hash {})", &m.model.hash()[..12]),
             ),
-        ]);
-    };
-    let t = &table.table().params;
-    Ok(vec![
-        ("base".into(), format!("{:?}", m.base)),
-        (
-            "scratch length L / width W / threshold tau".into(),
-            format!("{} / {} / {}", l.length, l.width, l.threshold),
-        ),
-        (
-            "layers".into(),
-            format!("{} (seed {}, mix {:?})", l.layers, m.layers.seed(), m.mix),
-        ),
-        ("profile".into(), t.profile.spec.clone()),
-        (
-            "table".into(),
-            format!(
-                "{:?} walls, Fresnel {:?} ({:?}), M {} N {} N_r {}",
-                t.trace.walls,
-                t.trace.fresnel_mode,
-                t.trace.fresnel_law,
-                t.trace.m,
-                t.trace.n,
-                t.trace.nr
-            ),
-        ),
-    ])
+        ]),
+    }
+    Ok(params)
 }
 
 /// Generate every figure into `dir` (created if missing) and write `index.html`. `log`

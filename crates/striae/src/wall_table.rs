@@ -117,6 +117,18 @@ pub fn centres(n: usize) -> Vec<f64> {
         .collect()
 }
 
+/// Bilinear weights at `x` between the [`centres`] of `n` bins: the two neighbouring centres
+/// and their weights, clamped to the first and last centre.
+pub fn grid_weights(n: usize, x: f64) -> [(usize, f64); 2] {
+    if n == 1 {
+        return [(0, 1.0), (0, 0.0)];
+    }
+    let f = ((x + PI / 2.0) / (PI / n as f64) - 0.5).clamp(0.0, (n - 1) as f64);
+    let i = (f.floor() as usize).min(n - 2);
+    let w = f - i as f64;
+    [(i, 1.0 - w), (i + 1, w)]
+}
+
 /// The exit `theta_o` of lobe `l` ([`LOBES`]) for smooth walls at incident `theta_i`: `beta = n
 /// w.y` is conserved (METHOD.md 8.1), so reflection gives `-theta_i`, transmission into the
 /// glass `-asin(sin theta_i / n)` and out of it `-asin(n sin theta_i)` (clamped at grazing,
@@ -197,17 +209,10 @@ impl WallTable {
     /// that the delta of smooth walls lands where it belongs instead of being split between
     /// the two slices' places (displacement interpolation).
     pub fn lobes_at(&self, theta_i: f64, phi_i: f64, out: &mut [Vec<f64>; 4]) {
-        let weights = |c: &[f64], x: f64| -> [(usize, f64); 2] {
-            let n = c.len();
-            if n == 1 {
-                return [(0, 1.0), (0, 0.0)];
-            }
-            let f = ((x - c[0]) / (PI / n as f64)).clamp(0.0, (n - 1) as f64);
-            let i = (f.floor() as usize).min(n - 2);
-            let w = f - i as f64;
-            [(i, 1.0 - w), (i + 1, w)]
-        };
-        let (wt, wp) = (weights(&self.theta_i, theta_i), weights(&self.phi_i, phi_i));
+        let (wt, wp) = (
+            grid_weights(self.theta_i.len(), theta_i),
+            grid_weights(self.phi_i.len(), phi_i),
+        );
         let b = self.params.bins;
         let bin = PI / b as f64;
         for (l, o) in out.iter_mut().enumerate() {
@@ -303,6 +308,20 @@ impl WallTable {
         };
         let (theta_i, phi_i, exit) = (vec("theta_i")?, vec("phi_i")?, vec("theta_o")?);
         let bad = std::io::Error::other;
+        // Lookups find grid points from the bin counts: the grids must be the bins' centres.
+        for (name, grid) in [("theta_i", &theta_i), ("phi_i", &phi_i), ("theta_o", &exit)] {
+            let want = centres(grid.len());
+            if want
+                .iter()
+                .zip(grid.iter())
+                .any(|(a, b)| (a - b).abs() > 1e-9)
+            {
+                return Err(bad(format!(
+                    "`{name}` is not the centres of {} equal bins over (-pi/2, pi/2)",
+                    grid.len()
+                )));
+            }
+        }
         let params = WallTableParams {
             profile,
             ior,
@@ -562,6 +581,12 @@ mod tests {
         let back = WallTable::load(&path).unwrap().unwrap();
         assert_eq!(back.params, t.params);
         assert_eq!(back.lobes, t.lobes);
+        // Grids that are not the bins' centres are refused (lookups assume them).
+        let mut odd = t.clone();
+        odd.phi_i[1] += 0.01;
+        odd.save(&dir.join("odd.npz")).unwrap();
+        let e = WallTable::load(&dir.join("odd.npz")).unwrap_err().to_string();
+        assert!(e.contains("`phi_i`"), "{e}");
         t.plot(0.3, -0.2, &dir.join("w.png")).unwrap();
         let img = image::open(dir.join("w.png")).unwrap().to_rgb8();
         assert_eq!(img.dimensions(), (1500, 1400));

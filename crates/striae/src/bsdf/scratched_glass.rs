@@ -35,7 +35,7 @@ use super::dielectric::{mirror_sample, refraction_sample};
 use super::scratched::{normalised_lobes, MAX_SCRATCH_LOBES};
 use super::{fresnel_f32, BsdfSample, ScratchLobe};
 use crate::math::{Rgb, Vec2, Vec3};
-use crate::wall_table::WallTable;
+use crate::wall_table::{self, WallTable};
 use std::f32::consts::{FRAC_PI_2, PI};
 
 /// How far from `+-pi/2` the warp's fixed points are kept (radians), so that its slopes stay
@@ -130,12 +130,7 @@ impl WallLobeTable {
     /// `side` (METHOD.md 8.1, [`crate::wall_table::exit_theta`]), kept off `+-pi/2`.
     #[inline]
     fn exit_theta(&self, side: usize, l: usize, theta: f32) -> f32 {
-        let s = theta.sin();
-        let e = match (side, l) {
-            (_, 0) => -theta,
-            (0, _) => -(s / self.n).asin(),
-            _ => -(self.n * s).clamp(-1.0, 1.0).asin(),
-        };
+        let e = wall_table::exit_theta(2 * side + l, theta as f64, self.n as f64) as f32;
         e.clamp(-FRAC_PI_2 + WARP_MARGIN, FRAC_PI_2 - WARP_MARGIN)
     }
 
@@ -144,18 +139,8 @@ impl WallLobeTable {
         let side = (wo.z < 0.0) as usize;
         let theta = wo.y.clamp(-1.0, 1.0).asin();
         let phi = wo.x.atan2(wo.z.abs());
-        // Bilinear weights between the grid's centres, clamped at its edges.
-        let weights = |n: usize, x: f32| -> [(usize, f32); 2] {
-            if n == 1 {
-                return [(0, 1.0), (0, 0.0)];
-            }
-            let step = PI / n as f32;
-            let f = ((x + FRAC_PI_2) / step - 0.5).clamp(0.0, (n - 1) as f32);
-            let i = (f as usize).min(n - 2);
-            let w = f - i as f32;
-            [(i, 1.0 - w), (i + 1, w)]
-        };
-        let (wt, wp) = (weights(self.nt, theta), weights(self.np, phi));
+        let wt = wall_table::grid_weights(self.nt, theta as f64);
+        let wp = wall_table::grid_weights(self.np, phi as f64);
         let e_o = [
             self.exit_theta(side, 0, theta),
             self.exit_theta(side, 1, theta),
@@ -173,7 +158,7 @@ impl WallLobeTable {
         for &(t, a) in &wt {
             let e_c = self.grid_exit[t][side];
             for &(p, bw) in &wp {
-                let w = a * bw;
+                let w = (a * bw) as f32;
                 if !(w > 0.0) {
                     continue;
                 }
