@@ -585,7 +585,9 @@ mod tests {
         let mut odd = t.clone();
         odd.phi_i[1] += 0.01;
         odd.save(&dir.join("odd.npz")).unwrap();
-        let e = WallTable::load(&dir.join("odd.npz")).unwrap_err().to_string();
+        let e = WallTable::load(&dir.join("odd.npz"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("`phi_i`"), "{e}");
         t.plot(0.3, -0.2, &dir.join("w.png")).unwrap();
         let img = image::open(dir.join("w.png")).unwrap().to_rgb8();
