@@ -1,7 +1,7 @@
 //! Scratch tables shared and cached: in memory by parameter hash ([`TableParams::hash`],
 //! [`WallTableParams::hash`]), so each distinct table is computed or loaded once per process
 //! however many materials use it, and on disk in [`cache_dir`] as `scratch-table-HASH.npz`
-//! (dielectric-wall tables: `wall-table-HASH.npz`), written atomically
+//! (wall tables, dielectric or rough specular: `wall-table-HASH.npz`), written atomically
 //! ([`crate::io::write_atomically`], a temporary name unique to the call), so concurrent renders
 //! sharing a cache folder never read a half-written file. A cache file that cannot be read, or
 //! holds other parameters, is recomputed with a warning ([`crate::log`]); temporary files of
@@ -10,7 +10,7 @@
 use crate::bsdf::{ScratchLobeTable, WallLobeTable};
 use crate::scratched::ScratchModel;
 use crate::table::{ScratchTable, TableError, TableParams};
-use crate::wall_table::{WallTable, WallTableParams};
+use crate::wall_table::{WallKind, WallTable, WallTableParams};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock, Weak};
@@ -62,7 +62,7 @@ fn shared(
     shared_in(registry, hash, || make().map(ScratchLobeTable::new))
 }
 
-/// The live dielectric-wall tables of the process by parameter hash.
+/// The live wall tables of the process by parameter hash.
 fn shared_walls(
     hash: String,
     make: impl FnOnce() -> Result<WallTable, TableError>,
@@ -72,13 +72,13 @@ fn shared_walls(
     shared_in(registry, hash, || make().map(|t| WallLobeTable::new(&t)))
 }
 
-/// The cache file of a dielectric-wall table: `wall-table-HASH.npz`.
+/// The cache file of a wall table: `wall-table-HASH.npz`.
 pub fn wall_cache_file(dir: &Path, hash: &str) -> PathBuf {
     dir.join(format!("wall-table-{hash}.npz"))
 }
 
-/// The dielectric-wall table of `params`: shared in memory, else read from the disk cache,
-/// else traced (seconds at the default sizes) and cached.
+/// The wall table of `params`: shared in memory, else read from the disk cache, else traced
+/// (seconds at the default sizes) and cached.
 pub fn obtain_wall_table(params: &WallTableParams) -> Result<Arc<WallLobeTable>, TableError> {
     let hash = params.hash();
     shared_walls(hash.clone(), || {
@@ -98,8 +98,9 @@ pub fn load_or_compute_walls(
         return Ok(t);
     }
     let start = std::time::Instant::now();
+    let kind = params.walls.name();
     crate::log::info(&format!(
-        "computing dielectric-wall table {} ({}, ior {}, roughness {}) ...",
+        "computing {kind} table {} ({}, ior {}, roughness {}) ...",
         &hash[..12],
         params.profile.spec,
         params.ior,
@@ -107,7 +108,7 @@ pub fn load_or_compute_walls(
     ));
     let table = WallTable::compute(params)?;
     crate::log::info(&format!(
-        "dielectric-wall table {} computed in {:.2} s",
+        "{kind} table {} computed in {:.2} s",
         &hash[..12],
         start.elapsed().as_secs_f64()
     ));
@@ -115,26 +116,31 @@ pub fn load_or_compute_walls(
         let file = wall_cache_file(dir, hash);
         let result = std::fs::create_dir_all(dir).and_then(|_| table.save(&file));
         if let Err(e) = result {
-            crate::log::warn(&format!("could not cache the dielectric-wall table ({e})"));
+            crate::log::warn(&format!("could not cache the {kind} table ({e})"));
         }
     }
     Ok(table)
 }
 
-/// Read a table file of either kind: a dielectric-wall table (its `kind` says so) or the
-/// seed's scratch table.
+/// Read a table file of any kind: a wall table (its `kind` says which: dielectric or rough
+/// specular) or the seed's scratch table.
 pub fn load_any_table_file(path: &Path) -> Result<ScratchModel, TableError> {
     let walls = WallTable::load(path).map_err(|e| TableError::WallFile {
         path: path.into(),
         why: e.to_string(),
     });
     match walls {
-        Ok(Some(t)) => Ok(ScratchModel::DielectricWalls(shared_walls(
-            t.params.hash(),
-            || Ok(t),
-        )?)),
+        Ok(Some(t)) => {
+            let specular = matches!(t.params.walls, WallKind::Specular { .. });
+            let table = shared_walls(t.params.hash(), || Ok(t))?;
+            Ok(if specular {
+                ScratchModel::SpecularWalls(table)
+            } else {
+                ScratchModel::DielectricWalls(table)
+            })
+        }
         Err(e) if crate::wall_table::declares_kind(path) => Err(e),
-        // Not a dielectric-wall table (or not an .npz at all): the seed's reader says why.
+        // Not a wall table (or not an .npz at all): the seed's reader says why.
         _ => load_table_file(path).map(ScratchModel::Seed),
     }
 }

@@ -213,7 +213,7 @@ fn scratch_params(scene: &Scene, name: &str) -> Result<Vec<(String, String)>, Fi
                 ),
             ]);
         }
-        ScratchModel::DielectricWalls(_) => params.extend([
+        ScratchModel::DielectricWalls(_) | ScratchModel::SpecularWalls(_) => params.extend([
             (
                 "layers".into(),
                 format!(
@@ -226,7 +226,14 @@ fn scratch_params(scene: &Scene, name: &str) -> Result<Vec<(String, String)>, Fi
             ),
             (
                 "table".into(),
-                format!("dielectric walls (hash {})", &m.model.hash()[..12]),
+                format!(
+                    "{} walls (hash {})",
+                    match m.model {
+                        ScratchModel::SpecularWalls(_) => "rough specular",
+                        _ => "dielectric",
+                    },
+                    &m.model.hash()[..12]
+                ),
             ),
         ]),
     }

@@ -12,10 +12,16 @@
 //! interpolation between two slices splits it between two bins; its error against the exact
 //! trace is measured by [`WallTable::error_against_trace`] and reported in `docs/fidelity.md`.
 //!
-//! Files (`.npz`, `docs/table-format.md`): `kind` ("dielectric-walls"), `profile`, `ior`,
-//! `roughness`, `paths`, `seed`, `theta_i[Bt]`, `phi_i[Bp]`, `theta_o[B]`, `phi_o[B]` and the four
-//! lobes `r_out`, `t_out`, `r_in`, `t_in`, each `[Bt, Bp, B, B]`.
+//! Rough metal walls ([`WallKind::Specular`], GGX conductor walls with the metal's Fresnel law
+//! at every microfacet hit) give one lobe, R from outside; it depends on `theta_o`, which the
+//! seed's 2D table cannot hold, so it takes this 4D form with the other three lobes zero.
+//!
+//! Files (`.npz`, `docs/table-format.md`): `kind` ("dielectric-walls" or "specular-walls"),
+//! `profile`, `ior`, `roughness`, `paths`, `seed`, `theta_i[Bt]`, `phi_i[Bp]`, `theta_o[B]`,
+//! `phi_o[B]` and the four lobes `r_out`, `t_out`, `r_in`, `t_in`, each `[Bt, Bp, B, B]`;
+//! specular-wall files hold `r_out` only and the walls' Fresnel law as JSON (`fresnel_law`).
 
+use crate::fresnel::FresnelLaw;
 use crate::groove::{trace_groove, GonioError, GonioSettings, GrooveWalls, LightSide};
 use crate::plot::{heat_panel, render, HeatMap, PlotError};
 use crate::profile::Profile;
@@ -27,11 +33,48 @@ use sha2::{Digest, Sha256};
 use std::f64::consts::PI;
 use std::path::Path;
 
-/// What a dielectric-wall table is computed from.
+/// The walls a table is traced with.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum WallKind {
+    /// Glass of the table's `ior`, smooth or GGX-rough: the four lobes.
+    Dielectric,
+    /// GGX-rough conductor walls (`roughness > 0`), `law` at every microfacet hit (the metal's
+    /// per-wall-hit Fresnel, as its mirror-wall 2D table has it): `r_out` only.
+    Specular { law: FresnelLaw },
+}
+
+impl WallKind {
+    /// The file's `kind` text.
+    pub fn name(&self) -> &'static str {
+        match self {
+            WallKind::Dielectric => "dielectric-walls",
+            WallKind::Specular { .. } => "specular-walls",
+        }
+    }
+
+    /// How many of [`LOBES`] the trace fills (the first ones; the others are zero).
+    pub fn lobe_count(&self) -> usize {
+        match self {
+            WallKind::Dielectric => 4,
+            WallKind::Specular { .. } => 1,
+        }
+    }
+
+    /// The sides light is traced from.
+    fn sides(&self) -> &'static [LightSide] {
+        match self {
+            WallKind::Dielectric => &[LightSide::Outside, LightSide::Inside],
+            WallKind::Specular { .. } => &[LightSide::Outside],
+        }
+    }
+}
+
+/// What a wall table is computed from.
 #[derive(Clone, Debug, PartialEq)]
 pub struct WallTableParams {
     pub profile: Profile,
-    /// The glass's index (walls and flat surface), `>= 1`.
+    pub walls: WallKind,
+    /// The glass's index (walls and flat surface), `>= 1`; 1 for specular walls (unused).
     pub ior: f64,
     /// GGX `alpha` of the walls, in `[0, 1]`; 0: smooth.
     pub roughness: f64,
@@ -51,6 +94,7 @@ impl WallTableParams {
     pub fn new(profile: Profile, ior: f64, roughness: f64) -> Self {
         WallTableParams {
             profile,
+            walls: WallKind::Dielectric,
             ior,
             roughness,
             theta_bins: 8,
@@ -61,10 +105,27 @@ impl WallTableParams {
         }
     }
 
+    /// Rough conductor walls of `roughness` in `(0, 1]` with `law` at every hit, at the sizes
+    /// of [`Self::new`].
+    pub fn specular(profile: Profile, law: FresnelLaw, roughness: f64) -> Self {
+        WallTableParams {
+            walls: WallKind::Specular { law },
+            ..Self::new(profile, 1.0, roughness)
+        }
+    }
+
     /// The trace settings for one incident direction and side.
     fn settings(&self, theta_i: f64, phi_i: f64, side: LightSide) -> GonioSettings {
+        let (walls, fresnel_law) = match self.walls {
+            WallKind::Dielectric => (
+                GrooveWalls::Dielectric,
+                GonioSettings::default().fresnel_law,
+            ),
+            WallKind::Specular { law } => (GrooveWalls::Specular, law),
+        };
         GonioSettings {
-            walls: GrooveWalls::Dielectric,
+            walls,
+            fresnel_law,
             roughness: self.roughness,
             ior: self.ior,
             theta_i,
@@ -88,16 +149,31 @@ impl WallTableParams {
                 });
             }
         }
-        self.settings(0.0, 0.0, LightSide::Inside).validate()
+        if matches!(self.walls, WallKind::Specular { .. }) && self.roughness == 0.0 {
+            return Err(GonioError {
+                key: "roughness",
+                value: self.roughness.to_string(),
+                why:
+                    "specular-wall tables have rough walls, in (0, 1] (mirror walls: the 2D table)",
+            });
+        }
+        let side = *self.walls.sides().last().expect("a side");
+        self.settings(0.0, 0.0, side).validate()
     }
 
     /// A SHA-256 of every parameter, naming the table in the cache.
+    /// Dielectric tables hash the text they always did (cached files stay valid); specular
+    /// ones name their kind and law in place of the index.
     pub fn hash(&self) -> String {
+        let walls = match self.walls {
+            WallKind::Dielectric => format!("{:016x}", self.ior.to_bits()),
+            WallKind::Specular { law } => format!("law {}", law_json(&law)),
+        };
         let text = format!(
-            "dielectric-walls|{:?}|{:?}|{:016x}|{:016x}|{}|{}|{}|{}|{}",
+            "{}|{:?}|{:?}|{walls}|{:016x}|{}|{}|{}|{}|{}",
+            self.walls.name(),
             self.profile.spec,
             self.profile.points,
-            self.ior.to_bits(),
             self.roughness.to_bits(),
             self.theta_bins,
             self.phi_bins,
@@ -108,6 +184,11 @@ impl WallTableParams {
         let d = Sha256::digest(text.as_bytes());
         d.iter().map(|b| format!("{b:02x}")).collect()
     }
+}
+
+/// A Fresnel law as the JSON of the 2D tables' parameters (floats written to round-trip).
+fn law_json(law: &FresnelLaw) -> String {
+    serde_json::to_string(law).expect("a Fresnel law serialises")
 }
 
 /// Bin centres of `n` bins over `(-pi/2, pi/2)`.
@@ -145,7 +226,7 @@ pub fn exit_theta(l: usize, theta_i: f64, n: f64) -> f64 {
 /// The four lobes, in the order of the file: R and T from outside, R and T from inside.
 pub const LOBES: [&str; 4] = ["r_out", "t_out", "r_in", "t_in"];
 
-/// A computed dielectric-wall table.
+/// A computed wall table.
 #[derive(Clone, Debug)]
 pub struct WallTable {
     pub params: WallTableParams,
@@ -158,15 +239,13 @@ pub struct WallTable {
 }
 
 impl WallTable {
-    /// Trace every incident direction of the grid from both sides.
+    /// Trace every incident direction of the grid from each side of the walls' kind.
     pub fn compute(params: &WallTableParams) -> Result<Self, GonioError> {
         params.validate()?;
         let (theta_i, phi_i) = (centres(params.theta_bins), centres(params.phi_bins));
+        let sides = params.walls.sides();
         let jobs: Vec<(usize, usize, LightSide)> = (0..theta_i.len())
-            .flat_map(|t| {
-                (0..phi_i.len())
-                    .flat_map(move |p| [(t, p, LightSide::Outside), (t, p, LightSide::Inside)])
-            })
+            .flat_map(|t| (0..phi_i.len()).flat_map(move |p| sides.iter().map(move |&s| (t, p, s))))
             .collect();
         // Each run is parallel inside; runs are many and short, so run them in parallel too.
         let outs = jobs
@@ -179,13 +258,16 @@ impl WallTable {
                 )
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let b2 = params.bins * params.bins;
-        let mut lobes: [Vec<f64>; 4] =
-            std::array::from_fn(|_| Vec::with_capacity(jobs.len() / 2 * b2));
+        let len = theta_i.len() * phi_i.len() * params.bins * params.bins;
+        let mut lobes: [Vec<f64>; 4] = std::array::from_fn(|_| Vec::with_capacity(len));
         for (&(_, _, side), out) in jobs.iter().zip(&outs) {
             let base = if side == LightSide::Outside { 0 } else { 2 };
             lobes[base].extend_from_slice(&out.reflected);
             lobes[base + 1].extend_from_slice(&out.transmitted);
+        }
+        // Opaque walls: the lobes no side fills (and `t_out`, nothing through metal) are zero.
+        for lobe in &mut lobes[params.walls.lobe_count()..] {
+            *lobe = vec![0.0; len];
         }
         Ok(WallTable {
             params: params.clone(),
@@ -248,8 +330,7 @@ impl WallTable {
         let p = &self.params;
         let shape = (self.theta_i.len(), self.phi_i.len(), p.bins, p.bins);
         let err = |e: ndarray_npy::WriteNpzError| std::io::Error::other(e.to_string());
-        let arrays = self
-            .lobes
+        let arrays = self.lobes[..p.walls.lobe_count()]
             .iter()
             .map(|v| Array4::from_shape_vec(shape, v.clone()).map_err(std::io::Error::other))
             .collect::<Result<Vec<_>, _>>()?;
@@ -257,8 +338,11 @@ impl WallTable {
             let file = std::fs::File::create(tmp)?;
             let mut w = NpzWriter::new(std::io::BufWriter::new(file));
             let text = |s: &str| Array1::from(s.bytes().collect::<Vec<u8>>());
-            w.add_array("kind", &text("dielectric-walls"))
-                .map_err(err)?;
+            w.add_array("kind", &text(p.walls.name())).map_err(err)?;
+            if let WallKind::Specular { law } = p.walls {
+                w.add_array("fresnel_law", &text(&law_json(&law)))
+                    .map_err(err)?;
+            }
             w.add_array("profile", &text(&p.profile.spec))
                 .map_err(err)?;
             w.add_array("ior", &arr0(p.ior)).map_err(err)?;
@@ -281,15 +365,24 @@ impl WallTable {
         })
     }
 
-    /// Read a table written by [`Self::save`]; `None` where the file is not a dielectric-wall
-    /// table (no `kind` array saying so), an error where it is one but unreadable, or holds
-    /// values no trace can give (negative or non-finite fractions, more energy out than in).
+    /// Read a table written by [`Self::save`]; `None` where the file is not a wall table (no
+    /// `kind` array saying so), an error where it is one but unreadable, or holds values no
+    /// trace can give (negative or non-finite fractions, more energy out than in).
     pub fn load(path: &Path) -> std::io::Result<Option<Self>> {
-        use ndarray::{Array0, Ix0, Ix1, Ix4, OwnedRepr};
-        let Some(mut r) = open_kind(path)? else {
+        use ndarray::{Array0, Ix0, Ix1, OwnedRepr};
+        let Some((mut r, kind)) = open_kind(path)? else {
             return Ok(None);
         };
         let err = |e: ndarray_npy::ReadNpzError| std::io::Error::other(e.to_string());
+        let walls = match kind.as_str() {
+            "specular-walls" => {
+                let json = read_text(&mut r, "fresnel_law")?;
+                let law = serde_json::from_str(&json)
+                    .map_err(|e| std::io::Error::other(format!("`fresnel_law` {json:?}: {e}")))?;
+                WallKind::Specular { law }
+            }
+            _ => WallKind::Dielectric,
+        };
         let spec = read_text(&mut r, "profile")?;
         let profile = Profile::parse(&spec).map_err(|e| std::io::Error::other(e.to_string()))?;
         let mut f64s = |k: &str| -> std::io::Result<f64> {
@@ -324,6 +417,7 @@ impl WallTable {
         }
         let params = WallTableParams {
             profile,
+            walls,
             ior,
             roughness,
             theta_bins: theta_i.len(),
@@ -335,25 +429,14 @@ impl WallTable {
         params
             .validate()
             .map_err(|e| bad(format!("bad parameters: {e}")))?;
+        let shape = (theta_i.len(), phi_i.len(), exit.len(), exit.len());
         let mut lobes: [Vec<f64>; 4] = std::array::from_fn(|_| Vec::new());
-        for (name, lobe) in LOBES.iter().zip(&mut lobes) {
-            let a: Array4<f64> = r.by_name::<OwnedRepr<f64>, Ix4>(name).map_err(err)?;
-            let (t, p, b, b2) = a.dim();
-            if (t, p, b, b2) != (theta_i.len(), phi_i.len(), exit.len(), exit.len()) {
-                return Err(bad(format!(
-                    "`{name}` has shape {:?}, the grids ask for {:?}",
-                    (t, p, b, b2),
-                    (theta_i.len(), phi_i.len(), exit.len(), exit.len())
-                )));
-            }
-            if let Some((i, v)) = a
-                .iter()
-                .enumerate()
-                .find(|(_, v)| !(**v >= 0.0 && v.is_finite()))
-            {
-                return Err(bad(format!("`{name}` holds {v} at flat index {i}")));
-            }
-            *lobe = a.iter().copied().collect();
+        for (l, (name, lobe)) in LOBES.iter().zip(&mut lobes).enumerate() {
+            *lobe = if l < walls.lobe_count() {
+                read_lobe(&mut r, name, shape)?
+            } else {
+                vec![0.0; shape.0 * shape.1 * shape.2 * shape.3]
+            };
         }
         let table = WallTable {
             params,
@@ -389,17 +472,29 @@ impl WallTable {
         Ok(())
     }
 
-    /// Heat maps of the four lobes at incident `(theta_i, phi_i)` (interpolated), 2 x 2: R and
-    /// T from outside above, from inside below (x: `phi_o`, y: `theta_o`, degrees).
+    /// Heat maps of the lobes at incident `(theta_i, phi_i)` (interpolated), 2 x 2: R and T
+    /// from outside above, from inside below; specular walls: R from outside alone (x:
+    /// `phi_o`, y: `theta_o`, degrees).
     pub fn plot(&self, theta_i: f64, phi_i: f64, path: &Path) -> Result<(), PlotError> {
         let mut lobes = std::array::from_fn(|_| Vec::new());
         self.lobes_at(theta_i, phi_i, &mut lobes);
-        let (w, h) = (1500u32, 1400u32);
+        let p = &self.params;
+        let (walls, (w, h), grid) = match p.walls {
+            WallKind::Dielectric => (
+                format!("dielectric walls, ior {}", p.ior),
+                (1500u32, 1400u32),
+                (2, 2),
+            ),
+            WallKind::Specular { law } => (
+                format!("specular walls, Fresnel {law:?}"),
+                (800, 750),
+                (1, 1),
+            ),
+        };
         let title = format!(
-            "dielectric walls, {}, ior {}, roughness {}: theta_i {:.1}, phi_i {:.1} degrees",
-            self.params.profile.spec,
-            self.params.ior,
-            self.params.roughness,
+            "{}, {walls}, roughness {}: theta_i {:.1}, phi_i {:.1} degrees",
+            p.profile.spec,
+            p.roughness,
             theta_i.to_degrees(),
             phi_i.to_degrees()
         );
@@ -415,7 +510,7 @@ impl WallTable {
             let root = root
                 .titled(&title, ("sans-serif", 20))
                 .map_err(|e| e.to_string())?;
-            for (l, area) in root.split_evenly((2, 2)).iter().enumerate() {
+            for (l, area) in root.split_evenly(grid).iter().enumerate() {
                 let hist = &lobes[l];
                 let vmax = hist.iter().cloned().fold(0.0, f64::max);
                 let albedo: f64 = hist.iter().sum();
@@ -445,7 +540,7 @@ impl WallTable {
         self.lobes_at(theta_i, phi_i, &mut table);
         let b = self.params.bins;
         let mut out = [LobeError::default(); 4];
-        for (s, side) in [LightSide::Outside, LightSide::Inside].iter().enumerate() {
+        for (s, side) in self.params.walls.sides().iter().enumerate() {
             let mut set = self.params.settings(theta_i, phi_i, *side);
             set.paths = paths;
             set.seed = self.params.seed ^ 0x005e_ed0f_7e57;
@@ -486,8 +581,10 @@ impl WallTable {
     }
 }
 
-/// The file as an `.npz` reader when its `kind` array says it is a dielectric-wall table.
-fn open_kind(path: &Path) -> std::io::Result<Option<ndarray_npy::NpzReader<std::fs::File>>> {
+type Reader = ndarray_npy::NpzReader<std::fs::File>;
+
+/// The file as an `.npz` reader, and its kind, when its `kind` array says it is a wall table.
+fn open_kind(path: &Path) -> std::io::Result<Option<(Reader, String)>> {
     use ndarray_npy::NpzReader;
     let err = |e: ndarray_npy::ReadNpzError| std::io::Error::other(e.to_string());
     let file = crate::io::open_regular(path, crate::io::MAX_BINARY_BYTES)?;
@@ -496,11 +593,39 @@ fn open_kind(path: &Path) -> std::io::Result<Option<ndarray_npy::NpzReader<std::
     if !names.iter().any(|n| n == "kind" || n == "kind.npy") {
         return Ok(None);
     }
-    Ok((read_text(&mut r, "kind")? == "dielectric-walls").then_some(r))
+    let kind = read_text(&mut r, "kind")?;
+    Ok(matches!(kind.as_str(), "dielectric-walls" | "specular-walls").then_some((r, kind)))
+}
+
+/// One lobe array of the file, of the grids' `shape`, every value finite and `>= 0`.
+fn read_lobe(
+    r: &mut Reader,
+    name: &str,
+    shape: (usize, usize, usize, usize),
+) -> std::io::Result<Vec<f64>> {
+    use ndarray::{Ix4, OwnedRepr};
+    let bad = std::io::Error::other;
+    let a: Array4<f64> = r
+        .by_name::<OwnedRepr<f64>, Ix4>(name)
+        .map_err(|e| bad(e.to_string()))?;
+    if a.dim() != shape {
+        return Err(bad(format!(
+            "`{name}` has shape {:?}, the grids ask for {shape:?}",
+            a.dim()
+        )));
+    }
+    if let Some((i, v)) = a
+        .iter()
+        .enumerate()
+        .find(|(_, v)| !(**v >= 0.0 && v.is_finite()))
+    {
+        return Err(bad(format!("`{name}` holds {v} at flat index {i}")));
+    }
+    Ok(a.iter().copied().collect())
 }
 
 /// A text array (bytes) of the file.
-fn read_text(r: &mut ndarray_npy::NpzReader<std::fs::File>, key: &str) -> std::io::Result<String> {
+fn read_text(r: &mut Reader, key: &str) -> std::io::Result<String> {
     use ndarray::{Ix1, OwnedRepr};
     let a: Array1<u8> = r
         .by_name::<OwnedRepr<u8>, Ix1>(key)
@@ -508,8 +633,8 @@ fn read_text(r: &mut ndarray_npy::NpzReader<std::fs::File>, key: &str) -> std::i
     String::from_utf8(a.to_vec()).map_err(std::io::Error::other)
 }
 
-/// Whether `path` is an `.npz` whose `kind` says it is a dielectric-wall table (its other
-/// arrays unread).
+/// Whether `path` is an `.npz` whose `kind` says it is a wall table (its other arrays
+/// unread).
 pub fn declares_kind(path: &Path) -> bool {
     matches!(open_kind(path), Ok(Some(_)))
 }
@@ -593,6 +718,74 @@ mod tests {
         let img = image::open(dir.join("w.png")).unwrap().to_rgb8();
         assert_eq!(img.dimensions(), (1500, 1400));
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// Rough specular walls: one lobe traced (R from outside), the others zero; the file says
+    /// its kind and law and reads back the same table; it plots; mirror walls are refused.
+    #[test]
+    fn specular_walls_round_trip() {
+        let law = FresnelLaw::Conductor {
+            eta: 0.1431189626455307,
+            k: 3.9831604957580566,
+        };
+        let p = WallTableParams {
+            theta_bins: 2,
+            phi_bins: 3,
+            bins: 8,
+            paths: 2000,
+            ..WallTableParams::specular(Profile::parse("v:angle=100").unwrap(), law, 0.3)
+        };
+        let t = WallTable::compute(&p).unwrap();
+        assert!(t.lobes[0].iter().sum::<f64>() > 0.5);
+        assert!(t.lobes[1..].iter().all(|l| l.iter().all(|&m| m == 0.0)));
+        let dir = std::env::temp_dir().join(format!("striae-spec-walls-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("s.npz");
+        t.save(&path).unwrap();
+        assert!(declares_kind(&path));
+        let back = WallTable::load(&path).unwrap().unwrap();
+        assert_eq!(back.params, t.params);
+        assert_eq!(back.params.hash(), p.hash());
+        assert_eq!(back.lobes, t.lobes);
+        let err = back.error_against_trace(0.3, -0.2, 2000).unwrap();
+        assert!(
+            err[0].albedo.abs() < 0.05 && err[1..].iter().all(|e| e.l1 == 0.0),
+            "{err:?}"
+        );
+        t.plot(0.3, -0.2, &dir.join("s.png")).unwrap();
+        assert!(image::open(dir.join("s.png")).is_ok());
+        std::fs::remove_dir_all(&dir).ok();
+        // Another law or kind is another table.
+        let none = WallTableParams::specular(p.profile.clone(), FresnelLaw::None, 0.3);
+        let glass = WallTableParams::new(p.profile.clone(), 1.0, 0.3);
+        assert_ne!(
+            none.hash(),
+            WallTableParams {
+                walls: p.walls,
+                ..none.clone()
+            }
+            .hash()
+        );
+        assert_ne!(
+            glass.hash(),
+            WallTableParams {
+                walls: none.walls,
+                ..glass.clone()
+            }
+            .hash()
+        );
+        let mirror = WallTableParams::specular(p.profile.clone(), law, 0.0);
+        assert_eq!(mirror.validate().unwrap_err().key, "roughness");
+    }
+
+    /// A dielectric table's hash is the text it always hashed: cached files keep their names.
+    #[test]
+    fn dielectric_hash_is_unchanged() {
+        let p = WallTableParams::new(Profile::parse("v:angle=90").unwrap(), 1.5, 0.0);
+        assert_eq!(
+            p.hash(),
+            "7f88ee76bb6b1e29fdd6ded8aa0947417259c0b181ca66403fb70e326f090644"
+        );
     }
 
     /// Interpolation: at a grid point the lookup is the stored slice; and bad parameters name

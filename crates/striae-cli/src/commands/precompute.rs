@@ -56,11 +56,12 @@ pub struct Args {
     /// eq. (3) (diffuse walls, Fresnel at every wall hit; docs/table-format.md).
     #[arg(long)]
     groove_slices: Option<usize>,
-    /// GGX roughness (alpha, in [0, 1]) of dielectric walls.
+    /// GGX roughness (alpha, in [0, 1]) of dielectric walls, or of specular walls (> 0: the
+    /// rough conductor walls' table of METHOD.md 8.1, --fresnel-law at every wall hit).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     roughness: f64,
-    /// Dielectric walls: also trace N off-grid incident directions per side exactly and print
-    /// the table's error against them.
+    /// Dielectric and rough specular walls: also trace N off-grid incident directions per
+    /// side exactly and print the table's error against them.
     #[arg(long, default_value_t = 0)]
     check: usize,
     /// Worker threads, 1 to 4096 (default: all cores).
@@ -114,8 +115,20 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     let profile =
         Profile::parse(&a.profile).with_context(|| format!("--profile `{}`", a.profile))?;
-    if let WallsArg::Dielectric = a.walls {
-        return dielectric(profile, &a);
+    use striae::wall_table::WallTableParams;
+    match a.walls {
+        WallsArg::Dielectric => {
+            return wall_table(WallTableParams::new(profile, a.ior, a.roughness), &a);
+        }
+        WallsArg::Specular if a.roughness != 0.0 => {
+            let law = parse_law(&a.fresnel_law, a.ior)?;
+            return wall_table(WallTableParams::specular(profile, law, a.roughness), &a);
+        }
+        WallsArg::Diffuse if a.roughness != 0.0 => anyhow::bail!(
+            "--roughness {}: applies to dielectric and specular walls, not diffuse ones",
+            a.roughness
+        ),
+        _ => {}
     }
     if a.groove_slices == Some(0) {
         anyhow::bail!("--groove-slices 0: must be in 1..=32 (leave it out for the seed's eq. (3))");
@@ -209,13 +222,14 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `--walls dielectric`: the four-lobe table (`striae::wall_table`), and with `--check N` its
+/// `--walls dielectric` or `--walls specular --roughness A`: the wall table
+/// (`striae::wall_table`; four lobes, or rough specular walls' one), and with `--check N` its
 /// error against the exact trace at N off-grid incident directions.
-fn dielectric(profile: Profile, a: &Args) -> anyhow::Result<()> {
-    use striae::wall_table::{WallTable, WallTableParams, LOBES};
-    let params = WallTableParams {
+fn wall_table(params: striae::wall_table::WallTableParams, a: &Args) -> anyhow::Result<()> {
+    use striae::wall_table::{WallKind, WallTable, LOBES};
+    let params = striae::wall_table::WallTableParams {
         seed: a.seed,
-        ..WallTableParams::new(profile, a.ior, a.roughness)
+        ..params
     };
     params.validate().context("invalid precompute parameters")?;
     let pool = rayon::ThreadPoolBuilder::new()
@@ -228,14 +242,18 @@ fn dielectric(profile: Profile, a: &Args) -> anyhow::Result<()> {
         .save(&a.output)
         .with_context(|| format!("writing {}", a.output.display()))?;
     let incident = params.theta_bins * params.phi_bins;
+    let (walls, sides) = match params.walls {
+        WallKind::Dielectric => (format!("dielectric walls, ior {}", params.ior), 2),
+        WallKind::Specular { law } => (format!("specular walls, Fresnel {law:?}"), 1),
+    };
     println!(
-        "dielectric walls: profile {}  ior {}  roughness {}  {} x {} incident directions x 2 sides, {} x {} exit bins, {} paths each",
-        params.profile.spec, params.ior, params.roughness, params.theta_bins, params.phi_bins,
+        "{walls}: profile {}  roughness {}  {} x {} incident directions x {sides} side(s), {} x {} exit bins, {} paths each",
+        params.profile.spec, params.roughness, params.theta_bins, params.phi_bins,
         params.bins, params.bins, params.paths
     );
     println!(
         "wall time {secs:.3} s ({} paths, {} threads)",
-        2 * incident as u64 * params.paths,
+        sides * incident as u64 * params.paths,
         pool.current_num_threads()
     );
     for k in 0..a.check {
@@ -243,7 +261,7 @@ fn dielectric(profile: Profile, a: &Args) -> anyhow::Result<()> {
         let g = |x: f64| ((x * 0.618_033_988_749_895).fract() - 0.5) * 160f64.to_radians();
         let (ti, pi) = (g(k as f64 + 0.37), g(k as f64 * 1.7 + 0.11));
         let err = pool.install(|| table.error_against_trace(ti, pi, 200_000))?;
-        let row: Vec<String> = LOBES
+        let row: Vec<String> = LOBES[..params.walls.lobe_count()]
             .iter()
             .zip(err)
             .map(|(n, e)| {

@@ -27,8 +27,8 @@
 //!   Mitsuba 3's `dielectric` in radiance mode). [`BsdfSample::eta`] reports that relative
 //!   index so Russian roulette can undo the scaling.
 //!
-//! The [`Scratched`](ScratchedBsdf) variant (`scratched.rs`) borrows the
-//! scene's scratch table, so [`Bsdf`] carries the lifetime of the material it came from.
+//! The scratched variants ([`ScratchedBsdf`], [`ScratchedGlassBsdf`], [`ScratchedMetalBsdf`])
+//! borrow the scene's scratch table, so [`Bsdf`] carries the lifetime of the material it came from.
 
 // `!(x > 0.0)` is used on purpose: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -40,6 +40,7 @@ mod fresnel_f32;
 pub mod microfacet;
 pub mod scratched;
 pub mod scratched_glass;
+pub mod scratched_metal;
 mod wall;
 
 pub use conductor::{Conductor, ConductorIor, RoughConductor, CONDUCTOR_PRESETS};
@@ -47,6 +48,7 @@ pub use dielectric::{Dielectric, RoughDielectric};
 pub use diffuse::Diffuse;
 pub use scratched::{ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf};
 pub use scratched_glass::{ScratchedGlassBsdf, WallLobeTable};
+pub use scratched_metal::ScratchedMetalBsdf;
 pub use wall::GrooveWall;
 
 use crate::math::{Rgb, Vec2, Vec3};
@@ -79,6 +81,8 @@ pub enum Bsdf<'a> {
     Scratched(ScratchedBsdf<'a>),
     /// Glass with dielectric-wall scratches, reflecting and transmitting (METHOD.md 8.2).
     ScratchedGlass(ScratchedGlassBsdf<'a>),
+    /// Metal with rough-walled scratches (METHOD.md 8.1).
+    ScratchedMetal(ScratchedMetalBsdf<'a>),
     /// The wall of an explicit scratch groove (METHOD.md 8.3).
     Wall(GrooveWall),
 }
@@ -94,6 +98,7 @@ impl Bsdf<'_> {
             Bsdf::RoughConductor(b) => b.eval(wo, wi),
             Bsdf::Scratched(b) => b.eval(wo, wi),
             Bsdf::ScratchedGlass(b) => b.eval(wo, wi),
+            Bsdf::ScratchedMetal(b) => b.eval(wo, wi),
             Bsdf::Wall(b) => b.eval(wo, wi),
         }
     }
@@ -108,6 +113,7 @@ impl Bsdf<'_> {
             Bsdf::RoughConductor(b) => b.pdf(wo, wi),
             Bsdf::Scratched(b) => b.pdf(wo, wi),
             Bsdf::ScratchedGlass(b) => b.pdf(wo, wi),
+            Bsdf::ScratchedMetal(b) => b.pdf(wo, wi),
             Bsdf::Wall(b) => b.pdf(wo, wi),
         }
     }
@@ -124,6 +130,7 @@ impl Bsdf<'_> {
             Bsdf::RoughConductor(b) => b.eval_pdf(wo, wi),
             Bsdf::Scratched(b) => b.eval_pdf(wo, wi),
             Bsdf::ScratchedGlass(b) => b.eval_pdf(wo, wi),
+            Bsdf::ScratchedMetal(b) => b.eval_pdf(wo, wi),
             Bsdf::Wall(b) => (b.eval(wo, wi), b.pdf(wo, wi)),
         }
     }
@@ -140,6 +147,10 @@ impl Bsdf<'_> {
                 (f, Some(pdf))
             }
             Bsdf::ScratchedGlass(b) if !delta_light => {
+                let (f, pdf) = b.eval_pdf(wo, wi);
+                (f, Some(pdf))
+            }
+            Bsdf::ScratchedMetal(b) if !delta_light => {
                 let (f, pdf) = b.eval_pdf(wo, wi);
                 (f, Some(pdf))
             }
@@ -160,6 +171,7 @@ impl Bsdf<'_> {
             Bsdf::RoughConductor(b) => b.sample(wo, u),
             Bsdf::Scratched(b) => b.sample(wo, u_lobe, u),
             Bsdf::ScratchedGlass(b) => b.sample(wo, u_lobe, u),
+            Bsdf::ScratchedMetal(b) => b.sample(wo, u_lobe, u),
             Bsdf::Wall(b) => b.sample(wo, u),
         }
     }

@@ -135,7 +135,7 @@ impl WallLobeTable {
     }
 
     /// The slices around `wo` (scratch frame, `wo.z != 0`) and their warps ([`Corners`]).
-    fn corners(&self, wo: Vec3) -> Corners {
+    pub(super) fn corners(&self, wo: Vec3) -> Corners {
         let side = (wo.z < 0.0) as usize;
         let theta = wo.y.clamp(-1.0, 1.0).asin();
         let phi = wo.x.atan2(wo.z.abs());
@@ -177,7 +177,7 @@ impl WallLobeTable {
     /// `(f, pdf)` of one groove lobe at `wi` (scratch frame), the pdf as the lobe's sampler's
     /// ([`Self::sample`]) given the corners of `wo`.
     #[inline]
-    fn eval_pdf(&self, c: &Corners, wi: Vec3) -> (f32, f32) {
+    pub(super) fn eval_pdf(&self, c: &Corners, wi: Vec3) -> (f32, f32) {
         let below = wi.z < 0.0;
         if wi.z == 0.0 {
             return (0.0, 0.0);
@@ -214,7 +214,7 @@ impl WallLobeTable {
     /// A direction from one groove lobe (see the module notes): `u0` picks the slice, `u` the
     /// bin and the point in it. `None` where the chosen slice holds no energy.
     #[inline]
-    fn sample(&self, c: &Corners, u0: f32, u: Vec2) -> Option<(Vec3, usize)> {
+    pub(super) fn sample(&self, c: &Corners, u0: f32, u: Vec2) -> Option<(Vec3, usize)> {
         let mut k = 0;
         let mut acc = c.weight[0];
         while u0 >= acc && k + 1 < c.count {
@@ -251,7 +251,7 @@ impl WallLobeTable {
 /// The slices a `wo` reads: up to four, with bilinear weights, each slice's total energy and
 /// the warp's fixed points (`e_c` the slice's smooth exit angle per lobe, `e_o` `wo`'s).
 #[derive(Clone, Copy, Debug, Default)]
-struct Corners {
+pub(super) struct Corners {
     side: usize,
     count: usize,
     slice: [u32; 4],

@@ -13,7 +13,8 @@
 //! walls = "diffuse"              # "specular" = mirror walls, [Raymond16]'s delta lobe;
 //!                                # "dielectric" = glass walls, reflecting and transmitting
 //!                                # from both sides (METHOD.md 8.1-8.2, glass only)
-//! # roughness = 0.2              # GGX alpha of dielectric walls (default 0, smooth)
+//! # roughness = 0.2              # GGX alpha of dielectric walls, or of a metal's specular
+//!                                # walls (default 0: smooth)
 //! fresnel = "seed"               # or "walls"
 //! fresnel_law = "schlick"        # dielectric | conductor:ETA,K | none
 //! m = 256                        # table size M, N, N_r (default: the seed's,
@@ -30,7 +31,7 @@
 
 use super::materials::{conductor_ior, invalid, MaterialError};
 use crate::bsdf::GrooveWall;
-use crate::bsdf::{ConductorIor, ScratchedBase, WallLobeTable};
+use crate::bsdf::{ConductorIor, ScratchedBase};
 use crate::fresnel::FresnelLaw;
 use crate::layers::{LayerError, LayerParams, LayerSet, Orientation, MAX_LAYERS};
 use crate::material::Material;
@@ -39,7 +40,7 @@ use crate::profile::Profile;
 use crate::scratched::{CoverageMode, LayerMix, ScratchModel, ScratchedMaterial};
 use crate::table::{TableError, TableParams};
 use crate::trace2d::{FresnelMode, TraceError, TraceSettings, Walls};
-use crate::wall_table::WallTableParams;
+use crate::wall_table::{WallKind, WallTableParams};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -69,7 +70,8 @@ pub struct ScratchSpec {
     /// `dielectric`: the groove's own glass (METHOD.md 8.1-8.2).
     #[serde(default, deserialize_with = "keyed::walls")]
     pub walls: Option<WallsKey>,
-    /// GGX `alpha` of dielectric walls, in `[0, 1]` (default 0: smooth).
+    /// GGX `alpha` of dielectric walls, or of a metal's specular walls, in `[0, 1]` (default
+    /// 0: smooth; the metal's mirror walls then keep the seed's 2D table).
     pub roughness: Option<f64>,
     /// Where Fresnel is applied: glass default `seed`, metal `walls`.
     #[serde(default, deserialize_with = "keyed::fresnel")]
@@ -162,9 +164,10 @@ pub enum WallsKey {
 #[derive(Clone, Debug, PartialEq)]
 pub enum TableSource {
     Compute(TableParams),
-    /// A dielectric-wall table (METHOD.md 8.1), computed or cached.
+    /// A wall table (METHOD.md 8.1; dielectric, or a metal's rough specular walls), computed
+    /// or cached.
     Walls(WallTableParams),
-    /// A table file: the seed's or a dielectric-wall one (`kind` says which).
+    /// A table file: the seed's or a wall table (`kind` says which).
     File(PathBuf),
 }
 
@@ -352,35 +355,11 @@ impl ScratchedDesc {
                 .map(TableSource::Walls);
         }
         if let Some(r) = s.roughness {
-            return Err(invalid(
-                "scratches.roughness",
-                r,
-                "applies to walls = \"dielectric\" only (the 2D table's walls are smooth or Lambertian)",
-            ));
-        }
-        let law = match &s.fresnel_law {
-            Some(text) => {
-                let n = s.ior.unwrap_or(match defaults.base {
-                    ScratchedBase::Glass { eta } => eta as f64,
-                    ScratchedBase::Metal { .. } => 1.5,
-                });
-                FresnelLaw::parse(text, n)
-                    .map_err(|e| invalid("scratches.fresnel_law", format!("{text:?}"), e))?
+            if let Some(params) = self.resolve_rough_specular(defaults, &profile, r)? {
+                return Ok(TableSource::Walls(params));
             }
-            None => defaults.law,
-        };
-        if let (Some(n), Some(_)) = (
-            s.ior,
-            s.fresnel_law
-                .as_deref()
-                .filter(|l| l.starts_with("conductor") || *l == "none"),
-        ) {
-            return Err(invalid(
-                "scratches.ior",
-                n,
-                "applies to the schlick and dielectric laws only",
-            ));
         }
+        let law = self.resolve_law(defaults)?;
         let seed = TraceSettings::default();
         let groove_slices = match s.groove_slices {
             Some(0) => {
@@ -420,6 +399,95 @@ impl ScratchedDesc {
             invalid(trace_key(key), value, why)
         })?;
         Ok(TableSource::Compute(TableParams::new(profile, trace)))
+    }
+
+    /// `roughness` with other than dielectric walls: a metal's specular walls only, in
+    /// `[0, 1]`. `Some` wall table for rough walls; `None` for 0, the seed's mirror walls (its
+    /// 2D table, unchanged).
+    fn resolve_rough_specular(
+        &self,
+        defaults: &BaseDefaults,
+        profile: &Profile,
+        roughness: f64,
+    ) -> Result<Option<WallTableParams>, MaterialError> {
+        let s = &self.scratches;
+        let specular = match s.walls {
+            Some(w) => w == WallsKey::Specular,
+            None => defaults.walls == Walls::Specular,
+        };
+        if !(specular && matches!(defaults.base, ScratchedBase::Metal { .. })) {
+            return Err(invalid(
+                "scratches.roughness",
+                roughness,
+                "applies to walls = \"dielectric\" (glass) and to a metal's walls = \"specular\" only (the 2D table's Lambertian walls have no roughness)",
+            ));
+        }
+        if !(roughness.is_finite() && (0.0..=1.0).contains(&roughness)) {
+            return Err(invalid(
+                "scratches.roughness",
+                roughness,
+                "must be in [0, 1] (GGX alpha; 0: mirror walls)",
+            ));
+        }
+        if roughness == 0.0 {
+            return Ok(None);
+        }
+        let law_keys = ["scratches.fresnel_law", "scratches.ior"];
+        let two_d = self.two_d_table_keys();
+        if let Some((key, _)) = two_d
+            .iter()
+            .find(|(key, given)| *given && !law_keys.contains(key))
+        {
+            return Err(invalid(
+                key,
+                "(given)",
+                "applies to the 2D table; rough specular walls (`scratches.roughness` > 0) are traced exactly, with Fresnel at every wall hit",
+            ));
+        }
+        let params = WallTableParams {
+            seed: s.trace_seed.unwrap_or(0),
+            ..WallTableParams::specular(profile.clone(), self.resolve_law(defaults)?, roughness)
+        };
+        params.validate().map_err(|e| {
+            let key = match e.key {
+                "roughness" => "scratches.roughness",
+                "fresnel-law" => "scratches.fresnel_law",
+                "ior" => "scratches.ior",
+                _ => "scratches",
+            };
+            invalid(key, e.value, e.why)
+        })?;
+        Ok(Some(params))
+    }
+
+    /// The 2D table's (and rough specular walls') Fresnel law: `fresnel_law` with
+    /// `scratches.ior`, else the base's.
+    fn resolve_law(&self, defaults: &BaseDefaults) -> Result<FresnelLaw, MaterialError> {
+        let s = &self.scratches;
+        let law = match &s.fresnel_law {
+            Some(text) => {
+                let n = s.ior.unwrap_or(match defaults.base {
+                    ScratchedBase::Glass { eta } => eta as f64,
+                    ScratchedBase::Metal { .. } => 1.5,
+                });
+                FresnelLaw::parse(text, n)
+                    .map_err(|e| invalid("scratches.fresnel_law", format!("{text:?}"), e))?
+            }
+            None => defaults.law,
+        };
+        if let (Some(n), Some(_)) = (
+            s.ior,
+            s.fresnel_law
+                .as_deref()
+                .filter(|l| l.starts_with("conductor") || *l == "none"),
+        ) {
+            return Err(invalid(
+                "scratches.ior",
+                n,
+                "applies to the schlick and dielectric laws only",
+            ));
+        }
+        Ok(law)
     }
 
     /// The keys of the 2D table alone, each with whether it is given.
@@ -529,17 +597,17 @@ impl ScratchedDesc {
             TableSource::Compute(params) => {
                 ScratchModel::Seed(crate::cache::obtain_table(params).map_err(table_error)?)
             }
-            TableSource::Walls(params) => ScratchModel::DielectricWalls(
-                crate::cache::obtain_wall_table(params).map_err(table_error)?,
-            ),
-            TableSource::File(path) => {
-                match crate::cache::load_any_table_file(path).map_err(table_error)? {
-                    model @ ScratchModel::Seed(_) => model,
-                    ScratchModel::DielectricWalls(walls) => {
-                        self.check_wall_table_base(&r.base, &walls)?;
-                        ScratchModel::DielectricWalls(walls)
-                    }
+            TableSource::Walls(params) => {
+                let table = crate::cache::obtain_wall_table(params).map_err(table_error)?;
+                match params.walls {
+                    WallKind::Dielectric => ScratchModel::DielectricWalls(table),
+                    WallKind::Specular { .. } => ScratchModel::SpecularWalls(table),
                 }
+            }
+            TableSource::File(path) => {
+                let model = crate::cache::load_any_table_file(path).map_err(table_error)?;
+                self.check_wall_table_base(&r.base, &model)?;
+                model
             }
         };
         let layers = LayerSet::with_orientation(r.layers, r.layer_seed, r.orientation)
@@ -549,12 +617,30 @@ impl ScratchedDesc {
         ))
     }
 
-    /// A dielectric-wall table file fits a glass base of its own index only.
+    /// A dielectric-wall table file fits a glass base of its own index only, a specular-wall
+    /// one a metal base.
     fn check_wall_table_base(
         &self,
         base: &ScratchedBase,
-        walls: &WallLobeTable,
+        model: &ScratchModel,
     ) -> Result<(), MaterialError> {
+        let walls = match model {
+            ScratchModel::Seed(_) => return Ok(()),
+            ScratchModel::SpecularWalls(_) if matches!(base, ScratchedBase::Metal { .. }) => {
+                return Ok(())
+            }
+            ScratchModel::SpecularWalls(_) => {
+                return Err(invalid(
+                    "scratches.table",
+                    format!(
+                        "{:?}",
+                        self.scratches.table.as_deref().unwrap_or(Path::new(""))
+                    ),
+                    "a specular-wall table (rough metal walls) needs base = \"metal\"",
+                ))
+            }
+            ScratchModel::DielectricWalls(walls) => walls,
+        };
         match *base {
             ScratchedBase::Glass { eta } if (eta - walls.ior()).abs() <= 1e-6 * eta => Ok(()),
             ScratchedBase::Glass { eta } => Err(invalid(
@@ -602,6 +688,13 @@ impl ScratchedDesc {
     pub fn explicit(&self, base_dir: &Path) -> Result<ExplicitSpec, MaterialError> {
         let r = self.resolve(base_dir)?;
         if let TableSource::Walls(params) = &r.table {
+            if let WallKind::Specular { .. } = params.walls {
+                return Err(invalid(
+                    "scratches.explicit",
+                    true,
+                    "explicit grooves have mirror or Lambertian metal walls: leave out `scratches.roughness` to carve them",
+                ));
+            }
             return self.explicit_glass(&r, params);
         }
         let TableSource::Compute(params) = r.table else {

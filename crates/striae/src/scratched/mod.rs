@@ -15,7 +15,7 @@
 use crate::bsdf::scratched::MAX_SCRATCH_LOBES;
 use crate::bsdf::{
     Bsdf, Conductor, Dielectric, ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf,
-    ScratchedGlassBsdf, WallLobeTable,
+    ScratchedGlassBsdf, ScratchedMetalBsdf, WallLobeTable,
 };
 use crate::layers::cache::PixelKey;
 use crate::layers::lattice::TileQuery;
@@ -73,6 +73,9 @@ pub enum ScratchModel {
     /// Dielectric walls (METHOD.md 8.1-8.2, glass only): the groove's four lobes, reflected
     /// and transmitted from either side ([`ScratchedGlassBsdf`]).
     DielectricWalls(Arc<WallLobeTable>),
+    /// Rough specular walls (METHOD.md 8.1, metal only): the seed's metal with its groove lobe
+    /// read from a 4D table of GGX-rough conductor walls ([`ScratchedMetalBsdf`]).
+    SpecularWalls(Arc<WallLobeTable>),
 }
 
 impl ScratchModel {
@@ -80,7 +83,7 @@ impl ScratchModel {
     pub fn hash(&self) -> &str {
         match self {
             ScratchModel::Seed(t) => t.hash(),
-            ScratchModel::DielectricWalls(t) => t.hash(),
+            ScratchModel::DielectricWalls(t) | ScratchModel::SpecularWalls(t) => t.hash(),
         }
     }
 }
@@ -124,7 +127,8 @@ impl ScratchedMaterial {
         Self::with_model(base, tint, ScratchModel::Seed(table), layers, mix, coverage)
     }
 
-    /// A material of any [`ScratchModel`] (dielectric walls: `base` must be glass).
+    /// A material of any [`ScratchModel`] (dielectric walls: `base` must be glass; specular
+    /// walls: metal).
     pub fn with_model(
         base: ScratchedBase,
         tint: Rgb,
@@ -219,6 +223,13 @@ impl ScratchedMaterial {
                     return self.base_bsdf();
                 };
                 return Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(eta, walls, &lobes[..count]));
+            }
+            ScratchModel::SpecularWalls(walls) => {
+                let ScratchedBase::Metal { ior } = self.base else {
+                    return self.base_bsdf();
+                };
+                let b = ScratchedMetalBsdf::new(ior, self.tint, walls, &lobes[..count]);
+                return Bsdf::ScratchedMetal(b);
             }
         };
         // The integrator evaluates and samples it with `wo` in this frame: precompute the

@@ -57,6 +57,36 @@ fn keys_are_validated() {
         (p.trace.m, p.trace.walls, p.trace.fresnel_law),
         (16, Walls::Diffuse, FresnelLaw::Schlick { n: 1.5 })
     );
+    // A metal's rough walls: a specular-wall table with the law its mirror walls take, the
+    // trace seed; roughness 0 leaves the seed's mirror-wall table exactly as without the key.
+    let metal = "type = \"scratched\"\nbase = \"metal\"\npreset = \"gold\"\n[scratches]\nprofile = \"round:depth=0.3\"";
+    let mirror = computed(metal);
+    assert_eq!(computed(&format!("{metal}\nroughness = 0.0")), mirror);
+    assert_eq!(
+        computed(&format!("{metal}\nwalls = \"specular\"\nroughness = 0")).hash(),
+        mirror.hash()
+    );
+    let rough = parse(&format!("{metal}\nroughness = 0.3\ntrace_seed = 4"))
+        .unwrap()
+        .resolve(Path::new("."))
+        .unwrap();
+    let TableSource::Walls(w) = rough.table else {
+        panic!("{:?}", rough.table)
+    };
+    assert_eq!(
+        (w.walls, w.roughness, w.seed),
+        (
+            crate::wall_table::WallKind::Specular {
+                law: mirror.trace.fresnel_law
+            },
+            0.3,
+            4
+        )
+    );
+    assert!(matches!(
+        mirror.trace.fresnel_law,
+        FresnelLaw::Conductor { .. }
+    ));
     // Metal defaults: mirror walls, Fresnel at the walls, the base's law; `none` for F = 1.
     let r = parse("type = \"scratched\"\nbase = \"metal\"\npreset = \"none\"")
         .unwrap()
@@ -87,6 +117,15 @@ fn keys_are_validated() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("`scratches.groove_slices`"), "{e}");
+    let e = parse("type = \"scratched\"\nbase = \"metal\"\npreset = \"gold\"\n[scratches]\nroughness = 0.2\nexplicit = true")
+        .unwrap()
+        .explicit(Path::new("."))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("`scratches.explicit`") && e.contains("roughness"),
+        "{e}"
+    );
     let cases: &[(&str, &[&str])] = &[
         ("base = \"wood\"", &["`base`", "wood"]),
         ("base = \"glass\"\nior = 0.5", &["`ior`", "0.5"]),
@@ -224,6 +263,43 @@ fn keys_are_validated() {
             &["`scratches.fresnel_law`", "dielectric"],
         ),
         ("base = \"glass\"\nroughness = 0.1", &["roughness"]),
+        // A metal's rough walls: specular walls only, in [0, 1], no 2D-table keys, no carving.
+        (
+            "base = \"metal\"\npreset = \"gold\"\n[scratches]\nwalls = \"diffuse\"\nroughness = 0.2",
+            &["`scratches.roughness`", "0.2", "specular"],
+        ),
+        (
+            "base = \"metal\"\npreset = \"gold\"\n[scratches]\nwalls = \"diffuse\"\nroughness = 0",
+            &["`scratches.roughness`", "specular"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nwalls = \"specular\"\nroughness = 0.2",
+            &["`scratches.roughness`", "metal"],
+        ),
+        (
+            "base = \"metal\"\npreset = \"gold\"\n[scratches]\nwalls = \"specular\"\nroughness = 1.5",
+            &["`scratches.roughness`", "1.5", "[0, 1]"],
+        ),
+        (
+            "base = \"metal\"\npreset = \"gold\"\n[scratches]\nroughness = -0.1",
+            &["`scratches.roughness`", "-0.1"],
+        ),
+        (
+            "base = \"metal\"\npreset = \"gold\"\n[scratches]\nroughness = nan",
+            &["`scratches.roughness`", "NaN"],
+        ),
+        (
+            "base = \"metal\"\npreset = \"gold\"\n[scratches]\nroughness = 0.2\nm = 64",
+            &["`scratches.m`", "rough specular walls"],
+        ),
+        (
+            "base = \"metal\"\npreset = \"gold\"\n[scratches]\nroughness = 0.2\nfresnel = \"seed\"",
+            &["`scratches.fresnel`", "rough specular walls"],
+        ),
+        (
+            "base = \"metal\"\npreset = \"gold\"\n[scratches]\nroughness = 0.2\nfresnel_law = \"bogus\"",
+            &["`scratches.fresnel_law`", "bogus"],
+        ),
     ];
     for (body, needles) in cases {
         let src = format!("type = \"scratched\"\n{body}");

@@ -1,0 +1,130 @@
+//! Scratched metal with rough walls (METHOD.md 8.1, `walls = "specular"` with `roughness > 0`):
+//! a smooth conductor mixed with the reflected lobe of a groove whose walls are GGX-rough
+//! conductors, `f = (1 - C) f_mirror + tint sum_k c_k f_groove,k` (`C = sum_k c_k`, the
+//! footprint coverages).
+//!
+//! The metal keeps the seed's model ([`super::ScratchedBsdf`] for mirror walls): the smooth
+//! base reflects with its RGB Fresnel, the groove carries the table's scalar Fresnel law at
+//! every wall hit (traced into the table, [`crate::wall_table::WallKind::Specular`]) times
+//! the material's `tint`. Only the lobe's shape changes: rough walls spread it in `theta_o`,
+//! so it depends on `theta_o` and is read from the 4D wall table's `r_out` lobe
+//! ([`WallLobeTable`], with `wo` as the incident direction: rough conductors are reciprocal),
+//! as [`super::ScratchedGlassBsdf`] reads its four lobes.
+//!
+//! Sampling (as the seed's metal): the base mirror with probability `1 - C` (weight `F(wo)`),
+//! groove lobe `k` with `c_k`, then a slice, an exit bin and a point in it from the table. The
+//! density of the non-delta part is `sum_k c_k pdf_k`, the value `pdf` returns. The BSDF is
+//! opaque: 0 unless `wo.z > 0` and `wi.z > 0`.
+
+use super::scratched::{normalised_lobes, MAX_SCRATCH_LOBES};
+use super::{BsdfSample, ConductorIor, ScratchLobe, WallLobeTable};
+use crate::math::{reflect_z, Rgb, Vec2, Vec3};
+
+/// Scratched metal with rough walls at one hit (see the module notes).
+#[derive(Clone, Copy, Debug)]
+pub struct ScratchedMetalBsdf<'a> {
+    /// The smooth base's complex index.
+    pub ior: ConductorIor,
+    /// RGB factor on the groove lobe (the base's colour, as the seed's metal).
+    pub tint: Rgb,
+    pub table: &'a WallLobeTable,
+    lobes: [ScratchLobe; MAX_SCRATCH_LOBES],
+    count: u8,
+    /// `C = sum_k c_k <= 1`.
+    total: f32,
+}
+
+impl<'a> ScratchedMetalBsdf<'a> {
+    /// `lobes` with coverages `c_k >= 0`, at most [`MAX_SCRATCH_LOBES`], rescaled so that
+    /// `sum c_k <= 1`.
+    pub fn new(
+        ior: ConductorIor,
+        tint: Rgb,
+        table: &'a WallLobeTable,
+        lobes: &[ScratchLobe],
+    ) -> Self {
+        let (lobes, count, total) = normalised_lobes(lobes);
+        ScratchedMetalBsdf {
+            ior,
+            tint,
+            table,
+            lobes,
+            count: count as u8,
+            total,
+        }
+    }
+
+    /// `(tint sum_k c_k f_k, sum_k c_k pdf_k)` for `wo`, `wi` both above the surface.
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        if !(wo.z > 0.0 && wi.z > 0.0) {
+            return (Rgb::ZERO, 0.0);
+        }
+        let mut sum = (0.0f32, 0.0f32);
+        for lobe in &self.lobes[..self.count as usize] {
+            let corners = self.table.corners(lobe.to_scratch(wo));
+            let (f, pdf) = self.table.eval_pdf(&corners, lobe.to_scratch(wi));
+            sum = (sum.0 + lobe.coverage * f, sum.1 + lobe.coverage * pdf);
+        }
+        (self.tint * sum.0, sum.1)
+    }
+
+    #[inline]
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
+        self.eval_pdf(wo, wi).0
+    }
+
+    #[inline]
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        self.eval_pdf(wo, wi).1
+    }
+
+    /// `u_lobe` picks the base mirror or a groove lobe and, rescaled, the lobe's slice; `u`
+    /// the direction in it.
+    #[inline]
+    pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+        if !(wo.z > 0.0) {
+            return None;
+        }
+        let base = 1.0 - self.total;
+        if u_lobe < base || self.count == 0 {
+            return Some(BsdfSample {
+                wi: reflect_z(wo),
+                weight: self.ior.fresnel(wo.z),
+                pdf: base,
+                delta: true,
+                eta: 1.0,
+            });
+        }
+        let (lobe, u0) = self.pick(u_lobe - base);
+        let corners = self.table.corners(lobe.to_scratch(wo));
+        let wi = lobe.from_scratch(self.table.sample(&corners, u0, u)?.0);
+        let (f, pdf) = self.eval_pdf(wo, wi);
+        (pdf > 0.0).then(|| BsdfSample {
+            wi,
+            weight: f * (wi.z / pdf),
+            pdf,
+            delta: false,
+            eta: 1.0,
+        })
+    }
+
+    /// The groove lobe that `x` in `[0, C)` falls in (lobe `k` spans `c_k`), and `x`'s place
+    /// within its span in `[0, 1]`.
+    #[inline]
+    fn pick(&self, mut x: f32) -> (&ScratchLobe, f32) {
+        let last = self.count as usize - 1;
+        let k = self.lobes[..last]
+            .iter()
+            .position(|l| {
+                let inside = x < l.coverage;
+                if !inside {
+                    x -= l.coverage;
+                }
+                inside
+            })
+            .unwrap_or(last);
+        let lobe = &self.lobes[k];
+        (lobe, (x / lobe.coverage).clamp(0.0, 1.0))
+    }
+}
