@@ -322,7 +322,7 @@ mod tests {
         std::fs::remove_dir_all(&dir).ok();
     }
 
-    /// A table file of either kind loads as its model; a dielectric-wall file with a negative
+    /// A table file of any kind loads as its model; a dielectric-wall file with a negative
     /// fraction, or more energy out than in, is refused naming the array; the disk cache of
     /// wall tables recovers from a corrupt file.
     #[test]
@@ -357,6 +357,24 @@ mod tests {
             let e = load_any_table_file(&path).unwrap_err().to_string();
             assert!(e.contains(needle), "{e}");
         }
+        // A metal's rough specular walls load as their own model.
+        let specular = WallTableParams {
+            theta_bins: 2,
+            phi_bins: 2,
+            bins: 4,
+            paths: 200,
+            ..WallTableParams::specular(
+                Profile::parse("v:angle=90").unwrap(),
+                FresnelLaw::None,
+                0.2,
+            )
+        };
+        let path = dir.join("specular.npz");
+        WallTable::compute(&specular).unwrap().save(&path).unwrap();
+        assert!(matches!(
+            load_any_table_file(&path).unwrap(),
+            ScratchModel::SpecularWalls(_)
+        ));
         let seed = TableParams::new(
             Profile::parse("v:angle=90").unwrap(),
             TraceSettings {

@@ -487,7 +487,7 @@ impl WallTable {
             ),
             WallKind::Specular { law } => (
                 format!("specular walls, Fresnel {law:?}"),
-                (800, 750),
+                (1100, 900),
                 (1, 1),
             ),
         };

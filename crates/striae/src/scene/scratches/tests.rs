@@ -309,3 +309,37 @@ fn keys_are_validated() {
         }
     }
 }
+
+/// A specular-wall table file (rough metal walls) fits a metal base, not glass.
+#[test]
+fn specular_wall_table_files_need_a_metal_base() {
+    use crate::wall_table::WallTable;
+    let dir = std::env::temp_dir().join(format!("striae-spec-file-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let params = WallTableParams {
+        theta_bins: 2,
+        phi_bins: 2,
+        bins: 4,
+        paths: 200,
+        ..WallTableParams::specular(Profile::parse("v:angle=90").unwrap(), FresnelLaw::None, 0.2)
+    };
+    WallTable::compute(&params)
+        .unwrap()
+        .save(&dir.join("s.npz"))
+        .unwrap();
+    let material = |base: &str| {
+        parse(&format!(
+            "type = \"scratched\"\n{base}\n[scratches]\ntable = \"s.npz\"\nlayers = 1"
+        ))
+        .unwrap()
+        .prepare(&dir)
+    };
+    let m = material("base = \"metal\"\npreset = \"gold\"").unwrap();
+    assert!(matches!(m.model, ScratchModel::SpecularWalls(_)));
+    let e = material("base = \"glass\"").unwrap_err().to_string();
+    assert!(
+        e.contains("`scratches.table`") && e.contains("metal"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
