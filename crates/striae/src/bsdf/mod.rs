@@ -69,6 +69,20 @@ pub struct BsdfSample {
     pub eta: f32,
 }
 
+impl BsdfSample {
+    /// A non-delta sample that stays on `wo`'s side: `weight = f |cos theta_i| / pdf`.
+    #[inline]
+    pub fn reflected(wi: Vec3, f: Rgb, pdf: f32) -> Self {
+        BsdfSample {
+            wi,
+            weight: f * (wi.z.abs() / pdf),
+            pdf,
+            delta: false,
+            eta: 1.0,
+        }
+    }
+}
+
 /// A BSDF evaluated at one surface point (textures already looked up).
 #[derive(Clone, Copy, Debug)]
 pub enum Bsdf<'a> {
@@ -98,7 +112,7 @@ impl Bsdf<'_> {
             Bsdf::RoughConductor(b) => b.eval(wo, wi),
             Bsdf::Scratched(b) => b.eval(wo, wi),
             Bsdf::ScratchedGlass(b) => b.eval(wo, wi),
-            Bsdf::ScratchedMetal(b) => b.eval(wo, wi),
+            Bsdf::ScratchedMetal(b) => b.eval_pdf(wo, wi).0,
             Bsdf::Wall(b) => b.eval(wo, wi),
         }
     }
@@ -113,7 +127,7 @@ impl Bsdf<'_> {
             Bsdf::RoughConductor(b) => b.pdf(wo, wi),
             Bsdf::Scratched(b) => b.pdf(wo, wi),
             Bsdf::ScratchedGlass(b) => b.pdf(wo, wi),
-            Bsdf::ScratchedMetal(b) => b.pdf(wo, wi),
+            Bsdf::ScratchedMetal(b) => b.eval_pdf(wo, wi).1,
             Bsdf::Wall(b) => b.pdf(wo, wi),
         }
     }

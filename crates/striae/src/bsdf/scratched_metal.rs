@@ -17,8 +17,8 @@
 //! opaque: 0 unless `wo.z > 0` and `wi.z > 0`.
 
 use super::scratched::{normalised_lobes, MAX_SCRATCH_LOBES};
-use super::{BsdfSample, ConductorIor, ScratchLobe, WallLobeTable};
-use crate::math::{reflect_z, Rgb, Vec2, Vec3};
+use super::{BsdfSample, Conductor, ConductorIor, ScratchLobe, WallLobeTable};
+use crate::math::{Rgb, Vec2, Vec3};
 
 /// Scratched metal with rough walls at one hit (see the module notes).
 #[derive(Clone, Copy, Debug)]
@@ -69,16 +69,6 @@ impl<'a> ScratchedMetalBsdf<'a> {
         (self.tint * sum.0, sum.1)
     }
 
-    #[inline]
-    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
-        self.eval_pdf(wo, wi).0
-    }
-
-    #[inline]
-    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        self.eval_pdf(wo, wi).1
-    }
-
     /// `u_lobe` picks the base mirror or a groove lobe and, rescaled, the lobe's slice; `u`
     /// the direction in it.
     #[inline]
@@ -88,25 +78,18 @@ impl<'a> ScratchedMetalBsdf<'a> {
         }
         let base = 1.0 - self.total;
         if u_lobe < base || self.count == 0 {
+            // The smooth conductor's mirror sample (weight `F(wo)`), chosen with `1 - C`.
+            let mirror = Conductor { ior: self.ior }.sample(wo)?;
             return Some(BsdfSample {
-                wi: reflect_z(wo),
-                weight: self.ior.fresnel(wo.z),
                 pdf: base,
-                delta: true,
-                eta: 1.0,
+                ..mirror
             });
         }
         let (lobe, u0) = self.pick(u_lobe - base);
         let corners = self.table.corners(lobe.to_scratch(wo));
         let wi = lobe.from_scratch(self.table.sample(&corners, u0, u)?.0);
         let (f, pdf) = self.eval_pdf(wo, wi);
-        (pdf > 0.0).then(|| BsdfSample {
-            wi,
-            weight: f * (wi.z / pdf),
-            pdf,
-            delta: false,
-            eta: 1.0,
-        })
+        (pdf > 0.0).then(|| BsdfSample::reflected(wi, f, pdf))
     }
 
     /// The groove lobe that `x` in `[0, C)` falls in (lobe `k` spans `c_k`), and `x`'s place

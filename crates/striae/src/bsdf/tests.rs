@@ -463,7 +463,7 @@ mod scratched_glass {
     }
 
     /// Two crossing scratches covering 0.3 and 0.25 of the footprint.
-    fn lobes() -> [ScratchLobe; 2] {
+    pub(super) fn lobes() -> [ScratchLobe; 2] {
         let (s, c) = 0.4f32.sin_cos();
         let (s2, c2) = 2.1f32.sin_cos();
         [
@@ -632,6 +632,7 @@ mod scratched_metal {
     //! energy of a white conductor against the table's own fractions, `eval` normalised by
     //! quadrature, and one-sidedness.
 
+    use super::scratched_glass::lobes;
     use super::*;
     use crate::fresnel::FresnelLaw;
     use crate::profile::Profile;
@@ -646,24 +647,6 @@ mod scratched_metal {
             ..WallTableParams::specular(Profile::parse("v:angle=100").unwrap(), law, 0.3)
         };
         WallTable::compute(&p).unwrap()
-    }
-
-    /// Two crossing scratches covering 0.3 and 0.25 of the footprint.
-    fn lobes() -> [ScratchLobe; 2] {
-        let (s, c) = 0.4f32.sin_cos();
-        let (s2, c2) = 2.1f32.sin_cos();
-        [
-            ScratchLobe {
-                coverage: 0.3,
-                cos: c,
-                sin: s,
-            },
-            ScratchLobe {
-                coverage: 0.25,
-                cos: c2,
-                sin: s2,
-            },
-        ]
     }
 
     fn white() -> ConductorIor {
