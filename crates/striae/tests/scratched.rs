@@ -1,5 +1,5 @@
 //! Scene tests of the scratched material: white furnaces (lossless scratched glass,
-//! scratched metal with F = 1, smooth and mirror-wall lobes), the scratched pixels of a
+//! scratched metal with F = 1, smooth, mirror-wall and rough-wall lobes), the scratched pixels of a
 //! head-on plate against the rasterised layer masks, and determinism across thread counts.
 //! Tiny tables and images: the file runs in a few seconds (tables are cached on disk).
 
@@ -404,6 +404,12 @@ fn scratched_renders_are_bit_identical_across_thread_counts() {
         &format!("{WIDE}m = 16\nn = 600\nnr = 8\nlayer_mix = \"sum\"\n"),
     );
     assert_bit_identical_across_thread_counts(&g);
+    // A metal's rough walls (the wall table's lookups), two layers summed.
+    let rough = furnace(
+        "type = \"scratched\"\nbase = \"metal\"\npreset = \"none\"",
+        &format!("{WIDE}profile = \"round:depth=0.3\"\nroughness = 0.3\nlayer_mix = \"sum\"\n"),
+    );
+    assert_bit_identical_across_thread_counts(&rough);
     // The glass teapot: surfaces seen through the glass share their pixel's footprint
     // coverage per chain of bounces (`LayerSet::coverage_of_pixel`).
     let teapot = scene(&format!(
