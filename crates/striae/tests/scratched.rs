@@ -1,6 +1,7 @@
 //! Scene tests of the scratched material: white furnaces (lossless scratched glass,
-//! scratched metal with F = 1, smooth, mirror-wall and rough-wall lobes), the scratched pixels of a
-//! head-on plate against the rasterised layer masks, and determinism across thread counts.
+//! scratched metal with F = 1, smooth, mirror-wall and rough-wall lobes), the scratched
+//! pixels of a head-on plate against the rasterised layer masks, and determinism across
+//! thread counts.
 //! Tiny tables and images: the file runs in a few seconds (tables are cached on disk).
 
 use std::path::Path;
