@@ -11,6 +11,8 @@
 //! `beta = n w.y` (a delta in `theta_o`): the table holds that delta as one `theta_o` bin, and the
 //! interpolation between two slices splits it between two bins; its error against the exact
 //! trace is measured by [`WallTable::error_against_trace`] and reported in `docs/fidelity.md`.
+//! The renderer reads only the `phi_o` marginals of smooth walls and puts `theta_o` at its exact
+//! value ([`crate::bsdf::scratched_glass`]).
 //!
 //! Files (`.npz`, `docs/table-format.md`): `kind` ("dielectric-walls"), `profile`, `ior`,
 //! `roughness`, `paths`, `seed`, `theta_i[Bt]`, `phi_i[Bp]`, `theta_o[B]`, `phi_o[B]` and the four
