@@ -34,9 +34,12 @@
 //! `(1 - C) F`, the smooth refraction `(1 - C)(1 - F)` (both deltas, weight 1 and `1 / eta^2`),
 //! groove lobe `k` with `c_k`; within a groove lobe, a grid slice with its bilinear weight, an
 //! exit bin in proportion to `m_b` (reflected and transmitted together, one CDF per slice), a
-//! point uniform in the bin, warped (rough walls) or in the box (smooth walls). The density of the non-delta part is `sum_k c_k pdf_k`,
-//! the value `pdf` returns, so MIS with light sampling is consistent; for a lossless groove and
-//! one slice, the weight is exactly `s`.
+//! point uniform in the bin, warped (rough walls) or in the box (smooth walls). The density
+//! of the non-delta part is `sum_k c_k pdf_k`, the value `pdf` returns, so MIS with light
+//! sampling is consistent (rough walls); for a lossless groove and one slice, the weight is
+//! exactly `s`. Smooth walls' boxes are too narrow for light sampling to land in: the
+//! integrator skips it there ([`super::Bsdf::is_delta`]) and counts what BSDF sampling finds,
+//! as for a specular surface.
 
 use super::dielectric::{mirror_sample, refraction_sample};
 use super::scratched::{normalised_lobes, MAX_SCRATCH_LOBES};
