@@ -20,8 +20,8 @@
 //! bins: against explicit grooves lit from behind, 11 % too much light, docs/fidelity.md). Their
 //! lobes keep only the `phi_o` marginals, and the exit `theta` is `wo`'s own smooth-wall exit
 //! angle, spread uniformly over a box [`SMOOTH_BOX_BINS`] of a bin wide (`dtheta` above,
-//! `J = 1`), narrow enough to be exact at any scale a scene resolves and still a density that
-//! `eval` and light sampling with MIS can use.
+//! `J = 1`): narrow enough to be exact at any scale a scene resolves, and still a density, so
+//! `eval` and `pdf` stay defined (light sampling leaves it to BSDF sampling, below).
 //!
 //! **Between grid points** the four nearest incident slices are blended bilinearly in
 //! `(theta_o, phi_o)` of `wo`; for rough walls each is first warped along `theta`: the
