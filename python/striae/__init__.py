@@ -108,19 +108,24 @@ def precompute(
     n: int = 10000,
     nr: int = 100,
     ior: float = 1.5,
-    fresnel: str = "seed",
+    fresnel: Optional[str] = None,
     fresnel_law: str = "schlick",
     albedo: float = 1.0,
     max_bounces: int = 64,
     seed: int = 0,
     estimator: str = "walks",
+    groove_slices: int = 0,
     threads: Optional[int] = None,
 ) -> Table:
-    """Trace a scratch profile into a BRDF table, as ``striae precompute`` (same arguments)."""
+    """Trace a scratch profile into a BRDF table, as ``striae precompute`` (same arguments;
+    ``fresnel`` defaults to ``"seed"``, or ``"walls"`` with ``groove_slices``, the number of
+    exact-groove ``theta_i`` slices the table then carries and evaluates instead of eq. (3))."""
+    if fresnel is None:
+        fresnel = "walls" if groove_slices else "seed"
     return Table(
         _striae.precompute(
             profile, walls, m, n, nr, ior, fresnel, fresnel_law, albedo, max_bounces, seed,
-            estimator, threads,
+            estimator, groove_slices, threads,
         )
     )
 

@@ -43,6 +43,22 @@ def test_sample_agrees_with_eval(table):
     assert 0.0 < weight.mean() <= 1.0 + 5 * weight.std() / np.sqrt(len(weight))
 
 
+def test_groove_slices_are_evaluated():
+    slices = striae.precompute(m=16, n=100, nr=4, seed=1, groove_slices=3)
+    plain = striae.precompute(m=16, n=100, nr=4, seed=1, fresnel="walls")
+    assert slices.params["groove_slices"] == 3 and plain.params.get("groove_slices", 0) == 0
+    rng = np.random.default_rng(5)
+    wo = unit(rng.normal(size=(500, 3)) * [1, 1, 0] + [0, 0, 1.2])
+    wi = unit(rng.normal(size=(500, 3)) * [1, 1, 0] + [0, 0, 1.2])
+    f_slices, _ = slices.eval(wo, wi)
+    f_plain, _ = plain.eval(wo, wi)
+    # The exact groove's slices replace eq. (3): another lobe, the same order of magnitude.
+    assert not np.allclose(f_slices, f_plain, rtol=1e-3)
+    assert 0.5 < f_slices.mean() / f_plain.mean() < 2.0
+    with pytest.raises(striae.StriaeError, match="groove_slices"):
+        striae.precompute(m=16, n=100, nr=4, walls="specular", groove_slices=3)
+
+
 def test_eval_rejects_bad_shapes(table):
     with pytest.raises(ValueError, match=r"\(N, 3\)"):
         table.eval(np.zeros((4, 2)), np.zeros((4, 2)))

@@ -363,3 +363,48 @@ fn radiance_that_overflows_is_an_error() {
     assert!(!out.with_extension("exr").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `precompute --walls dielectric` takes the table's sizes from `--incident`, `--exit-bins`
+/// and `--wall-paths`; the flags are refused for other walls and out of range, naming them.
+#[test]
+fn dielectric_wall_table_sizes_come_from_their_flags() {
+    let dir = std::env::temp_dir().join(format!("striae-walls-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("w.npz");
+    let sizes = [
+        "--incident",
+        "2x3",
+        "--exit-bins",
+        "6",
+        "--wall-paths",
+        "50",
+    ];
+    let mut args = vec!["precompute", "--walls", "dielectric"];
+    args.extend(sizes);
+    let (ok, err) = striae(&args, &out);
+    assert!(ok, "{err}");
+    let t = striae::wall_table::WallTable::load(&out).unwrap().unwrap();
+    assert_eq!((t.theta_i.len(), t.phi_i.len()), (2, 3));
+    assert_eq!((t.params.bins, t.params.paths), (6, 50));
+    std::fs::remove_file(&out).unwrap();
+    for (args, flag) in [
+        (&["precompute", "--exit-bins", "6"][..], "--exit-bins"),
+        (
+            &["precompute", "--walls", "dielectric", "--incident", "0x4"][..],
+            "--incident",
+        ),
+        (
+            &["precompute", "--walls", "dielectric", "--incident", "4by4"][..],
+            "--incident",
+        ),
+        (
+            &["precompute", "--walls", "dielectric", "--wall-paths", "0"][..],
+            "--wall-paths",
+        ),
+    ] {
+        let (ok, err) = striae(args, &out);
+        assert!(!ok && err.contains(flag), "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?} wrote");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

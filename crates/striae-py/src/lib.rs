@@ -428,7 +428,7 @@ fn named<T: serde::de::DeserializeOwned>(what: &str, v: &str) -> PyResult<T> {
 
 /// Trace a scratch profile into a table (`striae precompute`).
 #[pyfunction]
-#[pyo3(signature = (profile, walls, m, n, nr, ior, fresnel, fresnel_law, albedo, max_bounces, seed, estimator, threads=None))]
+#[pyo3(signature = (profile, walls, m, n, nr, ior, fresnel, fresnel_law, albedo, max_bounces, seed, estimator, groove_slices=0, threads=None))]
 #[allow(clippy::too_many_arguments)]
 fn precompute(
     py: Python<'_>,
@@ -444,6 +444,7 @@ fn precompute(
     max_bounces: usize,
     seed: u64,
     estimator: &str,
+    groove_slices: usize,
     threads: Option<usize>,
 ) -> PyResult<Table> {
     let profile = striae::profile::Profile::parse(profile).map_err(err)?;
@@ -459,7 +460,7 @@ fn precompute(
         fresnel_law: striae::fresnel::FresnelLaw::parse(fresnel_law, ior)
             .map_err(|e| PyValueError::new_err(format!("fresnel_law: {e}")))?,
         estimator: named("estimator", estimator)?,
-        groove_slices: 0,
+        groove_slices,
     };
     trace.validate().map_err(err)?;
     let params = TableParams::new(profile, trace);

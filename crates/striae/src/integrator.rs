@@ -828,7 +828,7 @@ fn radiance<const DIFFERENTIALS: bool>(
             break;
         }
         let wi_world = frame.to_world(bs.wi);
-        path.scatter(&bs);
+        path.scatter(&bs, bsdf.is_delta());
         if DIFFERENTIALS {
             let transmitted = bs.wi.z * wo.z < 0.0;
             differentials.push(
@@ -917,12 +917,13 @@ impl PathState {
         Some(self.beta * le * w)
     }
 
-    /// Continue through the sampled bounce `bs`.
+    /// Continue through the sampled bounce `bs`, from a BSDF that skipped light sampling
+    /// ([`Bsdf::is_delta`]) or not.
     #[inline(always)]
-    fn scatter(&mut self, bs: &BsdfSample) {
+    fn scatter(&mut self, bs: &BsdfSample, skipped_light_sampling: bool) {
         self.beta *= bs.weight;
         self.eta_scale *= bs.eta * bs.eta;
-        self.specular = bs.delta;
+        self.specular = bs.delta || skipped_light_sampling;
         self.prev_pdf = bs.pdf;
     }
 

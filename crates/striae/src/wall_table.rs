@@ -11,6 +11,8 @@
 //! `beta = n w.y` (a delta in `theta_o`): the table holds that delta as one `theta_o` bin, and the
 //! interpolation between two slices splits it between two bins; its error against the exact
 //! trace is measured by [`WallTable::error_against_trace`] and reported in `docs/fidelity.md`.
+//! The renderer reads only the `phi_o` marginals of smooth walls and puts `theta_o` at its exact
+//! value ([`crate::bsdf::scratched_glass`]).
 //!
 //! Rough metal walls ([`WallKind::Specular`], GGX conductor walls with the metal's Fresnel law
 //! at every microfacet hit) give one lobe, R from outside; it depends on `theta_o`, which the

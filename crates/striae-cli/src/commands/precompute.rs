@@ -64,6 +64,16 @@ pub struct Args {
     /// side exactly and print the table's error against them.
     #[arg(long, default_value_t = 0)]
     check: usize,
+    /// Wall tables (dielectric, rough specular): the incident grid, `theta_i` x `phi_i` bins, e.g. `16x32`
+    /// [default: 8x16].
+    #[arg(long, value_parser = parse_grid)]
+    incident: Option<(usize, usize)>,
+    /// Wall tables: exit bins per angle, `theta_o` and `phi_o` [default: 32].
+    #[arg(long)]
+    exit_bins: Option<usize>,
+    /// Wall tables: paths per incident direction and side [default: 20000].
+    #[arg(long)]
+    wall_paths: Option<u64>,
     /// Worker threads, 1 to 4096 (default: all cores).
     #[arg(long, value_parser = super::render::parse_threads)]
     threads: Option<usize>,
@@ -74,6 +84,16 @@ pub struct Args {
     /// memory available is always a limit.
     #[arg(long, value_parser = super::memory::parse_size)]
     max_memory: Option<u64>,
+}
+
+/// `TxP`: an incident grid of `T` `theta_i` and `P` `phi_i` bins.
+fn parse_grid(text: &str) -> Result<(usize, usize), String> {
+    let bad = || format!("`{text}`: expected THETAxPHI bin counts, e.g. 16x32");
+    let (t, p) = text.split_once('x').ok_or_else(bad)?;
+    Ok((
+        t.trim().parse().map_err(|_| bad())?,
+        p.trim().parse().map_err(|_| bad())?,
+    ))
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -129,6 +149,17 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             a.roughness
         ),
         _ => {}
+    }
+    for (flag, given) in [
+        ("--incident", a.incident.is_some()),
+        ("--exit-bins", a.exit_bins.is_some()),
+        ("--wall-paths", a.wall_paths.is_some()),
+    ] {
+        if given {
+            anyhow::bail!(
+                "{flag} applies to wall tables only (--walls dielectric, or specular with --roughness)"
+            );
+        }
     }
     if a.groove_slices == Some(0) {
         anyhow::bail!("--groove-slices 0: must be in 1..=32 (leave it out for the seed's eq. (3))");
@@ -226,12 +257,37 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 /// (`striae::wall_table`; four lobes, or rough specular walls' one), and with `--check N` its
 /// error against the exact trace at N off-grid incident directions.
 fn wall_table(params: striae::wall_table::WallTableParams, a: &Args) -> anyhow::Result<()> {
-    use striae::wall_table::{WallKind, WallTable, LOBES};
-    let params = striae::wall_table::WallTableParams {
+    use striae::wall_table::{WallKind, WallTable, WallTableParams, LOBES};
+    if a.exit_bins == Some(0) || a.wall_paths == Some(0) {
+        anyhow::bail!("--exit-bins and --wall-paths must be at least 1");
+    }
+    if let Some((t, p)) = a
+        .incident
+        .filter(|&(t, p)| !(1..=256).contains(&t) || !(1..=256).contains(&p))
+    {
+        anyhow::bail!("--incident {t}x{p}: each count must be in 1..=256");
+    }
+    let (theta_bins, phi_bins) = a.incident.unwrap_or((params.theta_bins, params.phi_bins));
+    let params = WallTableParams {
         seed: a.seed,
+        theta_bins,
+        phi_bins,
+        bins: a.exit_bins.unwrap_or(params.bins),
+        paths: a.wall_paths.unwrap_or(params.paths),
         ..params
     };
     params.validate().context("invalid precompute parameters")?;
+    // Four lobes of `B x B` f64 bins per incident direction, and one trace's histograms.
+    let b2 = (params.bins * params.bins) as u64;
+    let bytes = 32 * (params.theta_bins * params.phi_bins) as u64 * b2 + 64 * b2;
+    super::memory::check(
+        &format!(
+            "--exit-bins {} --incident {}x{}",
+            params.bins, params.theta_bins, params.phi_bins
+        ),
+        bytes,
+        a.max_memory,
+    )?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))
         .build()?;

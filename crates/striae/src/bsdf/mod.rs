@@ -201,12 +201,15 @@ impl Bsdf<'_> {
         }
     }
 
-    /// Whether every lobe is a delta: light sampling cannot contribute and is skipped.
+    /// Whether light sampling is skipped: every lobe is a delta, or nearly (smooth dielectric
+    /// walls' groove lobes, boxes of 0.35 degrees in `theta` that a light sample hardly ever
+    /// lands in). The integrator then counts emission found by BSDF sampling fully.
     #[inline]
     pub fn is_delta(&self) -> bool {
         match self {
             Bsdf::Dielectric(_) | Bsdf::Conductor(_) => true,
             Bsdf::Scratched(b) => b.is_delta(),
+            Bsdf::ScratchedGlass(b) => b.table.smooth(),
             Bsdf::Wall(b) => b.specular,
             _ => false,
         }

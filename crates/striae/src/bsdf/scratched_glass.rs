@@ -15,21 +15,31 @@
 //!
 //! `f(wo, wi) = s m_b / (J dtheta dphi cos(theta_i) |wi.z|)`,  `s = 1` (R), `(n_o / n_i)^2` (T).
 //!
+//! **Smooth walls** conserve `beta = n w.y` at every hit (METHOD.md 8.1): each lobe leaves at
+//! one exact `theta`, a delta that exit bins would smear over their width (5.6 degrees at 32
+//! bins: against explicit grooves lit from behind, 11 % too much light, docs/fidelity.md). Their
+//! lobes keep only the `phi_o` marginals, and the exit `theta` is `wo`'s own smooth-wall exit
+//! angle, spread uniformly over a box [`SMOOTH_BOX_BINS`] of a bin wide (`dtheta` above,
+//! `J = 1`): narrow enough to be exact at any scale a scene resolves, and still a density, so
+//! `eval` and `pdf` stay defined (light sampling leaves it to BSDF sampling, below).
+//!
 //! **Between grid points** the four nearest incident slices are blended bilinearly in
-//! `(theta_o, phi_o)` of `wo`, each first warped along `theta`: the piecewise-linear map of
-//! `(-pi/2, pi/2)` onto itself that carries the slice's smooth-wall exit angle
-//! ([`crate::wall_table::exit_theta`], `beta = n w.y` conserved) to `wo`'s, with slope `J`. A
-//! smooth wall's delta in `beta` so lands where it belongs (within one exit bin) wherever `wo`
-//! lies between the grid's points, and beyond the grid's last `theta` centres the warp
-//! extrapolates.
+//! `(theta_o, phi_o)` of `wo`; for rough walls each is first warped along `theta`: the
+//! piecewise-linear map of `(-pi/2, pi/2)` onto itself that carries the slice's smooth-wall
+//! exit angle ([`crate::wall_table::exit_theta`]) to `wo`'s, with slope `J`, so that the peak
+//! of a nearly smooth wall's lobe lands where it belongs wherever `wo` lies between the grid's
+//! points (beyond the grid's last `theta` centres the warp extrapolates).
 //!
 //! **Sampling.** One component with the probability of its energy: the smooth reflection
 //! `(1 - C) F`, the smooth refraction `(1 - C)(1 - F)` (both deltas, weight 1 and `1 / eta^2`),
 //! groove lobe `k` with `c_k`; within a groove lobe, a grid slice with its bilinear weight, an
 //! exit bin in proportion to `m_b` (reflected and transmitted together, one CDF per slice), a
-//! point uniform in the bin, warped. The density of the non-delta part is `sum_k c_k pdf_k`,
-//! the value `pdf` returns, so MIS with light sampling is consistent; for a lossless groove and
-//! one slice, the weight is exactly `s`.
+//! point uniform in the bin, warped (rough walls) or in the box (smooth walls). The density
+//! of the non-delta part is `sum_k c_k pdf_k`, the value `pdf` returns, so MIS with light
+//! sampling is consistent (rough walls); for a lossless groove and one slice, the weight is
+//! exactly `s`. Smooth walls' boxes are too narrow for light sampling to land in: the
+//! integrator skips it there ([`super::Bsdf::is_delta`]) and counts what BSDF sampling finds,
+//! as for a specular surface.
 
 use super::dielectric::{mirror_sample, refraction_sample};
 use super::scratched::{normalised_lobes, MAX_SCRATCH_LOBES};
@@ -42,6 +52,10 @@ use std::f32::consts::{FRAC_PI_2, PI};
 /// finite where an exit angle grazes (total internal reflection clamps it to `+-pi/2`).
 const WARP_MARGIN: f32 = 1e-3;
 
+/// The `theta_o` extent of a smooth wall's exit box, in exit bins: a sixteenth (0.35 degrees
+/// at the shipped 32 bins).
+const SMOOTH_BOX_BINS: f32 = 1.0 / 16.0;
+
 /// A dielectric-wall table ready for rendering (see the module notes).
 #[derive(Debug)]
 pub struct WallLobeTable {
@@ -49,9 +63,14 @@ pub struct WallLobeTable {
     nt: usize,
     np: usize,
     b: usize,
+    /// `theta_o` rows per lobe: `b` bins (rough walls) or one box at the exact exit angle
+    /// (smooth walls).
+    rows: usize,
+    /// A smooth wall's box, in exit bins.
+    box_bins: f32,
     /// The glass's index `n`.
     n: f32,
-    /// `[t][p][side][lobe][theta bin][phi bin]`, side 0: from outside, 1: from inside; lobe 0
+    /// `[t][p][side][lobe][theta row][phi bin]`, side 0: from outside, 1: from inside; lobe 0
     /// reflected, 1 transmitted.
     mass: Vec<f32>,
     /// Inclusive prefix sums of `mass` within each `[t][p][side]` slice.
@@ -63,18 +82,34 @@ pub struct WallLobeTable {
 
 impl WallLobeTable {
     pub fn new(table: &WallTable) -> Self {
+        Self::with_smooth_box(table, SMOOTH_BOX_BINS)
+    }
+
+    /// [`Self::new`] with smooth walls' boxes `box_bins` exit bins wide (tests integrate the
+    /// density over wider boxes).
+    pub(crate) fn with_smooth_box(table: &WallTable, box_bins: f32) -> Self {
         let (nt, np, b) = (table.theta_i.len(), table.phi_i.len(), table.params.bins);
-        let b2 = b * b;
-        let mut mass = Vec::with_capacity(nt * np * 4 * b2);
+        let rows = if table.params.roughness > 0.0 { b } else { 1 };
+        let mut mass = Vec::with_capacity(nt * np * 4 * rows * b);
         for t in 0..nt {
             for p in 0..np {
                 for l in 0..4 {
-                    mass.extend(table.slice(l, t, p).iter().map(|&m| m.max(0.0) as f32));
+                    let slice = table.slice(l, t, p);
+                    if rows == b {
+                        mass.extend(slice.iter().map(|&m| m.max(0.0) as f32));
+                    } else {
+                        // Smooth walls: the `phi_o` marginal; the exit `theta` is exact.
+                        mass.extend((0..b).map(|col| {
+                            let m: f64 =
+                                slice.iter().skip(col).step_by(b).map(|m| m.max(0.0)).sum();
+                            m as f32
+                        }));
+                    }
                 }
             }
         }
         let mut cdf = Vec::with_capacity(mass.len());
-        for slice in mass.chunks_exact(2 * b2) {
+        for slice in mass.chunks_exact(2 * rows * b) {
             let mut acc = 0.0f64;
             cdf.extend(slice.iter().map(|&m| {
                 acc += m as f64;
@@ -85,6 +120,8 @@ impl WallLobeTable {
             nt,
             np,
             b,
+            rows,
+            box_bins,
             n: table.params.ior as f32,
             mass,
             cdf,
@@ -112,12 +149,29 @@ impl WallLobeTable {
 
     #[inline]
     fn slice_len(&self) -> usize {
-        2 * self.b * self.b
+        2 * self.rows * self.b
     }
 
     #[inline]
     fn bin_width(&self) -> f32 {
         PI / self.b as f32
+    }
+
+    /// Whether the walls are smooth: each lobe's exit `theta` is exact (a box of
+    /// [`Self::row_width`] around it) and only `phi_o` is binned.
+    #[inline]
+    pub fn smooth(&self) -> bool {
+        self.rows == 1
+    }
+
+    /// The `theta_o` extent of one row: an exit bin, or a smooth wall's box.
+    #[inline]
+    pub fn row_width(&self) -> f32 {
+        if self.smooth() {
+            self.box_bins * self.bin_width()
+        } else {
+            self.bin_width()
+        }
     }
 
     /// The exit bin of an angle in `(-pi/2, pi/2)`.
@@ -141,10 +195,15 @@ impl WallLobeTable {
         let phi = wo.x.atan2(wo.z.abs());
         let wt = wall_table::grid_weights(self.nt, theta as f64);
         let wp = wall_table::grid_weights(self.np, phi as f64);
-        let e_o = [
+        let mut e_o = [
             self.exit_theta(side, 0, theta),
             self.exit_theta(side, 1, theta),
         ];
+        if self.smooth() {
+            // The box stays inside `(-pi/2, pi/2)`.
+            let edge = FRAC_PI_2 - 0.5 * self.row_width();
+            e_o = e_o.map(|e| e.clamp(-edge, edge));
+        }
         let mut c = Corners {
             side,
             count: 0,
@@ -188,19 +247,28 @@ impl WallLobeTable {
         if !(cos_theta > 0.0) {
             return (0.0, 0.0);
         }
+        let smooth = self.smooth();
+        if smooth && (theta - c.e_o[l]).abs() > 0.5 * self.row_width() {
+            return (0.0, 0.0);
+        }
         let col = self.bin(wi.x.atan2(wi.z.abs()));
-        let b2 = self.b * self.b;
+        let lobe_len = self.rows * self.b;
         let (mut f, mut p) = (0.0f32, 0.0f32);
         for k in 0..c.count {
-            let (src, slope) = unwarp(theta, c.e_c[k][l], c.e_o[l]);
-            let m = self.mass[c.slice[k] as usize + l * b2 + self.bin(src) * self.b + col];
+            let (row, slope) = if smooth {
+                (0, 1.0)
+            } else {
+                let (src, slope) = unwarp(theta, c.e_c[k][l], c.e_o[l]);
+                (self.bin(src), slope)
+            };
+            let m = self.mass[c.slice[k] as usize + l * lobe_len + row * self.b + col];
             if m > 0.0 && c.total[k] > 0.0 {
                 let m = c.weight[k] * m / slope;
                 f += m;
                 p += m / c.total[k];
             }
         }
-        let area = self.bin_width() * self.bin_width() * cos_theta;
+        let area = self.row_width() * self.bin_width() * cos_theta;
         let s = if l == 0 {
             1.0
         } else if c.side == 0 {
@@ -234,11 +302,14 @@ impl WallLobeTable {
         } else {
             0.5
         };
-        let b2 = self.b * self.b;
-        let (l, row, col) = (j / b2, (j % b2) / self.b, j % self.b);
+        let lobe_len = self.rows * self.b;
+        let (l, row, col) = (j / lobe_len, (j % lobe_len) / self.b, j % self.b);
         let h = self.bin_width();
-        let src = -FRAC_PI_2 + (row as f32 + frac) * h;
-        let theta = warp(src, c.e_c[k][l], c.e_o[l]);
+        let theta = if self.smooth() {
+            c.e_o[l] + (frac - 0.5) * self.row_width()
+        } else {
+            warp(-FRAC_PI_2 + (row as f32 + frac) * h, c.e_c[k][l], c.e_o[l])
+        };
         let phi = -FRAC_PI_2 + (col as f32 + u.y) * h;
         let (st, ct) = theta.sin_cos();
         let (sp, cp) = phi.sin_cos();

@@ -451,7 +451,7 @@ mod scratched_glass {
     use crate::wall_table::{WallTable, WallTableParams};
     use std::f32::consts::{FRAC_PI_2, PI};
 
-    fn table(roughness: f64, grid: usize, bins: usize, paths: u64) -> WallLobeTable {
+    fn wall_table(roughness: f64, grid: usize, bins: usize, paths: u64) -> WallTable {
         let p = WallTableParams {
             theta_bins: grid,
             phi_bins: grid,
@@ -459,7 +459,13 @@ mod scratched_glass {
             paths,
             ..WallTableParams::new(Profile::parse("round:depth=0.5").unwrap(), 1.5, roughness)
         };
-        WallLobeTable::new(&WallTable::compute(&p).unwrap())
+        WallTable::compute(&p).unwrap()
+    }
+
+    /// A small table; smooth walls' boxes one exit bin wide, which the quadratures resolve
+    /// (the shipped box is tested by `smooth_walls_leave_at_the_exact_angle`).
+    fn table(roughness: f64, grid: usize, bins: usize, paths: u64) -> WallLobeTable {
+        WallLobeTable::with_smooth_box(&wall_table(roughness, grid, bins, paths), 1.0)
     }
 
     /// Two crossing scratches covering 0.3 and 0.25 of the footprint.
@@ -530,6 +536,47 @@ mod scratched_glass {
                     "rough {rough} wo {wo:?}: {r:?}"
                 );
             }
+        }
+    }
+
+    /// Smooth walls with the shipped box: every groove sample leaves within the box around the
+    /// exact exit angle of METHOD.md 8.1 (`beta = n w.y` conserved,
+    /// [`crate::wall_table::exit_theta`]), reflected and transmitted, from both sides; a lossless
+    /// groove's sampled weights still average 1.
+    #[test]
+    fn smooth_walls_leave_at_the_exact_angle() {
+        let t = WallLobeTable::new(&wall_table(0.0, 3, 8, 4000));
+        assert!(t.smooth());
+        let lobe = lobes()[0];
+        let bsdf = Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(1.5, &t, &[lobe]));
+        let half = 0.5 * t.row_width();
+        for (i, wo) in wos().into_iter().enumerate() {
+            let side = (wo.z < 0.0) as usize;
+            let theta_i = lobe.to_scratch(wo).y.asin() as f64;
+            let mut rng = Pcg64::seed_from_u64(300 + i as u64);
+            let mut seen = [0; 2];
+            for _ in 0..20_000 {
+                let u = Vec2::new(rng.random(), rng.random());
+                let Some(s) = bsdf.sample(wo, rng.random(), u).filter(|s| !s.delta) else {
+                    continue;
+                };
+                let l = ((s.wi.z < 0.0) != (side == 1)) as usize;
+                seen[l] += 1;
+                let exit = crate::wall_table::exit_theta(2 * side + l, theta_i, 1.5) as f32;
+                let exit = exit.clamp(-FRAC_PI_2 + half, FRAC_PI_2 - half);
+                let theta = lobe.to_scratch(s.wi).y.clamp(-1.0, 1.0).asin();
+                assert!(
+                    (theta - exit).abs() <= half * 1.01 + 1e-5,
+                    "wo {wo:?} lobe {l}: theta {theta} against {exit} +- {half}"
+                );
+            }
+            // The groove is 0.3 of the footprint and both lobes carry energy.
+            assert!(
+                seen[0] + seen[1] > 5000 && seen[1] > 0,
+                "wo {wo:?}: {seen:?}"
+            );
+            let a = albedo(&bsdf, wo, 100_000, 170 + i as u64, true)[0];
+            assert!(a.agrees_with(1.0, 4.0, 1e-3), "wo {wo:?}: {a:?}");
         }
     }
 

@@ -240,8 +240,23 @@ impl ScratchedMaterial {
         )
     }
 
-    /// Each layer's coverage at the hit into `cov`, as the coverage mode asks; `false` where
-    /// the point test (`coverage = "point"`) finds no scratch.
+    /// How the hit measures coverage: the material's mode, except on dielectric-walled glass
+    /// seen from inside, which takes the point test. Those hits lie behind a refraction, where
+    /// the camera's footprint says little and the seed's model has no scratches at all, and a
+    /// path through a plate makes many of them: the point test estimates the same pixel
+    /// average without bias (`sum`/`union`; see [`CoverageMode::Point`]) at a fraction of the
+    /// footprint's cost (BENCHMARKS.md, "Dielectric walls over the seed's model").
+    #[inline(always)]
+    fn coverage_mode(&self, ctx: &ShadingContext) -> CoverageMode {
+        if matches!(self.model, ScratchModel::DielectricWalls(_)) && ctx.wo.dot(ctx.ng) <= 0.0 {
+            CoverageMode::Point
+        } else {
+            self.coverage
+        }
+    }
+
+    /// Each layer's coverage at the hit into `cov`, as [`Self::coverage_mode`] asks; `false`
+    /// where the point test finds no scratch.
     #[inline(always)]
     fn layer_coverage(
         &self,
@@ -253,7 +268,7 @@ impl ScratchedMaterial {
             LayerMix::Max => TileQuery::Max,
             LayerMix::Sum | LayerMix::Union => TileQuery::All,
         };
-        match self.coverage {
+        match self.coverage_mode(ctx) {
             CoverageMode::Footprint => match ctx.pixel {
                 Some(hit) => cache.of_pixel(
                     &self.layers,
