@@ -7,9 +7,9 @@
 //! base reflects with its RGB Fresnel, the groove carries the table's scalar Fresnel law at
 //! every wall hit (traced into the table, [`crate::wall_table::WallKind::Specular`]) times
 //! the material's `tint`. Only the lobe changes: rough walls spread it in `theta_o` (and lose
-//! what single-scattering GGX drops), so it depends on `theta_o` and is read from the 4D wall table's `r_out` lobe
-//! ([`WallLobeTable`], with `wo` as the incident direction: rough conductors are reciprocal),
-//! as [`super::ScratchedGlassBsdf`] reads its four lobes.
+//! what single-scattering GGX drops), so it depends on `theta_o` and is read from the 4D wall
+//! table's `r_out` lobe ([`WallLobeTable`], with `wo` as the incident direction: rough
+//! conductors are reciprocal), as [`super::ScratchedGlassBsdf`] reads its four lobes.
 //!
 //! Sampling (as the seed's metal): the base mirror with probability `1 - C` (weight `F(wo)`),
 //! groove lobe `k` with `c_k`, then a slice, an exit bin and a point in it from the table. The
