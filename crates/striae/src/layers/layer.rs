@@ -103,6 +103,11 @@ impl ScratchLayer {
         &self.noise
     }
 
+    /// Rows of `M = S^-1 R(-alpha)`, the linear part of [`Self::to_noise`].
+    pub fn noise_matrix(&self) -> [DVec2; 2] {
+        self.m
+    }
+
     pub fn threshold(&self) -> f64 {
         self.tau
     }

@@ -29,6 +29,7 @@ pub mod cache;
 pub mod footprint;
 pub mod lattice;
 pub mod layer;
+pub mod point_lanes;
 pub mod random;
 pub mod raster;
 pub mod worley;
@@ -160,6 +161,8 @@ pub struct LayerSet {
     params: LayerParams,
     seed: u64,
     layers: Vec<ScratchLayer>,
+    /// The layers' point test, lane by lane.
+    point: point_lanes::PointLanes,
     orientation: Orientation,
     expected_coverage: f64,
     /// Names the set in per-thread caches ([`lattice`]); unique per process, from 1.
@@ -212,6 +215,7 @@ impl LayerSet {
         Ok(LayerSet {
             params,
             seed,
+            point: point_lanes::PointLanes::new(&layers),
             layers,
             orientation,
             expected_coverage,
@@ -292,14 +296,11 @@ impl LayerSet {
         self.layers[k].is_scratched(uv)
     }
 
-    /// Bit `k` set iff layer `k` is scratched at `uv`: the point query over all layers.
-    #[inline]
+    /// Bit `k` set iff layer `k` is scratched at `uv`: the point query over all layers
+    /// ([`point_lanes`]).
+    #[inline(always)]
     pub fn scratched_mask(&self, uv: Vec2) -> u64 {
-        let mut mask = 0u64;
-        for (k, layer) in self.layers.iter().enumerate() {
-            mask |= (layer.is_scratched(uv) as u64) << k;
-        }
-        mask
+        self.point.mask(uv.as_dvec2(), &self.layers)
     }
 
     /// Fraction of the footprint `{uv + s duvdx + t duvdy : s, t in [-1/2, 1/2]}` (one pixel's

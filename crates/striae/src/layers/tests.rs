@@ -966,3 +966,50 @@ fn pixel_footprint_coverage_keeps_chains_of_bounces_apart() {
     }
     assert!(distinct > 20, "{distinct}");
 }
+
+/// The lane-wise point test answers as each layer's own `F1 < tau` test, bit for bit: both
+/// settings (9 layers: a full group of eight and one more), a direction per scratch, and a
+/// threshold above 1/2 (tested one by one), at random points in and beyond the texture and at
+/// points near scratch edges.
+#[test]
+fn lane_point_test_matches_each_layers_test() {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(17);
+    let sets = [
+        LayerSet::new(
+            LayerParams {
+                layers: 9,
+                ..LayerParams::setting(1).unwrap()
+            },
+            3,
+        )
+        .unwrap(),
+        LayerSet::new(
+            LayerParams {
+                layers: 9,
+                ..LayerParams::setting(2).unwrap()
+            },
+            4,
+        )
+        .unwrap(),
+        LayerSet::with_orientation(LayerParams::setting(2).unwrap(), 5, Orientation::Random)
+            .unwrap(),
+        LayerSet::new(params(0.3, 0.02, 0.7, 3), 6).unwrap(),
+    ];
+    for (s, set) in sets.iter().enumerate() {
+        let mut hits = 0;
+        for n in 0..200_000 {
+            let uv = if n % 2 == 0 {
+                Vec2::new(rng.random_range(-0.5..1.5), rng.random_range(-0.5..1.5))
+            } else {
+                // Near a hit of the previous point: scratch edges.
+                Vec2::new(rng.random_range(0.4..0.41), rng.random_range(0.6..0.601))
+            };
+            let expect = (0..set.len()).fold(0u64, |m, k| {
+                m | (set.layers()[k].is_scratched(uv) as u64) << k
+            });
+            assert_eq!(set.scratched_mask(uv), expect, "set {s} at {uv:?}");
+            hits += (expect != 0) as usize;
+        }
+        assert!(hits > 1000, "set {s}: {hits} scratched points");
+    }
+}

@@ -67,6 +67,11 @@ impl Worley {
         self.mask as u64 + 1
     }
 
+    /// The key and the period mask of [`Self::offset`]'s hash.
+    pub fn hash_key(&self) -> (u64, i64) {
+        (self.key, self.mask)
+    }
+
     /// The offset of cell `(i, j)`'s feature point inside its cell, in `[0, 1)^2`.
     #[inline(always)]
     pub fn offset(&self, i: i64, j: i64) -> DVec2 {

@@ -1,0 +1,110 @@
+//! The point test of METHOD.md section 5 (`F1(q) < tau`) for every layer of a set at once,
+//! the layers laid out lane by lane: the same arithmetic as [`super::Worley::any_within`],
+//! but branch-free (each lane tests its own cell and the nearer neighbouring column, row and
+//! corner, which for `tau <= 1/2` are all the cells the disc can touch), so that the compiler
+//! runs eight layers in one vector. Hits from inside glass with dielectric walls make this
+//! test at every bounce (`scratched`), where it is most of what scratches cost.
+
+use super::layer::{ScratchLayer, CENTRE};
+use super::worley::floor_i64;
+use crate::hash::mix64;
+use glam::DVec2;
+
+/// Layers a group tests together.
+const LANES: usize = 8;
+
+/// `[0, 2^32)` to `[0, 1)`, as [`super::Worley::offset`].
+const TO_UNIT: f64 = 1.0 / 4_294_967_296.0;
+
+/// Eight layers' noise maps and hash keys; a lane that is not tested here has `r2 = -1`.
+#[derive(Clone, Debug)]
+struct Group {
+    /// Rows of each layer's `M` ([`ScratchLayer::to_noise`]): `m00, m01, m10, m11`.
+    m: [[f64; LANES]; 4],
+    key: [u64; LANES],
+    mask: [i64; LANES],
+    r2: [f64; LANES],
+}
+
+/// The lane-wise point test of a set's layers (see the module notes).
+#[derive(Clone, Debug)]
+pub struct PointLanes {
+    groups: Vec<Group>,
+    /// Layers the lanes do not take (a direction per scratch, or `tau > 1/2`): tested one by
+    /// one.
+    others: Vec<usize>,
+}
+
+impl PointLanes {
+    pub fn new(layers: &[ScratchLayer]) -> Self {
+        let mut groups = vec![
+            Group {
+                m: [[0.0; LANES]; 4],
+                key: [0; LANES],
+                mask: [0; LANES],
+                r2: [-1.0; LANES],
+            };
+            layers.len().div_ceil(LANES)
+        ];
+        let mut others = Vec::new();
+        for (k, layer) in layers.iter().enumerate() {
+            let tau = layer.threshold();
+            if layer.random().is_some() || tau > 0.5 {
+                others.push(k);
+                continue;
+            }
+            let (g, lane) = (&mut groups[k / LANES], k % LANES);
+            let m = layer.noise_matrix();
+            for (row, v) in [m[0].x, m[0].y, m[1].x, m[1].y].into_iter().enumerate() {
+                g.m[row][lane] = v;
+            }
+            (g.key[lane], g.mask[lane]) = layer.noise().hash_key();
+            g.r2[lane] = tau * tau;
+        }
+        PointLanes { groups, others }
+    }
+
+    /// Bit `k` set where layer `k` is scratched at `uv` ([`ScratchLayer::is_scratched`], the
+    /// same answer).
+    #[inline(always)]
+    pub fn mask(&self, uv: DVec2, layers: &[ScratchLayer]) -> u64 {
+        let d = uv - CENTRE;
+        let mut out = 0u64;
+        for (g, group) in self.groups.iter().enumerate() {
+            let mut hit = [false; LANES];
+            for (lane, h) in hit.iter_mut().enumerate() {
+                *h = group.lane_hit(lane, d);
+            }
+            for (lane, &h) in hit.iter().enumerate() {
+                out |= (h as u64) << (g * LANES + lane);
+            }
+        }
+        for &k in &self.others {
+            out |= (layers[k].is_scratched_at(uv) as u64) << k;
+        }
+        out
+    }
+}
+
+impl Group {
+    /// Whether lane `lane`'s layer is scratched at texture offset `d = uv - CENTRE`.
+    #[inline(always)]
+    fn lane_hit(&self, lane: usize, d: DVec2) -> bool {
+        let qx = self.m[0][lane] * d.x + self.m[1][lane] * d.y;
+        let qy = self.m[2][lane] * d.x + self.m[3][lane] * d.y;
+        let (i, j) = (floor_i64(qx), floor_i64(qy));
+        let (fx, fy) = (qx - i as f64, qy - j as f64);
+        let di: i64 = if fx < 0.5 { -1 } else { 1 };
+        let dj: i64 = if fy < 0.5 { -1 } else { 1 };
+        let (key, mask, r2) = (self.key[lane], self.mask[lane], self.r2[lane]);
+        let near = |a: i64, b: i64| {
+            let iw = ((i + a) & mask) as u64;
+            let jw = ((j + b) & mask) as u64;
+            let h = mix64((iw | (jw << 32)) ^ key);
+            let px = a as f64 + (h >> 32) as f64 * TO_UNIT - fx;
+            let py = b as f64 + (h & 0xffff_ffff) as f64 * TO_UNIT - fy;
+            px * px + py * py < r2
+        };
+        near(0, 0) | near(di, 0) | near(0, dj) | near(di, dj)
+    }
+}
