@@ -63,7 +63,7 @@ impl WallKind {
     }
 
     /// The sides light is traced from.
-    fn sides(&self) -> &'static [LightSide] {
+    pub fn sides(&self) -> &'static [LightSide] {
         match self {
             WallKind::Dielectric => &[LightSide::Outside, LightSide::Inside],
             WallKind::Specular { .. } => &[LightSide::Outside],
@@ -113,6 +113,14 @@ impl WallTableParams {
         WallTableParams {
             walls: WallKind::Specular { law },
             ..Self::new(profile, 1.0, roughness)
+        }
+    }
+
+    /// The walls in words, for titles and reports.
+    pub fn walls_label(&self) -> String {
+        match self.walls {
+            WallKind::Dielectric => format!("dielectric walls, ior {}", self.ior),
+            WallKind::Specular { law } => format!("specular walls, Fresnel {law:?}"),
         }
     }
 
@@ -481,18 +489,11 @@ impl WallTable {
         let mut lobes = std::array::from_fn(|_| Vec::new());
         self.lobes_at(theta_i, phi_i, &mut lobes);
         let p = &self.params;
-        let (walls, (w, h), grid) = match p.walls {
-            WallKind::Dielectric => (
-                format!("dielectric walls, ior {}", p.ior),
-                (1500u32, 1400u32),
-                (2, 2),
-            ),
-            WallKind::Specular { law } => (
-                format!("specular walls, Fresnel {law:?}"),
-                (1100, 900),
-                (1, 1),
-            ),
+        let ((w, h), grid) = match p.walls {
+            WallKind::Dielectric => ((1500u32, 1400u32), (2, 2)),
+            WallKind::Specular { .. } => ((1100, 900), (1, 1)),
         };
+        let walls = p.walls_label();
         let title = format!(
             "{}, {walls}, roughness {}: theta_i {:.1}, phi_i {:.1} degrees",
             p.profile.spec,

@@ -257,16 +257,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 /// (`striae::wall_table`; four lobes, or rough specular walls' one), and with `--check N` its
 /// error against the exact trace at N off-grid incident directions.
 fn wall_table(params: striae::wall_table::WallTableParams, a: &Args) -> anyhow::Result<()> {
-    use striae::wall_table::{WallKind, WallTable, WallTableParams, LOBES};
-    if a.exit_bins == Some(0) || a.wall_paths == Some(0) {
-        anyhow::bail!("--exit-bins and --wall-paths must be at least 1");
-    }
-    if let Some((t, p)) = a
-        .incident
-        .filter(|&(t, p)| !(1..=256).contains(&t) || !(1..=256).contains(&p))
-    {
-        anyhow::bail!("--incident {t}x{p}: each count must be in 1..=256");
-    }
+    use striae::wall_table::{WallTable, WallTableParams, LOBES};
     let (theta_bins, phi_bins) = a.incident.unwrap_or((params.theta_bins, params.phi_bins));
     let params = WallTableParams {
         seed: a.seed,
@@ -276,7 +267,16 @@ fn wall_table(params: striae::wall_table::WallTableParams, a: &Args) -> anyhow::
         paths: a.wall_paths.unwrap_or(params.paths),
         ..params
     };
-    params.validate().context("invalid precompute parameters")?;
+    params.validate().map_err(|e| {
+        // The sizes' checks are the table's own; name the flag that set them.
+        let flag = match e.key {
+            "theta-bins" | "phi-bins" => "--incident",
+            "bins" => "--exit-bins",
+            "paths" => "--wall-paths",
+            _ => return anyhow::Error::new(e).context("invalid precompute parameters"),
+        };
+        anyhow::anyhow!("{flag}: {} {}: {}", e.key, e.value, e.why)
+    })?;
     // Four lobes of `B x B` f64 bins per incident direction, and one trace's histograms.
     let b2 = (params.bins * params.bins) as u64;
     let bytes = 32 * (params.theta_bins * params.phi_bins) as u64 * b2 + 64 * b2;
@@ -298,10 +298,7 @@ fn wall_table(params: striae::wall_table::WallTableParams, a: &Args) -> anyhow::
         .save(&a.output)
         .with_context(|| format!("writing {}", a.output.display()))?;
     let incident = params.theta_bins * params.phi_bins;
-    let (walls, sides) = match params.walls {
-        WallKind::Dielectric => (format!("dielectric walls, ior {}", params.ior), 2),
-        WallKind::Specular { law } => (format!("specular walls, Fresnel {law:?}"), 1),
-    };
+    let (walls, sides) = (params.walls_label(), params.walls.sides().len());
     println!(
         "{walls}: profile {}  roughness {}  {} x {} incident directions x {sides} side(s), {} x {} exit bins, {} paths each",
         params.profile.spec, params.roughness, params.theta_bins, params.phi_bins,
@@ -309,7 +306,7 @@ fn wall_table(params: striae::wall_table::WallTableParams, a: &Args) -> anyhow::
     );
     println!(
         "wall time {secs:.3} s ({} paths, {} threads)",
-        sides * incident as u64 * params.paths,
+        sides as u64 * incident as u64 * params.paths,
         pool.current_num_threads()
     );
     for k in 0..a.check {
