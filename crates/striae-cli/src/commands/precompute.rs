@@ -65,7 +65,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     check: usize,
     /// Wall tables (dielectric, rough specular): the incident grid, `theta_i` x `phi_i` bins, e.g. `16x32`
-    /// [default: 8x16].
+    /// [default: 16x32].
     #[arg(long, value_parser = parse_grid)]
     incident: Option<(usize, usize)>,
     /// Wall tables: exit bins per angle, `theta_o` and `phi_o` [default: 32].
