@@ -208,32 +208,72 @@ impl ScratchLobe {
     }
 }
 
-/// The lobes with coverage `c_k > 0`, at most [`MAX_SCRATCH_LOBES`] (extra ones ignored), each
-/// `c_k` clamped to 1 and all rescaled so that `C = sum c_k <= 1` (the `sum` mode's
-/// normalisation): `(lobes, count, C)`.
-pub(super) fn normalised_lobes(
-    lobes: &[ScratchLobe],
-) -> ([ScratchLobe; MAX_SCRATCH_LOBES], usize, f32) {
-    let mut out = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
-    let mut count = 0;
-    let mut total = 0.0f32;
-    for l in lobes
-        .iter()
-        .filter(|l| l.coverage > 0.0)
-        .take(MAX_SCRATCH_LOBES)
-    {
-        out[count] = *l;
-        total += l.coverage.min(1.0);
-        out[count].coverage = l.coverage.min(1.0);
-        count += 1;
-    }
-    if total > 1.0 {
-        for l in &mut out[..count] {
-            l.coverage /= total;
+/// The scratch lobes of one hit, shared by the scratched BSDFs: those with coverage `c_k > 0`,
+/// at most [`MAX_SCRATCH_LOBES`] (extra ones ignored), each `c_k` clamped to 1 and all rescaled
+/// so that `C = sum c_k <= 1` (the `sum` mode's normalisation).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct CoveredLobes {
+    lobes: [ScratchLobe; MAX_SCRATCH_LOBES],
+    count: u8,
+    /// `C = sum_k c_k <= 1`.
+    total: f32,
+}
+
+impl CoveredLobes {
+    pub fn new(lobes: &[ScratchLobe]) -> Self {
+        let mut out = CoveredLobes::default();
+        let mut count = 0;
+        for l in lobes
+            .iter()
+            .filter(|l| l.coverage > 0.0)
+            .take(MAX_SCRATCH_LOBES)
+        {
+            out.lobes[count] = ScratchLobe {
+                coverage: l.coverage.min(1.0),
+                ..*l
+            };
+            out.total += out.lobes[count].coverage;
+            count += 1;
         }
-        total = 1.0;
+        out.count = count as u8;
+        if out.total > 1.0 {
+            for l in &mut out.lobes[..count] {
+                l.coverage /= out.total;
+            }
+            out.total = 1.0;
+        }
+        out
     }
-    (out, count, total)
+
+    #[inline]
+    pub fn as_slice(&self) -> &[ScratchLobe] {
+        &self.lobes[..self.count as usize]
+    }
+
+    /// `C = sum_k c_k`.
+    #[inline]
+    pub fn total(&self) -> f32 {
+        self.total
+    }
+
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// The lobe a uniform `u` picks when lobe `k` spans `c_k` of `[start, start + C)` in order
+    /// (the last lobe takes what rounding leaves), and `u`'s place within its span in `[0, 1]`.
+    /// At least one lobe.
+    #[inline]
+    pub fn pick(&self, u: f32, start: f32) -> (usize, f32) {
+        let lobes = self.as_slice();
+        let (mut k, mut acc) = (0, start);
+        while k + 1 < lobes.len() && u >= acc + lobes[k].coverage {
+            acc += lobes[k].coverage;
+            k += 1;
+        }
+        (k, ((u - acc) / lobes[k].coverage).clamp(0.0, 1.0))
+    }
 }
 
 /// What one lobe's lookups need of `wo`: the table's `wo` terms in the lobe's scratch frame
@@ -253,10 +293,7 @@ pub struct ScratchedBsdf<'a> {
     pub table: &'a ScratchLobeTable,
     /// RGB factor on the scratch lobe (metal: the base's colour; glass: 1).
     pub tint: Rgb,
-    lobes: [ScratchLobe; MAX_SCRATCH_LOBES],
-    count: u8,
-    /// `C = sum_k c_k <= 1`.
-    total: f32,
+    lobes: CoveredLobes,
     /// The first lobe's `wo` terms for the `wo` of [`ScratchedBsdf::at_wo`].
     wo_cache: WoCache,
 }
@@ -294,14 +331,11 @@ impl<'a> ScratchedBsdf<'a> {
         tint: Rgb,
         lobes: &[ScratchLobe],
     ) -> Self {
-        let (out, count, total) = normalised_lobes(lobes);
         ScratchedBsdf {
             base,
             table,
             tint,
-            lobes: out,
-            count: count as u8,
-            total,
+            lobes: CoveredLobes::new(lobes),
             wo_cache: WoCache::default(),
         }
     }
@@ -311,10 +345,10 @@ impl<'a> ScratchedBsdf<'a> {
     /// with another `wo` computes them afresh.
     #[inline]
     pub fn at_wo(mut self, wo: Vec3) -> Self {
-        if wo.z > 0.0 && self.count > 0 {
+        if wo.z > 0.0 && !self.lobes.is_empty() {
             self.wo_cache = WoCache {
                 key: Some(WoCache::key(wo)),
-                terms: self.lobe_wo(&self.lobes[0], wo),
+                terms: self.lobe_wo(&self.lobes()[0], wo),
             };
         }
         self
@@ -334,17 +368,17 @@ impl<'a> ScratchedBsdf<'a> {
     fn terms(&self, k: usize, wo: Vec3) -> LobeWo {
         match self.wo_cache.get(wo) {
             Some(terms) if k == 0 => terms,
-            _ => self.lobe_wo(&self.lobes[k], wo),
+            _ => self.lobe_wo(&self.lobes()[k], wo),
         }
     }
 
     pub fn lobes(&self) -> &[ScratchLobe] {
-        &self.lobes[..self.count as usize]
+        self.lobes.as_slice()
     }
 
     /// `C = sum_k c_k`.
     pub fn total_coverage(&self) -> f32 {
-        self.total
+        self.lobes.total()
     }
 
     #[inline]
@@ -426,7 +460,7 @@ impl<'a> ScratchedBsdf<'a> {
                 }
                 // The smooth base's own Fresnel (`Dielectric::sample`'s, in `f32`).
                 let (fr, cos_t, eta_it) = fresnel_f32::dielectric(wo.z, eta);
-                let base = 1.0 - self.total;
+                let base = 1.0 - self.lobes.total();
                 let p_reflect = base * fr;
                 if u_lobe < p_reflect {
                     return Some(mirror_sample(wo, p_reflect));
@@ -439,10 +473,10 @@ impl<'a> ScratchedBsdf<'a> {
                     p_transmit += l.coverage - pk;
                 }
                 let mut acc = p_reflect + p_transmit;
-                if u_lobe < acc || self.count == 0 {
+                if u_lobe < acc || self.lobes.is_empty() {
                     return Some(refraction_sample(wo, cos_t, eta_it, p_transmit));
                 }
-                let count = self.count as usize;
+                let count = self.lobes().len();
                 for (k, &pk) in p_scatter[..count].iter().enumerate() {
                     acc += pk;
                     if u_lobe < acc || k + 1 == count {
@@ -455,8 +489,8 @@ impl<'a> ScratchedBsdf<'a> {
                 if wo.z <= 0.0 {
                     return None;
                 }
-                let base = 1.0 - self.total;
-                if u_lobe < base || self.count == 0 {
+                let base = 1.0 - self.lobes.total();
+                if u_lobe < base || self.lobes.is_empty() {
                     return Some(BsdfSample {
                         wi: reflect_z(wo),
                         weight: ior.fresnel(wo.z),
@@ -465,15 +499,8 @@ impl<'a> ScratchedBsdf<'a> {
                         eta: 1.0,
                     });
                 }
-                let mut acc = base;
-                for k in 0..self.count as usize {
-                    let pk = self.lobes[k].coverage;
-                    acc += pk;
-                    if u_lobe < acc || k + 1 == self.count as usize {
-                        return self.sample_lobe(k, wo, pk, u);
-                    }
-                }
-                None
+                let (k, _) = self.lobes.pick(u_lobe, base);
+                self.sample_lobe(k, wo, self.lobes()[k].coverage, u)
             }
         }
     }
@@ -484,14 +511,14 @@ impl<'a> ScratchedBsdf<'a> {
         if !(pk > 0.0) {
             return None;
         }
-        let l = &self.lobes[k];
+        let l = &self.lobes()[k];
         let c = self.terms(k, wo);
         let s = self
             .table
             .brdf()
             .sample_at(&c.terms, [u.x as f64, u.y as f64])?;
         let wi = l.from_scratch(s.wi);
-        if s.delta || self.count == 1 {
+        if s.delta || self.lobes().len() == 1 {
             // The delta lobe (coefficient c_k s value over P_k pmf), or one smooth lobe (the
             // `max` mode: the mixture's pdf is P_k times the lobe's, its value c_k s f): the
             // lobe's own weight times c_k s / P_k, with P_k = c_k a_k for glass, c_k for metal.

@@ -42,7 +42,7 @@
 //! as for a specular surface.
 
 use super::dielectric::{mirror_sample, refraction_sample};
-use super::scratched::{normalised_lobes, MAX_SCRATCH_LOBES};
+use super::scratched::CoveredLobes;
 use super::{fresnel_f32, BsdfSample, ScratchLobe};
 use crate::math::{Rgb, Vec2, Vec3};
 use crate::wall_table::{self, WallTable};
@@ -360,28 +360,17 @@ pub struct ScratchedGlassBsdf<'a> {
     /// Relative index of the smooth base, inside over outside.
     pub eta: f32,
     pub table: &'a WallLobeTable,
-    lobes: [ScratchLobe; MAX_SCRATCH_LOBES],
-    count: u8,
-    /// `C = sum_k c_k <= 1`.
-    total: f32,
+    lobes: CoveredLobes,
 }
 
 impl<'a> ScratchedGlassBsdf<'a> {
-    /// `lobes` with coverages `c_k >= 0`, at most [`MAX_SCRATCH_LOBES`], rescaled so that
-    /// `sum c_k <= 1`.
+    /// `lobes` with coverages `c_k >= 0` ([`CoveredLobes`]).
     pub fn new(eta: f32, table: &'a WallLobeTable, lobes: &[ScratchLobe]) -> Self {
-        let (out, count, total) = normalised_lobes(lobes);
         ScratchedGlassBsdf {
             eta,
             table,
-            lobes: out,
-            count: count as u8,
-            total,
+            lobes: CoveredLobes::new(lobes),
         }
-    }
-
-    fn lobes(&self) -> &[ScratchLobe] {
-        &self.lobes[..self.count as usize]
     }
 
     /// `(sum_k c_k f_k, sum_k c_k pdf_k)`: the groove lobes' value and the density of the
@@ -392,7 +381,7 @@ impl<'a> ScratchedGlassBsdf<'a> {
             return (Rgb::ZERO, 0.0);
         }
         let (mut f, mut p) = (0.0f32, 0.0f32);
-        for l in self.lobes() {
+        for l in self.lobes.as_slice() {
             let c = self.table.corners(l.to_scratch(wo));
             let (fk, pk) = self.table.eval_pdf(&c, l.to_scratch(wi));
             f += l.coverage * fk;
@@ -419,27 +408,21 @@ impl<'a> ScratchedGlassBsdf<'a> {
             return None;
         }
         let (fr, cos_t, eta_it) = fresnel_f32::dielectric(wo.z, self.eta);
-        let base = 1.0 - self.total;
+        let base = 1.0 - self.lobes.total();
         let p_reflect = base * fr;
         if u_lobe < p_reflect {
             return Some(mirror_sample(wo, p_reflect));
         }
         let p_transmit = base * (1.0 - fr);
-        let mut acc = p_reflect + p_transmit;
-        if u_lobe < acc || self.count == 0 {
+        let acc = p_reflect + p_transmit;
+        if u_lobe < acc || self.lobes.is_empty() {
             if !(p_transmit > 0.0) {
                 return None;
             }
             return Some(refraction_sample(wo, cos_t, eta_it, p_transmit));
         }
-        let count = self.count as usize;
-        let mut k = 0;
-        while k + 1 < count && u_lobe >= acc + self.lobes[k].coverage {
-            acc += self.lobes[k].coverage;
-            k += 1;
-        }
-        let l = &self.lobes[k];
-        let u0 = ((u_lobe - acc) / l.coverage).clamp(0.0, 1.0);
+        let (k, u0) = self.lobes.pick(u_lobe, acc);
+        let l = &self.lobes.as_slice()[k];
         let corners = self.table.corners(l.to_scratch(wo));
         let (wi_s, lobe) = self.table.sample(&corners, u0, u)?;
         let wi = l.from_scratch(wi_s);

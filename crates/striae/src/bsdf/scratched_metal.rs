@@ -16,7 +16,7 @@
 //! density of the non-delta part is `sum_k c_k pdf_k`, the value `pdf` returns. The BSDF is
 //! opaque: 0 unless `wo.z > 0` and `wi.z > 0`.
 
-use super::scratched::{normalised_lobes, MAX_SCRATCH_LOBES};
+use super::scratched::CoveredLobes;
 use super::{BsdfSample, Conductor, ConductorIor, ScratchLobe, WallLobeTable};
 use crate::math::{Rgb, Vec2, Vec3};
 
@@ -28,29 +28,22 @@ pub struct ScratchedMetalBsdf<'a> {
     /// RGB factor on the groove lobe (the base's colour, as the seed's metal).
     pub tint: Rgb,
     pub table: &'a WallLobeTable,
-    lobes: [ScratchLobe; MAX_SCRATCH_LOBES],
-    count: u8,
-    /// `C = sum_k c_k <= 1`.
-    total: f32,
+    lobes: CoveredLobes,
 }
 
 impl<'a> ScratchedMetalBsdf<'a> {
-    /// `lobes` with coverages `c_k >= 0`, at most [`MAX_SCRATCH_LOBES`], rescaled so that
-    /// `sum c_k <= 1`.
+    /// `lobes` with coverages `c_k >= 0` ([`CoveredLobes`]).
     pub fn new(
         ior: ConductorIor,
         tint: Rgb,
         table: &'a WallLobeTable,
         lobes: &[ScratchLobe],
     ) -> Self {
-        let (lobes, count, total) = normalised_lobes(lobes);
         ScratchedMetalBsdf {
             ior,
             tint,
             table,
-            lobes,
-            count: count as u8,
-            total,
+            lobes: CoveredLobes::new(lobes),
         }
     }
 
@@ -61,7 +54,7 @@ impl<'a> ScratchedMetalBsdf<'a> {
             return (Rgb::ZERO, 0.0);
         }
         let mut sum = (0.0f32, 0.0f32);
-        for lobe in &self.lobes[..self.count as usize] {
+        for lobe in self.lobes.as_slice() {
             let corners = self.table.corners(lobe.to_scratch(wo));
             let (f, pdf) = self.table.eval_pdf(&corners, lobe.to_scratch(wi));
             sum = (sum.0 + lobe.coverage * f, sum.1 + lobe.coverage * pdf);
@@ -76,8 +69,8 @@ impl<'a> ScratchedMetalBsdf<'a> {
         if !(wo.z > 0.0) {
             return None;
         }
-        let base = 1.0 - self.total;
-        if u_lobe < base || self.count == 0 {
+        let base = 1.0 - self.lobes.total();
+        if u_lobe < base || self.lobes.is_empty() {
             // The smooth conductor's mirror sample (weight `F(wo)`), chosen with `1 - C`.
             let mirror = Conductor { ior: self.ior }.sample(wo)?;
             return Some(BsdfSample {
@@ -85,29 +78,11 @@ impl<'a> ScratchedMetalBsdf<'a> {
                 ..mirror
             });
         }
-        let (lobe, u0) = self.pick(u_lobe - base);
+        let (k, u0) = self.lobes.pick(u_lobe, base);
+        let lobe = &self.lobes.as_slice()[k];
         let corners = self.table.corners(lobe.to_scratch(wo));
         let wi = lobe.from_scratch(self.table.sample(&corners, u0, u)?.0);
         let (f, pdf) = self.eval_pdf(wo, wi);
         (pdf > 0.0).then(|| BsdfSample::reflected(wi, f, pdf))
-    }
-
-    /// The groove lobe that `x` in `[0, C)` falls in (lobe `k` spans `c_k`), and `x`'s place
-    /// within its span in `[0, 1]`.
-    #[inline]
-    fn pick(&self, mut x: f32) -> (&ScratchLobe, f32) {
-        let last = self.count as usize - 1;
-        let k = self.lobes[..last]
-            .iter()
-            .position(|l| {
-                let inside = x < l.coverage;
-                if !inside {
-                    x -= l.coverage;
-                }
-                inside
-            })
-            .unwrap_or(last);
-        let lobe = &self.lobes[k];
-        (lobe, (x / lobe.coverage).clamp(0.0, 1.0))
     }
 }

@@ -441,6 +441,31 @@ fn eval_pdf_matches_eval_and_pdf() {
     assert!(nonzero > 5000, "{nonzero}");
 }
 
+/// The lobes the scratched BSDFs share: empty lobes dropped, coverages clamped to 1 and
+/// rescaled to sum at most 1; `pick` maps `[start, start + C)` onto the lobes in order.
+#[test]
+fn covered_lobes_normalise_and_pick() {
+    use super::scratched::CoveredLobes;
+    let lobe = |coverage| ScratchLobe {
+        coverage,
+        cos: 1.0,
+        sin: 0.0,
+    };
+    let l = CoveredLobes::new(&[lobe(0.2), lobe(0.0), lobe(0.3)]);
+    assert_eq!(l.as_slice().len(), 2);
+    assert!((l.total() - 0.5).abs() < 1e-7);
+    let (k, u) = l.pick(0.15, 0.1);
+    assert!(k == 0 && (u - 0.25).abs() < 1e-6, "{k} {u}");
+    let (k, u) = l.pick(0.45, 0.1);
+    assert!(k == 1 && (u - 0.5).abs() < 1e-5, "{k} {u}");
+    // What rounding leaves past `start + C` goes to the last lobe.
+    assert_eq!(l.pick(0.7, 0.1), (1, 1.0));
+    let full = CoveredLobes::new(&[lobe(1.5), lobe(0.5)]);
+    assert!((full.total() - 1.0).abs() < 1e-7);
+    assert!((full.as_slice()[0].coverage - 2.0 / 3.0).abs() < 1e-6);
+    assert!(CoveredLobes::new(&[lobe(0.0)]).is_empty());
+}
+
 mod scratched_glass {
     //! The dielectric-wall scratched glass (METHOD.md 8.1-8.2): sampler against its pdf from
     //! both sides, lossless energy, `eval` normalised independently of the sampler, and the
