@@ -28,6 +28,9 @@ pub fn save_npz(out: &GonioOutput, path: &Path) -> std::io::Result<()> {
         w.add_array("transmitted", &t).map_err(err)?;
         w.add_array("albedo_r", &arr0(out.albedo_r)).map_err(err)?;
         w.add_array("albedo_t", &arr0(out.albedo_t)).map_err(err)?;
+        if let Some(k) = out.intercept {
+            w.add_array("intercept", &arr0(k)).map_err(err)?;
+        }
         w.finish().map_err(err)?;
         Ok(())
     })

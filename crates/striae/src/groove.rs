@@ -76,7 +76,13 @@ pub struct GonioSettings {
     pub theta_i: f64,
     pub phi_i: f64,
     pub side: LightSide,
-    /// Paths traced (entry points, stratified over the opening).
+    /// `Inside` only: also trace the light aimed at the flat surface beside the opening that
+    /// meets the groove first. Seen from inside, a groove is a ridge of air below the surface,
+    /// and at grazing incidence it intercepts more light than crosses its opening (the ridge's
+    /// projected width over the opening's: [`GonioOutput::intercept`]). The fractions stay per
+    /// unit opening, so a lossless groove's `albedo_r + albedo_t` is the intercept.
+    pub beside: bool,
+    /// Paths traced (entry points, stratified over the opening, or the band of `beside`).
     pub paths: u64,
     /// Bins `B` per angle.
     pub bins: usize,
@@ -95,6 +101,7 @@ impl Default for GonioSettings {
             theta_i: 0.0,
             phi_i: 0.0,
             side: LightSide::Outside,
+            beside: false,
             paths: 200_000,
             bins: 32,
             max_bounces: 256,
@@ -142,6 +149,13 @@ impl GonioSettings {
                 "side",
                 "inside".into(),
                 "light from inside the object needs dielectric walls (opaque walls have no inside)",
+            );
+        }
+        if self.beside && self.side != LightSide::Inside {
+            return bad(
+                "beside",
+                "outside".into(),
+                "light from outside meets a groove only through its opening",
             );
         }
         if !(1..=4096).contains(&self.bins) {
@@ -199,6 +213,10 @@ pub struct GonioOutput {
     pub transmitted: Vec<f64>,
     pub albedo_r: f64,
     pub albedo_t: f64,
+    /// With [`GonioSettings::beside`], the light meeting the groove per unit of light crossing
+    /// its opening (the share of the band's paths that meet the groove times the band's
+    /// width); `None` for light through the opening alone.
+    pub intercept: Option<f64>,
     /// Fraction dropped by the bounce cap.
     pub dropped: f64,
     /// Fraction lost to round-off (a ray with no surface ahead and nowhere to leave); 0.
@@ -215,6 +233,8 @@ struct Acc {
     transmitted: Vec<u64>,
     dropped: u64,
     lost: u64,
+    /// Paths of the `beside` band whose first surface is the flat one (not the groove's).
+    missed: u64,
 }
 
 impl Acc {
@@ -224,6 +244,7 @@ impl Acc {
             transmitted: vec![0; bins * bins],
             dropped: 0,
             lost: 0,
+            missed: 0,
         }
     }
 
@@ -236,6 +257,7 @@ impl Acc {
         }
         self.dropped += o.dropped;
         self.lost += o.lost;
+        self.missed += o.missed;
         self
     }
 }
@@ -275,7 +297,8 @@ pub fn trace_groove(
             },
         )
         .reduce(|| Acc::new(s.bins), Acc::merge);
-    let norm = 1.0 / (FIXED * s.paths as f64);
+    // Every path stands for `band_width / paths` of the opening's light.
+    let norm = tracer.band_width / (FIXED * s.paths as f64);
     let reflected: Vec<f64> = acc.reflected.iter().map(|&v| v as f64 * norm).collect();
     let transmitted: Vec<f64> = acc.transmitted.iter().map(|&v| v as f64 * norm).collect();
     let albedo_r = acc.reflected.iter().sum::<u64>() as f64 * norm;
@@ -287,6 +310,9 @@ pub fn trace_groove(
         transmitted,
         albedo_r,
         albedo_t,
+        intercept: s
+            .beside
+            .then(|| tracer.band_width * (1.0 - acc.missed as f64 / s.paths as f64)),
         dropped: acc.dropped as f64 * norm,
         lost: acc.lost as f64 * norm,
     })
@@ -353,17 +379,31 @@ struct Tracer {
     ggx: Option<Ggx>,
     key: u64,
     d0: [f64; 3],
+    /// Where entry points start on the line `z = 0` and the width they cover (the opening
+    /// `[-1/2, 1/2]`, or with `beside` every line through the groove's bounding box).
+    band_start: f64,
+    band_width: f64,
 }
 
 impl Tracer {
     fn new(profile: &Profile, s: &GonioSettings) -> Self {
+        let cs = CrossSection::new(profile);
+        let d0 = s.incident_travel();
+        // A line reaches `z = cs.z_min` at `dx` from where it crosses `z = 0`.
+        let dx = if s.beside {
+            cs.z_min * d0[0] / d0[2]
+        } else {
+            0.0
+        };
         Tracer {
-            cs: CrossSection::new(profile),
+            band_start: -0.5 - dx.max(0.0),
+            band_width: 1.0 + dx.abs(),
+            cs,
             bins: AngleBins::new(s.bins),
             s: s.clone(),
             ggx: (s.roughness > 0.0).then(|| Ggx::isotropic(s.roughness as f32)),
             key: mix64(mix64(s.seed.wrapping_add(GOLDEN)) ^ GONIO_SALT),
-            d0: s.incident_travel(),
+            d0,
         }
     }
 
@@ -374,9 +414,11 @@ impl Tracer {
         unit(mix64(path_key.wrapping_add(counter.wrapping_mul(GOLDEN))))
     }
 
-    /// The starting ray of path `k`: its entry point stratified over the opening.
+    /// The starting ray of path `k`: its entry point stratified over the opening (or the
+    /// band of `beside`).
     fn start(&self, k: u64, path_key: u64) -> Ray {
-        let x0 = -0.5 + (k as f64 + self.draw(path_key, 0)) / self.s.paths as f64;
+        let x0 = self.band_start
+            + self.band_width * (k as f64 + self.draw(path_key, 0)) / self.s.paths as f64;
         let d = self.d0;
         match self.s.side {
             LightSide::Outside => Ray {
@@ -437,6 +479,11 @@ impl Tracer {
                     if let Scatter::Absorbed = self.wall(&mut ray, seg, u) {
                         return;
                     }
+                }
+                _ if t_flat.is_finite() && bounce == 0 && self.s.beside => {
+                    // Aimed beside the groove and passing it: the flat surface's light.
+                    acc.missed += 1;
+                    return;
                 }
                 _ if t_flat.is_finite() => {
                     ray.pos = [ray.pos[0] + t_flat * d2[0], 0.0];
@@ -1017,10 +1064,78 @@ mod tests {
         assert_ne!(a.reflected, c.reflected);
     }
 
+    /// Seen from inside, a round groove (a circular segment of chord 1 and sagitta `s`, radius
+    /// `R = (1/4 + s^2) / 2s`, centre `c = R - s` above the surface) is a ridge of air. Light
+    /// at the angle `a` from the normal in the cross-section (`phi_i`; `theta_i` only tilts it
+    /// along the groove) meets it over the ridge's projected width `cos a` while the arc's end
+    /// tangent hides it (`a <= 90 deg - alpha`, `sin alpha = 1 / 2R`), then `cos a / 2 + R -
+    /// c sin a` (the rim on one side, the arc's far point on the other), so the intercept is
+    /// that over `cos a`: 1.171 at 60 degrees for `s = 0.3`. With lossless walls what the band
+    /// meets all leaves: `albedo_r + albedo_t` is the intercept.
+    #[test]
+    fn beside_light_meets_the_ridge_over_its_projected_width() {
+        let sag = 0.3f64;
+        let r = (0.25 + sag * sag) / (2.0 * sag);
+        let c = r - sag;
+        let alpha = (0.5 / r).asin();
+        for (theta_deg, phi_deg) in [
+            (0.0f64, 60.0f64),
+            (40.0, -60.0),
+            (-20.0, 75.0),
+            (10.0, 20.0),
+        ] {
+            let a = phi_deg.abs().to_radians();
+            let width = if a <= FRAC_PI_2 - alpha {
+                a.cos()
+            } else {
+                0.5 * a.cos() + r - c * a.sin()
+            };
+            let expect = width / a.cos();
+            let s = GonioSettings {
+                walls: GrooveWalls::Dielectric,
+                fresnel_law: FresnelLaw::None,
+                side: LightSide::Inside,
+                beside: true,
+                theta_i: theta_deg.to_radians(),
+                phi_i: phi_deg.to_radians(),
+                paths: 40_000,
+                bins: 8,
+                ..GonioSettings::default()
+            };
+            let o = run("round:depth=0.3,segments=1024", &s);
+            let what = format!("theta_i {theta_deg}, phi_i {phi_deg}");
+            let k = o.intercept.unwrap();
+            assert!(
+                (k - expect).abs() < 1e-3 * expect,
+                "{what}: intercept {k} against {expect}"
+            );
+            let total = o.albedo_r + o.albedo_t + o.dropped;
+            assert!((total - k).abs() < 1e-9, "{what}: {total}");
+            // Through the opening alone the same light counts 1.
+            let opening = run(
+                "round:depth=0.3,segments=1024",
+                &GonioSettings { beside: false, ..s },
+            );
+            let total = opening.albedo_r + opening.albedo_t + opening.dropped;
+            assert!(
+                opening.intercept.is_none() && (total - 1.0).abs() < 1e-9,
+                "{what}"
+            );
+        }
+    }
+
     #[test]
     fn bad_settings_name_their_flag() {
         let base = GonioSettings::default();
         for (s, key) in [
+            (
+                GonioSettings {
+                    walls: GrooveWalls::Dielectric,
+                    beside: true,
+                    ..base.clone()
+                },
+                "beside",
+            ),
             (
                 GonioSettings {
                     side: LightSide::Inside,

@@ -37,7 +37,12 @@ pub struct Args {
     /// Where the light comes from: outside (the air) or inside (the object; dielectric walls).
     #[arg(long, value_enum, default_value_t = SideArg::Outside)]
     side: SideArg,
-    /// Paths (entry points stratified over the opening).
+    /// With `--side inside`: also trace the light aimed beside the opening that meets the
+    /// groove (a groove seen from inside is a ridge, wider than its opening at grazing
+    /// incidence); fractions stay per unit opening, and the npz gains `intercept`.
+    #[arg(long)]
+    beside: bool,
+    /// Paths (entry points stratified over the opening, or the band of --beside).
     #[arg(long, default_value_t = 200_000)]
     paths: u64,
     /// Bins per angle (theta and phi over [-90, 90] degrees).
@@ -54,7 +59,8 @@ pub struct Args {
     /// Heat maps of the two histograms (.png).
     #[arg(long)]
     plot: Option<PathBuf>,
-    /// Output (.npz): theta, phi, reflected, transmitted, albedo_r, albedo_t.
+    /// Output (.npz): theta, phi, reflected, transmitted, albedo_r, albedo_t (and intercept
+    /// with --beside).
     #[arg(short, long)]
     output: PathBuf,
 }
@@ -98,6 +104,7 @@ fn settings(a: &Args) -> anyhow::Result<GonioSettings> {
             SideArg::Outside => LightSide::Outside,
             SideArg::Inside => LightSide::Inside,
         },
+        beside: a.beside,
         paths: a.paths,
         bins: a.bins,
         max_bounces: a.max_bounces,
@@ -158,6 +165,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         "albedo_r {:.6}  albedo_t {:.6}  dropped by the bounce cap {:.3e}  lost {:.3e}",
         out.albedo_r, out.albedo_t, out.dropped, out.lost
     );
+    if let Some(k) = out.intercept {
+        println!("intercept {k:.6} (the light meeting the groove per unit through its opening)");
+    }
     println!("wrote {}", a.output.display());
     if let Some(p) = &a.plot {
         println!("wrote {}", p.display());
