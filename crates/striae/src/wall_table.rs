@@ -7,12 +7,18 @@
 //! mirrored up as in [`crate::groove`]); for each, and each side, the groove's exit
 //! histograms in `B x B` bins of `(theta_o, phi_o)`: the fraction of the energy arriving on the
 //! opening that leaves through each bin, reflected or transmitted. A lookup between grid points
-//! interpolates bilinearly in `(theta_i, phi_i)` ([`WallTable::lobes_at`]). Smooth walls keep
-//! `beta = n w.y` (a delta in `theta_o`): the table holds that delta as one `theta_o` bin, and the
-//! interpolation between two slices splits it between two bins; its error against the exact
-//! trace is measured by [`WallTable::error_against_trace`] and reported in `docs/fidelity.md`.
-//! The renderer reads only the `phi_o` marginals of smooth walls and puts `theta_o` at its exact
-//! value ([`crate::bsdf::scratched_glass`]).
+//! interpolates bilinearly in `(theta_i, phi_i)` ([`WallTable::lobes_at`]); its error against the
+//! exact trace is measured by [`WallTable::error_against_trace`] and reported in
+//! `docs/fidelity.md`.
+//!
+//! Smooth walls keep `beta = n w.y` (METHOD.md 8.1): each lobe leaves at one exact `theta_o`
+//! ([`exit_theta`]), so the table holds only the `phi_o` marginals (one `theta_o` row, `1 x B`
+//! bins), and finely: a polygonal profile's flat walls send light into a few sharp `phi_o`
+//! peaks, and 32 bins smear them enough to render a back-lit pane 2 % dark (docs/fidelity.md),
+//! so smooth tables default to 128 `phi_o` bins. A lookup puts the marginal back at its exact
+//! `theta_o` row; the renderer puts `theta_o` at its exact value
+//! ([`crate::bsdf::scratched_glass`]). Files with full `B x B` smooth lobes are read as their
+//! marginals (the same table: only the marginals were ever rendered).
 //!
 //! Rough metal walls ([`WallKind::Specular`], GGX conductor walls with the metal's Fresnel law
 //! at every microfacet hit) give one lobe, R from outside; it depends on `theta_o`, which the
@@ -20,7 +26,8 @@
 //!
 //! Files (`.npz`, `docs/table-format.md`): `kind` ("dielectric-walls" or "specular-walls"),
 //! `profile`, `ior`, `roughness`, `paths`, `seed`, `theta_i[Bt]`, `phi_i[Bp]`, `theta_o[B]`,
-//! `phi_o[B]` and the four lobes `r_out`, `t_out`, `r_in`, `t_in`, each `[Bt, Bp, B, B]`;
+//! `phi_o[B]` and the four lobes `r_out`, `t_out`, `r_in`, `t_in`, each `[Bt, Bp, Bo, B]` with
+//! `Bo = B` `theta_o` bins, or `Bo = 1` for smooth walls (`theta_o = [0]`, the marginals);
 //! specular-wall files hold `r_out` only and the walls' Fresnel law as JSON (`fresnel_law`).
 
 use crate::fresnel::FresnelLaw;
@@ -83,7 +90,7 @@ pub struct WallTableParams {
     /// Incident grid: `theta_i` and `phi_i` bins.
     pub theta_bins: usize,
     pub phi_bins: usize,
-    /// Exit bins per angle.
+    /// Exit bins per angle (`phi_o` only, for smooth walls: [`Self::exit_rows`]).
     pub bins: usize,
     /// Paths per incident direction and side.
     pub paths: u64,
@@ -91,10 +98,11 @@ pub struct WallTableParams {
 }
 
 impl WallTableParams {
-    /// The sizes the shipped scenes use: a 16 x 32 incident grid, 32 x 32 exit bins, 20 000
-    /// paths each (about 20 million paths in all). Smooth walls split R and T sharply with
-    /// `phi_i`, which a coarser grid blurs: an 8 x 16 grid renders a back-lit pane with one
-    /// layer 12 % too bright (docs/fidelity.md).
+    /// The sizes the shipped scenes use: a 16 x 32 incident grid, 32 x 32 exit bins (smooth
+    /// walls: 128 `phi_o` bins, the module notes), 20 000 paths each (about 20 million paths
+    /// in all). Smooth walls split R and T sharply with `phi_i`, which a coarser grid blurs:
+    /// an 8 x 16 grid renders a back-lit pane with one layer 12 % too bright
+    /// (docs/fidelity.md).
     pub fn new(profile: Profile, ior: f64, roughness: f64) -> Self {
         WallTableParams {
             profile,
@@ -103,10 +111,29 @@ impl WallTableParams {
             roughness,
             theta_bins: 16,
             phi_bins: 32,
-            bins: 32,
+            bins: if roughness == 0.0 {
+                SMOOTH_EXIT_BINS
+            } else {
+                32
+            },
             paths: 20_000,
             seed: 0,
         }
+    }
+
+    /// The `theta_o` rows of a lobe: 1 for smooth dielectric walls (the `phi_o` marginal; the
+    /// exit `theta` is exact), [`Self::bins`] otherwise.
+    pub fn exit_rows(&self) -> usize {
+        if self.smooth() {
+            1
+        } else {
+            self.bins
+        }
+    }
+
+    /// Smooth dielectric walls: `beta` conserved, one exact exit `theta` per lobe.
+    pub fn smooth(&self) -> bool {
+        self.walls == WallKind::Dielectric && self.roughness == 0.0
     }
 
     /// Rough conductor walls of `roughness` in `(0, 1]` with `law` at every hit, at the sizes
@@ -235,6 +262,9 @@ pub fn exit_theta(l: usize, theta_i: f64, n: f64) -> f64 {
     }
 }
 
+/// The default `phi_o` bins of smooth walls' marginals (the module notes).
+pub const SMOOTH_EXIT_BINS: usize = 128;
+
 /// The four lobes, in the order of the file: R and T from outside, R and T from inside.
 pub const LOBES: [&str; 4] = ["r_out", "t_out", "r_in", "t_in"];
 
@@ -244,9 +274,10 @@ pub struct WallTable {
     pub params: WallTableParams,
     pub theta_i: Vec<f64>,
     pub phi_i: Vec<f64>,
-    /// Exit bin centres (both axes).
-    pub exit: Vec<f64>,
-    /// `lobes[l][((ti * Bp + pi) * B + to) * B + po]`, `l` as [`LOBES`].
+    /// Exit bin centres: `Bo` rows of `theta_o` ([`WallTableParams::exit_rows`]), `B` of `phi_o`.
+    pub theta_o: Vec<f64>,
+    pub phi_o: Vec<f64>,
+    /// `lobes[l][((ti * Bp + pi) * Bo + to) * B + po]`, `l` as [`LOBES`].
     pub lobes: [Vec<f64>; 4],
 }
 
@@ -259,23 +290,25 @@ impl WallTable {
         let jobs: Vec<(usize, usize, LightSide)> = (0..theta_i.len())
             .flat_map(|t| (0..phi_i.len()).flat_map(move |p| sides.iter().map(move |&s| (t, p, s))))
             .collect();
+        let (rows, b) = (params.exit_rows(), params.bins);
         // Each run is parallel inside; runs are many and short, so run them in parallel too.
         let outs = jobs
             .par_iter()
             .map(|&(t, p, side)| {
-                trace_groove(
+                let out = trace_groove(
                     &params.profile,
                     &params.settings(theta_i[t], phi_i[p], side),
                     &|_| {},
-                )
+                )?;
+                Ok([out.reflected, out.transmitted].map(|h| rows_of(h, rows, b)))
             })
-            .collect::<Result<Vec<_>, _>>()?;
-        let len = theta_i.len() * phi_i.len() * params.bins * params.bins;
+            .collect::<Result<Vec<_>, GonioError>>()?;
+        let len = theta_i.len() * phi_i.len() * rows * b;
         let mut lobes: [Vec<f64>; 4] = std::array::from_fn(|_| Vec::with_capacity(len));
-        for (&(_, _, side), out) in jobs.iter().zip(&outs) {
+        for (&(_, _, side), [r, t]) in jobs.iter().zip(&outs) {
             let base = if side == LightSide::Outside { 0 } else { 2 };
-            lobes[base].extend_from_slice(&out.reflected);
-            lobes[base + 1].extend_from_slice(&out.transmitted);
+            lobes[base].extend_from_slice(r);
+            lobes[base + 1].extend_from_slice(t);
         }
         // Opaque walls: the lobes no side fills (and `t_out`, nothing through metal) are zero.
         for lobe in &mut lobes[params.walls.lobe_count()..] {
@@ -283,25 +316,27 @@ impl WallTable {
         }
         Ok(WallTable {
             params: params.clone(),
-            exit: outs[0].centres.clone(),
+            theta_o: centres(rows),
+            phi_o: centres(b),
             theta_i,
             phi_i,
             lobes,
         })
     }
 
-    /// The `B x B` histogram of lobe `l` at incident grid point `(t, p)`.
+    /// The `Bo x B` histogram of lobe `l` at incident grid point `(t, p)`.
     pub fn slice(&self, l: usize, t: usize, p: usize) -> &[f64] {
-        let b2 = self.params.bins * self.params.bins;
-        let k = (t * self.phi_i.len() + p) * b2;
-        &self.lobes[l][k..k + b2]
+        let n = self.theta_o.len() * self.phi_o.len();
+        let k = (t * self.phi_i.len() + p) * n;
+        &self.lobes[l][k..k + n]
     }
 
     /// The four lobes at incident `(theta_i, phi_i)` into `out[l]` (each `B x B`): bilinear in
     /// `(theta_i, phi_i)` between the grid's centres (clamped at its edges), each slice first
     /// moved along `theta_o` by the change of its smooth-wall exit angle ([`exit_theta`]), so
-    /// that the delta of smooth walls lands where it belongs instead of being split between
-    /// the two slices' places (displacement interpolation).
+    /// that the peak of nearly smooth walls lands where it belongs instead of being split
+    /// between the two slices' places (displacement interpolation). Smooth walls' marginals go
+    /// to the row of their exact exit `theta_o`.
     pub fn lobes_at(&self, theta_i: f64, phi_i: f64, out: &mut [Vec<f64>; 4]) {
         let (wt, wp) = (
             grid_weights(self.theta_i.len(), theta_i),
@@ -309,11 +344,23 @@ impl WallTable {
         );
         let b = self.params.bins;
         let bin = PI / b as f64;
+        let n = self.params.ior;
         for (l, o) in out.iter_mut().enumerate() {
             o.clear();
             o.resize(b * b, 0.0);
+            if self.params.smooth() {
+                let row = (((exit_theta(l, theta_i, n) + PI / 2.0) / bin) as usize).min(b - 1);
+                for &(t, a) in &wt {
+                    for &(p, c) in &wp {
+                        let dst = &mut o[row * b..(row + 1) * b];
+                        for (x, y) in dst.iter_mut().zip(self.slice(l, t, p)) {
+                            *x += a * c * y;
+                        }
+                    }
+                }
+                continue;
+            }
             for &(t, a) in &wt {
-                let n = self.params.ior;
                 let shift = (exit_theta(l, theta_i, n) - exit_theta(l, self.theta_i[t], n)) / bin;
                 let (whole, frac) = (shift.floor(), shift - shift.floor());
                 for &(p, c) in &wp {
@@ -340,7 +387,12 @@ impl WallTable {
     /// Write the table as `.npz` (atomically; the arrays of the module notes).
     pub fn save(&self, path: &Path) -> std::io::Result<()> {
         let p = &self.params;
-        let shape = (self.theta_i.len(), self.phi_i.len(), p.bins, p.bins);
+        let shape = (
+            self.theta_i.len(),
+            self.phi_i.len(),
+            self.theta_o.len(),
+            p.bins,
+        );
         let err = |e: ndarray_npy::WriteNpzError| std::io::Error::other(e.to_string());
         let arrays = self.lobes[..p.walls.lobe_count()]
             .iter()
@@ -365,9 +417,9 @@ impl WallTable {
                 .map_err(err)?;
             w.add_array("phi_i", &Array1::from(self.phi_i.clone()))
                 .map_err(err)?;
-            w.add_array("theta_o", &Array1::from(self.exit.clone()))
+            w.add_array("theta_o", &Array1::from(self.theta_o.clone()))
                 .map_err(err)?;
-            w.add_array("phi_o", &Array1::from(self.exit.clone()))
+            w.add_array("phi_o", &Array1::from(self.phi_o.clone()))
                 .map_err(err)?;
             for (name, a) in LOBES.iter().zip(&arrays) {
                 w.add_array(*name, a).map_err(err)?;
@@ -379,7 +431,8 @@ impl WallTable {
 
     /// Read a table written by [`Self::save`]; `None` where the file is not a wall table (no
     /// `kind` array saying so), an error where it is one but unreadable, or holds values no
-    /// trace can give (negative or non-finite fractions, more energy out than in).
+    /// trace can give (negative or non-finite fractions, more energy out than in). Smooth
+    /// walls' full `B x B` lobes are read as their `phi_o` marginals.
     pub fn load(path: &Path) -> std::io::Result<Option<Self>> {
         use ndarray::{Array0, Ix0, Ix1, OwnedRepr};
         let Some((mut r, kind)) = open_kind(path)? else {
@@ -411,10 +464,16 @@ impl WallTable {
             let a: Array1<f64> = r.by_name::<OwnedRepr<f64>, Ix1>(k).map_err(err)?;
             Ok(a.to_vec())
         };
-        let (theta_i, phi_i, exit) = (vec("theta_i")?, vec("phi_i")?, vec("theta_o")?);
+        let (theta_i, phi_i) = (vec("theta_i")?, vec("phi_i")?);
+        let (theta_o, phi_o) = (vec("theta_o")?, vec("phi_o")?);
         let bad = std::io::Error::other;
         // Lookups find grid points from the bin counts: the grids must be the bins' centres.
-        for (name, grid) in [("theta_i", &theta_i), ("phi_i", &phi_i), ("theta_o", &exit)] {
+        for (name, grid) in [
+            ("theta_i", &theta_i),
+            ("phi_i", &phi_i),
+            ("theta_o", &theta_o),
+            ("phi_o", &phi_o),
+        ] {
             let want = centres(grid.len());
             if want
                 .iter()
@@ -434,27 +493,40 @@ impl WallTable {
             roughness,
             theta_bins: theta_i.len(),
             phi_bins: phi_i.len(),
-            bins: exit.len(),
+            bins: phi_o.len(),
             paths,
             seed,
         };
         params
             .validate()
             .map_err(|e| bad(format!("bad parameters: {e}")))?;
-        let shape = (theta_i.len(), phi_i.len(), exit.len(), exit.len());
+        let rows = params.exit_rows();
+        if theta_o.len() != rows && theta_o.len() != phi_o.len() {
+            return Err(bad(format!(
+                "`theta_o` has {} bins: {rows} or as many as `phi_o` ({}) for these walls",
+                theta_o.len(),
+                phi_o.len()
+            )));
+        }
+        let shape = (theta_i.len(), phi_i.len(), theta_o.len(), phi_o.len());
         let mut lobes: [Vec<f64>; 4] = std::array::from_fn(|_| Vec::new());
         for (l, (name, lobe)) in LOBES.iter().zip(&mut lobes).enumerate() {
-            *lobe = if l < walls.lobe_count() {
+            let full = if l < walls.lobe_count() {
                 read_lobe(&mut r, name, shape)?
             } else {
                 vec![0.0; shape.0 * shape.1 * shape.2 * shape.3]
             };
+            *lobe = full
+                .chunks_exact(shape.2 * shape.3)
+                .flat_map(|h| rows_of(h.to_vec(), rows, shape.3))
+                .collect();
         }
         let table = WallTable {
             params,
             theta_i,
             phi_i,
-            exit,
+            theta_o: centres(rows),
+            phi_o,
             lobes,
         };
         table.check_energy().map_err(bad)?;
@@ -558,7 +630,7 @@ impl WallTable {
                     let e: f64 = h.iter().sum();
                     let m: f64 = h
                         .chunks_exact(b)
-                        .zip(&self.exit)
+                        .zip(&centres(b))
                         .map(|(r, t)| r.iter().sum::<f64>() * t)
                         .sum();
                     if e > 0.0 {
@@ -584,6 +656,15 @@ impl WallTable {
         }
         Ok(out)
     }
+}
+
+/// A traced `B x B` histogram as `rows` rows of `b` `phi_o` bins: itself, or (one row) its
+/// `phi_o` marginal.
+fn rows_of(h: Vec<f64>, rows: usize, b: usize) -> Vec<f64> {
+    if rows * b == h.len() {
+        return h;
+    }
+    (0..b).map(|j| h.iter().skip(j).step_by(b).sum()).collect()
 }
 
 type Reader = ndarray_npy::NpzReader<std::fs::File>;
@@ -783,12 +864,14 @@ mod tests {
         assert_eq!(mirror.validate().unwrap_err().key, "roughness");
     }
 
-    /// A dielectric table's hash is the text it always hashed: cached files keep their names.
+    /// A dielectric table's hash is the text it always hashed: cached files keep their names
+    /// (smooth walls' full lobes read as the marginals they render with).
     #[test]
     fn dielectric_hash_is_unchanged() {
         let p = WallTableParams {
             theta_bins: 8,
             phi_bins: 16,
+            bins: 32,
             ..WallTableParams::new(Profile::parse("v:angle=90").unwrap(), 1.5, 0.0)
         };
         assert_eq!(
@@ -797,11 +880,95 @@ mod tests {
         );
     }
 
+    /// Smooth walls keep the `phi_o` marginal of the traced histogram (one row); a lookup at a
+    /// grid point puts it at the row of the exact exit `theta_o`, where the trace has it.
+    #[test]
+    fn smooth_walls_keep_the_traced_marginal() {
+        let t = small(0.0);
+        let b = t.params.bins;
+        assert_eq!((t.theta_o.len(), t.phi_o.len()), (1, b));
+        let (ti, pi) = (1, 2);
+        let mut out = std::array::from_fn(|_| Vec::new());
+        t.lobes_at(t.theta_i[ti], t.phi_i[pi], &mut out);
+        for side in [LightSide::Outside, LightSide::Inside] {
+            let set = t.params.settings(t.theta_i[ti], t.phi_i[pi], side);
+            let exact = trace_groove(&t.params.profile, &set, &|_| {}).unwrap();
+            let base = if side == LightSide::Outside { 0 } else { 2 };
+            for (k, hist) in [&exact.reflected, &exact.transmitted].iter().enumerate() {
+                let l = base + k;
+                let marginal = rows_of(hist.to_vec(), 1, b);
+                assert_eq!(t.slice(l, ti, pi), &marginal[..], "lobe {l}");
+                // Every traced path leaves in one `theta_o` row, the exact exit angle's.
+                let row = (((exit_theta(l, t.theta_i[ti], 1.5) + PI / 2.0) / (PI / b as f64))
+                    as usize)
+                    .min(b - 1);
+                let rows: Vec<f64> = hist.chunks_exact(b).map(|r| r.iter().sum()).collect();
+                let total: f64 = rows.iter().sum();
+                assert!(
+                    (rows[row] - total).abs() < 1e-9 * total.max(1.0),
+                    "lobe {l}"
+                );
+                for (j, (x, y)) in out[l].iter().zip(hist.iter()).enumerate() {
+                    assert!((x - y).abs() < 1e-12, "lobe {l} bin {j}: {x} against {y}");
+                }
+            }
+        }
+    }
+
+    /// A file holding smooth walls' full `B x B` lobes reads back as the same table.
+    #[test]
+    fn full_smooth_lobes_read_as_marginals() {
+        let t = small(0.0);
+        let mut full = t.clone();
+        let b = t.params.bins;
+        full.theta_o = centres(b);
+        // Each marginal spread over the rows; its column sums are unchanged.
+        full.lobes = t.lobes.clone().map(|lobe| {
+            lobe.chunks_exact(b)
+                .flat_map(|m| {
+                    (0..b).flat_map(move |r| {
+                        m.iter()
+                            .map(move |x| x * (r + 1) as f64 * 2.0 / (b * (b + 1)) as f64)
+                    })
+                })
+                .collect()
+        });
+        let dir = std::env::temp_dir().join(format!("striae-full-walls-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("f.npz");
+        full.save(&path).unwrap();
+        let back = WallTable::load(&path).unwrap().unwrap();
+        assert_eq!(back.params, t.params);
+        assert_eq!(back.theta_o, t.theta_o);
+        for (x, y) in back.lobes.iter().flatten().zip(t.lobes.iter().flatten()) {
+            assert!((x - y).abs() < 1e-12 * y.max(1.0), "{x} against {y}");
+        }
+        // Rough walls' rows must be all there.
+        let rough = small(0.2);
+        let mut short = rough.clone();
+        short.theta_o = centres(1);
+        short.lobes = rough
+            .lobes
+            .clone()
+            .map(|l| rows_of_each(&l, rough.params.bins));
+        short.save(&path).unwrap();
+        let e = WallTable::load(&path).unwrap_err().to_string();
+        assert!(e.contains("`theta_o`"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// The marginal of each `B x B` slice of a lobe.
+    fn rows_of_each(lobe: &[f64], b: usize) -> Vec<f64> {
+        lobe.chunks_exact(b * b)
+            .flat_map(|h| rows_of(h.to_vec(), 1, b))
+            .collect()
+    }
+
     /// Interpolation: at a grid point the lookup is the stored slice; and bad parameters name
     /// their key.
     #[test]
     fn lookup_and_validation() {
-        let t = small(0.0);
+        let t = small(0.3);
         let mut out = std::array::from_fn(|_| Vec::new());
         t.lobes_at(t.theta_i[1], t.phi_i[2], &mut out);
         for (l, lobe) in out.iter().enumerate() {

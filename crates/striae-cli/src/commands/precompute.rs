@@ -68,7 +68,8 @@ pub struct Args {
     /// [default: 16x32].
     #[arg(long, value_parser = parse_grid)]
     incident: Option<(usize, usize)>,
-    /// Wall tables: exit bins per angle, `theta_o` and `phi_o` [default: 32].
+    /// Wall tables: exit bins per angle, `theta_o` and `phi_o` (smooth dielectric walls:
+    /// `phi_o` only, the exit `theta_o` is exact) [default: 32; smooth dielectric walls: 128].
     #[arg(long)]
     exit_bins: Option<usize>,
     /// Wall tables: paths per incident direction and side [default: 20000].
@@ -277,9 +278,10 @@ fn wall_table(params: striae::wall_table::WallTableParams, a: &Args) -> anyhow::
         };
         anyhow::anyhow!("{flag}: {} {}: {}", e.key, e.value, e.why)
     })?;
-    // Four lobes of `B x B` f64 bins per incident direction, and one trace's histograms.
+    // Four lobes of `Bo x B` f64 bins per incident direction, and one trace's histograms.
     let b2 = (params.bins * params.bins) as u64;
-    let bytes = 32 * (params.theta_bins * params.phi_bins) as u64 * b2 + 64 * b2;
+    let lobe = (params.exit_rows() * params.bins) as u64;
+    let bytes = 32 * (params.theta_bins * params.phi_bins) as u64 * lobe + 64 * b2;
     super::memory::check(
         &format!(
             "--exit-bins {} --incident {}x{}",
@@ -302,7 +304,7 @@ fn wall_table(params: striae::wall_table::WallTableParams, a: &Args) -> anyhow::
     println!(
         "{walls}: profile {}  roughness {}  {} x {} incident directions x {sides} side(s), {} x {} exit bins, {} paths each",
         params.profile.spec, params.roughness, params.theta_bins, params.phi_bins,
-        params.bins, params.bins, params.paths
+        params.exit_rows(), params.bins, params.paths
     );
     println!(
         "wall time {secs:.3} s ({} paths, {} threads)",

@@ -18,10 +18,11 @@
 //! **Smooth walls** conserve `beta = n w.y` at every hit (METHOD.md 8.1): each lobe leaves at
 //! one exact `theta`, a delta that exit bins would smear over their width (5.6 degrees at 32
 //! bins: against explicit grooves lit from behind, 11 % too much light, docs/fidelity.md). Their
-//! lobes keep only the `phi_o` marginals, and the exit `theta` is `wo`'s own smooth-wall exit
-//! angle, spread uniformly over a box [`SMOOTH_BOX_BINS`] of a bin wide (`dtheta` above,
-//! `J = 1`): narrow enough to be exact at any scale a scene resolves, and still a density, so
-//! `eval` and `pdf` stay defined (light sampling leaves it to BSDF sampling, below).
+//! tables hold only the `phi_o` marginals ([`crate::wall_table`]), and the exit `theta` is
+//! `wo`'s own smooth-wall exit angle, spread uniformly over a box [`SMOOTH_BOX`] wide
+//! (`dtheta` above, `J = 1`): narrow enough to be exact at any scale a scene resolves, and
+//! still a density, so `eval` and `pdf` stay defined (light sampling leaves it to BSDF
+//! sampling, below).
 //!
 //! **Between grid points** the four nearest incident slices are blended bilinearly in
 //! `(theta_o, phi_o)` of `wo`; for rough walls each is first warped along `theta`: the
@@ -52,9 +53,8 @@ use std::f32::consts::{FRAC_PI_2, PI};
 /// finite where an exit angle grazes (total internal reflection clamps it to `+-pi/2`).
 const WARP_MARGIN: f32 = 1e-3;
 
-/// The `theta_o` extent of a smooth wall's exit box, in exit bins: a sixteenth (0.35 degrees
-/// at the shipped 32 bins).
-const SMOOTH_BOX_BINS: f32 = 1.0 / 16.0;
+/// The `theta_o` extent of a smooth wall's exit box (radians): 0.35 degrees.
+pub(crate) const SMOOTH_BOX: f32 = PI / 512.0;
 
 /// A dielectric-wall table ready for rendering (see the module notes).
 #[derive(Debug)]
@@ -66,8 +66,8 @@ pub struct WallLobeTable {
     /// `theta_o` rows per lobe: `b` bins (rough walls) or one box at the exact exit angle
     /// (smooth walls).
     rows: usize,
-    /// A smooth wall's box, in exit bins.
-    box_bins: f32,
+    /// A smooth wall's box (radians).
+    smooth_box: f32,
     /// The glass's index `n`.
     n: f32,
     /// `[t][p][side][lobe][theta row][phi bin]`, side 0: from outside, 1: from inside; lobe 0
@@ -82,29 +82,20 @@ pub struct WallLobeTable {
 
 impl WallLobeTable {
     pub fn new(table: &WallTable) -> Self {
-        Self::with_smooth_box(table, SMOOTH_BOX_BINS)
+        Self::with_smooth_box(table, SMOOTH_BOX)
     }
 
-    /// [`Self::new`] with smooth walls' boxes `box_bins` exit bins wide (tests integrate the
+    /// [`Self::new`] with smooth walls' boxes `smooth_box` radians wide (tests integrate the
     /// density over wider boxes).
-    pub(crate) fn with_smooth_box(table: &WallTable, box_bins: f32) -> Self {
+    pub(crate) fn with_smooth_box(table: &WallTable, smooth_box: f32) -> Self {
         let (nt, np, b) = (table.theta_i.len(), table.phi_i.len(), table.params.bins);
-        let rows = if table.params.roughness > 0.0 { b } else { 1 };
+        // Smooth walls: one row, the `phi_o` marginal; the exit `theta` is exact.
+        let rows = table.params.exit_rows();
         let mut mass = Vec::with_capacity(nt * np * 4 * rows * b);
         for t in 0..nt {
             for p in 0..np {
                 for l in 0..4 {
-                    let slice = table.slice(l, t, p);
-                    if rows == b {
-                        mass.extend(slice.iter().map(|&m| m.max(0.0) as f32));
-                    } else {
-                        // Smooth walls: the `phi_o` marginal; the exit `theta` is exact.
-                        mass.extend((0..b).map(|col| {
-                            let m: f64 =
-                                slice.iter().skip(col).step_by(b).map(|m| m.max(0.0)).sum();
-                            m as f32
-                        }));
-                    }
+                    mass.extend(table.slice(l, t, p).iter().map(|&m| m.max(0.0) as f32));
                 }
             }
         }
@@ -121,7 +112,7 @@ impl WallLobeTable {
             np,
             b,
             rows,
-            box_bins,
+            smooth_box,
             n: table.params.ior as f32,
             mass,
             cdf,
@@ -168,7 +159,7 @@ impl WallLobeTable {
     #[inline]
     pub fn row_width(&self) -> f32 {
         if self.smooth() {
-            self.box_bins * self.bin_width()
+            self.smooth_box
         } else {
             self.bin_width()
         }

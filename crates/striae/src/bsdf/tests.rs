@@ -490,7 +490,7 @@ mod scratched_glass {
     /// A small table; smooth walls' boxes one exit bin wide, which the quadratures resolve
     /// (the shipped box is tested by `smooth_walls_leave_at_the_exact_angle`).
     fn table(roughness: f64, grid: usize, bins: usize, paths: u64) -> WallLobeTable {
-        WallLobeTable::with_smooth_box(&wall_table(roughness, grid, bins, paths), 1.0)
+        WallLobeTable::with_smooth_box(&wall_table(roughness, grid, bins, paths), PI / bins as f32)
     }
 
     /// Two crossing scratches covering 0.3 and 0.25 of the footprint.
