@@ -356,6 +356,36 @@ impl Profile {
     pub fn segments(&self) -> usize {
         self.points.len() - 1
     }
+
+    /// The groove's depth below the surface, in units of its opening's width.
+    pub fn depth(&self) -> f64 {
+        -self.points.iter().map(|p| p[1]).fold(0.0, f64::min)
+    }
+
+    /// Whether the line from the surface point `(x, 0)` going down along `(dx, dz)` (`dz <
+    /// 0`) meets the groove's walls. Seen from inside the object a groove is a ridge of air
+    /// below the surface, so light arriving along `-(dx, dz)` at a point beside the opening
+    /// has met the groove first when this holds (METHOD.md 8.1; the light beside the opening
+    /// of [`crate::groove::GonioSettings::beside`]).
+    pub fn ray_meets_ridge(&self, x: f64, dx: f64, dz: f64) -> bool {
+        if !(dz < 0.0) {
+            return false;
+        }
+        let o = [x, 0.0];
+        let d = [dx, dz];
+        self.points.windows(2).any(|w| {
+            // `o + t d = w0 + u (w1 - w0)`, `t > 0`, `u` in `[0, 1]`.
+            let e = sub(w[1], w[0]);
+            let den = cross(d, e);
+            if den == 0.0 {
+                return false;
+            }
+            let r = sub(w[0], o);
+            let t = cross(r, e) / den;
+            let u = cross(r, d) / den;
+            t > 1e-12 && (0.0..=1.0).contains(&u)
+        })
+    }
 }
 
 fn bad(spec: &str, key: &str, value: f64, why: &str) -> ProfileError {
@@ -479,6 +509,49 @@ fn validate(what: &str, points: &[[f64; 2]]) -> Result<(), ProfileError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The ridge a round groove shows from inside (a circular segment of chord 1 and sagitta
+    /// `s`, radius `R = (1/4 + s^2) / 2s`, centre `c = R - s` above the surface) meets light at
+    /// the angle `a` from the normal over a surface band beyond the opening of `k - 1`, with
+    /// `k` the closed form of `groove`'s `beside_light_meets_the_ridge_over_its_projected_width`
+    /// (1 while the arc's end tangent hides the ridge, `a <= 90 deg - alpha`, `sin alpha =
+    /// 1 / 2R`; then `(cos a / 2 + R - c sin a) / cos a`); and nothing on the far side.
+    #[test]
+    fn ridge_band_of_a_round_groove() {
+        let p = Profile::parse("round:depth=0.3,segments=1024").unwrap();
+        assert!((p.depth() - 0.3).abs() < 1e-9);
+        let sag = 0.3f64;
+        let r = (0.25 + sag * sag) / (2.0 * sag);
+        let c = r - sag;
+        let alpha = (0.5 / r).asin();
+        for deg in [20.0f64, 60.0, 75.0, 85.0] {
+            let a = deg.to_radians();
+            let k = if a <= std::f64::consts::FRAC_PI_2 - alpha {
+                1.0
+            } else {
+                (0.5 * a.cos() + r - c * a.sin()) / a.cos()
+            };
+            // Light going up and to `-x` arrives from `(sin a, -cos a)`: the band lies at
+            // `x < -1/2`, where the ray back towards the light passes under the groove.
+            let n = 50_000;
+            let span = 4.0;
+            let hits = (0..n)
+                .filter(|&i| {
+                    let x = -0.5 - span * (i as f64 + 0.5) / n as f64;
+                    p.ray_meets_ridge(x, a.sin(), -a.cos())
+                })
+                .count();
+            let band = span * hits as f64 / n as f64;
+            assert!(
+                (band - (k - 1.0)).abs() < 1e-3,
+                "{deg} degrees: band {band} against {}",
+                k - 1.0
+            );
+            let far = (0..1000)
+                .any(|i| p.ray_meets_ridge(0.5 + 0.004 * (i as f64 + 0.5), a.sin(), -a.cos()));
+            assert!(!far, "{deg} degrees: the far side");
+        }
+    }
 
     #[test]
     fn shapes_are_valid_and_parsed() {

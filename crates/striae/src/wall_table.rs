@@ -34,7 +34,7 @@ use crate::fresnel::FresnelLaw;
 use crate::groove::{trace_groove, GonioError, GonioSettings, GrooveWalls, LightSide};
 use crate::plot::{heat_panel, render, HeatMap, PlotError};
 use crate::profile::Profile;
-use ndarray::{arr0, Array1, Array4};
+use ndarray::{arr0, Array1, Array2, Array4};
 use ndarray_npy::NpzWriter;
 use plotters::prelude::*;
 use rayon::prelude::*;
@@ -170,6 +170,9 @@ impl WallTableParams {
             theta_i,
             phi_i,
             side,
+            // Seen from inside, a groove is a ridge that meets light aimed beside its opening
+            // too: the inside lobes are per unit of the light it intercepts.
+            beside: side == LightSide::Inside && self.walls == WallKind::Dielectric,
             paths: self.paths,
             bins: self.bins,
             seed: self.seed,
@@ -200,15 +203,21 @@ impl WallTableParams {
         self.settings(0.0, 0.0, side).validate()
     }
 
-    /// A SHA-256 of every parameter, naming the table in the cache.
-    /// Dielectric tables hash the text they always did (cached files stay valid); specular
-    /// ones name their kind and law in place of the index.
+    /// A SHA-256 of every parameter, naming the table in the cache ([`Self::hash_text`]).
     pub fn hash(&self) -> String {
+        let d = Sha256::digest(self.hash_text().as_bytes());
+        d.iter().map(|b| format!("{b:02x}")).collect()
+    }
+
+    /// The text [`Self::hash`] digests: the kind, the profile, the walls (dielectric: the
+    /// index and `beside`, their inside lobes being per intercepted light; specular: the
+    /// law), the roughness, the sizes, the paths and the seed.
+    pub fn hash_text(&self) -> String {
         let walls = match self.walls {
-            WallKind::Dielectric => format!("{:016x}", self.ior.to_bits()),
+            WallKind::Dielectric => format!("{:016x}|beside", self.ior.to_bits()),
             WallKind::Specular { law } => format!("law {}", law_json(&law)),
         };
-        let text = format!(
+        format!(
             "{}|{:?}|{:?}|{walls}|{:016x}|{}|{}|{}|{}|{}",
             self.walls.name(),
             self.profile.spec,
@@ -219,9 +228,7 @@ impl WallTableParams {
             self.bins,
             self.paths,
             self.seed
-        );
-        let d = Sha256::digest(text.as_bytes());
-        d.iter().map(|b| format!("{b:02x}")).collect()
+        )
     }
 }
 
@@ -277,8 +284,13 @@ pub struct WallTable {
     /// Exit bin centres: `Bo` rows of `theta_o` ([`WallTableParams::exit_rows`]), `B` of `phi_o`.
     pub theta_o: Vec<f64>,
     pub phi_o: Vec<f64>,
-    /// `lobes[l][((ti * Bp + pi) * Bo + to) * B + po]`, `l` as [`LOBES`].
+    /// `lobes[l][((ti * Bp + pi) * Bo + to) * B + po]`, `l` as [`LOBES`]; the inside lobes
+    /// per unit of the light the groove intercepts (through its opening and beside it).
     pub lobes: [Vec<f64>; 4],
+    /// `[ti * Bp + pi]`: the light a groove intercepts from inside per unit crossing its
+    /// opening (`GonioOutput::intercept`: at least 1 up to its Monte Carlo error); 1 for opaque
+    /// walls and files without it.
+    pub intercept: Vec<f64>,
 }
 
 impl WallTable {
@@ -300,15 +312,26 @@ impl WallTable {
                     &params.settings(theta_i[t], phi_i[p], side),
                     &|_| {},
                 )?;
-                Ok([out.reflected, out.transmitted].map(|h| rows_of(h, rows, b)))
+                let k = out.intercept.unwrap_or(1.0);
+                let lobes = [out.reflected, out.transmitted].map(|h| {
+                    rows_of(h, rows, b)
+                        .into_iter()
+                        .map(|m| m / k)
+                        .collect::<Vec<_>>()
+                });
+                Ok((lobes, k))
             })
             .collect::<Result<Vec<_>, GonioError>>()?;
         let len = theta_i.len() * phi_i.len() * rows * b;
         let mut lobes: [Vec<f64>; 4] = std::array::from_fn(|_| Vec::with_capacity(len));
-        for (&(_, _, side), [r, t]) in jobs.iter().zip(&outs) {
+        let mut intercept = vec![1.0; theta_i.len() * phi_i.len()];
+        for (&(t, p, side), ([r, tr], k)) in jobs.iter().zip(&outs) {
             let base = if side == LightSide::Outside { 0 } else { 2 };
             lobes[base].extend_from_slice(r);
-            lobes[base + 1].extend_from_slice(t);
+            lobes[base + 1].extend_from_slice(tr);
+            if side == LightSide::Inside {
+                intercept[t * phi_i.len() + p] = *k;
+            }
         }
         // Opaque walls: the lobes no side fills (and `t_out`, nothing through metal) are zero.
         for lobe in &mut lobes[params.walls.lobe_count()..] {
@@ -321,6 +344,7 @@ impl WallTable {
             theta_i,
             phi_i,
             lobes,
+            intercept,
         })
     }
 
@@ -424,6 +448,14 @@ impl WallTable {
             for (name, a) in LOBES.iter().zip(&arrays) {
                 w.add_array(*name, a).map_err(err)?;
             }
+            if p.walls == WallKind::Dielectric {
+                let k = Array2::from_shape_vec(
+                    (self.theta_i.len(), self.phi_i.len()),
+                    self.intercept.clone(),
+                )
+                .map_err(std::io::Error::other)?;
+                w.add_array("intercept_in", &k).map_err(err)?;
+            }
             w.finish().map_err(err)?;
             Ok(())
         })
@@ -521,6 +553,7 @@ impl WallTable {
                 .flat_map(|h| rows_of(h.to_vec(), rows, shape.3))
                 .collect();
         }
+        let intercept = read_intercept(&mut r, (shape.0, shape.1))?;
         let table = WallTable {
             params,
             theta_i,
@@ -528,6 +561,7 @@ impl WallTable {
             theta_o: centres(rows),
             phi_o,
             lobes,
+            intercept,
         };
         table.check_energy().map_err(bad)?;
         Ok(Some(table))
@@ -622,9 +656,12 @@ impl WallTable {
             set.paths = paths;
             set.seed = self.params.seed ^ 0x005e_ed0f_7e57;
             let exact = trace_groove(&self.params.profile, &set, &|_| {})?;
+            // Per unit of intercepted light, as the table's inside lobes.
+            let per = 1.0 / exact.intercept.unwrap_or(1.0);
             for (k, hist) in [&exact.reflected, &exact.transmitted].iter().enumerate() {
                 let l = 2 * s + k;
-                let (mine, theirs) = (&table[l], *hist);
+                let theirs: Vec<f64> = hist.iter().map(|m| m * per).collect();
+                let (mine, theirs) = (&table[l], &theirs[..]);
                 let marginal = |h: &[f64], j: usize| h.iter().skip(j).step_by(b).sum::<f64>();
                 let mean_theta = |h: &[f64]| {
                     let e: f64 = h.iter().sum();
@@ -706,6 +743,35 @@ fn read_lobe(
         .find(|(_, v)| !(**v >= 0.0 && v.is_finite()))
     {
         return Err(bad(format!("`{name}` holds {v} at flat index {i}")));
+    }
+    Ok(a.iter().copied().collect())
+}
+
+/// `intercept_in` of the file, `[Bt, Bp]`, each finite and positive; all 1 where the file
+/// has none (opaque walls, or a table traced through the opening only).
+fn read_intercept(r: &mut Reader, shape: (usize, usize)) -> std::io::Result<Vec<f64>> {
+    use ndarray::{Ix2, OwnedRepr};
+    let err = |e: ndarray_npy::ReadNpzError| std::io::Error::other(e.to_string());
+    let names = r.names().map_err(err)?;
+    if !names
+        .iter()
+        .any(|n| n == "intercept_in" || n == "intercept_in.npy")
+    {
+        return Ok(vec![1.0; shape.0 * shape.1]);
+    }
+    let a: Array2<f64> = r
+        .by_name::<OwnedRepr<f64>, Ix2>("intercept_in")
+        .map_err(err)?;
+    if a.dim() != shape {
+        return Err(std::io::Error::other(format!(
+            "`intercept_in` has shape {:?}, the grids ask for {shape:?}",
+            a.dim()
+        )));
+    }
+    if let Some(k) = a.iter().find(|k| !(k.is_finite() && **k > 0.0)) {
+        return Err(std::io::Error::other(format!(
+            "`intercept_in` holds {k}: an intercept is positive"
+        )));
     }
     Ok(a.iter().copied().collect())
 }
@@ -792,6 +858,8 @@ mod tests {
         let back = WallTable::load(&path).unwrap().unwrap();
         assert_eq!(back.params, t.params);
         assert_eq!(back.lobes, t.lobes);
+        assert_eq!(back.intercept, t.intercept);
+        assert!(t.intercept.iter().any(|&k| k > 1.01), "{:?}", t.intercept);
         // Grids that are not the bins' centres are refused (lookups assume them).
         let mut odd = t.clone();
         odd.phi_i[1] += 0.01;
@@ -864,20 +932,24 @@ mod tests {
         assert_eq!(mirror.validate().unwrap_err().key, "roughness");
     }
 
-    /// A dielectric table's hash is the text it always hashed: cached files keep their names
-    /// (smooth walls' full lobes read as the marginals they render with).
+    /// A dielectric table's hash digests every parameter and says that its inside lobes are
+    /// per intercepted light (`beside`), so tables traced through the opening only are not
+    /// taken from the cache for it.
     #[test]
-    fn dielectric_hash_is_unchanged() {
+    fn dielectric_hash_text() {
         let p = WallTableParams {
             theta_bins: 8,
             phi_bins: 16,
             bins: 32,
-            ..WallTableParams::new(Profile::parse("v:angle=90").unwrap(), 1.5, 0.0)
+            ..WallTableParams::new(Profile::parse("v:depth=0.5").unwrap(), 1.5, 0.0)
         };
         assert_eq!(
-            p.hash(),
-            "7f88ee76bb6b1e29fdd6ded8aa0947417259c0b181ca66403fb70e326f090644"
+            p.hash_text(),
+            "dielectric-walls|\"v:depth=0.5\"|[[-0.5, 0.0], [0.0, -0.5], [0.5, 0.0]]|\
+             3ff8000000000000|beside|0000000000000000|8|16|32|20000|0"
         );
+        let d = Sha256::digest(p.hash_text().as_bytes());
+        assert_eq!(p.hash(), format!("{d:x}"));
     }
 
     /// Smooth walls keep the `phi_o` marginal of the traced histogram (one row); a lookup at a
@@ -894,7 +966,14 @@ mod tests {
             let set = t.params.settings(t.theta_i[ti], t.phi_i[pi], side);
             let exact = trace_groove(&t.params.profile, &set, &|_| {}).unwrap();
             let base = if side == LightSide::Outside { 0 } else { 2 };
-            for (k, hist) in [&exact.reflected, &exact.transmitted].iter().enumerate() {
+            // Inside: per unit of the light the groove intercepts.
+            let k = exact.intercept.unwrap_or(1.0);
+            if side == LightSide::Inside {
+                assert_eq!(k, t.intercept[ti * t.phi_i.len() + pi]);
+            }
+            let hists = [&exact.reflected, &exact.transmitted]
+                .map(|h| h.iter().map(|m| m / k).collect::<Vec<_>>());
+            for (k, hist) in hists.iter().enumerate() {
                 let l = base + k;
                 let marginal = rows_of(hist.to_vec(), 1, b);
                 assert_eq!(t.slice(l, ti, pi), &marginal[..], "lobe {l}");

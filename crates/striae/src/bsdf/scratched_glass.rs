@@ -46,6 +46,7 @@ use super::dielectric::{mirror_sample, refraction_sample};
 use super::scratched::CoveredLobes;
 use super::{fresnel_f32, BsdfSample, ScratchLobe};
 use crate::math::{Rgb, Vec2, Vec3};
+use crate::profile::Profile;
 use crate::wall_table::{self, WallTable};
 use std::f32::consts::{FRAC_PI_2, PI};
 
@@ -77,6 +78,10 @@ pub struct WallLobeTable {
     cdf: Vec<f32>,
     /// The smooth-wall exit angles of the `theta` grid's centres, `[t][side][lobe]`.
     grid_exit: Vec<[[f32; 2]; 2]>,
+    /// The groove's cross-section, and the least `tan theta` (in the cross-section) at which
+    /// light from inside meets it beside its opening ([`Self::ridge_tan`]).
+    profile: Profile,
+    ridge_tan: f64,
     hash: String,
 }
 
@@ -117,6 +122,8 @@ impl WallLobeTable {
             mass,
             cdf,
             grid_exit: Vec::new(),
+            profile: table.params.profile.clone(),
+            ridge_tan: ridge_tan(&table.params.profile),
             hash: table.params.hash(),
         };
         t.grid_exit = (0..nt)
@@ -126,6 +133,17 @@ impl WallLobeTable {
             })
             .collect();
         t
+    }
+
+    /// The groove's cross-section the table was traced with.
+    pub fn profile(&self) -> &Profile {
+        &self.profile
+    }
+
+    /// Below this `tan theta` from the normal no light from inside meets the groove beside its
+    /// opening: the least slope from a rim to a point of the profile below it.
+    pub fn ridge_tan(&self) -> f64 {
+        self.ridge_tan
     }
 
     /// The table's parameter hash (`WallTableParams::hash`).
@@ -308,6 +326,17 @@ impl WallLobeTable {
         let z = if up { ct * cp } else { -ct * cp };
         Some((Vec3::new(ct * sp, st, z), l))
     }
+}
+
+/// [`WallLobeTable::ridge_tan`] of `profile`: a ray from beside the left rim reaches the point
+/// `(x, z)` only if it leans at least `(x + 1/2) / |z|` (the right rim mirrored).
+fn ridge_tan(profile: &Profile) -> f64 {
+    profile
+        .points
+        .iter()
+        .filter(|p| p[1] < 0.0)
+        .map(|p| (p[0] + 0.5).min(0.5 - p[0]) / -p[1])
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// The slices a `wo` reads: up to four, with bilinear weights, each slice's total energy and

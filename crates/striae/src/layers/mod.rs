@@ -275,6 +275,27 @@ impl LayerSet {
         }
     }
 
+    /// The scratch of layer `k` at texture point `uv`: the one covering it (the nearest in its
+    /// own metric, as [`Self::direction_at`]; for the seed's layers the nearest feature point
+    /// of the stretched noise, whose ellipse is `F1 < tau`), or the nearest where none does;
+    /// `None` where a random layer finds none within reach.
+    /// # Panics
+    /// If `k >= len()`.
+    pub fn scratch_at(&self, k: usize, uv: glam::DVec2) -> Option<Scratch> {
+        let layer = &self.layers[k];
+        if let Some(r) = layer.random() {
+            return r.nearest_scratch(uv, k);
+        }
+        let (a, b) = layer.half_axes();
+        Some(Scratch {
+            layer: k,
+            centre: layer.to_texture(layer.noise_at(uv).nearest),
+            direction: glam::DVec2::from(layer.direction()),
+            half_length: a,
+            half_width: b,
+        })
+    }
+
     /// Layer `k`'s scratch direction `d_k = (cos alpha_k, sin alpha_k)` in texture space.
     /// # Panics
     /// If `k >= len()`.

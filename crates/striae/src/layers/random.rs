@@ -21,7 +21,7 @@
 use super::footprint::MAX_DISCS;
 use super::layer::{disc_parallelogram_area, Parallelogram, CENTRE};
 use super::worley::{floor_i64, Worley};
-use super::{LayerError, LayerParams, LAYER_NOISE_PERIOD};
+use super::{LayerError, LayerParams, Scratch, LAYER_NOISE_PERIOD};
 use crate::hash::mix64;
 use arrayvec::ArrayVec;
 use glam::DVec2;
@@ -145,6 +145,25 @@ impl RandomScratches {
     /// inside): its normalised distance and direction `beta`; `None` where no scratch reaches
     /// `p` (nor could: nothing within `a` cells).
     pub fn nearest(&self, p: DVec2) -> Option<(f64, f64)> {
+        self.nearest_cell(p)
+            .map(|(n2, i, j, _)| (n2.sqrt(), self.angle(i, j)))
+    }
+
+    /// The scratch nearest to texture point `p` in its own metric as a texture-space
+    /// [`Scratch`] of layer `layer`.
+    pub fn nearest_scratch(&self, p: DVec2, layer: usize) -> Option<Scratch> {
+        self.nearest_cell(p).map(|(_, _, _, e)| Scratch {
+            layer,
+            centre: p + e.c * self.scale,
+            direction: e.d,
+            half_length: e.a * self.scale,
+            half_width: e.b * self.scale,
+        })
+    }
+
+    /// The nearest scratch's `|T (q - c)|^2`, cell and ellipse, centred relative to `p`
+    /// (noise space).
+    fn nearest_cell(&self, p: DVec2) -> Option<(f64, i64, i64, Ellipse)> {
         let q = self.to_noise(p);
         let [i0, i1, j0, j1] = self.cells(q, DVec2::ZERO, NEAR_CELLS)?;
         let mut best: Option<(f64, i64, i64)> = None;
@@ -156,7 +175,7 @@ impl RandomScratches {
                 }
             }
         }
-        best.map(|(n2, i, j)| (n2.sqrt(), self.angle(i, j)))
+        best.map(|(n2, i, j)| (n2, i, j, self.ellipse(i, j, q)))
     }
 
     /// The mean coverage over the noise, the value for footprints too large to enumerate:

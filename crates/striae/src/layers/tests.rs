@@ -1013,3 +1013,34 @@ fn lane_point_test_matches_each_layers_test() {
         assert!(hits > 1000, "set {s}: {hits} scratched points");
     }
 }
+
+/// `scratch_at` names the scratch that covers a scratched point: the point lies in its
+/// ellipse, for the seed's layers and for randomly oriented ones; and every scratch it names
+/// is one of the enumeration's (`scratches`), the explicit geometry's objects.
+#[test]
+fn scratch_at_names_the_covering_scratch() {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(17);
+    for orientation in [Orientation::Layer, Orientation::Random] {
+        let set =
+            LayerSet::with_orientation(LayerParams::setting(2).unwrap(), 3, orientation).unwrap();
+        let mut found = 0;
+        for _ in 0..20_000 {
+            let uv = DVec2::new(rng.random_range(0.0..1.0), rng.random_range(0.0..1.0));
+            let mask = set.scratched_mask(uv.as_vec2());
+            for k in (0..set.len()).filter(|k| mask >> k & 1 == 1) {
+                let s = set.scratch_at(k, uv).unwrap();
+                let v = uv - s.centre;
+                let (x, y) = (s.direction.dot(v), s.direction.perp_dot(v));
+                let n2 = (x / s.half_length).powi(2) + (y / s.half_width).powi(2);
+                assert!(n2 < 1.0 + 1e-9, "{orientation:?} layer {k} at {uv:?}: {n2}");
+                assert_eq!(s.layer, k);
+                if orientation == Orientation::Layer {
+                    let near = set.scratches(uv, uv);
+                    assert!(near.contains(&s), "{uv:?}: {s:?} not enumerated");
+                }
+                found += 1;
+            }
+        }
+        assert!(found > 1000, "{orientation:?}: {found}");
+    }
+}

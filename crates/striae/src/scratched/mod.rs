@@ -198,6 +198,13 @@ impl ScratchedMaterial {
         let k = self.layers.len();
         let mut cov = [0.0f32; MAX_LAYERS];
         if !self.layer_coverage(ctx, cache, &mut cov[..k]) {
+            if let (ScratchModel::DielectricWalls(walls), ScratchedBase::Glass { eta }) =
+                (&self.model, self.base)
+            {
+                if let Some(l) = self.ridge_lobe(ctx, walls) {
+                    return Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(eta, walls, &[l]));
+                }
+            }
             return self.base_bsdf();
         }
         let mut lobes = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
@@ -238,6 +245,87 @@ impl ScratchedMaterial {
             ScratchedBsdf::new(self.base, table, self.tint, &lobes[..count])
                 .at_wo(ctx.frame.to_local(ctx.wo)),
         )
+    }
+
+    /// A hit from inside the glass that no scratch covers may still have met one (METHOD.md
+    /// 8.1): seen from inside, a groove is a ridge of air below the surface, and light arriving
+    /// at a grazing angle meets it beside its opening (the table's inside lobes are per unit of
+    /// that intercepted light, [`crate::wall_table`]). The ray back along `wo` passes under the
+    /// surface within the grooves' depth over a horizontal reach `R = D tan theta`; points on
+    /// that segment, spaced at most the narrowest groove's width (at most
+    /// [`MAX_RIDGE_TESTS`]), find the scratches whose strips it crosses, and for each the
+    /// ray is met against the groove's cross-section, the profile scaled to the scratch's local
+    /// width ([`crate::profile::Profile::ray_meets_ridge`], in the face's tangent plane; depths
+    /// and widths as the explicit geometry carves them, METHOD.md 8.3). The first scratch met
+    /// scatters with coverage 1, as the point test's covered hits do. Not seen: a ridge met
+    /// where the scratch tapers narrower than the spacing, and a scratch whose groove, crossed
+    /// by another layer's, is not the one the ray meets first.
+    /// Inlined into the render loop, whose SIMD width the point tests then use.
+    #[inline(always)]
+    fn ridge_lobe(&self, ctx: &ShadingContext, walls: &WallLobeTable) -> Option<ScratchLobe> {
+        use glam::DVec2;
+        let wo = ctx.frame.to_local(ctx.wo);
+        let (hx, hy, hz) = (wo.x as f64, wo.y as f64, wo.z as f64);
+        let h_len = hx.hypot(hy);
+        let tan = h_len / -hz;
+        if !(hz < 0.0) || !(tan > walls.ridge_tan()) {
+            return None;
+        }
+        // The face's texture-to-tangent-plane map `A = [a_u a_v]` and its singular values.
+        let (s, t) = (ctx.frame.s, ctx.frame.t);
+        let tangent = |v: Vec3| DVec2::new(v.dot(s) as f64, v.dot(t) as f64);
+        let (au, av) = (tangent(ctx.dpdu), tangent(ctx.dpdv));
+        let det = au.perp_dot(av);
+        let (e, f, g) = (au.length_squared(), au.dot(av), av.length_squared());
+        let spread = ((0.5 * (e - g)).powi(2) + f * f).sqrt();
+        let sigma_max = (0.5 * (e + g) + spread).sqrt();
+        if !(det.abs() > 1e-30 && sigma_max.is_finite()) {
+            return None;
+        }
+        let sigma_min = det.abs() / sigma_max;
+        let (w_lo, w_hi) = self
+            .layers
+            .layers()
+            .iter()
+            .fold((f64::MAX, 0.0f64), |(lo, hi), l| {
+                let w = l.half_axes().1;
+                (lo.min(w), hi.max(w))
+            });
+        // World half-widths lie within `w sigma_min .. w sigma_max`.
+        let reach = walls.profile().depth() * 2.0 * w_hi * sigma_max * tan;
+        let spacing = w_lo * sigma_min;
+        let n = ((reach / spacing).ceil() as usize).clamp(1, MAX_RIDGE_TESTS);
+        let dir = DVec2::new(hx, hy) / h_len;
+        let to_uv = |v: DVec2| DVec2::new(v.perp_dot(av), au.perp_dot(v)) / det;
+        let uv = ctx.uv.as_dvec2();
+        for j in 1..=n {
+            let step = dir * (reach * j as f64 / n as f64);
+            let q = uv + to_uv(step);
+            let mask = self.layers.scratched_mask(q.as_vec2());
+            for k in (0..self.layers.len()).filter(|k| mask >> k & 1 == 1) {
+                let Some(sc) = self.layers.scratch_at(k, q) else {
+                    continue;
+                };
+                // The scratch in the tangent plane, relative to the hit.
+                let d = au * sc.direction.x + av * sc.direction.y;
+                let d_len = d.length();
+                let (along, across) = (d / d_len, (d / d_len).perp());
+                let centre = au * (sc.centre.x - uv.x) + av * (sc.centre.y - uv.y);
+                let half_length = sc.half_length * d_len;
+                let s_q = (step - centre).dot(along) / half_length;
+                let half_width = sc.half_width * det.abs() / d_len * (1.0 - s_q * s_q).sqrt();
+                if !(half_width > 0.0) {
+                    continue;
+                }
+                let x = -centre.dot(across) / (2.0 * half_width);
+                let dx = DVec2::new(hx, hy).dot(across);
+                if walls.profile().ray_meets_ridge(x, dx, hz) {
+                    let d = sc.direction.as_vec2();
+                    return Some(lobe_along(ctx, [d.x, d.y], 1.0));
+                }
+            }
+        }
+        None
     }
 
     /// How the hit measures coverage: the material's mode, except on dielectric-walled glass
@@ -381,8 +469,11 @@ pub fn union_scale(cov: &[f32]) -> f32 {
     ((1.0 - uncovered) / sum).min(1.0)
 }
 
-/// Scratch lobe of `layer` with coverage `c`: `t = d.x dP/du + d.y dP/dv` in the shading
-/// plane, as `(cos beta, sin beta)` against the frame's `s` axis (METHOD.md section 1).
+/// The most points [`ScratchedMaterial::ridge_lobe`] tests along a ray's reach: enough for
+/// a groove of depth 0.3 (in opening widths) up to 87 degrees from the normal.
+const MAX_RIDGE_TESTS: usize = 16;
+
+/// Scratch lobe of `layer` with coverage `c` ([`lobe_along`] its direction at the hit).
 fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32) -> ScratchLobe {
     let d = if p.layers.orientation() == Orientation::Random {
         // The scratch at the hit point (or nearest to it): the hit is spread uniformly over the
@@ -391,6 +482,13 @@ fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32) -> Sc
     } else {
         p.directions[layer]
     };
+    lobe_along(ctx, d, c)
+}
+
+/// Scratch lobe of texture direction `d` with coverage `c`: `t = d.x dP/du + d.y dP/dv` in the
+/// shading plane, as `(cos beta, sin beta)` against the frame's `s` axis (METHOD.md section 1).
+#[inline(always)]
+fn lobe_along(ctx: &ShadingContext, d: [f32; 2], c: f32) -> ScratchLobe {
     let t: Vec3 = ctx.dpdu * d[0] + ctx.dpdv * d[1];
     let (x, y) = (t.dot(ctx.frame.s), t.dot(ctx.frame.t));
     let len = (x * x + y * y).sqrt();
