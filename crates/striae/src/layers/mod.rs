@@ -296,6 +296,54 @@ impl LayerSet {
         })
     }
 
+    /// Calls `f` with each scratch of layer `k` (one of the seed's layers: not randomly
+    /// oriented) whose ellipse comes within reach of the texture segment from `uv` to `uv + v`
+    /// (a feature point within `tau` of it in noise space, as [`Self::capsule_mask`]), until
+    /// `f` returns `true`; whether one did. Without allocating: the cells of the segment's
+    /// noise-space box, grown by `tau`.
+    /// # Panics
+    /// If `k >= len()`.
+    pub fn find_scratch_near_segment(
+        &self,
+        k: usize,
+        uv: glam::DVec2,
+        v: glam::DVec2,
+        mut f: impl FnMut(&Scratch) -> bool,
+    ) -> bool {
+        let layer = &self.layers[k];
+        let (q0, q1) = (layer.to_noise(uv), layer.to_noise(uv + v));
+        let tau = layer.threshold();
+        let (lo, hi) = (q0.min(q1) - tau, q0.max(q1) + tau);
+        let d = q1 - q0;
+        let inv = if d.length_squared() > 0.0 {
+            1.0 / d.length_squared()
+        } else {
+            0.0
+        };
+        let (half_length, half_width) = layer.half_axes();
+        let direction = glam::DVec2::from(layer.direction());
+        for j in worley::floor_i64(lo.y)..=worley::floor_i64(hi.y) {
+            for i in worley::floor_i64(lo.x)..=worley::floor_i64(hi.x) {
+                let p = layer.noise().feature_point(i, j);
+                let t = ((p - q0).dot(d) * inv).clamp(0.0, 1.0);
+                if (q0 + d * t - p).length_squared() >= tau * tau {
+                    continue;
+                }
+                let s = Scratch {
+                    layer: k,
+                    centre: layer.to_texture(p),
+                    direction,
+                    half_length,
+                    half_width,
+                };
+                if f(&s) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
     /// Layer `k`'s scratch direction `d_k = (cos alpha_k, sin alpha_k)` in texture space.
     /// # Panics
     /// If `k >= len()`.
@@ -315,6 +363,14 @@ impl LayerSet {
     #[inline]
     pub fn is_scratched(&self, k: usize, uv: Vec2) -> bool {
         self.layers[k].is_scratched(uv)
+    }
+
+    /// Bit `k` set where a scratch of layer `k` may reach the texture segment from `uv` to
+    /// `uv + v` (exact for the seed's layers of `tau <= 1/2`, a feature point within `tau` of
+    /// it in noise space; always for the others): [`point_lanes`]' capsule test.
+    #[inline(always)]
+    pub fn capsule_mask(&self, uv: glam::DVec2, v: glam::DVec2) -> u64 {
+        self.point.capsule_mask(uv, v)
     }
 
     /// Bit `k` set iff layer `k` is scratched at `uv`: the point query over all layers

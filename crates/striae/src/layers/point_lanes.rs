@@ -4,6 +4,11 @@
 //! corner, which for `tau <= 1/2` are all the cells the disc can touch), so that the compiler
 //! runs eight layers in one vector. Hits from inside glass with dielectric walls make this
 //! test at every bounce (`scratched`), where it is most of what scratches cost.
+//!
+//! The capsule test ([`PointLanes::capsule_mask`]) asks the same of a segment: whether some
+//! scratch of the layer comes within `tau` of it in noise space (a feature point within the
+//! capsule), for segments short enough that the capsule's box spans at most two cells per
+//! axis (longer ones are split): the four cells from the box's lower corner.
 
 use super::layer::{ScratchLayer, CENTRE};
 use super::worley::floor_i64;
@@ -12,6 +17,9 @@ use glam::DVec2;
 
 /// Layers a group tests together.
 const LANES: usize = 8;
+
+/// The most pieces [`PointLanes::capsule_mask`] splits a segment into.
+const MAX_PIECES: usize = 64;
 
 /// `[0, 2^32)` to `[0, 1)`, as [`super::Worley::offset`].
 const TO_UNIT: f64 = 1.0 / 4_294_967_296.0;
@@ -24,6 +32,7 @@ struct Group {
     key: [u64; LANES],
     mask: [i64; LANES],
     r2: [f64; LANES],
+    tau: [f64; LANES],
 }
 
 /// The lane-wise point test of a set's layers (see the module notes).
@@ -43,6 +52,7 @@ impl PointLanes {
                 key: [0; LANES],
                 mask: [0; LANES],
                 r2: [-1.0; LANES],
+                tau: [0.0; LANES],
             };
             layers.len().div_ceil(LANES)
         ];
@@ -60,6 +70,7 @@ impl PointLanes {
             }
             (g.key[lane], g.mask[lane]) = layer.noise().hash_key();
             g.r2[lane] = tau * tau;
+            g.tau[lane] = tau;
         }
         PointLanes { groups, others }
     }
@@ -84,9 +95,88 @@ impl PointLanes {
         }
         out
     }
+
+    /// Bit `k` set where a scratch of layer `k` may come within reach of the texture segment
+    /// from `uv` to `uv + v`: exactly (a feature point within `tau` of it in noise space) for
+    /// the lanes' layers and segments within [`MAX_PIECES`] pieces, always for the others.
+    #[inline(always)]
+    pub fn capsule_mask(&self, uv: DVec2, v: DVec2) -> u64 {
+        let d = uv - CENTRE;
+        let mut out = 0u64;
+        for (g, group) in self.groups.iter().enumerate() {
+            // Pieces short enough that each capsule's box spans at most two cells per axis;
+            // a lane that would need more than `MAX_PIECES` (a segment across many cells, or
+            // `tau` near 1/2) may be reached.
+            let mut need = [0.0f64; LANES];
+            for (lane, n) in need.iter_mut().enumerate() {
+                let (qx, qy) = group.to_noise(lane, v);
+                *n = qx.abs().max(qy.abs()) / (0.999 - 2.0 * group.tau[lane]);
+            }
+            let most = need
+                .iter()
+                .filter(|&&n| n <= MAX_PIECES as f64)
+                .fold(1.0f64, |m, &n| m.max(n));
+            let pieces = most.ceil() as usize;
+            let step = v / pieces as f64;
+            let mut hit = [false; LANES];
+            for piece in 0..pieces {
+                let start = d + step * piece as f64;
+                for (lane, h) in hit.iter_mut().enumerate() {
+                    *h |= group.lane_capsule(lane, start, step);
+                }
+            }
+            for (lane, &h) in hit.iter().enumerate() {
+                let maybe = !(need[lane] <= MAX_PIECES as f64) && group.r2[lane] >= 0.0;
+                out |= ((h || maybe) as u64) << (g * LANES + lane);
+            }
+        }
+        for &k in &self.others {
+            out |= 1 << k;
+        }
+        out
+    }
 }
 
 impl Group {
+    /// Lane `lane`'s linear map to noise space (`M v`).
+    #[inline(always)]
+    fn to_noise(&self, lane: usize, v: DVec2) -> (f64, f64) {
+        (
+            self.m[0][lane] * v.x + self.m[1][lane] * v.y,
+            self.m[2][lane] * v.x + self.m[3][lane] * v.y,
+        )
+    }
+
+    /// Whether a feature point of lane `lane`'s layer lies within `tau` of the segment from
+    /// texture offset `d` (`uv - CENTRE`) along `v`, whose capsule's box spans at most two
+    /// cells per axis.
+    #[inline(always)]
+    fn lane_capsule(&self, lane: usize, d: DVec2, v: DVec2) -> bool {
+        let (ax, ay) = self.to_noise(lane, d);
+        let (vx, vy) = self.to_noise(lane, v);
+        let tau = self.tau[lane];
+        let (i, j) = (
+            floor_i64(ax.min(ax + vx) - tau),
+            floor_i64(ay.min(ay + vy) - tau),
+        );
+        let (fx, fy) = (ax - i as f64, ay - j as f64);
+        let vv = vx * vx + vy * vy;
+        let inv = if vv > 0.0 { 1.0 / vv } else { 0.0 };
+        let (key, mask, r2) = (self.key[lane], self.mask[lane], self.r2[lane]);
+        let near = |a: i64, b: i64| {
+            let iw = ((i + a) & mask) as u64;
+            let jw = ((j + b) & mask) as u64;
+            let h = mix64((iw | (jw << 32)) ^ key);
+            // The feature point relative to the segment's start, then its nearest point.
+            let px = a as f64 + (h >> 32) as f64 * TO_UNIT - fx;
+            let py = b as f64 + (h & 0xffff_ffff) as f64 * TO_UNIT - fy;
+            let t = ((px * vx + py * vy) * inv).clamp(0.0, 1.0);
+            let (ex, ey) = (px - t * vx, py - t * vy);
+            ex * ex + ey * ey < r2
+        };
+        near(0, 0) | near(1, 0) | near(0, 1) | near(1, 1)
+    }
+
     /// Whether lane `lane`'s layer is scratched at texture offset `d = uv - CENTRE`.
     #[inline(always)]
     fn lane_hit(&self, lane: usize, d: DVec2) -> bool {

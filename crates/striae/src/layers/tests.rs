@@ -1044,3 +1044,71 @@ fn scratch_at_names_the_covering_scratch() {
         assert!(found > 1000, "{orientation:?}: {found}");
     }
 }
+
+/// The capsule test: bit `k` iff a feature point of layer `k` lies within `tau` of the
+/// segment in noise space (against enumerating the cells around it), so every scratched point
+/// of the segment sets its layer's bit; segments from a fraction of a scratch's width to many
+/// cells across (split into pieces; beyond `MAX_PIECES` a layer may only answer "maybe"), in
+/// every direction; randomly oriented layers always answer "maybe".
+#[test]
+fn capsule_mask_finds_the_scratches_a_segment_reaches() {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(23);
+    let sets = [
+        LayerSet::new(LayerParams::setting(2).unwrap(), 4).unwrap(),
+        LayerSet::new(
+            LayerParams {
+                threshold: 0.45,
+                ..LayerParams::setting(1).unwrap()
+            },
+            5,
+        )
+        .unwrap(),
+    ];
+    for set in &sets {
+        let mut hits = 0;
+        for n in 0..4000 {
+            let uv = DVec2::new(rng.random_range(0.0..1.0), rng.random_range(0.0..1.0));
+            // Lengths from a fraction of a scratch's width to several cells across.
+            let (w, l) = (set.params().width, set.params().length);
+            let reach = [0.3 * w, 3.0 * w, 0.5 * l, 3.0 * l][n % 4];
+            let a: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+            let v = DVec2::new(a.cos(), a.sin()) * reach;
+            let mask = set.capsule_mask(uv, v);
+            for (k, layer) in set.layers().iter().enumerate() {
+                let (q0, q1) = (layer.to_noise(uv), layer.to_noise(uv + v));
+                let tau = layer.threshold();
+                let (lo, hi) = (q0.min(q1) - tau, q0.max(q1) + tau);
+                let mut want = false;
+                for j in worley::floor_i64(lo.y)..=worley::floor_i64(hi.y) {
+                    for i in worley::floor_i64(lo.x)..=worley::floor_i64(hi.x) {
+                        let f = layer.noise().feature_point(i, j);
+                        let d = q1 - q0;
+                        let t = ((f - q0).dot(d) / d.length_squared()).clamp(0.0, 1.0);
+                        let e = (q0 + d * t - f).length();
+                        assert!((e - tau).abs() > 1e-9, "borderline");
+                        want |= e < tau;
+                    }
+                }
+                let bit = mask >> k & 1 == 1;
+                if n % 4 < 3 {
+                    assert_eq!(bit, want, "layer {k} at {uv:?} along {v:?}");
+                } else {
+                    assert!(bit || !want, "layer {k} at {uv:?} along {v:?}");
+                }
+                hits += want as usize;
+                for s in 0..=16 {
+                    let p = uv + v * (s as f64 / 16.0);
+                    assert!(!layer.is_scratched_at(p) || want, "layer {k}: {p:?}");
+                }
+            }
+        }
+        assert!(hits > 500, "{hits}");
+    }
+    let random =
+        LayerSet::with_orientation(LayerParams::setting(2).unwrap(), 5, Orientation::Random)
+            .unwrap();
+    assert_eq!(
+        random.capsule_mask(DVec2::splat(0.3), DVec2::X * 1e-3),
+        (1 << random.len()) - 1
+    );
+}

@@ -20,7 +20,7 @@ use crate::bsdf::{
 use crate::layers::cache::PixelKey;
 use crate::layers::lattice::TileQuery;
 use crate::layers::layer::MAX_FOOTPRINT_CELLS;
-use crate::layers::{CoverageCache, LayerSet, Orientation, MAX_LAYERS};
+use crate::layers::{CoverageCache, LayerSet, Orientation, Scratch, MAX_LAYERS};
 use crate::math::{Rgb, Vec3};
 use crate::shading::ShadingContext;
 use serde::Deserialize;
@@ -197,14 +197,21 @@ impl ScratchedMaterial {
         }
         let k = self.layers.len();
         let mut cov = [0.0f32; MAX_LAYERS];
-        if !self.layer_coverage(ctx, cache, &mut cov[..k]) {
-            if let (ScratchModel::DielectricWalls(walls), ScratchedBase::Glass { eta }) =
-                (&self.model, self.base)
+        let covered = match (&self.model, self.base) {
+            (ScratchModel::DielectricWalls(walls), ScratchedBase::Glass { eta })
+                if ctx.wo.dot(ctx.ng) <= 0.0 =>
             {
-                if let Some(l) = self.ridge_lobe(ctx, walls) {
-                    return Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(eta, walls, &[l]));
+                match self.inside_coverage(ctx, walls, &mut cov[..k]) {
+                    InsideHit::Covered => true,
+                    InsideHit::Ridge(l) => {
+                        return Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(eta, walls, &[l]))
+                    }
+                    InsideHit::Plain => false,
                 }
             }
+            _ => self.layer_coverage(ctx, cache, &mut cov[..k]),
+        };
+        if !covered {
             return self.base_bsdf();
         }
         let mut lobes = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
@@ -247,85 +254,87 @@ impl ScratchedMaterial {
         )
     }
 
-    /// A hit from inside the glass that no scratch covers may still have met one (METHOD.md
-    /// 8.1): seen from inside, a groove is a ridge of air below the surface, and light arriving
-    /// at a grazing angle meets it beside its opening (the table's inside lobes are per unit of
-    /// that intercepted light, [`crate::wall_table`]). The ray back along `wo` passes under the
-    /// surface within the grooves' depth over a horizontal reach `R = D tan theta`; points on
-    /// that segment, spaced at most the narrowest groove's width (at most
-    /// [`MAX_RIDGE_TESTS`]), find the scratches whose strips it crosses, and for each the
-    /// ray is met against the groove's cross-section, the profile scaled to the scratch's local
-    /// width ([`crate::profile::Profile::ray_meets_ridge`], in the face's tangent plane; depths
-    /// and widths as the explicit geometry carves them, METHOD.md 8.3). The first scratch met
-    /// scatters with coverage 1, as the point test's covered hits do. Not seen: a ridge met
-    /// where the scratch tapers narrower than the spacing, and a scratch whose groove, crossed
-    /// by another layer's, is not the one the ray meets first.
-    /// Inlined into the render loop, whose SIMD width the point tests then use.
+    /// A hit from inside dielectric-walled glass (METHOD.md 8.1): the point test's coverage
+    /// (`cov`: 1 for each layer scratched at the hit, [`CoverageMode::Point`]), and where no
+    /// scratch covers the hit, the groove whose ridge the light met on its way. Seen from
+    /// inside, a groove is a ridge of air below the surface, and light arriving at a grazing
+    /// angle meets it beside its opening (the table's inside lobes are per unit of that
+    /// intercepted light, [`crate::wall_table`]). The ray back along `wo` passes under the
+    /// surface within the grooves' depth over the horizontal reach `R = D tan theta` (the
+    /// deepest groove's `D`); one capsule test of that segment ([`LayerSet::capsule_mask`],
+    /// which holds the hit itself) finds the layers whose scratches come within reach, most
+    /// hits none, and for each of their scratches near the segment the ray is met against the
+    /// groove's cross-section, the profile scaled to the scratch's local width
+    /// ([`Self::meets_ridge`]). The first scratch met scatters with coverage 1, as the point
+    /// test's covered hits do. Randomly oriented layers are searched by point tests along the
+    /// segment, spaced half the narrowest groove's width: a ridge where a scratch tapers
+    /// narrower is missed (about 2 % of them at 85 degrees).
     #[inline(always)]
-    fn ridge_lobe(&self, ctx: &ShadingContext, walls: &WallLobeTable) -> Option<ScratchLobe> {
-        use glam::DVec2;
-        let wo = ctx.frame.to_local(ctx.wo);
-        let (hx, hy, hz) = (wo.x as f64, wo.y as f64, wo.z as f64);
-        let h_len = hx.hypot(hy);
-        let tan = h_len / -hz;
-        if !(hz < 0.0) || !(tan > walls.ridge_tan()) {
-            return None;
-        }
-        // The face's texture-to-tangent-plane map `A = [a_u a_v]` and its singular values.
-        let (s, t) = (ctx.frame.s, ctx.frame.t);
-        let tangent = |v: Vec3| DVec2::new(v.dot(s) as f64, v.dot(t) as f64);
-        let (au, av) = (tangent(ctx.dpdu), tangent(ctx.dpdv));
-        let det = au.perp_dot(av);
-        let (e, f, g) = (au.length_squared(), au.dot(av), av.length_squared());
-        let spread = ((0.5 * (e - g)).powi(2) + f * f).sqrt();
-        let sigma_max = (0.5 * (e + g) + spread).sqrt();
-        if !(det.abs() > 1e-30 && sigma_max.is_finite()) {
-            return None;
-        }
-        let sigma_min = det.abs() / sigma_max;
-        let (w_lo, w_hi) = self
-            .layers
-            .layers()
-            .iter()
-            .fold((f64::MAX, 0.0f64), |(lo, hi), l| {
-                let w = l.half_axes().1;
-                (lo.min(w), hi.max(w))
-            });
-        // World half-widths lie within `w sigma_min .. w sigma_max`.
-        let reach = walls.profile().depth() * 2.0 * w_hi * sigma_max * tan;
-        let spacing = w_lo * sigma_min;
-        let n = ((reach / spacing).ceil() as usize).clamp(1, MAX_RIDGE_TESTS);
-        let dir = DVec2::new(hx, hy) / h_len;
-        let to_uv = |v: DVec2| DVec2::new(v.perp_dot(av), au.perp_dot(v)) / det;
+    fn inside_coverage(
+        &self,
+        ctx: &ShadingContext,
+        walls: &WallLobeTable,
+        cov: &mut [f32],
+    ) -> InsideHit {
+        let reach = RidgeReach::new(self, ctx, walls);
         let uv = ctx.uv.as_dvec2();
-        for j in 1..=n {
-            let step = dir * (reach * j as f64 / n as f64);
-            let q = uv + to_uv(step);
-            let mask = self.layers.scratched_mask(q.as_vec2());
-            for k in (0..self.layers.len()).filter(|k| mask >> k & 1 == 1) {
-                let Some(sc) = self.layers.scratch_at(k, q) else {
-                    continue;
-                };
-                // The scratch in the tangent plane, relative to the hit.
-                let d = au * sc.direction.x + av * sc.direction.y;
-                let d_len = d.length();
-                let (along, across) = (d / d_len, (d / d_len).perp());
-                let centre = au * (sc.centre.x - uv.x) + av * (sc.centre.y - uv.y);
-                let half_length = sc.half_length * d_len;
-                let s_q = (step - centre).dot(along) / half_length;
-                let half_width = sc.half_width * det.abs() / d_len * (1.0 - s_q * s_q).sqrt();
-                if !(half_width > 0.0) {
-                    continue;
-                }
-                let x = -centre.dot(across) / (2.0 * half_width);
-                let dx = DVec2::new(hx, hy).dot(across);
-                if walls.profile().ray_meets_ridge(x, dx, hz) {
-                    let d = sc.direction.as_vec2();
-                    return Some(lobe_along(ctx, [d.x, d.y], 1.0));
+        let maybe = match &reach {
+            Some(r) => self.layers.capsule_mask(uv, r.reach_uv),
+            None => u64::MAX,
+        };
+        if maybe == 0 {
+            return InsideHit::Plain;
+        }
+        let mask = self.layers.scratched_mask(ctx.uv);
+        if mask != 0 {
+            for (i, c) in cov.iter_mut().enumerate() {
+                *c = ((mask >> i) & 1) as f32;
+            }
+            return InsideHit::Covered;
+        }
+        let Some(r) = reach else {
+            return InsideHit::Plain;
+        };
+        let profile = walls.profile();
+        let random = self.layers.orientation() == Orientation::Random;
+        let mut met = None;
+        for k in (0..self.layers.len()).filter(|k| maybe >> k & 1 == 1) {
+            if random {
+                break;
+            }
+            self.layers
+                .find_scratch_near_segment(k, uv, r.reach_uv, |sc| {
+                    let hit = r.meets_ridge(sc, uv, profile);
+                    if hit {
+                        met = Some(sc.direction);
+                    }
+                    hit
+                });
+            if met.is_some() {
+                break;
+            }
+        }
+        if random {
+            'search: for j in 1..=r.tests {
+                let q = uv + r.reach_uv * (j as f64 / r.tests as f64);
+                let mask = self.layers.scratched_mask(q.as_vec2());
+                for k in (0..self.layers.len()).filter(|k| mask >> k & 1 == 1) {
+                    if let Some(sc) = self.layers.scratch_at(k, q) {
+                        if r.meets_ridge(&sc, uv, profile) {
+                            met = Some(sc.direction);
+                            break 'search;
+                        }
+                    }
                 }
             }
         }
-        None
+        match met {
+            Some(d) => {
+                let d = d.as_vec2();
+                InsideHit::Ridge(lobe_along(ctx, [d.x, d.y], 1.0))
+            }
+            None => InsideHit::Plain,
+        }
     }
 
     /// How the hit measures coverage: the material's mode, except on dielectric-walled glass
@@ -469,9 +478,109 @@ pub fn union_scale(cov: &[f32]) -> f32 {
     ((1.0 - uncovered) / sum).min(1.0)
 }
 
-/// The most points [`ScratchedMaterial::ridge_lobe`] tests along a ray's reach: enough for
-/// a groove of depth 0.3 (in opening widths) up to 87 degrees from the normal.
+/// What a hit from inside dielectric-walled glass meets ([`ScratchedMaterial::inside_coverage`]).
+enum InsideHit {
+    /// A scratch's opening: the coverages are set.
+    Covered,
+    /// A groove's ridge beside its opening: its lobe, coverage 1.
+    Ridge(ScratchLobe),
+    /// The flat glass.
+    Plain,
+}
+
+/// The most points the search of randomly oriented layers tests along a ray's reach: enough
+/// for a groove of depth 0.3 (in opening widths) up to 84 degrees from the normal.
 const MAX_RIDGE_TESTS: usize = 16;
+
+/// The ray back from a hit inside the glass, in the face's tangent plane, over the reach where
+/// it passes under the surface within the grooves' depth.
+struct RidgeReach {
+    /// `wo` in the shading frame (`z < 0`).
+    wo: glam::DVec3,
+    /// The face's texture-to-tangent-plane map `A = [a_u a_v]` and its determinant.
+    au: glam::DVec2,
+    av: glam::DVec2,
+    det: f64,
+    /// The reach as a texture vector, and how many point tests span it (random layers).
+    reach_uv: glam::DVec2,
+    tests: usize,
+}
+
+impl RidgeReach {
+    /// `None` where no groove can be met beside its opening: light from outside, or steeper
+    /// than the profile's rims let it reach a wall (`WallLobeTable::ridge_tan`).
+    #[inline(always)]
+    fn new(m: &ScratchedMaterial, ctx: &ShadingContext, walls: &WallLobeTable) -> Option<Self> {
+        use glam::DVec2;
+        let wo = ctx.frame.to_local(ctx.wo).as_dvec3();
+        let h_len = (wo.x * wo.x + wo.y * wo.y).sqrt();
+        let tan = h_len / -wo.z;
+        if !(wo.z < 0.0) || !(tan > walls.ridge_tan()) {
+            return None;
+        }
+        let (s, t) = (ctx.frame.s, ctx.frame.t);
+        let tangent = |v: Vec3| DVec2::new(v.dot(s) as f64, v.dot(t) as f64);
+        let (au, av) = (tangent(ctx.dpdu), tangent(ctx.dpdv));
+        let det = au.perp_dot(av);
+        // World half-widths lie within `w sigma_min .. w sigma_max` (`A`'s singular values).
+        let (e, f, g) = (au.length_squared(), au.dot(av), av.length_squared());
+        let spread = ((0.5 * (e - g)).powi(2) + f * f).sqrt();
+        let sigma_max = (0.5 * (e + g) + spread).sqrt();
+        if !(det.abs() > 1e-30 && sigma_max.is_finite()) {
+            return None;
+        }
+        let sigma_min = det.abs() / sigma_max;
+        let (w_lo, w_hi) = m
+            .layers
+            .layers()
+            .iter()
+            .fold((f64::MAX, 0.0f64), |(lo, hi), l| {
+                let w = l.half_axes().1;
+                (lo.min(w), hi.max(w))
+            });
+        let reach = walls.profile().depth() * 2.0 * w_hi * sigma_max * tan;
+        let v = DVec2::new(wo.x, wo.y) * (reach / h_len);
+        let reach_uv = DVec2::new(v.perp_dot(av), au.perp_dot(v)) / det;
+        let tests = ((reach / (w_lo * sigma_min)).ceil() as usize).clamp(1, MAX_RIDGE_TESTS);
+        Some(RidgeReach {
+            wo,
+            au,
+            av,
+            det,
+            reach_uv,
+            tests,
+        })
+    }
+
+    /// Whether the ray from texture point `uv` meets scratch `sc`'s groove beside its opening:
+    /// in the tangent plane, the groove's cross-section where the ray's reach crosses the
+    /// scratch's axis (the scratch's local width there, as the explicit geometry carves it,
+    /// METHOD.md 8.3) met by the ray's projection across the scratch.
+    #[inline(always)]
+    fn meets_ridge(
+        &self,
+        sc: &Scratch,
+        uv: glam::DVec2,
+        profile: &crate::profile::Profile,
+    ) -> bool {
+        let map = |v: glam::DVec2| self.au * v.x + self.av * v.y;
+        let d = map(sc.direction);
+        let d_len = d.length();
+        let (along, across) = (d / d_len, (d / d_len).perp());
+        let centre = map(sc.centre - uv);
+        let reach = map(self.reach_uv);
+        let t = (centre.dot(across) / reach.dot(across)).clamp(0.0, 1.0);
+        let t = if t.is_finite() { t } else { 0.0 };
+        let s = (reach * t - centre).dot(along) / (sc.half_length * d_len);
+        let half_width = sc.half_width * self.det.abs() / d_len * (1.0 - s * s).sqrt();
+        if !(half_width > 0.0) {
+            return false;
+        }
+        let x = -centre.dot(across) / (2.0 * half_width);
+        let dx = glam::DVec2::new(self.wo.x, self.wo.y).dot(across);
+        x.abs() >= 0.5 && profile.ray_meets_ridge(x, dx, self.wo.z)
+    }
+}
 
 /// Scratch lobe of `layer` with coverage `c` ([`lobe_along`] its direction at the hit).
 fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32) -> ScratchLobe {
