@@ -368,7 +368,8 @@ impl Profile {
     /// has met the groove first when this holds (METHOD.md 8.1; the light beside the opening
     /// of [`crate::groove::GonioSettings::beside`]).
     pub fn ray_meets_ridge(&self, x: f64, dx: f64, dz: f64) -> bool {
-        if !(dz < 0.0) {
+        let down = dz < 0.0;
+        if !down {
             return false;
         }
         let o = [x, 0.0];

@@ -126,7 +126,8 @@ impl PointLanes {
                 }
             }
             for (lane, &h) in hit.iter().enumerate() {
-                let maybe = !(need[lane] <= MAX_PIECES as f64) && group.r2[lane] >= 0.0;
+                let split = need[lane] <= MAX_PIECES as f64;
+                let maybe = !split && group.r2[lane] >= 0.0;
                 out |= ((h || maybe) as u64) << (g * LANES + lane);
             }
         }

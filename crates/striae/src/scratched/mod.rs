@@ -515,7 +515,8 @@ impl RidgeReach {
         let wo = ctx.frame.to_local(ctx.wo).as_dvec3();
         let h_len = (wo.x * wo.x + wo.y * wo.y).sqrt();
         let tan = h_len / -wo.z;
-        if !(wo.z < 0.0) || !(tan > walls.ridge_tan()) {
+        let grazing = wo.z < 0.0 && tan > walls.ridge_tan();
+        if !grazing {
             return None;
         }
         let (s, t) = (ctx.frame.s, ctx.frame.t);
@@ -573,7 +574,8 @@ impl RidgeReach {
         let t = if t.is_finite() { t } else { 0.0 };
         let s = (reach * t - centre).dot(along) / (sc.half_length * d_len);
         let half_width = sc.half_width * self.det.abs() / d_len * (1.0 - s * s).sqrt();
-        if !(half_width > 0.0) {
+        let open = half_width > 0.0;
+        if !open {
             return false;
         }
         let x = -centre.dot(across) / (2.0 * half_width);
