@@ -139,6 +139,18 @@ impl PointLanes {
 }
 
 impl Group {
+    /// The offset of lane `lane`'s feature point inside cell `(i, j)`, in `[0, 1)^2`.
+    #[inline(always)]
+    fn offset(&self, lane: usize, i: i64, j: i64) -> (f64, f64) {
+        let mask = self.mask[lane];
+        let (iw, jw) = ((i & mask) as u64, (j & mask) as u64);
+        let h = mix64((iw | (jw << 32)) ^ self.key[lane]);
+        (
+            (h >> 32) as f64 * TO_UNIT,
+            (h & 0xffff_ffff) as f64 * TO_UNIT,
+        )
+    }
+
     /// Lane `lane`'s linear map to noise space (`M v`).
     #[inline(always)]
     fn to_noise(&self, lane: usize, v: DVec2) -> (f64, f64) {
@@ -163,14 +175,11 @@ impl Group {
         let (fx, fy) = (ax - i as f64, ay - j as f64);
         let vv = vx * vx + vy * vy;
         let inv = if vv > 0.0 { 1.0 / vv } else { 0.0 };
-        let (key, mask, r2) = (self.key[lane], self.mask[lane], self.r2[lane]);
+        let r2 = self.r2[lane];
         let near = |a: i64, b: i64| {
-            let iw = ((i + a) & mask) as u64;
-            let jw = ((j + b) & mask) as u64;
-            let h = mix64((iw | (jw << 32)) ^ key);
             // The feature point relative to the segment's start, then its nearest point.
-            let px = a as f64 + (h >> 32) as f64 * TO_UNIT - fx;
-            let py = b as f64 + (h & 0xffff_ffff) as f64 * TO_UNIT - fy;
+            let (ox, oy) = self.offset(lane, i + a, j + b);
+            let (px, py) = (a as f64 + ox - fx, b as f64 + oy - fy);
             let t = ((px * vx + py * vy) * inv).clamp(0.0, 1.0);
             let (ex, ey) = (px - t * vx, py - t * vy);
             ex * ex + ey * ey < r2
@@ -181,19 +190,15 @@ impl Group {
     /// Whether lane `lane`'s layer is scratched at texture offset `d = uv - CENTRE`.
     #[inline(always)]
     fn lane_hit(&self, lane: usize, d: DVec2) -> bool {
-        let qx = self.m[0][lane] * d.x + self.m[1][lane] * d.y;
-        let qy = self.m[2][lane] * d.x + self.m[3][lane] * d.y;
+        let (qx, qy) = self.to_noise(lane, d);
         let (i, j) = (floor_i64(qx), floor_i64(qy));
         let (fx, fy) = (qx - i as f64, qy - j as f64);
         let di: i64 = if fx < 0.5 { -1 } else { 1 };
         let dj: i64 = if fy < 0.5 { -1 } else { 1 };
-        let (key, mask, r2) = (self.key[lane], self.mask[lane], self.r2[lane]);
+        let r2 = self.r2[lane];
         let near = |a: i64, b: i64| {
-            let iw = ((i + a) & mask) as u64;
-            let jw = ((j + b) & mask) as u64;
-            let h = mix64((iw | (jw << 32)) ^ key);
-            let px = a as f64 + (h >> 32) as f64 * TO_UNIT - fx;
-            let py = b as f64 + (h & 0xffff_ffff) as f64 * TO_UNIT - fy;
+            let (ox, oy) = self.offset(lane, i + a, j + b);
+            let (px, py) = (a as f64 + ox - fx, b as f64 + oy - fy);
             px * px + py * py < r2
         };
         near(0, 0) | near(di, 0) | near(0, dj) | near(di, dj)
