@@ -255,8 +255,13 @@ impl ScratchedMaterial {
     }
 
     /// A hit from inside dielectric-walled glass (METHOD.md 8.1): the point test's coverage
-    /// (`cov`: 1 for each layer scratched at the hit, [`CoverageMode::Point`]), and where no
-    /// scratch covers the hit, the groove whose ridge the light met on its way. Seen from
+    /// (`cov`: 1 for each layer scratched at the hit, [`CoverageMode::Point`], whatever the
+    /// material's mode), and where no scratch covers the hit, the groove whose ridge the light
+    /// met on its way. These hits lie behind a refraction, where the camera's footprint says
+    /// little and the seed's model has no scratches at all, and a path through a plate makes
+    /// many of them: the point test estimates the same pixel average without bias
+    /// (`sum`/`union`) at a fraction of the footprint's cost (BENCHMARKS.md, "Dielectric walls
+    /// over the seed's model"). Seen from
     /// inside, a groove is a ridge of air below the surface, and light arriving at a grazing
     /// angle meets it beside its opening (the table's inside lobes are per unit of that
     /// intercepted light, [`crate::wall_table`]). The ray back along `wo` passes under the
@@ -265,7 +270,7 @@ impl ScratchedMaterial {
     /// which holds the hit itself) finds the layers whose scratches come within reach, most
     /// hits none, and for each of their scratches near the segment the ray is met against the
     /// groove's cross-section, the profile scaled to the scratch's local width
-    /// ([`Self::meets_ridge`]). The first scratch met scatters with coverage 1, as the point
+    /// ([`RidgeReach::meets_ridge`]). The first scratch met scatters with coverage 1, as the point
     /// test's covered hits do. Randomly oriented layers are searched by point tests along the
     /// segment, spaced half the narrowest groove's width: a ridge where a scratch tapers
     /// narrower is missed (about 2 % of them at 85 degrees).
@@ -296,25 +301,8 @@ impl ScratchedMaterial {
             return InsideHit::Plain;
         };
         let profile = walls.profile();
-        let random = self.layers.orientation() == Orientation::Random;
         let mut met = None;
-        for k in (0..self.layers.len()).filter(|k| maybe >> k & 1 == 1) {
-            if random {
-                break;
-            }
-            self.layers
-                .find_scratch_near_segment(k, uv, r.reach_uv, |sc| {
-                    let hit = r.meets_ridge(sc, uv, profile);
-                    if hit {
-                        met = Some(sc.direction);
-                    }
-                    hit
-                });
-            if met.is_some() {
-                break;
-            }
-        }
-        if random {
+        if self.layers.orientation() == Orientation::Random {
             'search: for j in 1..=r.tests {
                 let q = uv + r.reach_uv * (j as f64 / r.tests as f64);
                 let mask = self.layers.scratched_mask(q.as_vec2());
@@ -327,6 +315,21 @@ impl ScratchedMaterial {
                     }
                 }
             }
+        } else {
+            for k in (0..self.layers.len()).filter(|k| maybe >> k & 1 == 1) {
+                let found = self
+                    .layers
+                    .find_scratch_near_segment(k, uv, r.reach_uv, |sc| {
+                        let hit = r.meets_ridge(sc, uv, profile);
+                        if hit {
+                            met = Some(sc.direction);
+                        }
+                        hit
+                    });
+                if found {
+                    break;
+                }
+            }
         }
         match met {
             Some(d) => {
@@ -337,23 +340,8 @@ impl ScratchedMaterial {
         }
     }
 
-    /// How the hit measures coverage: the material's mode, except on dielectric-walled glass
-    /// seen from inside, which takes the point test. Those hits lie behind a refraction, where
-    /// the camera's footprint says little and the seed's model has no scratches at all, and a
-    /// path through a plate makes many of them: the point test estimates the same pixel
-    /// average without bias (`sum`/`union`; see [`CoverageMode::Point`]) at a fraction of the
-    /// footprint's cost (BENCHMARKS.md, "Dielectric walls over the seed's model").
-    #[inline(always)]
-    fn coverage_mode(&self, ctx: &ShadingContext) -> CoverageMode {
-        if matches!(self.model, ScratchModel::DielectricWalls(_)) && ctx.wo.dot(ctx.ng) <= 0.0 {
-            CoverageMode::Point
-        } else {
-            self.coverage
-        }
-    }
-
-    /// Each layer's coverage at the hit into `cov`, as [`Self::coverage_mode`] asks; `false`
-    /// where the point test finds no scratch.
+    /// Each layer's coverage at the hit into `cov`, as the material's [`CoverageMode`] asks;
+    /// `false` where the point test finds no scratch.
     #[inline(always)]
     fn layer_coverage(
         &self,
@@ -365,7 +353,7 @@ impl ScratchedMaterial {
             LayerMix::Max => TileQuery::Max,
             LayerMix::Sum | LayerMix::Union => TileQuery::All,
         };
-        match self.coverage_mode(ctx) {
+        match self.coverage {
             CoverageMode::Footprint => match ctx.pixel {
                 Some(hit) => cache.of_pixel(
                     &self.layers,
