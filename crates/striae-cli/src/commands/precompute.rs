@@ -65,14 +65,15 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     check: usize,
     /// Wall tables (dielectric, rough specular): the incident grid, `theta_i` x `phi_i` bins, e.g. `16x32`
-    /// [default: 16x32].
+    /// [default: 16x32; smooth dielectric walls: 32x128].
     #[arg(long, value_parser = parse_grid)]
     incident: Option<(usize, usize)>,
     /// Wall tables: exit bins per angle, `theta_o` and `phi_o` (smooth dielectric walls:
     /// `phi_o` only, the exit `theta_o` is exact) [default: 32; smooth dielectric walls: 128].
     #[arg(long)]
     exit_bins: Option<usize>,
-    /// Wall tables: paths per incident direction and side [default: 20000].
+    /// Wall tables: paths per incident direction and side [default: 20000; smooth dielectric
+    /// walls: 5000].
     #[arg(long)]
     wall_paths: Option<u64>,
     /// Worker threads, 1 to 4096 (default: all cores).
