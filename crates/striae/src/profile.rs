@@ -362,6 +362,18 @@ impl Profile {
         -self.points.iter().map(|p| p[1]).fold(0.0, f64::min)
     }
 
+    /// Below this `tan theta` from the normal (in the cross-section) no light from inside meets
+    /// the groove beside its opening ([`Self::ray_meets_ridge`]): a ray from beside the left
+    /// rim reaches the point `(x, z)` only if it leans at least `(x + 1/2) / |z|` (the right
+    /// rim mirrored), so the least such slope over the points below the surface.
+    pub fn ridge_tan(&self) -> f64 {
+        self.points
+            .iter()
+            .filter(|p| p[1] < 0.0)
+            .map(|p| (p[0] + 0.5).min(0.5 - p[0]) / -p[1])
+            .fold(f64::INFINITY, f64::min)
+    }
+
     /// Whether the line from the surface point `(x, 0)` going down along `(dx, dz)` (`dz <
     /// 0`) meets the groove's walls. Seen from inside the object a groove is a ridge of air
     /// below the surface, so light arriving along `-(dx, dz)` at a point beside the opening

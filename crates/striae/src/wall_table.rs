@@ -313,10 +313,8 @@ impl WallTable {
                 )?;
                 let k = out.intercept.unwrap_or(1.0);
                 let lobes = [out.reflected, out.transmitted].map(|h| {
-                    rows_of(h, rows, b)
-                        .into_iter()
-                        .map(|m| m / k)
-                        .collect::<Vec<_>>()
+                    let h = if rows == 1 { phi_marginal(&h, b) } else { h };
+                    h.into_iter().map(|m| m / k).collect::<Vec<_>>()
                 });
                 Ok((lobes, k))
             })
@@ -547,10 +545,13 @@ impl WallTable {
             } else {
                 vec![0.0; shape.0 * shape.1 * shape.2 * shape.3]
             };
-            *lobe = full
-                .chunks_exact(shape.2 * shape.3)
-                .flat_map(|h| rows_of(h.to_vec(), rows, shape.3))
-                .collect();
+            *lobe = if shape.2 == rows {
+                full
+            } else {
+                full.chunks_exact(shape.2 * shape.3)
+                    .flat_map(|h| phi_marginal(h, shape.3))
+                    .collect()
+            };
         }
         let intercept = read_intercept(&mut r, (shape.0, shape.1))?;
         let table = WallTable {
@@ -661,7 +662,6 @@ impl WallTable {
                 let l = 2 * s + k;
                 let theirs: Vec<f64> = hist.iter().map(|m| m * per).collect();
                 let (mine, theirs) = (&table[l], &theirs[..]);
-                let marginal = |h: &[f64], j: usize| h.iter().skip(j).step_by(b).sum::<f64>();
                 let mean_theta = |h: &[f64]| {
                     let e: f64 = h.iter().sum();
                     let m: f64 = h
@@ -679,8 +679,10 @@ impl WallTable {
                 out[l] = LobeError {
                     albedo: ea - eb,
                     l1: mine.iter().zip(theirs).map(|(x, y)| (x - y).abs()).sum(),
-                    phi_l1: (0..b)
-                        .map(|j| (marginal(mine, j) - marginal(theirs, j)).abs())
+                    phi_l1: phi_marginal(mine, b)
+                        .iter()
+                        .zip(phi_marginal(theirs, b))
+                        .map(|(x, y)| (x - y).abs())
                         .sum(),
                     theta_shift: if ea > 1e-3 && eb > 1e-3 {
                         mean_theta(mine) - mean_theta(theirs)
@@ -694,16 +696,19 @@ impl WallTable {
     }
 }
 
-/// A traced `B x B` histogram as `rows` rows of `b` `phi_o` bins: itself, or (one row) its
-/// `phi_o` marginal.
-fn rows_of(h: Vec<f64>, rows: usize, b: usize) -> Vec<f64> {
-    if rows * b == h.len() {
-        return h;
-    }
+/// The `phi_o` marginal of a histogram of rows of `b` `phi_o` bins (the column sums).
+fn phi_marginal(h: &[f64], b: usize) -> Vec<f64> {
     (0..b).map(|j| h.iter().skip(j).step_by(b).sum()).collect()
 }
 
 type Reader = ndarray_npy::NpzReader<std::fs::File>;
+
+/// Whether an `.npz`'s array names (`NpzReader::names`) hold `key`.
+fn holds(names: &[String], key: &str) -> bool {
+    names
+        .iter()
+        .any(|n| n.strip_suffix(".npy").unwrap_or(n) == key)
+}
 
 /// The file as an `.npz` reader, and its kind, when its `kind` array says it is a wall table.
 fn open_kind(path: &Path) -> std::io::Result<Option<(Reader, String)>> {
@@ -712,7 +717,7 @@ fn open_kind(path: &Path) -> std::io::Result<Option<(Reader, String)>> {
     let file = crate::io::open_regular(path, crate::io::MAX_BINARY_BYTES)?;
     let mut r = NpzReader::new(file).map_err(err)?;
     let names = r.names().map_err(err)?;
-    if !names.iter().any(|n| n == "kind" || n == "kind.npy") {
+    if !holds(&names, "kind") {
         return Ok(None);
     }
     let kind = read_text(&mut r, "kind")?;
@@ -751,11 +756,7 @@ fn read_lobe(
 fn read_intercept(r: &mut Reader, shape: (usize, usize)) -> std::io::Result<Vec<f64>> {
     use ndarray::{Ix2, OwnedRepr};
     let err = |e: ndarray_npy::ReadNpzError| std::io::Error::other(e.to_string());
-    let names = r.names().map_err(err)?;
-    if !names
-        .iter()
-        .any(|n| n == "intercept_in" || n == "intercept_in.npy")
-    {
+    if !holds(&r.names().map_err(err)?, "intercept_in") {
         return Ok(vec![1.0; shape.0 * shape.1]);
     }
     let a: Array2<f64> = r
@@ -975,7 +976,7 @@ mod tests {
                 .map(|h| h.iter().map(|m| m / k).collect::<Vec<_>>());
             for (k, hist) in hists.iter().enumerate() {
                 let l = base + k;
-                let marginal = rows_of(hist.to_vec(), 1, b);
+                let marginal = phi_marginal(hist, b);
                 assert_eq!(t.slice(l, ti, pi), &marginal[..], "lobe {l}");
                 // Every traced path leaves in one `theta_o` row, the exact exit angle's.
                 let row = (((exit_theta(l, t.theta_i[ti], 1.5) + PI / 2.0) / (PI / b as f64))
@@ -1039,7 +1040,7 @@ mod tests {
     /// The marginal of each `B x B` slice of a lobe.
     fn rows_of_each(lobe: &[f64], b: usize) -> Vec<f64> {
         lobe.chunks_exact(b * b)
-            .flat_map(|h| rows_of(h.to_vec(), 1, b))
+            .flat_map(|h| phi_marginal(h, b))
             .collect()
     }
 

@@ -123,7 +123,7 @@ impl WallLobeTable {
             cdf,
             grid_exit: Vec::new(),
             profile: table.params.profile.clone(),
-            ridge_tan: ridge_tan(&table.params.profile),
+            ridge_tan: table.params.profile.ridge_tan(),
             hash: table.params.hash(),
         };
         t.grid_exit = (0..nt)
@@ -140,8 +140,7 @@ impl WallLobeTable {
         &self.profile
     }
 
-    /// Below this `tan theta` from the normal no light from inside meets the groove beside its
-    /// opening: the least slope from a rim to a point of the profile below it.
+    /// The profile's [`Profile::ridge_tan`], kept for the hits from inside that ask it.
     pub fn ridge_tan(&self) -> f64 {
         self.ridge_tan
     }
@@ -326,17 +325,6 @@ impl WallLobeTable {
         let z = if up { ct * cp } else { -ct * cp };
         Some((Vec3::new(ct * sp, st, z), l))
     }
-}
-
-/// [`WallLobeTable::ridge_tan`] of `profile`: a ray from beside the left rim reaches the point
-/// `(x, z)` only if it leans at least `(x + 1/2) / |z|` (the right rim mirrored).
-fn ridge_tan(profile: &Profile) -> f64 {
-    profile
-        .points
-        .iter()
-        .filter(|p| p[1] < 0.0)
-        .map(|p| (p[0] + 0.5).min(0.5 - p[0]) / -p[1])
-        .fold(f64::INFINITY, f64::min)
 }
 
 /// The slices a `wo` reads: up to four, with bilinear weights, each slice's total energy and

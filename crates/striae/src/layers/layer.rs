@@ -117,6 +117,19 @@ impl ScratchLayer {
         (self.tau * self.length, self.tau * self.width)
     }
 
+    /// The scratch of the feature point `q` (noise space): the ellipse of [`Self::half_axes`]
+    /// along the layer's direction about `q`'s texture point ([`super::LayerSet::scratches`]).
+    pub fn scratch(&self, q: DVec2) -> super::Scratch {
+        let (half_length, half_width) = self.half_axes();
+        super::Scratch {
+            layer: self.index,
+            centre: self.to_texture(q),
+            direction: DVec2::from(self.direction()),
+            half_length,
+            half_width,
+        }
+    }
+
     /// `q = S^-1 R(-alpha) (p - c)`, METHOD.md section 5.
     #[inline]
     pub fn to_noise(&self, p: DVec2) -> DVec2 {

@@ -286,14 +286,7 @@ impl LayerSet {
         if let Some(r) = layer.random() {
             return r.nearest_scratch(uv, k);
         }
-        let (a, b) = layer.half_axes();
-        Some(Scratch {
-            layer: k,
-            centre: layer.to_texture(layer.noise_at(uv).nearest),
-            direction: glam::DVec2::from(layer.direction()),
-            half_length: a,
-            half_width: b,
-        })
+        Some(layer.scratch(layer.noise_at(uv).nearest))
     }
 
     /// Calls `f` with each scratch of layer `k` (one of the seed's layers: not randomly
@@ -320,8 +313,6 @@ impl LayerSet {
         } else {
             0.0
         };
-        let (half_length, half_width) = layer.half_axes();
-        let direction = glam::DVec2::from(layer.direction());
         for j in worley::floor_i64(lo.y)..=worley::floor_i64(hi.y) {
             for i in worley::floor_i64(lo.x)..=worley::floor_i64(hi.x) {
                 let p = layer.noise().feature_point(i, j);
@@ -329,14 +320,7 @@ impl LayerSet {
                 if (q0 + d * t - p).length_squared() >= tau * tau {
                     continue;
                 }
-                let s = Scratch {
-                    layer: k,
-                    centre: layer.to_texture(p),
-                    direction,
-                    half_length,
-                    half_width,
-                };
-                if f(&s) {
+                if f(&layer.scratch(p)) {
                     return true;
                 }
             }
@@ -575,15 +559,9 @@ impl LayerSet {
             let reach = glam::DVec2::new((a * d.x).hypot(b * d.y), (a * d.y).hypot(b * d.x));
             for j in worley::floor_i64(qlo.y)..=worley::floor_i64(qhi.y) {
                 for i in worley::floor_i64(qlo.x)..=worley::floor_i64(qhi.x) {
-                    let centre = layer.to_texture(layer.noise().feature_point(i, j));
-                    if (centre + reach).cmpge(lo).all() && (centre - reach).cmple(hi).all() {
-                        out.push(Scratch {
-                            layer: layer.index(),
-                            centre,
-                            direction: d,
-                            half_length: a,
-                            half_width: b,
-                        });
+                    let s = layer.scratch(layer.noise().feature_point(i, j));
+                    if (s.centre + reach).cmpge(lo).all() && (s.centre - reach).cmple(hi).all() {
+                        out.push(s);
                     }
                 }
             }

@@ -290,11 +290,7 @@ impl ScratchedMaterial {
         if maybe == 0 {
             return InsideHit::Plain;
         }
-        let mask = self.layers.scratched_mask(ctx.uv);
-        if mask != 0 {
-            for (i, c) in cov.iter_mut().enumerate() {
-                *c = ((mask >> i) & 1) as f32;
-            }
+        if self.point_coverage(ctx.uv, cov) {
             return InsideHit::Covered;
         }
         let Some(r) = reach else {
@@ -377,17 +373,20 @@ impl ScratchedMaterial {
                 self.layers
                     .coverage_query(query, ctx.uv, duvdx, duvdy, MAX_FOOTPRINT_CELLS, cov)
             }
-            CoverageMode::Point => {
-                let mask = self.layers.scratched_mask(ctx.uv);
-                if mask == 0 {
-                    return false;
-                }
-                for (i, c) in cov.iter_mut().enumerate() {
-                    *c = ((mask >> i) & 1) as f32;
-                }
-            }
+            CoverageMode::Point => return self.point_coverage(ctx.uv, cov),
         }
         true
+    }
+
+    /// [`CoverageMode::Point`]: 1 in `cov` for each layer scratched at `uv`, 0 for the others;
+    /// `false` where none is.
+    #[inline(always)]
+    fn point_coverage(&self, uv: crate::math::Vec2, cov: &mut [f32]) -> bool {
+        let mask = self.layers.scratched_mask(uv);
+        for (i, c) in cov.iter_mut().enumerate() {
+            *c = ((mask >> i) & 1) as f32;
+        }
+        mask != 0
     }
 
     /// `layer_mix = "max"` (METHOD.md section 6): the lobe of the layer with the largest
@@ -519,18 +518,12 @@ impl RidgeReach {
             return None;
         }
         let sigma_min = det.abs() / sigma_max;
-        let (w_lo, w_hi) = m
-            .layers
-            .layers()
-            .iter()
-            .fold((f64::MAX, 0.0f64), |(lo, hi), l| {
-                let w = l.half_axes().1;
-                (lo.min(w), hi.max(w))
-            });
-        let reach = walls.profile().depth() * 2.0 * w_hi * sigma_max * tan;
+        // Every layer of a set has the same scratch width.
+        let w = m.layers.layers()[0].half_axes().1;
+        let reach = walls.profile().depth() * 2.0 * w * sigma_max * tan;
         let v = DVec2::new(wo.x, wo.y) * (reach / h_len);
         let reach_uv = DVec2::new(v.perp_dot(av), au.perp_dot(v)) / det;
-        let tests = ((reach / (w_lo * sigma_min)).ceil() as usize).clamp(1, MAX_RIDGE_TESTS);
+        let tests = ((reach / (w * sigma_min)).ceil() as usize).clamp(1, MAX_RIDGE_TESTS);
         Some(RidgeReach {
             wo,
             au,
