@@ -34,13 +34,17 @@
 //! **Sampling.** One component with the probability of its energy: the smooth reflection
 //! `(1 - C) F`, the smooth refraction `(1 - C)(1 - F)` (both deltas, weight 1 and `1 / eta^2`),
 //! groove lobe `k` with `c_k`; within a groove lobe, a grid slice with its bilinear weight, an
-//! exit bin in proportion to `m_b` (reflected and transmitted together, one CDF per slice), a
-//! point uniform in the bin, warped (rough walls) or in the box (smooth walls). The density
-//! of the non-delta part is `sum_k c_k pdf_k`, the value `pdf` returns, so MIS with light
-//! sampling is consistent (rough walls); for a lossless groove and one slice, the weight is
-//! exactly `s`. Smooth walls' boxes are too narrow for light sampling to land in: the
-//! integrator skips it there ([`super::Bsdf::is_delta`]) and counts what BSDF sampling finds,
-//! as for a specular surface.
+//! exit bin in proportion to `m_b` (reflected and transmitted together, one CDF per slice,
+//! searched through a one-line guide of it), a point uniform in the bin, warped (rough walls)
+//! or in the box (smooth walls). The density of the non-delta part is `sum_k c_k pdf_k`, the
+//! value `pdf` returns, so MIS with light sampling is consistent (rough walls: the weight is
+//! `f cos / pdf` of the whole blend). Smooth walls' boxes are too narrow for light sampling
+//! to land in: the integrator skips it there ([`super::Bsdf::is_delta`]) and counts what BSDF
+//! sampling finds, as for a specular surface, so no other density is weighed against
+//! theirs, and their weight is the **one-slice estimate** `f_q cos / pdf_q = s E_q` of the
+//! chosen slice `q` alone (`E_q` its energy, 1 for a lossless groove): the blend's expected
+//! value, since slice `q` is chosen with its weight, with no lookup of the other slices (the
+//! table is the size of a large cache; BENCHMARKS.md).
 
 use super::dielectric::{mirror_sample, refraction_sample};
 use super::scratched::CoveredLobes;
@@ -76,6 +80,13 @@ pub struct WallLobeTable {
     mass: Vec<f32>,
     /// Inclusive prefix sums of `mass` within each `[t][p][side]` slice.
     cdf: Vec<f32>,
+    /// Each slice's energy, its CDF's last entry, `[t][p][side]`: a few kilobytes the
+    /// lookups read before the slice itself.
+    totals: Vec<f32>,
+    /// Each slice's CDF at the ends of its [`GUIDE`] equal groups, `[t][p][side][group]`:
+    /// one cache line per slice, a sixteenth of the CDF's size, that takes a sample to its
+    /// group before it reads the CDF itself (one line of it for smooth walls).
+    guide: Vec<[f32; GUIDE]>,
     /// The smooth-wall exit angles of the `theta` grid's centres, `[t][side][lobe]`.
     grid_exit: Vec<[[f32; 2]; 2]>,
     /// The groove's cross-section, and the least `tan theta` (in the cross-section) at which
@@ -112,6 +123,14 @@ impl WallLobeTable {
                 acc as f32
             }));
         }
+        let len = 2 * rows * b;
+        let totals = cdf.chunks_exact(len).map(|c| c[len - 1]).collect();
+        let guide = cdf
+            .chunks_exact(len)
+            .map(|c| {
+                std::array::from_fn(|g| group_end(g, len).checked_sub(1).map_or(0.0, |e| c[e]))
+            })
+            .collect();
         let mut t = WallLobeTable {
             nt,
             np,
@@ -121,6 +140,8 @@ impl WallLobeTable {
             n: table.params.ior as f32,
             mass,
             cdf,
+            totals,
+            guide,
             grid_exit: Vec::new(),
             profile: table.params.profile.clone(),
             ridge_tan: table.params.profile.ridge_tan(),
@@ -182,6 +203,19 @@ impl WallLobeTable {
         }
     }
 
+    /// The first entry of slice `slice`'s CDF above `x` (the last where none is): its
+    /// group from the guide, then the entry within the group.
+    #[inline]
+    fn search(&self, slice: usize, x: f32) -> usize {
+        let len = self.slice_len();
+        let g = self.guide[slice]
+            .partition_point(|&v| v <= x)
+            .min(GUIDE - 1);
+        let (start, end) = (group_end(g.wrapping_sub(1), len), group_end(g, len));
+        let cdf = &self.cdf[slice * len + start..slice * len + end];
+        (start + cdf.partition_point(|&v| v <= x)).min(len - 1)
+    }
+
     /// The exit bin of an angle in `(-pi/2, pi/2)`.
     #[inline]
     fn bin(&self, a: f32) -> usize {
@@ -230,10 +264,10 @@ impl WallLobeTable {
                     continue;
                 }
                 let k = c.count;
-                let start = ((t * self.np + p) * 2 + side) * len;
-                c.slice[k] = start as u32;
+                let slice = (t * self.np + p) * 2 + side;
+                c.slice[k] = (slice * len) as u32;
                 c.weight[k] = w;
-                c.total[k] = self.cdf[start + len - 1];
+                c.total[k] = self.totals[slice];
                 c.e_c[k] = e_c;
                 c.count += 1;
             }
@@ -287,6 +321,58 @@ impl WallLobeTable {
         (s * f / (area * wi.z.abs()), p / area)
     }
 
+    /// Smooth walls: a direction from the groove lobes of `wo` (scratch frame, `wo.z != 0`),
+    /// the one-slice estimate of the module notes. `u0` picks a grid slice with its bilinear
+    /// weight (the `theta` neighbour, then the `phi` one), `u.x` an exit bin of the slice's
+    /// CDF and the point in the box, `u.y` the point in the bin. The directions are
+    /// distributed as [`Self::eval_pdf`]'s density; the weight is the chosen slice's own
+    /// `f |cos| / pdf`. `None` where the slice holds no energy.
+    #[inline]
+    pub(super) fn sample_smooth(&self, wo: Vec3, u0: f32, u: Vec2) -> Option<SmoothSample> {
+        let side = (wo.z < 0.0) as usize;
+        let theta = wo.y.clamp(-1.0, 1.0).asin();
+        let phi = wo.x.atan2(wo.z.abs());
+        let (t, v) = pick_neighbour(wall_table::grid_weights(self.nt, theta as f64), u0);
+        let (p, _) = pick_neighbour(wall_table::grid_weights(self.np, phi as f64), v);
+        let slice = (t * self.np + p) * 2 + side;
+        let total = self.totals[slice];
+        if !(total > 0.0) {
+            return None;
+        }
+        let x = u.x * total;
+        let j = self.search(slice, x);
+        let cdf = &self.cdf[slice * self.slice_len()..];
+        let lo = if j == 0 { 0.0 } else { cdf[j - 1] };
+        let m = cdf[j] - lo;
+        if !(m > 0.0) {
+            return None;
+        }
+        let frac = ((x - lo) / m).clamp(0.0, 1.0);
+        let (l, col) = (j / self.b, j % self.b);
+        let edge = FRAC_PI_2 - 0.5 * self.smooth_box;
+        let exit = self.exit_theta(side, l, theta).clamp(-edge, edge);
+        let theta_o = exit + (frac - 0.5) * self.smooth_box;
+        let h = self.bin_width();
+        let phi_o = -FRAC_PI_2 + (col as f32 + u.y) * h;
+        let (st, ct) = theta_o.sin_cos();
+        let (sp, cp) = phi_o.sin_cos();
+        let up = (side == 0) == (l == 0);
+        let z = if up { ct * cp } else { -ct * cp };
+        let s = if l == 0 {
+            1.0
+        } else if side == 0 {
+            1.0 / (self.n * self.n)
+        } else {
+            self.n * self.n
+        };
+        Some(SmoothSample {
+            wi: Vec3::new(ct * sp, st, z),
+            lobe: l,
+            weight: s * total,
+            pdf: m / (total * self.smooth_box * h * ct),
+        })
+    }
+
     /// A direction from one groove lobe (see the module notes): `u0` picks the slice, `u` the
     /// bin and the point in it. `None` where the chosen slice holds no energy.
     #[inline]
@@ -303,7 +389,7 @@ impl WallLobeTable {
         let start = c.slice[k] as usize;
         let cdf = &self.cdf[start..start + self.slice_len()];
         let x = u.x * c.total[k];
-        let j = cdf.partition_point(|&v| v <= x).min(cdf.len() - 1);
+        let j = self.search(start / self.slice_len(), x);
         let lo = if j == 0 { 0.0 } else { cdf[j - 1] };
         let frac = if cdf[j] > lo {
             ((x - lo) / (cdf[j] - lo)).clamp(0.0, 1.0)
@@ -325,6 +411,44 @@ impl WallLobeTable {
         let z = if up { ct * cp } else { -ct * cp };
         Some((Vec3::new(ct * sp, st, z), l))
     }
+}
+
+/// Groups of a slice's CDF in the guide ([`WallLobeTable::search`]).
+const GUIDE: usize = 16;
+
+/// The end (exclusive) of group `g` of a CDF of `len` entries; `g = -1` (wrapped) ends at 0.
+/// The groups split the entries evenly, and some are empty where `len < GUIDE`.
+#[inline]
+fn group_end(g: usize, len: usize) -> usize {
+    g.wrapping_add(1) * len / GUIDE
+}
+
+/// One grid neighbour of a pair `[(i, 1 - w), (i + 1, w)]` ([`wall_table::grid_weights`]),
+/// picked by `u` with its weight, and `u` rescaled within its share.
+#[inline]
+fn pick_neighbour(pair: [(usize, f64); 2], u: f32) -> (usize, f32) {
+    let [(i, a), (j, b)] = pair.map(|(i, w)| (i, w as f32));
+    let (k, rest) = if u < a || !(b > 0.0) {
+        (i, u / a)
+    } else {
+        (j, (u - a) / b)
+    };
+    (k, rest.clamp(0.0, ONE_BELOW))
+}
+
+/// The largest `f32` below 1.
+const ONE_BELOW: f32 = 1.0 - f32::EPSILON / 2.0;
+
+/// A smooth-wall groove sample ([`WallLobeTable::sample_smooth`]), scratch frame.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct SmoothSample {
+    pub wi: Vec3,
+    /// 0: reflected, 1: transmitted.
+    pub lobe: usize,
+    /// `f |cos| / pdf` of the chosen slice: `s` times its energy (module notes).
+    pub weight: f32,
+    /// The density of `wi` from the chosen slice.
+    pub pdf: f32,
 }
 
 /// The slices a `wo` reads: up to four, with bilinear weights, each slice's total energy and
@@ -431,6 +555,26 @@ impl<'a> ScratchedGlassBsdf<'a> {
         }
         let (k, u0) = self.lobes.pick(u_lobe, acc);
         let l = &self.lobes.as_slice()[k];
+        let eta = |lobe: usize| {
+            if lobe == 0 {
+                1.0
+            } else if wo.z > 0.0 {
+                self.table.n
+            } else {
+                1.0 / self.table.n
+            }
+        };
+        if self.table.smooth() {
+            // The one-slice estimate (module notes): no light sampling to weigh against.
+            let s = self.table.sample_smooth(l.to_scratch(wo), u0, u)?;
+            return Some(BsdfSample {
+                wi: l.from_scratch(s.wi),
+                weight: Rgb::splat(s.weight),
+                pdf: l.coverage * s.pdf,
+                delta: false,
+                eta: eta(s.lobe),
+            });
+        }
         let corners = self.table.corners(l.to_scratch(wo));
         let (wi_s, lobe) = self.table.sample(&corners, u0, u)?;
         let wi = l.from_scratch(wi_s);
@@ -438,19 +582,48 @@ impl<'a> ScratchedGlassBsdf<'a> {
         if !(pdf > 0.0) {
             return None;
         }
-        let eta = if lobe == 0 {
-            1.0
-        } else if wo.z > 0.0 {
-            self.table.n
-        } else {
-            1.0 / self.table.n
-        };
         Some(BsdfSample {
             wi,
             weight: f * (wi.z.abs() / pdf),
             pdf,
             delta: false,
-            eta,
+            eta: eta(lobe),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wall_table::WallTableParams;
+
+    /// The guided search ([`WallLobeTable::search`]) finds the entry a binary search of the
+    /// whole slice finds, at every CDF value (ties and empty bins included) and between them,
+    /// for slices longer than the guide, as long and shorter (empty groups).
+    #[test]
+    fn guided_search_is_the_whole_search() {
+        for (roughness, bins) in [(0.0, 2), (0.0, 8), (0.0, 12), (0.3, 3)] {
+            let p = WallTableParams {
+                theta_bins: 2,
+                phi_bins: 2,
+                bins,
+                paths: 300,
+                ..WallTableParams::new(Profile::parse("v:angle=90").unwrap(), 1.5, roughness)
+            };
+            let t = WallLobeTable::new(&WallTable::compute(&p).unwrap());
+            let len = t.slice_len();
+            for slice in 0..t.totals.len() {
+                let cdf = &t.cdf[slice * len..(slice + 1) * len];
+                let mut xs: Vec<f32> = cdf
+                    .iter()
+                    .flat_map(|&v| [v, v * 0.999, v * 1.001])
+                    .collect();
+                xs.extend([-1.0, 0.0, 2.0 * t.totals[slice]]);
+                for x in xs {
+                    let whole = cdf.partition_point(|&v| v <= x).min(len - 1);
+                    assert_eq!(t.search(slice, x), whole, "bins {bins} slice {slice} x {x}");
+                }
+            }
+        }
     }
 }

@@ -518,9 +518,11 @@ mod scratched_glass {
         w
     }
 
-    /// Samples: the non-delta ones' `pdf` and weight match `pdf()` and `eval cos / pdf`, and
-    /// their directions pass a chi-square test against `pdf` (which integrates to the groove
-    /// lobes' probability `C`); smooth and rough walls, from outside and inside.
+    /// Samples: their directions pass a chi-square test against `pdf` (which integrates to
+    /// the groove lobes' probability `C`); smooth and rough walls, from outside and inside.
+    /// Rough walls' non-delta samples' `pdf` and weight match `pdf()` and `eval cos / pdf`;
+    /// smooth walls' weights are the one-slice estimate's, `s` times the slice's energy (the
+    /// module notes), which a lossless groove's slices make exactly `s`.
     #[test]
     fn sampler_matches_pdf_from_both_sides() {
         for rough in [0.0, 0.3] {
@@ -539,6 +541,13 @@ mod scratched_glass {
                             bsdf.sample(wo, rng.random(), Vec2::new(rng.random(), rng.random()))?;
                         if s.delta {
                             return None;
+                        }
+                        if rough == 0.0 {
+                            // `s` undone: `eta^2` is `1 / s` for each lobe and side.
+                            let lossless = s.weight.x * s.eta * s.eta;
+                            bad_weight += !rel_close(lossless, 1.0, 1e-4) as usize;
+                            bad_pdf += !(s.pdf > 0.0) as usize;
+                            return Some(s.wi);
                         }
                         let (f, pdf) = bsdf.eval_pdf(wo, s.wi);
                         bad_pdf += !rel_close(s.pdf, pdf, 2e-3) as usize;
