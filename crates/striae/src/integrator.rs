@@ -977,7 +977,8 @@ fn shade_hit<'a, const DIFFERENTIALS: bool>(
         sampler.seek(depth, 1);
         None
     };
-    let (rd_here, chain) = if DIFFERENTIALS && u_layer.is_some() {
+    let reads_footprint = u_layer.is_some() && material.reads_footprint_at(wo_world, hit.ng);
+    let (rd_here, chain) = if DIFFERENTIALS && reads_footprint {
         let (rd, chain) = differentials.resolve(&scene.geometry);
         (Some(rd), chain)
     } else {

@@ -78,6 +78,16 @@ impl Material {
         }
     }
 
+    /// Whether the BSDF at a hit that reads its context ([`Self::reads_hit_context`]) reads
+    /// its footprint too: not scratched glass seen from inside.
+    #[inline]
+    pub fn reads_footprint_at(&self, wo: Vec3, ng: Vec3) -> bool {
+        match self {
+            Material::Scratched(m) => m.reads_footprint_at(wo, ng),
+            _ => false,
+        }
+    }
+
     /// The shading frame at `hit` and the BSDF the material presents there, in that frame: the
     /// one place a material becomes a BSDF. The frame is flipped to `wo`'s side for opaque
     /// materials and guarded against `wo` falling behind the shading normal

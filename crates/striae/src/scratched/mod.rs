@@ -180,6 +180,18 @@ impl ScratchedMaterial {
         !self.seen_from_inside(wo, ng)
     }
 
+    /// Whether [`Self::bsdf`] reads the hit's footprint (and its pixel) for `wo` and `ng` as
+    /// [`Self::reads_hit_context`]: where it reads the context at all, except glass with
+    /// dielectric walls seen from inside, whose hits take the point test
+    /// ([`Self::inside_coverage`]) and read only `u_layer`.
+    #[inline]
+    pub fn reads_footprint_at(&self, wo: Vec3, ng: Vec3) -> bool {
+        let inside_walls = matches!(self.model, ScratchModel::DielectricWalls(_))
+            && matches!(self.base, ScratchedBase::Glass { .. })
+            && wo.dot(ng) <= 0.0;
+        self.reads_footprint() && !inside_walls
+    }
+
     /// Glass seen from inside under the seed's model, which has no scratches there
     /// (`bsdf::scratched`); dielectric walls scatter from both sides.
     #[inline]

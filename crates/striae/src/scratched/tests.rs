@@ -879,3 +879,74 @@ fn ridges_meet_grazing_light_from_inside() {
         );
     }
 }
+
+/// Hits from inside glass with dielectric walls read `u_layer` but not the footprint
+/// (`reads_footprint_at`, which lets the integrator leave their ray differentials unworked):
+/// their BSDF is the same with no differentials as with any footprint. From outside the
+/// footprint counts; the seed's glass and the metal read it from outside only where they read
+/// anything.
+#[test]
+fn inside_hits_read_no_footprint() {
+    use crate::wall_table::{WallTable, WallTableParams};
+    let table = WallTable::compute(&WallTableParams {
+        theta_bins: 2,
+        phi_bins: 2,
+        bins: 4,
+        paths: 200,
+        ..WallTableParams::new(Profile::parse("v:angle=90").unwrap(), 1.5, 0.0)
+    })
+    .unwrap();
+    let glass = ScratchedMaterial::with_model(
+        ScratchedBase::Glass { eta: 1.5 },
+        Rgb::ONE,
+        ScratchModel::DielectricWalls(Arc::new(WallLobeTable::new(&table))),
+        wide_layers(4, 5),
+        LayerMix::Max,
+        CoverageMode::Footprint,
+    );
+    let mut rng = Pcg64::seed_from_u64(77);
+    let (mut covered, mut differs) = (0, 0);
+    for _ in 0..300 {
+        let uv = Vec2::new(rng.random(), rng.random());
+        let wo = dir(70.0 * rng.random::<f32>(), 360.0 * rng.random::<f32>());
+        assert!(glass.reads_hit_context(-wo, Vec3::Z) && !glass.reads_footprint_at(-wo, Vec3::Z));
+        assert!(glass.reads_footprint_at(wo, Vec3::Z));
+        let none = ShadingContext {
+            rd: None,
+            ..flat_ctx(uv, 0.0, -wo, 0.5)
+        };
+        let inside = format!("{:?}", bsdf_of(&glass, &none));
+        assert_eq!(
+            inside,
+            format!("{:?}", bsdf_of(&glass, &flat_ctx(uv, 0.2, -wo, 0.5)))
+        );
+        covered += matches!(bsdf_of(&glass, &none), Bsdf::ScratchedGlass(_)) as usize;
+        let outside = |f| format!("{:?}", bsdf_of(&glass, &flat_ctx(uv, f, wo, 0.5)));
+        differs += (outside(0.0) != outside(0.2)) as usize;
+    }
+    assert!(covered > 20 && differs > 20, "{covered} {differs}");
+    for base in [
+        ScratchedBase::Glass { eta: 1.5 },
+        ScratchedBase::Metal {
+            ior: ConductorIor {
+                eta: Rgb::ZERO,
+                k: Rgb::ONE,
+            },
+        },
+    ] {
+        let m = ScratchedMaterial::new(
+            base,
+            Rgb::ONE,
+            lossless_diffuse(),
+            wide_layers(2, 1),
+            LayerMix::Max,
+            CoverageMode::Footprint,
+        );
+        assert!(m.reads_footprint_at(Vec3::Z, Vec3::Z));
+        let point = ScratchedMaterial {
+            coverage: CoverageMode::Point,
+            ..m.clone()
+        };
+        assert!(!point.reads_footprint_at(Vec3::Z, Vec3::Z));
+    }
+}
