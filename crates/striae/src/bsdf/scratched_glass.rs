@@ -216,6 +216,17 @@ impl WallLobeTable {
         (start + cdf.partition_point(|&v| v <= x)).min(len - 1)
     }
 
+    /// The factor `s` of lobe `l` (0: R, 1: T) for light from `side` (module notes): 1 for
+    /// reflection, `(n_o / n_i)^2` for transmission.
+    #[inline]
+    fn radiance_factor(&self, side: usize, l: usize) -> f32 {
+        match (l, side) {
+            (0, _) => 1.0,
+            (_, 0) => 1.0 / (self.n * self.n),
+            _ => self.n * self.n,
+        }
+    }
+
     /// The exit bin of an angle in `(-pi/2, pi/2)`.
     #[inline]
     fn bin(&self, a: f32) -> usize {
@@ -311,13 +322,7 @@ impl WallLobeTable {
             }
         }
         let area = self.row_width() * self.bin_width() * cos_theta;
-        let s = if l == 0 {
-            1.0
-        } else if c.side == 0 {
-            1.0 / (self.n * self.n)
-        } else {
-            self.n * self.n
-        };
+        let s = self.radiance_factor(c.side, l);
         (s * f / (area * wi.z.abs()), p / area)
     }
 
@@ -358,17 +363,10 @@ impl WallLobeTable {
         let (sp, cp) = phi_o.sin_cos();
         let up = (side == 0) == (l == 0);
         let z = if up { ct * cp } else { -ct * cp };
-        let s = if l == 0 {
-            1.0
-        } else if side == 0 {
-            1.0 / (self.n * self.n)
-        } else {
-            self.n * self.n
-        };
         Some(SmoothSample {
             wi: Vec3::new(ct * sp, st, z),
             lobe: l,
-            weight: s * total,
+            weight: self.radiance_factor(side, l) * total,
             pdf: m / (total * self.smooth_box * h * ct),
         })
     }
