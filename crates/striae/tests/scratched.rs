@@ -159,7 +159,8 @@ fn white_furnace_scratched_glass() {
 /// footprint scratched), and the wide scratches with the sky light-sampled under MIS.
 ///
 /// Smooth walls are lossless (the table's `R + T` is 1 in every slice), so the furnace is 1
-/// within noise; the slack (0.01) covers the table's Monte Carlo noise.
+/// within noise; the slack (0.01) covers the table's Monte Carlo noise. Traced smooth walls
+/// (`lobes = "traced"`, no table) have none: slack 3e-3.
 ///
 /// Rough walls (GGX alpha 0.3) lose what the walls' single-scattering microfacet model drops:
 /// a sample below the wall is absorbed, and GGX at alpha 0.3 puts 8 % of the projected
@@ -191,6 +192,15 @@ fn white_furnace_scratched_glass_dielectric_walls() {
             "{what}: mean {} +- {}",
             smooth.mean(),
             smooth.std_error()
+        );
+        let what = format!("traced dielectric walls, setting {setting}");
+        check_furnace(
+            &what,
+            &furnace(
+                glass,
+                &format!("{walls}lobes = \"traced\"\n{union}setting = {setting}\n"),
+            ),
+            3e-3,
         );
         let what = format!("rough dielectric walls, setting {setting}");
         let rough = furnace_mean(

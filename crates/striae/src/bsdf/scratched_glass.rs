@@ -24,6 +24,13 @@
 //! still a density, so `eval` and `pdf` stay defined (light sampling leaves it to BSDF
 //! sampling, below).
 //!
+//! **Traced grooves** (`lobes = "traced"`, [`WallLobeTable::traced`]): smooth walls with no
+//! table. A groove sample is one path of [`GroovePaths`] through the exact groove, entering
+//! at `u.x` across the opening (or the band beside it, from inside), its bounces drawn from a
+//! stream keyed by the sample's other numbers; its weight is `s` times the path's (1:
+//! lossless), its `pdf` the lobe's probability `c_k` (there is no density to give: `eval` and
+//! `pdf` are 0 for these lobes, which only BSDF sampling reaches, as for smooth walls' boxes).
+//!
 //! **Between grid points** the four nearest incident slices are blended bilinearly in
 //! `(theta_o, phi_o)` of `wo`; for rough walls each is first warped along `theta`: the
 //! piecewise-linear map of `(-pi/2, pi/2)` onto itself that carries the slice's smooth-wall
@@ -49,9 +56,11 @@
 use super::dielectric::{mirror_sample, refraction_sample};
 use super::scratched::CoveredLobes;
 use super::{fresnel_f32, BsdfSample, ScratchLobe};
+use crate::groove::GroovePaths;
+use crate::hash::mix64;
 use crate::math::{Rgb, Vec2, Vec3};
 use crate::profile::Profile;
-use crate::wall_table::{self, WallTable};
+use crate::wall_table::{self, WallTable, WallTableParams};
 use std::f32::consts::{FRAC_PI_2, PI};
 
 /// How far from `+-pi/2` the warp's fixed points are kept (radians), so that its slopes stay
@@ -94,6 +103,8 @@ pub struct WallLobeTable {
     profile: Profile,
     ridge_tan: f64,
     hash: String,
+    /// `lobes = "traced"`: no table; each groove sample is one path through the exact groove.
+    paths: Option<GroovePaths>,
 }
 
 impl WallLobeTable {
@@ -146,6 +157,7 @@ impl WallLobeTable {
             profile: table.params.profile.clone(),
             ridge_tan: table.params.profile.ridge_tan(),
             hash: table.params.hash(),
+            paths: None,
         };
         t.grid_exit = (0..nt)
             .map(|i| {
@@ -154,6 +166,34 @@ impl WallLobeTable {
             })
             .collect();
         t
+    }
+
+    /// Smooth walls with no table (`lobes = "traced"`, see the module notes): the groove of
+    /// `params` (smooth dielectric walls) sampled by tracing it, one path a sample.
+    pub fn traced(params: &WallTableParams) -> Self {
+        let profile = params.profile.clone();
+        WallLobeTable {
+            nt: 0,
+            np: 0,
+            b: 0,
+            rows: 1,
+            smooth_box: 0.0,
+            n: params.ior as f32,
+            mass: Vec::new(),
+            cdf: Vec::new(),
+            totals: Vec::new(),
+            guide: Vec::new(),
+            grid_exit: Vec::new(),
+            ridge_tan: profile.ridge_tan(),
+            hash: format!("{}-traced", params.hash()),
+            paths: Some(GroovePaths::new(&profile, params.ior)),
+            profile,
+        }
+    }
+
+    /// Whether the groove is traced instead of read from a table.
+    pub fn is_traced(&self) -> bool {
+        self.paths.is_some()
     }
 
     /// The groove's cross-section the table was traced with.
@@ -507,7 +547,7 @@ impl<'a> ScratchedGlassBsdf<'a> {
     /// sampler's non-delta part.
     #[inline]
     pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
-        if wo.z == 0.0 {
+        if wo.z == 0.0 || self.table.is_traced() {
             return (Rgb::ZERO, 0.0);
         }
         let (mut f, mut p) = (0.0f32, 0.0f32);
@@ -562,6 +602,24 @@ impl<'a> ScratchedGlassBsdf<'a> {
                 1.0 / self.table.n
             }
         };
+        if let Some(paths) = &self.table.paths {
+            let w = l.to_scratch(wo);
+            // The path's bounces from a stream keyed by the sample's other numbers.
+            let key = mix64((u0.to_bits() as u64) << 32 | u.y.to_bits() as u64);
+            let d0 = [-w.x as f64, -w.y as f64, -w.z as f64];
+            let e = paths.trace(d0, u.x as f64, key)?;
+            let wi = Vec3::new(e.d[0] as f32, e.d[1] as f32, e.d[2] as f32);
+            let lobe = (wi.z > 0.0) != (wo.z > 0.0);
+            let side = (wo.z < 0.0) as usize;
+            let weight = self.table.radiance_factor(side, lobe as usize) * e.w as f32;
+            return Some(BsdfSample {
+                wi: l.from_scratch(wi),
+                weight: Rgb::splat(weight),
+                pdf: l.coverage,
+                delta: false,
+                eta: eta(lobe as usize),
+            });
+        }
         if self.table.smooth() {
             // The one-slice estimate (module notes): no light sampling to weigh against.
             let s = self.table.sample_smooth(l.to_scratch(wo), u0, u)?;

@@ -576,13 +576,21 @@ mod scratched_glass {
     /// Smooth walls with the shipped box: every groove sample leaves within the box around the
     /// exact exit angle of METHOD.md 8.1 (`beta = n w.y` conserved,
     /// [`crate::wall_table::exit_theta`]), reflected and transmitted, from both sides; a lossless
-    /// groove's sampled weights still average 1.
+    /// groove's sampled weights still average 1. Traced grooves (`lobes = "traced"`, no table)
+    /// leave at the exact angle itself, and have no density to evaluate.
     #[test]
     fn smooth_walls_leave_at_the_exact_angle() {
-        let t = WallLobeTable::new(&wall_table(0.0, 3, 8, 4000));
+        let table = wall_table(0.0, 3, 8, 4000);
+        let traced = WallLobeTable::traced(&table.params);
+        for t in [WallLobeTable::new(&table), traced] {
+            smooth_walls_leave_at(&t);
+        }
+    }
+
+    fn smooth_walls_leave_at(t: &WallLobeTable) {
         assert!(t.smooth());
         let lobe = lobes()[0];
-        let bsdf = Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(1.5, &t, &[lobe]));
+        let bsdf = Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(1.5, t, &[lobe]));
         let half = 0.5 * t.row_width();
         for (i, wo) in wos().into_iter().enumerate() {
             let side = (wo.z < 0.0) as usize;
@@ -611,6 +619,10 @@ mod scratched_glass {
             );
             let a = albedo(&bsdf, wo, 100_000, 170 + i as u64, true)[0];
             assert!(a.agrees_with(1.0, 4.0, 1e-3), "wo {wo:?}: {a:?}");
+            if t.is_traced() {
+                let wi = lobe.from_scratch(Vec3::new(0.3, 0.1, -0.95).normalize());
+                assert_eq!(bsdf.eval_pdf(wo, wi).1, 0.0);
+            }
         }
     }
 

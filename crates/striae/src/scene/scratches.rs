@@ -15,6 +15,8 @@
 //!                                # from both sides (METHOD.md 8.1-8.2, glass only)
 //! # roughness = 0.2              # GGX alpha of dielectric walls, or of a metal's specular
 //!                                # walls (default 0: smooth)
+//! # lobes = "traced"             # smooth dielectric walls: trace the exact groove at every
+//!                                # sample instead of reading a table (default "table")
 //! fresnel = "seed"               # or "walls"
 //! fresnel_law = "schlick"        # dielectric | conductor:ETA,K | none
 //! m = 256                        # table size M, N, N_r (default: the seed's,
@@ -112,6 +114,10 @@ pub struct ScratchSpec {
     /// A table file (`.npz`, relative to the scene file) to load instead of computing one;
     /// excludes the table keys above.
     pub table: Option<PathBuf>,
+    /// Smooth dielectric walls: `table` (default: the precomputed lobes) or `traced` (no
+    /// table: each groove sample traces one path through the exact groove).
+    #[serde(default, deserialize_with = "keyed::lobes")]
+    pub lobes: Option<LobesKey>,
     /// Build the scratches as real grooves on the shape's planar faces instead of the
     /// SV-BRDF (METHOD.md 8.3; `scene::explicit`).
     pub explicit: Option<bool>,
@@ -121,7 +127,7 @@ pub struct ScratchSpec {
 /// A material is an internally tagged enum, which serde buffers, so `toml` can point only at the
 /// material's table and its message would name the bad word but not the key.
 mod keyed {
-    use super::{BaseKind, CoverageMode, FresnelMode, LayerMix, Orientation, WallsKey};
+    use super::{BaseKind, CoverageMode, FresnelMode, LayerMix, LobesKey, Orientation, WallsKey};
     use serde::de::{Deserialize, Deserializer, Error};
 
     fn named<'de, T: Deserialize<'de>, D: Deserializer<'de>>(
@@ -149,6 +155,19 @@ mod keyed {
     pub fn orientation<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Orientation>, D::Error> {
         named(d, "scratches.orientation")
     }
+    pub fn lobes<'de, D: Deserializer<'de>>(d: D) -> Result<Option<LobesKey>, D::Error> {
+        named(d, "scratches.lobes")
+    }
+}
+
+/// `scratches.lobes`: how smooth dielectric walls' groove lobes are found.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum LobesKey {
+    /// Read from the precomputed wall table (METHOD.md 8.1).
+    Table,
+    /// Sampled by tracing the exact groove at render time, one path a sample.
+    Traced,
 }
 
 /// `scratches.walls`: the 2D table's walls ([`Walls`]) or the groove's own glass.
@@ -167,6 +186,8 @@ pub enum TableSource {
     /// A wall table (METHOD.md 8.1; dielectric, or a metal's rough specular walls), computed
     /// or cached.
     Walls(WallTableParams),
+    /// Smooth dielectric walls with no table, traced at render time (`lobes = "traced"`).
+    Traced(WallTableParams),
     /// A table file: the seed's or a wall table (`kind` says which).
     File(PathBuf),
 }
@@ -330,6 +351,7 @@ impl ScratchedDesc {
             ("scratches.walls", s.walls.is_some()),
             ("scratches.roughness", s.roughness.is_some()),
             ("scratches.trace_seed", s.trace_seed.is_some()),
+            ("scratches.lobes", s.lobes.is_some()),
         ];
         if let Some(path) = &s.table {
             let two_d = self.two_d_table_keys();
@@ -350,9 +372,25 @@ impl ScratchedDesc {
         }
         .map_err(|e| invalid("scratches.profile", format!("{spec:?}"), e.to_string()))?;
         if s.walls == Some(WallsKey::Dielectric) {
-            return self
-                .resolve_walls(defaults, profile)
-                .map(TableSource::Walls);
+            let params = self.resolve_walls(defaults, profile)?;
+            return Ok(match s.lobes {
+                Some(LobesKey::Traced) if params.roughness > 0.0 => {
+                    return Err(invalid(
+                        "scratches.lobes",
+                        "\"traced\"",
+                        "needs smooth walls: rough walls' lobes are light-sampled with MIS, which needs the table's density (leave out `roughness` or `lobes`)",
+                    ))
+                }
+                Some(LobesKey::Traced) => TableSource::Traced(params),
+                _ => TableSource::Walls(params),
+            });
+        }
+        if s.lobes.is_some() {
+            return Err(invalid(
+                "scratches.lobes",
+                format!("{:?}", s.lobes.unwrap_or(LobesKey::Table)).to_lowercase(),
+                "applies to walls = \"dielectric\" only",
+            ));
         }
         if let Some(r) = s.roughness {
             if let Some(params) = self.resolve_rough_specular(defaults, &profile, r)? {
@@ -604,6 +642,9 @@ impl ScratchedDesc {
                     WallKind::Specular { .. } => ScratchModel::SpecularWalls(table),
                 }
             }
+            TableSource::Traced(params) => ScratchModel::DielectricWalls(std::sync::Arc::new(
+                crate::bsdf::WallLobeTable::traced(params),
+            )),
             TableSource::File(path) => {
                 let model = crate::cache::load_any_table_file(path).map_err(table_error)?;
                 self.check_wall_table_base(&r.base, &model)?;
@@ -687,7 +728,7 @@ impl ScratchedDesc {
     /// The explicit geometry's ingredients (validated like [`ScratchedDesc::resolve`]).
     pub fn explicit(&self, base_dir: &Path) -> Result<ExplicitSpec, MaterialError> {
         let r = self.resolve(base_dir)?;
-        if let TableSource::Walls(params) = &r.table {
+        if let TableSource::Walls(params) | TableSource::Traced(params) = &r.table {
             if let WallKind::Specular { .. } = params.walls {
                 return Err(invalid(
                     "scratches.explicit",

@@ -50,6 +50,15 @@ fn keys_are_validated() {
         panic!("{:?}", walls.table)
     };
     assert_eq!((w.ior, w.roughness, w.seed), (1.4f32 as f64, 0.25, 7));
+    // Traced smooth walls: the same parameters, no table.
+    let traced = parse("type = \"scratched\"\nbase = \"glass\"\n[scratches]\nwalls = \"dielectric\"\nlobes = \"traced\"")
+        .unwrap()
+        .resolve(Path::new("."))
+        .unwrap();
+    let TableSource::Traced(w) = traced.table else {
+        panic!("{:?}", traced.table)
+    };
+    assert_eq!((w.ior, w.roughness), (1.5, 0.0));
     let TableSource::Compute(p) = r.table else {
         panic!()
     };
@@ -192,6 +201,22 @@ fn keys_are_validated() {
         (
             "base = \"glass\"\n[scratches]\nwalls = \"rough\"",
             &["`scratches.walls`", "rough"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nwalls = \"dielectric\"\nlobes = \"exact\"",
+            &["`scratches.lobes`", "exact"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nwalls = \"dielectric\"\nroughness = 0.2\nlobes = \"traced\"",
+            &["`scratches.lobes`", "smooth walls"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nlobes = \"traced\"",
+            &["`scratches.lobes`", "dielectric"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\ntable = \"t.npz\"\nlobes = \"table\"",
+            &["`scratches.lobes`", "table"],
         ),
         (
             "base = \"glass\"\n[scratches]\nfresnel = \"exact\"",
