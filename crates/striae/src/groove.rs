@@ -364,6 +364,14 @@ struct Ray {
     w: f64,
 }
 
+/// Where entry points start on the line `z = 0` and the width they cover, for light along
+/// `d`: the opening `[-1/2, 1/2]`, or with `beside` every line through the groove's bounding
+/// box (a line reaches `z = cs.z_min` at `dx` from where it crosses `z = 0`).
+fn entry_band(cs: &CrossSection, d: [f64; 3], beside: bool) -> (f64, f64) {
+    let dx = if beside { cs.z_min * d[0] / d[2] } else { 0.0 };
+    (-0.5 - dx.max(0.0), 1.0 + dx.abs())
+}
+
 /// How a path ended ([`Tracer::run`]).
 enum Outcome {
     /// With nothing ahead: into the air or the bulk.
@@ -401,15 +409,10 @@ impl Tracer {
     fn new(profile: &Profile, s: &GonioSettings) -> Self {
         let cs = CrossSection::new(profile);
         let d0 = s.incident_travel();
-        // A line reaches `z = cs.z_min` at `dx` from where it crosses `z = 0`.
-        let dx = if s.beside {
-            cs.z_min * d0[0] / d0[2]
-        } else {
-            0.0
-        };
+        let (band_start, band_width) = entry_band(&cs, d0, s.beside);
         Tracer {
-            band_start: -0.5 - dx.max(0.0),
-            band_width: 1.0 + dx.abs(),
+            band_start,
+            band_width,
             cs,
             bins: AngleBins::new(s.bins),
             s: s.clone(),
@@ -431,26 +434,24 @@ impl Tracer {
     fn start(&self, k: u64, path_key: u64) -> Ray {
         let x0 = self.band_start
             + self.band_width * (k as f64 + self.draw(path_key, 0)) / self.s.paths as f64;
-        let d = self.d0;
-        match self.s.side {
-            LightSide::Outside => Ray {
-                pos: [x0, 0.0],
-                d,
-                in_object: false,
-                skip: usize::MAX,
-                w: 1.0,
-            },
-            LightSide::Inside => {
-                // Start below the deepest point on the line through (x0, 0).
-                let z = self.cs.z_min - 1.0;
-                Ray {
-                    pos: [x0 + z / d[2] * d[0], z],
-                    d,
-                    in_object: true,
-                    skip: usize::MAX,
-                    w: 1.0,
-                }
-            }
+        self.entry(x0, self.d0, self.s.side == LightSide::Inside)
+    }
+
+    /// A ray along `d` entering at `x0` on the line `z = 0`: there from the air, or from
+    /// inside the object (`inside`), below the deepest point on the line through `(x0, 0)`.
+    fn entry(&self, x0: f64, d: [f64; 3], inside: bool) -> Ray {
+        let (pos, in_object) = if inside {
+            let z = self.cs.z_min - 1.0;
+            ([x0 + z / d[2] * d[0], z], true)
+        } else {
+            ([x0, 0.0], false)
+        };
+        Ray {
+            pos,
+            d,
+            in_object,
+            skip: usize::MAX,
+            w: 1.0,
         }
     }
 
@@ -709,32 +710,11 @@ impl GroovePaths {
     pub fn trace(&self, d0: [f64; 3], x: f64, key: u64) -> Option<GrooveExit> {
         let t = &self.tracer;
         let inside = d0[2] > 0.0;
-        // The band of entry points whose lines pass through the groove's bounding box.
-        let dx = if inside {
-            t.cs.z_min * d0[0] / d0[2]
-        } else {
-            0.0
-        };
-        let (start, width) = (-0.5 - dx.max(0.0), 1.0 + dx.abs());
+        let (start, width) = entry_band(&t.cs, d0, inside);
         for attempt in 0..ENTRY_TRIES {
             let path_key = mix64(key.wrapping_add(attempt.wrapping_mul(GOLDEN)));
             let u = if attempt == 0 { x } else { t.draw(path_key, 0) };
-            let x0 = start + width * u;
-            let (pos, in_object) = if inside {
-                // Below the deepest point on the line through (x0, 0).
-                let z = t.cs.z_min - 1.0;
-                ([x0 + z / d0[2] * d0[0], z], true)
-            } else {
-                ([x0, 0.0], false)
-            };
-            let ray = Ray {
-                pos,
-                d: d0,
-                in_object,
-                skip: usize::MAX,
-                w: 1.0,
-            };
-            match t.run(ray, path_key, inside) {
+            match t.run(t.entry(start + width * u, d0, inside), path_key, inside) {
                 Outcome::Left(r) if r.d[2] != 0.0 && (r.d[2] < 0.0) == r.in_object => {
                     return Some(GrooveExit {
                         d: r.d,

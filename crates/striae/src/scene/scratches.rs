@@ -373,22 +373,20 @@ impl ScratchedDesc {
         .map_err(|e| invalid("scratches.profile", format!("{spec:?}"), e.to_string()))?;
         if s.walls == Some(WallsKey::Dielectric) {
             let params = self.resolve_walls(defaults, profile)?;
-            return Ok(match s.lobes {
-                Some(LobesKey::Traced) if params.roughness > 0.0 => {
-                    return Err(invalid(
-                        "scratches.lobes",
-                        "\"traced\"",
-                        "needs smooth walls: rough walls' lobes are light-sampled with MIS, which needs the table's density (leave out `roughness` or `lobes`)",
-                    ))
-                }
-                Some(LobesKey::Traced) => TableSource::Traced(params),
-                _ => TableSource::Walls(params),
-            });
+            return match s.lobes {
+                Some(LobesKey::Traced) if params.roughness > 0.0 => Err(invalid(
+                    "scratches.lobes",
+                    "\"traced\"",
+                    "needs smooth walls: rough walls' lobes are light-sampled with MIS, which needs the table's density (leave out `roughness` or `lobes`)",
+                )),
+                Some(LobesKey::Traced) => Ok(TableSource::Traced(params)),
+                _ => Ok(TableSource::Walls(params)),
+            };
         }
-        if s.lobes.is_some() {
+        if let Some(lobes) = s.lobes {
             return Err(invalid(
                 "scratches.lobes",
-                format!("{:?}", s.lobes.unwrap_or(LobesKey::Table)).to_lowercase(),
+                format!("{lobes:?}").to_lowercase(),
                 "applies to walls = \"dielectric\" only",
             ));
         }
