@@ -83,12 +83,15 @@ pub const BEYOND_SCENES: [(&str, &str, &str, &str, &str); 3] = [
 ];
 
 /// The seed's model of a scene written for dielectric walls: the walls back to the default
-/// (`diffuse`, the seed's glass scratches), their `roughness` dropped, one direction per layer.
+/// (`diffuse`, the seed's glass scratches), their `roughness` and `lobes` dropped, one
+/// direction per layer.
 pub fn seed_variant(text: &str) -> String {
     text.lines()
         .filter(|l| {
             let key = l.trim_start();
-            !(key.starts_with("walls = \"dielectric\"") || key.starts_with("roughness ="))
+            !["walls = \"dielectric\"", "roughness =", "lobes ="]
+                .iter()
+                .any(|k| key.starts_with(k))
         })
         .map(|l| l.replace("orientation = \"random\"", "orientation = \"layer\""))
         .collect::<Vec<_>>()
@@ -592,11 +595,18 @@ mod tests {
                 walls || orientation == crate::layers::Orientation::Random,
                 "{name}"
             );
-            let (walls, orientation) = model(&seed_variant(text), name);
-            assert!(
-                !walls && orientation == crate::layers::Orientation::Layer,
-                "{name}"
+            // (`lobes` applies to dielectric walls only, so it goes with them.)
+            let with_lobes = text.replace(
+                "walls = \"dielectric\"",
+                "walls = \"dielectric\"\nlobes = \"table\"",
             );
+            for text in [text, &with_lobes[..]] {
+                let (walls, orientation) = model(&seed_variant(text), name);
+                assert!(
+                    !walls && orientation == crate::layers::Orientation::Layer,
+                    "{name}"
+                );
+            }
         }
     }
 

@@ -15,8 +15,9 @@
 //!                                # from both sides (METHOD.md 8.1-8.2, glass only)
 //! # roughness = 0.2              # GGX alpha of dielectric walls, or of a metal's specular
 //!                                # walls (default 0: smooth)
-//! # lobes = "traced"             # smooth dielectric walls: trace the exact groove at every
-//!                                # sample instead of reading a table (default "table")
+//! # lobes = "table"              # smooth dielectric walls: read a precomputed table instead
+//!                                # of tracing the exact groove at every sample (default
+//!                                # "traced"; rough walls always read a table)
 //! fresnel = "seed"               # or "walls"
 //! fresnel_law = "schlick"        # dielectric | conductor:ETA,K | none
 //! m = 256                        # table size M, N, N_r (default: the seed's,
@@ -114,8 +115,8 @@ pub struct ScratchSpec {
     /// A table file (`.npz`, relative to the scene file) to load instead of computing one;
     /// excludes the table keys above.
     pub table: Option<PathBuf>,
-    /// Smooth dielectric walls: `table` (default: the precomputed lobes) or `traced` (no
-    /// table: each groove sample traces one path through the exact groove).
+    /// Smooth dielectric walls: `traced` (default: no table, each groove sample traces one
+    /// path through the exact groove) or `table` (the precomputed lobes).
     #[serde(default, deserialize_with = "keyed::lobes")]
     pub lobes: Option<LobesKey>,
     /// Build the scratches as real grooves on the shape's planar faces instead of the
@@ -160,13 +161,14 @@ mod keyed {
     }
 }
 
-/// `scratches.lobes`: how smooth dielectric walls' groove lobes are found.
+/// `scratches.lobes`: how smooth dielectric walls' groove lobes are found (rough walls' are
+/// always read from a table).
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum LobesKey {
     /// Read from the precomputed wall table (METHOD.md 8.1).
     Table,
-    /// Sampled by tracing the exact groove at render time, one path a sample.
+    /// Sampled by tracing the exact groove at render time, one path a sample (the default).
     Traced,
 }
 
@@ -186,7 +188,8 @@ pub enum TableSource {
     /// A wall table (METHOD.md 8.1; dielectric, or a metal's rough specular walls), computed
     /// or cached.
     Walls(WallTableParams),
-    /// Smooth dielectric walls with no table, traced at render time (`lobes = "traced"`).
+    /// Smooth dielectric walls with no table, traced at render time (`lobes = "traced"`, the
+    /// default for them).
     Traced(WallTableParams),
     /// A table file: the seed's or a wall table (`kind` says which).
     File(PathBuf),
@@ -373,13 +376,14 @@ impl ScratchedDesc {
         .map_err(|e| invalid("scratches.profile", format!("{spec:?}"), e.to_string()))?;
         if s.walls == Some(WallsKey::Dielectric) {
             let params = self.resolve_walls(defaults, profile)?;
+            let smooth = params.roughness == 0.0;
             return match s.lobes {
-                Some(LobesKey::Traced) if params.roughness > 0.0 => Err(invalid(
+                Some(LobesKey::Traced) if !smooth => Err(invalid(
                     "scratches.lobes",
                     "\"traced\"",
                     "needs smooth walls: rough walls' lobes are light-sampled with MIS, which needs the table's density (leave out `roughness` or `lobes`)",
                 )),
-                Some(LobesKey::Traced) => Ok(TableSource::Traced(params)),
+                Some(LobesKey::Traced) | None if smooth => Ok(TableSource::Traced(params)),
                 _ => Ok(TableSource::Walls(params)),
             };
         }

@@ -50,13 +50,24 @@ fn keys_are_validated() {
         panic!("{:?}", walls.table)
     };
     assert_eq!((w.ior, w.roughness, w.seed), (1.4f32 as f64, 0.25, 7));
-    // Traced smooth walls: the same parameters, no table.
-    let traced = parse("type = \"scratched\"\nbase = \"glass\"\n[scratches]\nwalls = \"dielectric\"\nlobes = \"traced\"")
+    // Smooth walls: traced with no table, by default or asked for; a table where asked for.
+    let smooth = |lobes: &str| {
+        parse(&format!(
+            "type = \"scratched\"\nbase = \"glass\"\n[scratches]\nwalls = \"dielectric\"\n{lobes}"
+        ))
         .unwrap()
         .resolve(Path::new("."))
-        .unwrap();
-    let TableSource::Traced(w) = traced.table else {
-        panic!("{:?}", traced.table)
+        .unwrap()
+        .table
+    };
+    for lobes in ["", "lobes = \"traced\""] {
+        let TableSource::Traced(w) = smooth(lobes) else {
+            panic!("{lobes}: {:?}", smooth(lobes))
+        };
+        assert_eq!((w.ior, w.roughness), (1.5, 0.0));
+    }
+    let TableSource::Walls(w) = smooth("lobes = \"table\"") else {
+        panic!("{:?}", smooth("lobes = \"table\""))
     };
     assert_eq!((w.ior, w.roughness), (1.5, 0.0));
     let TableSource::Compute(p) = r.table else {
