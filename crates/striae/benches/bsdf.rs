@@ -1,15 +1,17 @@
 //! Cost of `eval` + `pdf` (two calls), of `eval_pdf` (one) and of `sample` for every BSDF, and of environment-map sampling.
-//! The scratched glass with dielectric walls reads tables of the shipped sizes (smooth walls:
-//! 17 MiB, which the lookups' cache misses make part of the cost).
+//! The scratched glass with dielectric walls reads tables of the default sizes (smooth walls:
+//! 17 MiB, which the lookups' cache misses make part of the cost), or, for smooth walls as
+//! they render by default, traces the groove (`scratched_glass_traced`).
 //! Each iteration processes a batch of 1024 precomputed random directions / sample points.
 //!
 //! `cargo bench -p striae --bench bsdf`
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use rand::{Rng, SeedableRng};
+use std::sync::Arc;
 use striae::bsdf::{
-    Bsdf, Conductor, ConductorIor, Dielectric, Diffuse, RoughConductor, RoughDielectric,
-    ScratchLobe, ScratchedGlassBsdf, WallLobeTable,
+    Bsdf, Conductor, ConductorIor, Dielectric, Diffuse, GlassWalls, RoughConductor,
+    RoughDielectric, ScratchLobe, ScratchedGlassBsdf, TracedGroove, WallLobeTable,
 };
 use striae::envmap::EnvMap;
 use striae::math::{Rgb, Vec2, Vec3};
@@ -33,21 +35,29 @@ fn bsdfs() -> Vec<(&'static str, Bsdf<'static>)> {
             "rough_conductor",
             Bsdf::RoughConductor(RoughConductor::new(eta, k, 0.2)),
         ),
-        ("scratched_glass_smooth", scratched_glass(0.0)),
-        ("scratched_glass_rough", scratched_glass(0.3)),
+        ("scratched_glass_smooth", scratched_glass(0.0, false)),
+        ("scratched_glass_traced", scratched_glass(0.0, true)),
+        ("scratched_glass_rough", scratched_glass(0.3, false)),
     ]
 }
 
 /// Glass with two crossing scratches (coverages 0.3 and 0.25) whose round grooves have
-/// dielectric walls of GGX `roughness` (METHOD.md 8.2): the shipped table sizes, traced with
-/// 300 paths a direction (the lookups' cost does not depend on them).
-fn scratched_glass(roughness: f64) -> Bsdf<'static> {
+/// dielectric walls of GGX `roughness` (METHOD.md 8.2): read from a table of the default
+/// sizes, traced with 300 paths a direction (the lookups' cost does not depend on them), or
+/// (`traced`, smooth walls) the groove traced at every sample.
+fn scratched_glass(roughness: f64, traced: bool) -> Bsdf<'static> {
     let profile = Profile::parse("round:depth=0.3").unwrap();
     let params = WallTableParams {
         paths: 300,
         ..WallTableParams::new(profile, 1.5, roughness)
     };
-    let table = WallLobeTable::new(&WallTable::compute(&params).unwrap());
+    let walls = if traced {
+        GlassWalls::Traced(Arc::new(TracedGroove::new(&params)))
+    } else {
+        GlassWalls::Table(Arc::new(WallLobeTable::new(
+            &WallTable::compute(&params).unwrap(),
+        )))
+    };
     let lobe = |coverage: f32, beta: f32| ScratchLobe {
         coverage,
         cos: beta.cos(),
@@ -56,7 +66,7 @@ fn scratched_glass(roughness: f64) -> Bsdf<'static> {
     let lobes = [lobe(0.3, 0.4), lobe(0.25, 2.1)];
     Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(
         1.5,
-        Box::leak(Box::new(table)),
+        Box::leak(Box::new(walls)),
         &lobes,
     ))
 }

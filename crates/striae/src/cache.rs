@@ -7,7 +7,7 @@
 //! holds other parameters, is recomputed with a warning ([`crate::log`]); temporary files of
 //! processes killed while writing are swept ([`crate::io::sweep_stale_temporaries`]).
 
-use crate::bsdf::{ScratchLobeTable, WallLobeTable};
+use crate::bsdf::{GlassWalls, ScratchLobeTable, WallLobeTable};
 use crate::scratched::ScratchModel;
 use crate::table::{ScratchTable, TableError, TableParams};
 use crate::wall_table::{WallKind, WallTable, WallTableParams};
@@ -136,7 +136,7 @@ pub fn load_any_table_file(path: &Path) -> Result<ScratchModel, TableError> {
             Ok(if specular {
                 ScratchModel::SpecularWalls(table)
             } else {
-                ScratchModel::DielectricWalls(table)
+                ScratchModel::DielectricWalls(GlassWalls::Table(table))
             })
         }
         Err(e) if crate::wall_table::declares_kind(path) => Err(e),

@@ -47,7 +47,7 @@ pub use conductor::{Conductor, ConductorIor, RoughConductor, CONDUCTOR_PRESETS};
 pub use dielectric::{Dielectric, RoughDielectric};
 pub use diffuse::Diffuse;
 pub use scratched::{ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf};
-pub use scratched_glass::{ScratchedGlassBsdf, WallLobeTable};
+pub use scratched_glass::{GlassWalls, ScratchedGlassBsdf, TracedGroove, WallLobeTable};
 pub use scratched_metal::ScratchedMetalBsdf;
 pub use wall::GrooveWall;
 
@@ -209,7 +209,7 @@ impl Bsdf<'_> {
         match self {
             Bsdf::Dielectric(_) | Bsdf::Conductor(_) => true,
             Bsdf::Scratched(b) => b.is_delta(),
-            Bsdf::ScratchedGlass(b) => b.table.smooth(),
+            Bsdf::ScratchedGlass(b) => b.walls.smooth(),
             Bsdf::Wall(b) => b.specular,
             _ => false,
         }

@@ -24,12 +24,14 @@
 //! still a density, so `eval` and `pdf` stay defined (light sampling leaves it to BSDF
 //! sampling, below).
 //!
-//! **Traced grooves** (`lobes = "traced"`, [`WallLobeTable::traced`]): smooth walls with no
-//! table. A groove sample is one path of [`GroovePaths`] through the exact groove, entering
-//! at `u.x` across the opening (or the band beside it, from inside), its bounces drawn from a
-//! stream keyed by the sample's other numbers; its weight is `s` times the path's (1:
-//! lossless), its `pdf` the lobe's probability `c_k` (there is no density to give: `eval` and
-//! `pdf` are 0 for these lobes, which only BSDF sampling reaches, as for smooth walls' boxes).
+//! **The walls' two render forms** ([`GlassWalls`]): a table ([`WallLobeTable`], below: rough
+//! walls, and smooth ones with `lobes = "table"`), or, for smooth walls by default, the exact
+//! groove traced ([`TracedGroove`], `lobes = "traced"`): a groove sample is one path of
+//! [`GroovePaths`] through the groove, entering at `u.x` across the opening (or the band
+//! beside it, from inside), its bounces drawn from a stream keyed by the sample's other
+//! numbers; its weight is `s` times the path's (1: lossless), its `pdf` the lobe's probability
+//! `c_k` (there is no density to give: `eval` and `pdf` are 0 for these lobes, which only BSDF
+//! sampling reaches, as for smooth walls' boxes).
 //!
 //! **Between grid points** the four nearest incident slices are blended bilinearly in
 //! `(theta_o, phi_o)` of `wo`; for rough walls each is first warped along `theta`: the
@@ -62,6 +64,7 @@ use crate::math::{Rgb, Vec2, Vec3};
 use crate::profile::Profile;
 use crate::wall_table::{self, WallTable, WallTableParams};
 use std::f32::consts::{FRAC_PI_2, PI};
+use std::sync::Arc;
 
 /// How far from `+-pi/2` the warp's fixed points are kept (radians), so that its slopes stay
 /// finite where an exit angle grazes (total internal reflection clamps it to `+-pi/2`).
@@ -99,12 +102,10 @@ pub struct WallLobeTable {
     /// The smooth-wall exit angles of the `theta` grid's centres, `[t][side][lobe]`.
     grid_exit: Vec<[[f32; 2]; 2]>,
     /// The groove's cross-section, and the least `tan theta` (in the cross-section) at which
-    /// light from inside meets it beside its opening ([`Self::ridge_tan`]).
+    /// light from inside meets it beside its opening ([`GlassWalls::ridge_tan`]).
     profile: Profile,
     ridge_tan: f64,
     hash: String,
-    /// `lobes = "traced"`: no table; each groove sample is one path through the exact groove.
-    paths: Option<GroovePaths>,
 }
 
 impl WallLobeTable {
@@ -157,7 +158,6 @@ impl WallLobeTable {
             profile: table.params.profile.clone(),
             ridge_tan: table.params.profile.ridge_tan(),
             hash: table.params.hash(),
-            paths: None,
         };
         t.grid_exit = (0..nt)
             .map(|i| {
@@ -168,52 +168,9 @@ impl WallLobeTable {
         t
     }
 
-    /// Smooth walls with no table (`lobes = "traced"`, see the module notes): the groove of
-    /// `params` (smooth dielectric walls) sampled by tracing it, one path a sample.
-    pub fn traced(params: &WallTableParams) -> Self {
-        let profile = params.profile.clone();
-        WallLobeTable {
-            nt: 0,
-            np: 0,
-            b: 0,
-            rows: 1,
-            smooth_box: 0.0,
-            n: params.ior as f32,
-            mass: Vec::new(),
-            cdf: Vec::new(),
-            totals: Vec::new(),
-            guide: Vec::new(),
-            grid_exit: Vec::new(),
-            ridge_tan: profile.ridge_tan(),
-            hash: format!("{}-traced", params.hash()),
-            paths: Some(GroovePaths::new(&profile, params.ior)),
-            profile,
-        }
-    }
-
-    /// Whether the groove is traced instead of read from a table.
-    pub fn is_traced(&self) -> bool {
-        self.paths.is_some()
-    }
-
-    /// The groove's cross-section the table was traced with.
-    pub fn profile(&self) -> &Profile {
-        &self.profile
-    }
-
-    /// The profile's [`Profile::ridge_tan`], kept for the hits from inside that ask it.
-    pub fn ridge_tan(&self) -> f64 {
-        self.ridge_tan
-    }
-
     /// The table's parameter hash (`WallTableParams::hash`).
     pub fn hash(&self) -> &str {
         &self.hash
-    }
-
-    /// The glass's index the table was traced with.
-    pub fn ior(&self) -> f32 {
-        self.n
     }
 
     #[inline]
@@ -254,17 +211,6 @@ impl WallLobeTable {
         let (start, end) = (group_end(g.wrapping_sub(1), len), group_end(g, len));
         let cdf = &self.cdf[slice * len + start..slice * len + end];
         (start + cdf.partition_point(|&v| v <= x)).min(len - 1)
-    }
-
-    /// The factor `s` of lobe `l` (0: R, 1: T) for light from `side` (module notes): 1 for
-    /// reflection, `(n_o / n_i)^2` for transmission.
-    #[inline]
-    fn radiance_factor(&self, side: usize, l: usize) -> f32 {
-        match (l, side) {
-            (0, _) => 1.0,
-            (_, 0) => 1.0 / (self.n * self.n),
-            _ => self.n * self.n,
-        }
     }
 
     /// The exit bin of an angle in `(-pi/2, pi/2)`.
@@ -362,7 +308,7 @@ impl WallLobeTable {
             }
         }
         let area = self.row_width() * self.bin_width() * cos_theta;
-        let s = self.radiance_factor(c.side, l);
+        let s = radiance_factor(self.n, c.side, l);
         (s * f / (area * wi.z.abs()), p / area)
     }
 
@@ -406,7 +352,7 @@ impl WallLobeTable {
         Some(SmoothSample {
             wi: Vec3::new(ct * sp, st, z),
             lobe: l,
-            weight: self.radiance_factor(side, l) * total,
+            weight: radiance_factor(self.n, side, l) * total,
             pdf: m / (total * self.smooth_box * h * ct),
         })
     }
@@ -451,6 +397,17 @@ impl WallLobeTable {
     }
 }
 
+/// The factor `s` of lobe `l` (0: R, 1: T) for light from `side` (module notes) through
+/// walls of index `n`: 1 for reflection, `(n_o / n_i)^2` for transmission.
+#[inline]
+fn radiance_factor(n: f32, side: usize, l: usize) -> f32 {
+    match (l, side) {
+        (0, _) => 1.0,
+        (_, 0) => 1.0 / (n * n),
+        _ => n * n,
+    }
+}
+
 /// Groups of a slice's CDF in the guide ([`WallLobeTable::search`]).
 const GUIDE: usize = 16;
 
@@ -477,16 +434,116 @@ fn pick_neighbour(pair: [(usize, f64); 2], u: f32) -> (usize, f32) {
 /// The largest `f32` below 1.
 const ONE_BELOW: f32 = 1.0 - f32::EPSILON / 2.0;
 
-/// A smooth-wall groove sample ([`WallLobeTable::sample_smooth`]), scratch frame.
+/// A smooth-wall groove sample ([`WallLobeTable::sample_smooth`], [`TracedGroove::sample`]),
+/// scratch frame.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct SmoothSample {
     pub wi: Vec3,
     /// 0: reflected, 1: transmitted.
     pub lobe: usize,
-    /// `f |cos| / pdf` of the chosen slice: `s` times its energy (module notes).
+    /// `f |cos| / pdf` of the chosen slice: `s` times its energy, or `s` times the traced
+    /// path's weight (module notes).
     pub weight: f32,
-    /// The density of `wi` from the chosen slice.
+    /// The density of `wi` from the chosen slice; 1 for a traced path, which has none.
     pub pdf: f32,
+}
+
+/// Smooth glass walls with no table (`lobes = "traced"`, see the module notes): the groove
+/// sampled by tracing it, one path a sample.
+#[derive(Debug)]
+pub struct TracedGroove {
+    paths: GroovePaths,
+    /// The glass's index `n`.
+    n: f32,
+    profile: Profile,
+    ridge_tan: f64,
+    hash: String,
+}
+
+impl TracedGroove {
+    /// The groove of `params` (smooth dielectric walls).
+    pub fn new(params: &WallTableParams) -> Self {
+        let profile = params.profile.clone();
+        TracedGroove {
+            paths: GroovePaths::new(&profile, params.ior),
+            n: params.ior as f32,
+            ridge_tan: profile.ridge_tan(),
+            hash: format!("{}-traced", params.hash()),
+            profile,
+        }
+    }
+
+    /// One path through the groove for light arriving along `-w` (`w` toward the viewer,
+    /// scratch frame, as a table is read): `u.x` the entry point, the bounces from a stream
+    /// keyed by `u0` and `u.y`. `None` where the path is lost.
+    #[inline]
+    fn sample(&self, w: Vec3, u0: f32, u: Vec2) -> Option<SmoothSample> {
+        let key = mix64((u0.to_bits() as u64) << 32 | u.y.to_bits() as u64);
+        let d0 = [-w.x as f64, -w.y as f64, -w.z as f64];
+        let e = self.paths.trace(d0, u.x as f64, key)?;
+        let wi = Vec3::new(e.d[0] as f32, e.d[1] as f32, e.d[2] as f32);
+        let lobe = ((wi.z > 0.0) != (w.z > 0.0)) as usize;
+        let side = (w.z < 0.0) as usize;
+        Some(SmoothSample {
+            wi,
+            lobe,
+            weight: radiance_factor(self.n, side, lobe) * e.w as f32,
+            pdf: 1.0,
+        })
+    }
+}
+
+/// The render form of glass scratch walls (see the module notes), shared by the materials
+/// that use it.
+#[derive(Clone, Debug)]
+pub enum GlassWalls {
+    /// Read from a wall table: rough walls, and smooth ones with `lobes = "table"`.
+    Table(Arc<WallLobeTable>),
+    /// Smooth walls traced (`lobes = "traced"`, their default).
+    Traced(Arc<TracedGroove>),
+}
+
+impl GlassWalls {
+    /// The groove's cross-section.
+    pub fn profile(&self) -> &Profile {
+        match self {
+            GlassWalls::Table(t) => &t.profile,
+            GlassWalls::Traced(g) => &g.profile,
+        }
+    }
+
+    /// The profile's [`Profile::ridge_tan`], kept for the hits from inside that ask it.
+    pub fn ridge_tan(&self) -> f64 {
+        match self {
+            GlassWalls::Table(t) => t.ridge_tan,
+            GlassWalls::Traced(g) => g.ridge_tan,
+        }
+    }
+
+    /// The walls' parameter hash (`WallTableParams::hash`; `-traced` appended for traced
+    /// walls).
+    pub fn hash(&self) -> &str {
+        match self {
+            GlassWalls::Table(t) => &t.hash,
+            GlassWalls::Traced(g) => &g.hash,
+        }
+    }
+
+    /// The glass's index.
+    pub fn ior(&self) -> f32 {
+        match self {
+            GlassWalls::Table(t) => t.n,
+            GlassWalls::Traced(g) => g.n,
+        }
+    }
+
+    /// Whether the walls are smooth (their lobes are reached by BSDF sampling only).
+    pub fn smooth(&self) -> bool {
+        match self {
+            GlassWalls::Table(t) => t.smooth(),
+            GlassWalls::Traced(_) => true,
+        }
+    }
 }
 
 /// The slices a `wo` reads: up to four, with bilinear weights, each slice's total energy and
@@ -529,16 +586,16 @@ fn unwarp(y: f32, from: f32, to: f32) -> (f32, f32) {
 pub struct ScratchedGlassBsdf<'a> {
     /// Relative index of the smooth base, inside over outside.
     pub eta: f32,
-    pub table: &'a WallLobeTable,
+    pub walls: &'a GlassWalls,
     lobes: CoveredLobes,
 }
 
 impl<'a> ScratchedGlassBsdf<'a> {
     /// `lobes` with coverages `c_k >= 0` ([`CoveredLobes`]).
-    pub fn new(eta: f32, table: &'a WallLobeTable, lobes: &[ScratchLobe]) -> Self {
+    pub fn new(eta: f32, walls: &'a GlassWalls, lobes: &[ScratchLobe]) -> Self {
         ScratchedGlassBsdf {
             eta,
-            table,
+            walls,
             lobes: CoveredLobes::new(lobes),
         }
     }
@@ -547,13 +604,16 @@ impl<'a> ScratchedGlassBsdf<'a> {
     /// sampler's non-delta part.
     #[inline]
     pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
-        if wo.z == 0.0 || self.table.is_traced() {
+        let GlassWalls::Table(table) = self.walls else {
+            return (Rgb::ZERO, 0.0);
+        };
+        if wo.z == 0.0 {
             return (Rgb::ZERO, 0.0);
         }
         let (mut f, mut p) = (0.0f32, 0.0f32);
         for l in self.lobes.as_slice() {
-            let c = self.table.corners(l.to_scratch(wo));
-            let (fk, pk) = self.table.eval_pdf(&c, l.to_scratch(wi));
+            let c = table.corners(l.to_scratch(wo));
+            let (fk, pk) = table.eval_pdf(&c, l.to_scratch(wi));
             f += l.coverage * fk;
             p += l.coverage * pk;
         }
@@ -593,46 +653,37 @@ impl<'a> ScratchedGlassBsdf<'a> {
         }
         let (k, u0) = self.lobes.pick(u_lobe, acc);
         let l = &self.lobes.as_slice()[k];
+        let n = self.walls.ior();
         let eta = |lobe: usize| {
             if lobe == 0 {
                 1.0
             } else if wo.z > 0.0 {
-                self.table.n
+                n
             } else {
-                1.0 / self.table.n
+                1.0 / n
             }
         };
-        if let Some(paths) = &self.table.paths {
-            let w = l.to_scratch(wo);
-            // The path's bounces from a stream keyed by the sample's other numbers.
-            let key = mix64((u0.to_bits() as u64) << 32 | u.y.to_bits() as u64);
-            let d0 = [-w.x as f64, -w.y as f64, -w.z as f64];
-            let e = paths.trace(d0, u.x as f64, key)?;
-            let wi = Vec3::new(e.d[0] as f32, e.d[1] as f32, e.d[2] as f32);
-            let lobe = (wi.z > 0.0) != (wo.z > 0.0);
-            let side = (wo.z < 0.0) as usize;
-            let weight = self.table.radiance_factor(side, lobe as usize) * e.w as f32;
-            return Some(BsdfSample {
-                wi: l.from_scratch(wi),
-                weight: Rgb::splat(weight),
-                pdf: l.coverage,
-                delta: false,
-                eta: eta(lobe as usize),
-            });
-        }
-        if self.table.smooth() {
-            // The one-slice estimate (module notes): no light sampling to weigh against.
-            let s = self.table.sample_smooth(l.to_scratch(wo), u0, u)?;
-            return Some(BsdfSample {
-                wi: l.from_scratch(s.wi),
-                weight: Rgb::splat(s.weight),
-                pdf: l.coverage * s.pdf,
-                delta: false,
-                eta: eta(s.lobe),
-            });
-        }
-        let corners = self.table.corners(l.to_scratch(wo));
-        let (wi_s, lobe) = self.table.sample(&corners, u0, u)?;
+        let table = match self.walls {
+            GlassWalls::Table(t) if !t.smooth() => t,
+            walls => {
+                // Smooth walls: a traced path, or the one-slice estimate (module notes); no
+                // light sampling to weigh against.
+                let w = l.to_scratch(wo);
+                let s = match walls {
+                    GlassWalls::Traced(g) => g.sample(w, u0, u),
+                    GlassWalls::Table(t) => t.sample_smooth(w, u0, u),
+                }?;
+                return Some(BsdfSample {
+                    wi: l.from_scratch(s.wi),
+                    weight: Rgb::splat(s.weight),
+                    pdf: l.coverage * s.pdf,
+                    delta: false,
+                    eta: eta(s.lobe),
+                });
+            }
+        };
+        let corners = table.corners(l.to_scratch(wo));
+        let (wi_s, lobe) = table.sample(&corners, u0, u)?;
         let wi = l.from_scratch(wi_s);
         let (f, pdf) = self.eval_pdf(wo, wi);
         if !(pdf > 0.0) {

@@ -475,6 +475,7 @@ mod scratched_glass {
     use crate::profile::Profile;
     use crate::wall_table::{WallTable, WallTableParams};
     use std::f32::consts::{FRAC_PI_2, PI};
+    use std::sync::Arc;
 
     fn wall_table(roughness: f64, grid: usize, bins: usize, paths: u64) -> WallTable {
         let p = WallTableParams {
@@ -489,8 +490,11 @@ mod scratched_glass {
 
     /// A small table; smooth walls' boxes one exit bin wide, which the quadratures resolve
     /// (the shipped box is tested by `smooth_walls_leave_at_the_exact_angle`).
-    fn table(roughness: f64, grid: usize, bins: usize, paths: u64) -> WallLobeTable {
-        WallLobeTable::with_smooth_box(&wall_table(roughness, grid, bins, paths), PI / bins as f32)
+    fn table(roughness: f64, grid: usize, bins: usize, paths: u64) -> GlassWalls {
+        GlassWalls::Table(Arc::new(WallLobeTable::with_smooth_box(
+            &wall_table(roughness, grid, bins, paths),
+            PI / bins as f32,
+        )))
     }
 
     /// Two crossing scratches covering 0.3 and 0.25 of the footprint.
@@ -581,17 +585,18 @@ mod scratched_glass {
     #[test]
     fn smooth_walls_leave_at_the_exact_angle() {
         let table = wall_table(0.0, 3, 8, 4000);
-        let traced = WallLobeTable::traced(&table.params);
-        for t in [WallLobeTable::new(&table), traced] {
-            smooth_walls_leave_at(&t);
-        }
+        let t = WallLobeTable::new(&table);
+        let half = 0.5 * t.row_width();
+        smooth_walls_leave_at(&GlassWalls::Table(Arc::new(t)), half);
+        let traced = TracedGroove::new(&table.params);
+        smooth_walls_leave_at(&GlassWalls::Traced(Arc::new(traced)), 0.0);
     }
 
-    fn smooth_walls_leave_at(t: &WallLobeTable) {
-        assert!(t.smooth());
+    /// Samples of smooth walls `walls` leave within `half` of the exact exit angle.
+    fn smooth_walls_leave_at(walls: &GlassWalls, half: f32) {
+        assert!(walls.smooth());
         let lobe = lobes()[0];
-        let bsdf = Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(1.5, t, &[lobe]));
-        let half = 0.5 * t.row_width();
+        let bsdf = Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(1.5, walls, &[lobe]));
         for (i, wo) in wos().into_iter().enumerate() {
             let side = (wo.z < 0.0) as usize;
             let theta_i = lobe.to_scratch(wo).y.asin() as f64;
@@ -619,7 +624,7 @@ mod scratched_glass {
             );
             let a = albedo(&bsdf, wo, 100_000, 170 + i as u64, true)[0];
             assert!(a.agrees_with(1.0, 4.0, 1e-3), "wo {wo:?}: {a:?}");
-            if t.is_traced() {
+            if let GlassWalls::Traced(_) = walls {
                 let wi = lobe.from_scratch(Vec3::new(0.3, 0.1, -0.95).normalize());
                 assert_eq!(bsdf.eval_pdf(wo, wi).1, 0.0);
             }

@@ -34,7 +34,7 @@
 
 use super::materials::{conductor_ior, invalid, MaterialError};
 use crate::bsdf::GrooveWall;
-use crate::bsdf::{ConductorIor, ScratchedBase};
+use crate::bsdf::{ConductorIor, GlassWalls, ScratchedBase, TracedGroove};
 use crate::fresnel::FresnelLaw;
 use crate::layers::{LayerError, LayerParams, LayerSet, Orientation, MAX_LAYERS};
 use crate::material::Material;
@@ -640,12 +640,12 @@ impl ScratchedDesc {
             TableSource::Walls(params) => {
                 let table = crate::cache::obtain_wall_table(params).map_err(table_error)?;
                 match params.walls {
-                    WallKind::Dielectric => ScratchModel::DielectricWalls(table),
+                    WallKind::Dielectric => ScratchModel::DielectricWalls(GlassWalls::Table(table)),
                     WallKind::Specular { .. } => ScratchModel::SpecularWalls(table),
                 }
             }
-            TableSource::Traced(params) => ScratchModel::DielectricWalls(std::sync::Arc::new(
-                crate::bsdf::WallLobeTable::traced(params),
+            TableSource::Traced(params) => ScratchModel::DielectricWalls(GlassWalls::Traced(
+                std::sync::Arc::new(TracedGroove::new(params)),
             )),
             TableSource::File(path) => {
                 let model = crate::cache::load_any_table_file(path).map_err(table_error)?;

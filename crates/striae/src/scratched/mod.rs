@@ -14,8 +14,8 @@
 
 use crate::bsdf::scratched::MAX_SCRATCH_LOBES;
 use crate::bsdf::{
-    Bsdf, Conductor, Dielectric, ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf,
-    ScratchedGlassBsdf, ScratchedMetalBsdf, WallLobeTable,
+    Bsdf, Conductor, Dielectric, GlassWalls, ScratchLobe, ScratchLobeTable, ScratchedBase,
+    ScratchedBsdf, ScratchedGlassBsdf, ScratchedMetalBsdf, WallLobeTable,
 };
 use crate::layers::cache::PixelKey;
 use crate::layers::lattice::TileQuery;
@@ -72,7 +72,7 @@ pub enum ScratchModel {
     Seed(Arc<ScratchLobeTable>),
     /// Dielectric walls (METHOD.md 8.1-8.2, glass only): the groove's four lobes, reflected
     /// and transmitted from either side ([`ScratchedGlassBsdf`]).
-    DielectricWalls(Arc<WallLobeTable>),
+    DielectricWalls(GlassWalls),
     /// Rough specular walls (METHOD.md 8.1, metal only): the seed's metal with its groove lobe
     /// read from a 4D table of GGX-rough conductor walls ([`ScratchedMetalBsdf`]).
     SpecularWalls(Arc<WallLobeTable>),
@@ -83,7 +83,8 @@ impl ScratchModel {
     pub fn hash(&self) -> &str {
         match self {
             ScratchModel::Seed(t) => t.hash(),
-            ScratchModel::DielectricWalls(t) | ScratchModel::SpecularWalls(t) => t.hash(),
+            ScratchModel::DielectricWalls(w) => w.hash(),
+            ScratchModel::SpecularWalls(t) => t.hash(),
         }
     }
 }
@@ -290,7 +291,7 @@ impl ScratchedMaterial {
     fn inside_coverage(
         &self,
         ctx: &ShadingContext,
-        walls: &WallLobeTable,
+        walls: &GlassWalls,
         cov: &mut [f32],
     ) -> InsideHit {
         let reach = RidgeReach::new(self, ctx, walls);
@@ -507,9 +508,9 @@ struct RidgeReach {
 
 impl RidgeReach {
     /// `None` where no groove can be met beside its opening: light from outside, or steeper
-    /// than the profile's rims let it reach a wall (`WallLobeTable::ridge_tan`).
+    /// than the profile's rims let it reach a wall (`GlassWalls::ridge_tan`).
     #[inline(always)]
-    fn new(m: &ScratchedMaterial, ctx: &ShadingContext, walls: &WallLobeTable) -> Option<Self> {
+    fn new(m: &ScratchedMaterial, ctx: &ShadingContext, walls: &GlassWalls) -> Option<Self> {
         use glam::DVec2;
         let wo = ctx.frame.to_local(ctx.wo).as_dvec3();
         let h_len = (wo.x * wo.x + wo.y * wo.y).sqrt();

@@ -787,7 +787,7 @@ fn ridges_meet_grazing_light_from_inside() {
     let m = ScratchedMaterial::with_model(
         ScratchedBase::Glass { eta: 1.5 },
         Rgb::ONE,
-        ScratchModel::DielectricWalls(Arc::new(WallLobeTable::new(&table))),
+        ScratchModel::DielectricWalls(GlassWalls::Table(Arc::new(WallLobeTable::new(&table)))),
         layers,
         LayerMix::Max,
         CoverageMode::Footprint,
@@ -899,7 +899,7 @@ fn inside_hits_read_no_footprint() {
     let glass = ScratchedMaterial::with_model(
         ScratchedBase::Glass { eta: 1.5 },
         Rgb::ONE,
-        ScratchModel::DielectricWalls(Arc::new(WallLobeTable::new(&table))),
+        ScratchModel::DielectricWalls(GlassWalls::Table(Arc::new(WallLobeTable::new(&table)))),
         wide_layers(4, 5),
         LayerMix::Max,
         CoverageMode::Footprint,
