@@ -58,11 +58,7 @@ fn scratched_glass(roughness: f64, traced: bool) -> Bsdf<'static> {
             &WallTable::compute(&params).unwrap(),
         )))
     };
-    let lobe = |coverage: f32, beta: f32| ScratchLobe {
-        coverage,
-        cos: beta.cos(),
-        sin: beta.sin(),
-    };
+    let lobe = |coverage: f32, beta: f32| ScratchLobe::new(coverage, beta.cos(), beta.sin());
     let lobes = [lobe(0.3, 0.4), lobe(0.25, 2.1)];
     Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(
         1.5,

@@ -178,33 +178,108 @@ pub enum ScratchedBase {
 }
 
 /// One scratch lobe at a hit: its coverage `c` of the footprint and the rotation of its scratch
-/// frame, `(cos beta, sin beta)` with `t = cos beta s + sin beta t_shading`.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// frame, `(cos beta, sin beta)` with `t = cos beta s + sin beta t_shading`, and the frame's
+/// lean along the scratch (`lean = true`, METHOD.md 8.3): its normal tilted toward `t` by an
+/// angle `alpha`, `(cos alpha, sin alpha)`, `(1, 0)` without one.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ScratchLobe {
     pub coverage: f32,
     pub cos: f32,
     pub sin: f32,
+    pub lean: [f32; 2],
+}
+
+impl Default for ScratchLobe {
+    fn default() -> Self {
+        ScratchLobe::new(0.0, 0.0, 0.0)
+    }
 }
 
 impl ScratchLobe {
+    /// A lobe of coverage `c` along `(cos beta, sin beta)`, without a lean.
+    pub fn new(coverage: f32, cos: f32, sin: f32) -> Self {
+        ScratchLobe {
+            coverage,
+            cos,
+            sin,
+            lean: [1.0, 0.0],
+        }
+    }
+
+    /// The same lobe with its normal tilted toward `t` by the angle whose tangent is `tan`.
+    pub fn leaned(self, tan: f32) -> Self {
+        let c = 1.0 / (1.0 + tan * tan).sqrt();
+        ScratchLobe {
+            lean: [c, tan * c],
+            ..self
+        }
+    }
+
+    #[inline]
+    fn has_lean(&self) -> bool {
+        self.lean[1] != 0.0
+    }
+
     /// Shading frame to scratch frame: `x = w . b`, `b = t x n = (sin beta, -cos beta, 0)`;
-    /// `y = w . t`.
+    /// `y = w . t`; then the lean, `n' = cos alpha n + sin alpha t`, `t' = cos alpha t - sin
+    /// alpha n`.
     #[inline]
     pub fn to_scratch(&self, w: Vec3) -> Vec3 {
-        Vec3::new(
+        let v = Vec3::new(
             self.sin * w.x - self.cos * w.y,
             self.cos * w.x + self.sin * w.y,
             w.z,
-        )
+        );
+        if !self.has_lean() {
+            return v;
+        }
+        let [c, s] = self.lean;
+        Vec3::new(v.x, c * v.y - s * v.z, c * v.z + s * v.y)
     }
 
     #[inline]
     pub fn from_scratch(&self, v: Vec3) -> Vec3 {
+        let v = if self.has_lean() {
+            let [c, s] = self.lean;
+            Vec3::new(v.x, c * v.y + s * v.z, c * v.z - s * v.y)
+        } else {
+            v
+        };
         Vec3::new(
             self.sin * v.x + self.cos * v.y,
             -self.cos * v.x + self.sin * v.y,
             v.z,
         )
+    }
+
+    /// `wo` in the scratch frame, kept on its side of the surface: a leaned frame takes a
+    /// grazing `wo` across its horizon, and there it is held just on its own side.
+    #[inline]
+    pub fn wo_to_scratch(&self, wo: Vec3) -> Vec3 {
+        let v = self.to_scratch(wo);
+        if !self.has_lean() || v.z * wo.z > 0.0 || wo.z == 0.0 {
+            return v;
+        }
+        const HORIZON: f32 = 1e-4;
+        let xy = (v.x * v.x + v.y * v.y).sqrt().max(f32::MIN_POSITIVE);
+        let k = (1.0 - HORIZON * HORIZON).sqrt() / xy;
+        Vec3::new(v.x * k, v.y * k, HORIZON.copysign(wo.z))
+    }
+
+    /// The factor taking the lobe's value in the scratch frame (a BSDF for the cosine
+    /// `wi_s.z`) to the shading frame's (for `wi.z`): `wi_s.z / wi.z`, so that a leaned lobe
+    /// scatters the energy it does unleaned; 0 where the lean puts `wi` on the other side of
+    /// the frame's horizon than the surface's (the lobe's sampler then fails there too). 1
+    /// without a lean.
+    #[inline]
+    pub fn cosine_factor(&self, wi: Vec3, wi_s: Vec3) -> f32 {
+        if !self.has_lean() {
+            1.0
+        } else if wi.z * wi_s.z > 0.0 {
+            wi_s.z / wi.z
+        } else {
+            0.0
+        }
     }
 }
 
@@ -357,7 +432,7 @@ impl<'a> ScratchedBsdf<'a> {
     /// [`LobeWo`] of lobe `l` for `wo.z > 0`.
     #[inline]
     fn lobe_wo(&self, l: &ScratchLobe, wo: Vec3) -> LobeWo {
-        let wo_s = l.to_scratch(wo);
+        let wo_s = l.wo_to_scratch(wo);
         let terms = self.table.brdf().wo_terms(wo_s);
         let (a, scale) = ScratchLobeTable::scale_albedo(self.table.albedo_at(&terms));
         LobeWo { terms, a, scale }
@@ -406,9 +481,14 @@ impl<'a> ScratchedBsdf<'a> {
         }
         let mut f = 0.0f64;
         for (k, l) in self.lobes().iter().enumerate() {
+            let wi_s = l.to_scratch(wi);
+            let lean = l.cosine_factor(wi, wi_s);
+            if lean == 0.0 {
+                continue;
+            }
             let c = self.terms(k, wo);
-            let fk = self.table.brdf().eval_at(&c.terms, l.to_scratch(wi));
-            f += (l.coverage * c.scale) as f64 * fk;
+            let fk = self.table.brdf().eval_at(&c.terms, wi_s);
+            f += (l.coverage * c.scale * lean) as f64 * fk;
         }
         self.tint * f as f32
     }
@@ -421,10 +501,14 @@ impl<'a> ScratchedBsdf<'a> {
         }
         let mut p = 0.0f64;
         for (k, l) in self.lobes().iter().enumerate() {
+            let wi_s = l.to_scratch(wi);
+            if l.cosine_factor(wi, wi_s) == 0.0 {
+                continue;
+            }
             let c = self.terms(k, wo);
             let pk = self.lobe_probability(l, &c);
             if pk > 0.0 {
-                p += pk as f64 * self.table.brdf().eval_pdf_at(&c.terms, l.to_scratch(wi)).1;
+                p += pk as f64 * self.table.brdf().eval_pdf_at(&c.terms, wi_s).1;
             }
         }
         p as f32
@@ -438,9 +522,14 @@ impl<'a> ScratchedBsdf<'a> {
         }
         let (mut f, mut p) = (0.0f64, 0.0f64);
         for (k, l) in self.lobes().iter().enumerate() {
+            let wi_s = l.to_scratch(wi);
+            let lean = l.cosine_factor(wi, wi_s);
+            if lean == 0.0 {
+                continue;
+            }
             let c = self.terms(k, wo);
-            let (fk, pdf_k) = self.table.brdf().eval_pdf_at(&c.terms, l.to_scratch(wi));
-            f += (l.coverage * c.scale) as f64 * fk;
+            let (fk, pdf_k) = self.table.brdf().eval_pdf_at(&c.terms, wi_s);
+            f += (l.coverage * c.scale * lean) as f64 * fk;
             let pk = self.lobe_probability(l, &c);
             if pk > 0.0 {
                 p += pk as f64 * pdf_k;
@@ -518,6 +607,10 @@ impl<'a> ScratchedBsdf<'a> {
             .brdf()
             .sample_at(&c.terms, [u.x as f64, u.y as f64])?;
         let wi = l.from_scratch(s.wi);
+        // (`wi`'s own image in the scratch frame, as `eval` and `pdf` see it.)
+        if l.cosine_factor(wi, l.to_scratch(wi)) == 0.0 {
+            return None;
+        }
         if s.delta || self.lobes().len() == 1 {
             // The delta lobe (coefficient c_k s value over P_k pmf), or one smooth lobe (the
             // `max` mode: the mixture's pdf is P_k times the lobe's, its value c_k s f): the

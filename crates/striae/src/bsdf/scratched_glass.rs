@@ -190,6 +190,11 @@ impl WallLobeTable {
         self.rows == 1
     }
 
+    /// The groove's cross-section.
+    pub fn profile(&self) -> &Profile {
+        &self.profile
+    }
+
     /// The `theta_o` extent of one row: an exit bin, or a smooth wall's box.
     #[inline]
     pub fn row_width(&self) -> f32 {
@@ -612,9 +617,14 @@ impl<'a> ScratchedGlassBsdf<'a> {
         }
         let (mut f, mut p) = (0.0f32, 0.0f32);
         for l in self.lobes.as_slice() {
-            let c = table.corners(l.to_scratch(wo));
-            let (fk, pk) = table.eval_pdf(&c, l.to_scratch(wi));
-            f += l.coverage * fk;
+            let wi_s = l.to_scratch(wi);
+            let lean = l.cosine_factor(wi, wi_s);
+            if lean == 0.0 {
+                continue;
+            }
+            let c = table.corners(l.wo_to_scratch(wo));
+            let (fk, pk) = table.eval_pdf(&c, wi_s);
+            f += l.coverage * fk * lean;
             p += l.coverage * pk;
         }
         (Rgb::splat(f), p)
@@ -668,13 +678,17 @@ impl<'a> ScratchedGlassBsdf<'a> {
             walls => {
                 // Smooth walls: a traced path, or the one-slice estimate (module notes); no
                 // light sampling to weigh against.
-                let w = l.to_scratch(wo);
+                let w = l.wo_to_scratch(wo);
                 let s = match walls {
                     GlassWalls::Traced(g) => g.sample(w, u0, u),
                     GlassWalls::Table(t) => t.sample_smooth(w, u0, u),
                 }?;
+                let wi = l.from_scratch(s.wi);
+                if l.cosine_factor(wi, l.to_scratch(wi)) == 0.0 {
+                    return None;
+                }
                 return Some(BsdfSample {
-                    wi: l.from_scratch(s.wi),
+                    wi,
                     weight: Rgb::splat(s.weight),
                     pdf: l.coverage * s.pdf,
                     delta: false,
@@ -682,9 +696,12 @@ impl<'a> ScratchedGlassBsdf<'a> {
                 });
             }
         };
-        let corners = table.corners(l.to_scratch(wo));
+        let corners = table.corners(l.wo_to_scratch(wo));
         let (wi_s, lobe) = table.sample(&corners, u0, u)?;
         let wi = l.from_scratch(wi_s);
+        if l.cosine_factor(wi, l.to_scratch(wi)) == 0.0 {
+            return None; // a leaned lobe's exit across the surface: not in its pdf
+        }
         let (f, pdf) = self.eval_pdf(wo, wi);
         if !(pdf > 0.0) {
             return None;

@@ -55,9 +55,17 @@ impl<'a> ScratchedMetalBsdf<'a> {
         }
         let mut sum = (0.0f32, 0.0f32);
         for lobe in self.lobes.as_slice() {
-            let corners = self.table.corners(lobe.to_scratch(wo));
-            let (f, pdf) = self.table.eval_pdf(&corners, lobe.to_scratch(wi));
-            sum = (sum.0 + lobe.coverage * f, sum.1 + lobe.coverage * pdf);
+            let wi_s = lobe.to_scratch(wi);
+            let lean = lobe.cosine_factor(wi, wi_s);
+            if lean == 0.0 {
+                continue;
+            }
+            let corners = self.table.corners(lobe.wo_to_scratch(wo));
+            let (f, pdf) = self.table.eval_pdf(&corners, wi_s);
+            sum = (
+                sum.0 + lobe.coverage * f * lean,
+                sum.1 + lobe.coverage * pdf,
+            );
         }
         (self.tint * sum.0, sum.1)
     }
@@ -80,8 +88,11 @@ impl<'a> ScratchedMetalBsdf<'a> {
         }
         let (k, u0) = self.lobes.pick(u_lobe, base);
         let lobe = &self.lobes.as_slice()[k];
-        let corners = self.table.corners(lobe.to_scratch(wo));
+        let corners = self.table.corners(lobe.wo_to_scratch(wo));
         let wi = lobe.from_scratch(self.table.sample(&corners, u0, u)?.0);
+        if lobe.cosine_factor(wi, lobe.to_scratch(wi)) == 0.0 {
+            return None; // a leaned lobe's exit below the surface: not in its pdf
+        }
         let (f, pdf) = self.eval_pdf(wo, wi);
         (pdf > 0.0).then(|| BsdfSample::reflected(wi, f, pdf))
     }

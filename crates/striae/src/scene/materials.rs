@@ -371,6 +371,38 @@ mod tests {
         }
     }
 
+    /// `scratches.lean = true` leans the scratch lobes' frames; without it they have none.
+    #[test]
+    fn scratched_lean_key_leans_the_lobes() {
+        let text = |lean: &str| {
+            format!(
+                "type = \"scratched\"\nbase = \"metal\"\npreset = \"none\"\n[scratches]\nwalls = \"specular\"\nfresnel_law = \"none\"\nm = 8\nn = 50\nlength = 0.3\nwidth = 0.05\nthreshold = 1.0\nlayers = 1\ncoverage = \"point\"\n{lean}"
+            )
+        };
+        for (lean, leaned) in [("", false), ("lean = false", false), ("lean = true", true)] {
+            let m = prepared(&text(lean));
+            let mut covered = 0;
+            for i in 0..49 {
+                let uv = Vec2::new((i % 7) as f32 + 0.5, (i / 7) as f32 + 0.5) / 7.0;
+                let hit = crate::geometry::SurfaceHit::flat(uv);
+                let view = crate::material::HitView {
+                    wo: Vec3::Z,
+                    rd: None,
+                    u_layer: Some(0.3),
+                    pixel: None,
+                };
+                let mut cache = crate::layers::CoverageCache::new();
+                if let Bsdf::Scratched(b) = m.shade(&hit, view, &mut cache).1 {
+                    assert_eq!(b.lobes()[0].lean[1] != 0.0, leaned, "{lean} {uv:?}");
+                    covered += 1;
+                }
+            }
+            assert!(covered >= 10, "{lean}: {covered}");
+        }
+        let e = parse(&text("lean = \"yes\"")).unwrap_err();
+        assert!(e.contains("lean") || e.contains("boolean"), "{e}");
+    }
+
     #[test]
     fn bad_materials_are_rejected_with_key_and_value() {
         let cases = [

@@ -122,6 +122,10 @@ pub struct ScratchSpec {
     /// Build the scratches as real grooves on the shape's planar faces instead of the
     /// SV-BRDF (METHOD.md 8.3; `scene::explicit`).
     pub explicit: Option<bool>,
+    /// Lean the SV-BRDF's scratch frame along the scratch as the tapered groove's walls lean
+    /// (default `false`, the seed's extruded groove; [`ScratchedMaterial::with_lean`]).
+    /// Explicit grooves have the lean of their geometry whatever this says.
+    pub lean: Option<bool>,
 }
 
 /// Deserialisers of the scratched material's word-valued keys that put the key in the error.
@@ -655,9 +659,10 @@ impl ScratchedDesc {
         };
         let layers = LayerSet::with_orientation(r.layers, r.layer_seed, r.orientation)
             .map_err(layer_error)?;
-        Ok(ScratchedMaterial::with_model(
-            r.base, r.tint, model, layers, r.mix, r.coverage,
-        ))
+        Ok(
+            ScratchedMaterial::with_model(r.base, r.tint, model, layers, r.mix, r.coverage)
+                .with_lean(self.scratches.lean == Some(true)),
+        )
     }
 
     /// A dielectric-wall table file fits a glass base of its own index only, a specular-wall

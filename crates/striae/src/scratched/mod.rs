@@ -79,6 +79,15 @@ pub enum ScratchModel {
 }
 
 impl ScratchModel {
+    /// The groove's cross-section.
+    pub fn profile(&self) -> &crate::profile::Profile {
+        match self {
+            ScratchModel::Seed(t) => &t.table().params.profile,
+            ScratchModel::DielectricWalls(w) => w.profile(),
+            ScratchModel::SpecularWalls(t) => t.profile(),
+        }
+    }
+
     /// The table's parameter hash.
     pub fn hash(&self) -> &str {
         match self {
@@ -102,6 +111,8 @@ pub struct ScratchedMaterial {
     directions: Vec<[f32; 2]>,
     pub mix: LayerMix,
     pub coverage: CoverageMode,
+    /// `lean = true`: twice the profile's cross-section area ([`Self::with_lean`]); 0 without.
+    lean: f64,
 }
 
 impl std::fmt::Debug for ScratchedMaterial {
@@ -149,7 +160,24 @@ impl ScratchedMaterial {
             directions,
             mix,
             coverage,
+            lean: 0.0,
         }
+    }
+
+    /// The same material with `lean = true` (an option of ours beside METHOD.md 8.3's
+    /// explicit grooves): the scratch frame at a hit tilted along the scratch as the walls of
+    /// its tapered groove lean there. A groove whose width `W(s) = 2 w sqrt(1 - (s/l)^2)`
+    /// shrinks toward its tips, its depth in proportion, leans its walls toward its middle by
+    /// `tan alpha = 2 A W'(s)` (`A` the profile's [`crate::profile::Profile::area`]): exactly
+    /// for a V, whose walls all lean alike, and on average over the opening for other
+    /// profiles. The seed's extruded groove has no lean.
+    pub fn with_lean(mut self, on: bool) -> Self {
+        self.lean = if on {
+            2.0 * self.model.profile().area()
+        } else {
+            0.0
+        };
+        self
     }
 
     /// Whether its BSDF transmits, at every hit: glass does (scratched or not, from either
@@ -318,7 +346,7 @@ impl ScratchedMaterial {
                 for k in (0..self.layers.len()).filter(|k| mask >> k & 1 == 1) {
                     if let Some(sc) = self.layers.scratch_at(k, q) {
                         if r.meets_ridge(&sc, uv, profile) {
-                            met = Some(sc.direction);
+                            met = Some(sc);
                             break 'search;
                         }
                     }
@@ -331,7 +359,7 @@ impl ScratchedMaterial {
                     .find_scratch_near_segment(k, uv, r.reach_uv, |sc| {
                         let hit = r.meets_ridge(sc, uv, profile);
                         if hit {
-                            met = Some(sc.direction);
+                            met = Some(*sc);
                         }
                         hit
                     });
@@ -341,8 +369,11 @@ impl ScratchedMaterial {
             }
         }
         match met {
-            Some(d) => {
-                let d = d.as_vec2();
+            Some(sc) if self.lean != 0.0 => {
+                InsideHit::Ridge(leaned_lobe(self, ctx, &sc, 1.0, Along::Hit))
+            }
+            Some(sc) => {
+                let d = sc.direction.as_vec2();
                 InsideHit::Ridge(lobe_along(ctx, [d.x, d.y], 1.0))
             }
             None => InsideHit::Plain,
@@ -425,17 +456,19 @@ impl ScratchedMaterial {
             mask | (((c > 0.0) & (c >= best - 1e-6)) as u64) << i
         });
         let count = ties.count_ones();
-        let layer = if count == 1 {
-            ties.trailing_zeros() as usize
+        let (layer, u) = if count == 1 {
+            (ties.trailing_zeros() as usize, ctx.u_layer)
         } else {
             let pick = ((ctx.u_layer * count as f32) as u32).min(count - 1);
             let mut rest = ties;
             for _ in 0..pick {
                 rest &= rest - 1;
             }
-            rest.trailing_zeros() as usize
+            // `u_layer`'s place within the pick's share, for the lean.
+            let u = (ctx.u_layer * count as f32 - pick as f32).clamp(0.0, 1.0);
+            (rest.trailing_zeros() as usize, u)
         };
-        lobes[0] = lobe(self, ctx, layer, cov[layer]);
+        lobes[0] = lobe(self, ctx, layer, cov[layer], u);
         1
     }
 
@@ -461,7 +494,7 @@ impl ScratchedMaterial {
         }
         let n = covered.min(MAX_SCRATCH_LOBES);
         for j in 0..n {
-            lobes[j] = lobe(self, ctx, order[j], cov[order[j]]);
+            lobes[j] = lobe(self, ctx, order[j], cov[order[j]], ctx.u_layer);
         }
         n
     }
@@ -578,8 +611,19 @@ impl RidgeReach {
     }
 }
 
-/// Scratch lobe of `layer` with coverage `c` ([`lobe_along`] its direction at the hit).
-fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32) -> ScratchLobe {
+/// Scratch lobe of `layer` with coverage `c` ([`lobe_along`] its direction at the hit; with
+/// `lean`, [`leaned_lobe`] of the scratch at the hit, `u` uniform in `[0, 1)` placing it).
+fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32, u: f32) -> ScratchLobe {
+    if p.lean != 0.0 {
+        if let Some(sc) = p.layers.scratch_at(layer, ctx.uv.as_dvec2()) {
+            let along = if p.coverage == CoverageMode::Point {
+                Along::Hit
+            } else {
+                Along::Footprint(u)
+            };
+            return leaned_lobe(p, ctx, &sc, c, along);
+        }
+    }
     let d = if p.layers.orientation() == Orientation::Random {
         // The scratch at the hit point (or nearest to it): the hit is spread uniformly over the
         // footprint, so each scratch of the footprint is chosen in proportion to its share.
@@ -588,6 +632,116 @@ fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32) -> Sc
         p.directions[layer]
     };
     lobe_along(ctx, d, c)
+}
+
+/// Where the lean of a tapered groove's walls runs out: `|s/l|` at most this (a tilt of at most
+/// `atan(22 * 2 A W / L)`; 20 degrees for a 90-degree V of setting 2).
+const MAX_LEAN_S: f64 = 0.999;
+
+/// Where on a scratch's axis a leaned lobe takes its lean.
+#[derive(Clone, Copy)]
+enum Along {
+    /// At the hit (the point test: the hit is on the scratch, or beside its ridge).
+    Hit,
+    /// At the hit where it lies on the scratch; else (the footprint's coverage, where the hit
+    /// may lie off the scratch the footprint holds) at a point of the scratch's part within
+    /// the footprint, placed by the given uniform number.
+    Footprint(f32),
+}
+
+/// Scratch `sc`'s lobe with coverage `c`, its frame leaned as the tapered groove's walls lean
+/// at `s/l` ([`ScratchedMaterial::with_lean`]): `W' = -2 w (s/l) / (l sqrt(1 - (s/l)^2))`
+/// with the scratch's world half-length `l` and half-width `w` (the texture ellipse mapped to
+/// the face, as the explicit grooves take it, [`crate::geometry::carve`]); the normal tilts
+/// toward the scratch's middle.
+fn leaned_lobe(
+    p: &ScratchedMaterial,
+    ctx: &ShadingContext,
+    sc: &Scratch,
+    c: f32,
+    along: Along,
+) -> ScratchLobe {
+    let d = sc.direction;
+    let lobe = lobe_along(ctx, [d.x as f32, d.y as f32], c);
+    let map = |v: glam::DVec2| ctx.dpdu.as_dvec3() * v.x + ctx.dpdv.as_dvec3() * v.y;
+    let along_world = map(d);
+    let along_len = along_world.length();
+    let area = along_world.cross(map(d.perp())).length();
+    let (l, w) = (sc.half_length * along_len, sc.half_width * area / along_len);
+    let s = lean_place(ctx, sc, along).clamp(-MAX_LEAN_S, MAX_LEAN_S);
+    let tan = p.lean * -2.0 * w * s / (l * (1.0 - s * s).sqrt());
+    if tan.is_finite() {
+        lobe.leaned(tan as f32)
+    } else {
+        lobe
+    }
+}
+
+/// `s/l` of the point of scratch `sc` whose lean a lobe takes ([`Along`]). Off the scratch,
+/// the scratch's part within the pixel's footprint (centred on the pixel's centre,
+/// [`crate::layers::CoverageCache::of_pixel`]) spans `s/l` in `[a - e, a + e]` (`a` the
+/// centre's, `e` the footprint's half-extent along the axis), clipped to `[-1, 1]`; the point
+/// is drawn there in proportion to the scratch's width, `sqrt(1 - (s/l)^2)`: the scratch's
+/// covered area, when the footprint holds it across. Where that span is empty (the scratch
+/// nearest to the hit is not the one the footprint holds) it is the whole scratch's.
+fn lean_place(ctx: &ShadingContext, sc: &Scratch, along: Along) -> f64 {
+    let d = sc.direction;
+    let rel = ctx.uv.as_dvec2() - sc.centre;
+    let (a, b) = (rel.dot(d) / sc.half_length, d.perp_dot(rel) / sc.half_width);
+    let u = match along {
+        Along::Footprint(u) if a * a + b * b > 1.0 => u,
+        _ => return a,
+    };
+    let (dx, dy) = ctx.footprint_uv();
+    let (dx, dy) = (dx.as_dvec2(), dy.as_dvec2());
+    let offset = ctx.pixel.map_or(glam::DVec2::ZERO, |h| h.offset.as_dvec2());
+    let centre = a - (offset.x * dx + offset.y * dy).dot(d) / sc.half_length;
+    let e = 0.5 * (dx.dot(d).abs() + dy.dot(d).abs()) / sc.half_length;
+    let (lo, hi) = match ((centre - e).max(-1.0), (centre + e).min(1.0)) {
+        (lo, hi) if lo < hi => (lo, hi),
+        // The footprint misses the scratch found nearest to the hit (it holds another of the
+        // layer's): a point of the whole scratch.
+        _ => (-1.0, 1.0),
+    };
+    // `s/l = sin phi`: the area up to `phi` is `G(phi) = phi + sin(2 phi) / 2`.
+    let (g0, g1) = (area_up_to(lo.asin()), area_up_to(hi.asin()));
+    area_inverse(g0 + u as f64 * (g1 - g0)).sin()
+}
+
+/// `G(phi) = phi + sin(2 phi) / 2`, the area of a unit semicircle's part `s/l < sin phi`
+/// (times 2), increasing from `-pi/2` to `pi/2` over `[-pi/2, pi/2]`; `G' = 2 cos^2 phi`.
+fn area_up_to(phi: f64) -> f64 {
+    phi + 0.5 * (2.0 * phi).sin()
+}
+
+/// `G^-1(g)` ([`area_up_to`]) for `g` in `[-pi/2, pi/2]`: a table of 256 intervals read
+/// linearly, then one step of Newton's method (error below 1e-6 where `cos phi > 0.05`, and
+/// `s/l = sin phi` within 1e-6 everywhere).
+fn area_inverse(g: f64) -> f64 {
+    use std::f64::consts::{FRAC_PI_2, PI};
+    const N: usize = 256;
+    static TABLE: std::sync::LazyLock<[f64; N + 1]> = std::sync::LazyLock::new(|| {
+        std::array::from_fn(|i| {
+            let target = -FRAC_PI_2 + PI * i as f64 / N as f64;
+            // Bisection, once per table entry.
+            let (mut a, mut b) = (-FRAC_PI_2, FRAC_PI_2);
+            for _ in 0..60 {
+                let mid = 0.5 * (a + b);
+                if area_up_to(mid) < target {
+                    a = mid;
+                } else {
+                    b = mid;
+                }
+            }
+            0.5 * (a + b)
+        })
+    });
+    let x = ((g + FRAC_PI_2) / PI * N as f64).clamp(0.0, N as f64);
+    let i = (x as usize).min(N - 1);
+    let phi = TABLE[i] + (x - i as f64) * (TABLE[i + 1] - TABLE[i]);
+    let (sin2, cos2) = (2.0 * phi).sin_cos();
+    let step = (phi + 0.5 * sin2 - g) / (1.0 + cos2).max(1e-3);
+    (phi - step).clamp(-FRAC_PI_2, FRAC_PI_2)
 }
 
 /// Scratch lobe of texture direction `d` with coverage `c`: `t = d.x dP/du + d.y dP/dv` in the
@@ -602,11 +756,7 @@ fn lobe_along(ctx: &ShadingContext, d: [f32; 2], c: f32) -> ScratchLobe {
     } else {
         (1.0, 0.0)
     };
-    ScratchLobe {
-        coverage: c,
-        cos,
-        sin,
-    }
+    ScratchLobe::new(c, cos, sin)
 }
 
 #[cfg(test)]
