@@ -154,6 +154,13 @@ impl ScratchLayer {
         self.noise.eval(self.to_noise(p))
     }
 
+    /// The feature point nearest to texture point `p`, in noise space (`noise_at(p).nearest`,
+    /// at half the cost).
+    #[inline]
+    pub fn nearest_at(&self, p: DVec2) -> DVec2 {
+        self.noise.nearest(self.to_noise(p))
+    }
+
     /// `F1(q(p)) < tau` at an `f64` texture point.
     #[inline]
     pub fn is_scratched_at(&self, p: DVec2) -> bool {

@@ -286,7 +286,7 @@ impl LayerSet {
         if let Some(r) = layer.random() {
             return r.nearest_scratch(uv, k);
         }
-        Some(layer.scratch(layer.noise_at(uv).nearest))
+        Some(layer.scratch(layer.nearest_at(uv)))
     }
 
     /// Calls `f` with each scratch of layer `k` (one of the seed's layers: not randomly

@@ -93,6 +93,41 @@ impl Worley {
         worley_search(q, |i, j| self.offset(i, j))
     }
 
+    /// The feature point nearest to `q` (F1's, [`Self::eval`]'s `nearest`), visiting the cells
+    /// ring by ring and only those that can hold a nearer one than the best so far: about half
+    /// of the cells `eval` visits for F2 as well.
+    pub fn nearest(&self, q: DVec2) -> DVec2 {
+        let (i, j) = (floor_i64(q.x), floor_i64(q.y));
+        let cell = DVec2::new(i as f64, j as f64);
+        let f = q - cell;
+        let gap = |d: i64, t: f64| -> f64 {
+            if d < 0 {
+                t - (d + 1) as f64
+            } else if d > 0 {
+                d as f64 - t
+            } else {
+                0.0
+            }
+        };
+        let mut best = (f64::INFINITY, DVec2::ZERO);
+        for ring in 0..=2i64 {
+            for dj in -ring..=ring {
+                for di in -ring..=ring {
+                    let (gx, gy) = (gap(di, f.x), gap(dj, f.y));
+                    if di.abs().max(dj.abs()) != ring || gx * gx + gy * gy >= best.0 {
+                        continue;
+                    }
+                    let p = DVec2::new(di as f64, dj as f64) + self.offset(i + di, j + dj);
+                    let d = (p - f).length_squared();
+                    if d < best.0 {
+                        best = (d, p);
+                    }
+                }
+            }
+        }
+        cell + best.1
+    }
+
     /// Whether some feature point lies strictly closer than `r` to `q`, i.e. `F1(q) < r`
     /// (the scratch test of METHOD.md section 5). Visits only the cells the disc of radius `r`
     /// touches (one to four for `r <= 1/2`).
@@ -228,6 +263,7 @@ mod tests {
             );
             assert_eq!(s.cell, cell);
             assert!((s.nearest - w.feature_point(cell[0], cell[1])).length() < 1e-12);
+            assert!((w.nearest(q) - s.nearest).length() < 1e-12, "{q:?}");
             for r in [0.05, 0.1, 0.3, 0.5, 0.7, 1.0] {
                 assert_eq!(w.any_within(q, r), f1 < r, "q {q:?} r {r}");
             }

@@ -23,6 +23,7 @@ use crate::layers::layer::MAX_FOOTPRINT_CELLS;
 use crate::layers::{CoverageCache, LayerSet, Orientation, Scratch, MAX_LAYERS};
 use crate::math::{Rgb, Vec3};
 use crate::shading::ShadingContext;
+use lean::Along;
 use serde::Deserialize;
 use std::sync::Arc;
 
@@ -634,26 +635,8 @@ fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32, u: f3
     lobe_along(ctx, d, c)
 }
 
-/// Where the lean of a tapered groove's walls runs out: `|s/l|` at most this (a tilt of at most
-/// `atan(22 * 2 A W / L)`; 20 degrees for a 90-degree V of setting 2).
-const MAX_LEAN_S: f64 = 0.999;
-
-/// Where on a scratch's axis a leaned lobe takes its lean.
-#[derive(Clone, Copy)]
-enum Along {
-    /// At the hit (the point test: the hit is on the scratch, or beside its ridge).
-    Hit,
-    /// At the hit where it lies on the scratch; else (the footprint's coverage, where the hit
-    /// may lie off the scratch the footprint holds) at a point of the scratch's part within
-    /// the footprint, placed by the given uniform number.
-    Footprint(f32),
-}
-
 /// Scratch `sc`'s lobe with coverage `c`, its frame leaned as the tapered groove's walls lean
-/// at `s/l` ([`ScratchedMaterial::with_lean`]): `W' = -2 w (s/l) / (l sqrt(1 - (s/l)^2))`
-/// with the scratch's world half-length `l` and half-width `w` (the texture ellipse mapped to
-/// the face, as the explicit grooves take it, [`crate::geometry::carve`]); the normal tilts
-/// toward the scratch's middle.
+/// where `along` places it ([`lean::leaned`]).
 fn leaned_lobe(
     p: &ScratchedMaterial,
     ctx: &ShadingContext,
@@ -662,86 +645,13 @@ fn leaned_lobe(
     along: Along,
 ) -> ScratchLobe {
     let d = sc.direction;
-    let lobe = lobe_along(ctx, [d.x as f32, d.y as f32], c);
-    let map = |v: glam::DVec2| ctx.dpdu.as_dvec3() * v.x + ctx.dpdv.as_dvec3() * v.y;
-    let along_world = map(d);
-    let along_len = along_world.length();
-    let area = along_world.cross(map(d.perp())).length();
-    let (l, w) = (sc.half_length * along_len, sc.half_width * area / along_len);
-    let s = lean_place(ctx, sc, along).clamp(-MAX_LEAN_S, MAX_LEAN_S);
-    let tan = p.lean * -2.0 * w * s / (l * (1.0 - s * s).sqrt());
-    if tan.is_finite() {
-        lobe.leaned(tan as f32)
-    } else {
-        lobe
-    }
-}
-
-/// `s/l` of the point of scratch `sc` whose lean a lobe takes ([`Along`]). Off the scratch,
-/// the scratch's part within the pixel's footprint (centred on the pixel's centre,
-/// [`crate::layers::CoverageCache::of_pixel`]) spans `s/l` in `[a - e, a + e]` (`a` the
-/// centre's, `e` the footprint's half-extent along the axis), clipped to `[-1, 1]`; the point
-/// is drawn there in proportion to the scratch's width, `sqrt(1 - (s/l)^2)`: the scratch's
-/// covered area, when the footprint holds it across. Where that span is empty (the scratch
-/// nearest to the hit is not the one the footprint holds) it is the whole scratch's.
-fn lean_place(ctx: &ShadingContext, sc: &Scratch, along: Along) -> f64 {
-    let d = sc.direction;
-    let rel = ctx.uv.as_dvec2() - sc.centre;
-    let (a, b) = (rel.dot(d) / sc.half_length, d.perp_dot(rel) / sc.half_width);
-    let u = match along {
-        Along::Footprint(u) if a * a + b * b > 1.0 => u,
-        _ => return a,
-    };
-    let (dx, dy) = ctx.footprint_uv();
-    let (dx, dy) = (dx.as_dvec2(), dy.as_dvec2());
-    let offset = ctx.pixel.map_or(glam::DVec2::ZERO, |h| h.offset.as_dvec2());
-    let centre = a - (offset.x * dx + offset.y * dy).dot(d) / sc.half_length;
-    let e = 0.5 * (dx.dot(d).abs() + dy.dot(d).abs()) / sc.half_length;
-    let (lo, hi) = match ((centre - e).max(-1.0), (centre + e).min(1.0)) {
-        (lo, hi) if lo < hi => (lo, hi),
-        // The footprint misses the scratch found nearest to the hit (it holds another of the
-        // layer's): a point of the whole scratch.
-        _ => (-1.0, 1.0),
-    };
-    // `s/l = sin phi`: the area up to `phi` is `G(phi) = phi + sin(2 phi) / 2`.
-    let (g0, g1) = (area_up_to(lo.asin()), area_up_to(hi.asin()));
-    area_inverse(g0 + u as f64 * (g1 - g0)).sin()
-}
-
-/// `G(phi) = phi + sin(2 phi) / 2`, the area of a unit semicircle's part `s/l < sin phi`
-/// (times 2), increasing from `-pi/2` to `pi/2` over `[-pi/2, pi/2]`; `G' = 2 cos^2 phi`.
-fn area_up_to(phi: f64) -> f64 {
-    phi + 0.5 * (2.0 * phi).sin()
-}
-
-/// `G^-1(g)` ([`area_up_to`]) for `g` in `[-pi/2, pi/2]`: a table of 256 intervals read
-/// linearly, then one step of Newton's method (error below 1e-6 where `cos phi > 0.05`, and
-/// `s/l = sin phi` within 1e-6 everywhere).
-fn area_inverse(g: f64) -> f64 {
-    use std::f64::consts::{FRAC_PI_2, PI};
-    const N: usize = 256;
-    static TABLE: std::sync::LazyLock<[f64; N + 1]> = std::sync::LazyLock::new(|| {
-        std::array::from_fn(|i| {
-            let target = -FRAC_PI_2 + PI * i as f64 / N as f64;
-            // Bisection, once per table entry.
-            let (mut a, mut b) = (-FRAC_PI_2, FRAC_PI_2);
-            for _ in 0..60 {
-                let mid = 0.5 * (a + b);
-                if area_up_to(mid) < target {
-                    a = mid;
-                } else {
-                    b = mid;
-                }
-            }
-            0.5 * (a + b)
-        })
-    });
-    let x = ((g + FRAC_PI_2) / PI * N as f64).clamp(0.0, N as f64);
-    let i = (x as usize).min(N - 1);
-    let phi = TABLE[i] + (x - i as f64) * (TABLE[i + 1] - TABLE[i]);
-    let (sin2, cos2) = (2.0 * phi).sin_cos();
-    let step = (phi + 0.5 * sin2 - g) / (1.0 + cos2).max(1e-3);
-    (phi - step).clamp(-FRAC_PI_2, FRAC_PI_2)
+    lean::leaned(
+        lobe_along(ctx, [d.x as f32, d.y as f32], c),
+        p.lean,
+        ctx,
+        sc,
+        along,
+    )
 }
 
 /// Scratch lobe of texture direction `d` with coverage `c`: `t = d.x dP/du + d.y dP/dv` in the
@@ -758,6 +668,8 @@ fn lobe_along(ctx: &ShadingContext, d: [f32; 2], c: f32) -> ScratchLobe {
     };
     ScratchLobe::new(c, cos, sin)
 }
+
+mod lean;
 
 #[cfg(test)]
 mod tests;

@@ -816,6 +816,44 @@ fn lean_follows_the_tapered_groove() {
     assert!(checked >= 10, "{checked}");
 }
 
+/// The point a leaned lobe takes beside its scratch is drawn in proportion to the scratch's
+/// width: chi-square of `place_by_width` against the semicircle law's CDF, `(x sqrt(1 - x^2)
+/// + asin x)`, over the whole scratch and over pieces of it (one at a tip).
+#[test]
+fn lean_places_follow_the_scratch_width() {
+    let cdf = |x: f64| x * (1.0 - x * x).max(0.0).sqrt() + x.clamp(-1.0, 1.0).asin();
+    let mut rng = Pcg64::seed_from_u64(31);
+    for (lo, hi) in [(-1.0, 1.0), (0.2, 0.9), (-0.999, -0.5), (0.95, 1.0)] {
+        let bins = 20;
+        let n = 100_000;
+        let mut counts = vec![0u64; bins];
+        for _ in 0..n {
+            let u = rng.random();
+            let x = lean::place_by_width(lo, hi, u);
+            assert!(
+                x >= lo - 1e-9 && x <= hi + 1e-9,
+                "{x} outside {lo}..{hi} ({u})"
+            );
+            let b = (((x - lo) / (hi - lo)) * bins as f64) as usize;
+            counts[b.min(bins - 1)] += 1;
+        }
+        let edge = |k: usize| lo + (hi - lo) * k as f64 / bins as f64;
+        let total = cdf(hi) - cdf(lo);
+        let expected: Vec<f64> = (0..bins)
+            .map(|k| n as f64 * (cdf(edge(k + 1)) - cdf(edge(k))) / total)
+            .collect();
+        let r = chi2_discrete(&counts, &expected);
+        assert!(r.p_value > 1e-3, "{lo}..{hi}: {r:?}");
+    }
+    // `G^-1` itself inverts `G` everywhere, the ends included.
+    for k in 0..=1000 {
+        let g = -FRAC_PI_2 + PI * k as f64 / 1000.0;
+        let phi = lean::area_inverse(g);
+        let back = lean::area_up_to(phi);
+        assert!((back - g).abs() < 1e-9, "{g}: {phi} gives {back}");
+    }
+}
+
 /// Only the coverage modes that filter over the footprint ask the integrator for ray
 /// differentials (it skips them when no material reads them).
 #[test]
