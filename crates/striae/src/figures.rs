@@ -84,12 +84,12 @@ pub const BEYOND_SCENES: [(&str, &str, &str, &str, &str); 3] = [
 
 /// The seed's model of a scene written for dielectric walls: the walls back to the default
 /// (`diffuse`, the seed's glass scratches), their `roughness` and `lobes` dropped, one
-/// direction per layer.
+/// direction per layer, no `lean`.
 pub fn seed_variant(text: &str) -> String {
     text.lines()
         .filter(|l| {
             let key = l.trim_start();
-            !["walls = \"dielectric\"", "roughness =", "lobes ="]
+            !["walls = \"dielectric\"", "roughness =", "lobes =", "lean ="]
                 .iter()
                 .any(|k| key.starts_with(k))
         })
@@ -565,7 +565,8 @@ mod tests {
     }
 
     /// Each "beyond the seed" scene goes past the seed (dielectric walls or a direction per
-    /// scratch), and its seed variant is the seed's table model with one direction per layer.
+    /// scratch), and its seed variant is the seed's table model with one direction per layer
+    /// and no lean.
     #[test]
     fn beyond_the_seed_scenes_and_their_seed_variants() {
         let o = Overrides {
@@ -582,7 +583,7 @@ mod tests {
                 .iter()
                 .find_map(|m| match m {
                     Material::Scratched(s) => Some((
-                        matches!(s.model, ScratchModel::DielectricWalls(_)),
+                        matches!(s.model, ScratchModel::DielectricWalls(_)) || s.has_lean(),
                         s.layers.orientation(),
                     )),
                     _ => None,
@@ -595,10 +596,10 @@ mod tests {
                 walls || orientation == crate::layers::Orientation::Random,
                 "{name}"
             );
-            // (`lobes` applies to dielectric walls only, so it goes with them.)
+            // (`lobes` applies to dielectric walls only, so it goes with them; `lean` is ours.)
             let with_lobes = text.replace(
                 "walls = \"dielectric\"",
-                "walls = \"dielectric\"\nlobes = \"table\"",
+                "walls = \"dielectric\"\nlobes = \"table\"\nlean = true",
             );
             for text in [text, &with_lobes[..]] {
                 let (walls, orientation) = model(&seed_variant(text), name);

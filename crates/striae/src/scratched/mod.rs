@@ -165,6 +165,11 @@ impl ScratchedMaterial {
         }
     }
 
+    /// Whether its lobes lean ([`Self::with_lean`]).
+    pub fn has_lean(&self) -> bool {
+        self.lean != 0.0
+    }
+
     /// The same material with `lean = true` (an option of ours beside METHOD.md 8.3's
     /// explicit grooves): the scratch frame at a hit tilted along the scratch as the walls of
     /// its tapered groove lean there. A groove whose width `W(s) = 2 w sqrt(1 - (s/l)^2)`
