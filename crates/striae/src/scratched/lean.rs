@@ -9,7 +9,7 @@ use crate::shading::ShadingContext;
 use glam::DVec2;
 
 /// Where the lean of a tapered groove's walls runs out: `|s/l|` at most this (a tilt of at most
-/// `atan(22 * 2 A W / L)`; 20 degrees for a 90-degree V of setting 2).
+/// `atan(89 A W / L)`: 20 degrees for a 90-degree V at setting 2, `W / L = 1/60`).
 const MAX_LEAN_S: f64 = 0.999;
 
 /// Where on a scratch's axis a leaned lobe takes its lean.
