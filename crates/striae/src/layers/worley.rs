@@ -100,20 +100,11 @@ impl Worley {
         let (i, j) = (floor_i64(q.x), floor_i64(q.y));
         let cell = DVec2::new(i as f64, j as f64);
         let f = q - cell;
-        let gap = |d: i64, t: f64| -> f64 {
-            if d < 0 {
-                t - (d + 1) as f64
-            } else if d > 0 {
-                d as f64 - t
-            } else {
-                0.0
-            }
-        };
         let mut best = (f64::INFINITY, DVec2::ZERO);
         for ring in 0..=2i64 {
             for dj in -ring..=ring {
                 for di in -ring..=ring {
-                    let (gx, gy) = (gap(di, f.x), gap(dj, f.y));
+                    let (gx, gy) = (axis_gap(di, f.x), axis_gap(dj, f.y));
                     if di.abs().max(dj.abs()) != ring || gx * gx + gy * gy >= best.0 {
                         continue;
                     }
@@ -170,6 +161,19 @@ impl Worley {
     }
 }
 
+/// The gap along one axis between a point at `t` in `[0, 1)` within its cell and the cell `d`
+/// steps away (0 for its own column or row).
+#[inline(always)]
+fn axis_gap(d: i64, t: f64) -> f64 {
+    if d < 0 {
+        t - (d + 1) as f64
+    } else if d > 0 {
+        d as f64 - t
+    } else {
+        0.0
+    }
+}
+
 /// Exact F1/F2 search around `q` for any placement `offset(i, j)` in `[0, 1)^2` per cell.
 /// Generic so that a test can feed it another implementation's feature points.
 pub fn worley_search(q: DVec2, offset: impl Fn(i64, i64) -> DVec2) -> WorleySample {
@@ -195,15 +199,6 @@ pub fn worley_search(q: DVec2, offset: impl Fn(i64, i64) -> DVec2) -> WorleySamp
         }
     }
     // Ring at Chebyshev distance 2: visit a cell only if it can beat the current F2.
-    let axis_gap = |d: i64, t: f64| -> f64 {
-        if d < 0 {
-            t - (d + 1) as f64
-        } else if d > 0 {
-            d as f64 - t
-        } else {
-            0.0
-        }
-    };
     for dj in -2i64..=2 {
         for di in -2i64..=2 {
             if di.abs() < 2 && dj.abs() < 2 {
