@@ -180,13 +180,13 @@ pub enum ScratchedBase {
 /// One scratch lobe at a hit: its coverage `c` of the footprint and the rotation of its scratch
 /// frame, `(cos beta, sin beta)` with `t = cos beta s + sin beta t_shading`, and the frame's
 /// lean along the scratch (`lean = true`, METHOD.md 8.3): its normal tilted toward `t` by an
-/// angle `alpha`, `(cos alpha, sin alpha)`, `(1, 0)` without one.
+/// angle `alpha`, as `sin alpha` (0 without one).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ScratchLobe {
     pub coverage: f32,
     pub cos: f32,
     pub sin: f32,
-    pub lean: [f32; 2],
+    pub lean: f32,
 }
 
 impl Default for ScratchLobe {
@@ -202,22 +202,27 @@ impl ScratchLobe {
             coverage,
             cos,
             sin,
-            lean: [1.0, 0.0],
+            lean: 0.0,
         }
     }
 
     /// The same lobe with its normal tilted toward `t` by the angle whose tangent is `tan`.
     pub fn leaned(self, tan: f32) -> Self {
-        let c = 1.0 / (1.0 + tan * tan).sqrt();
         ScratchLobe {
-            lean: [c, tan * c],
+            lean: tan / (1.0 + tan * tan).sqrt(),
             ..self
         }
     }
 
     #[inline]
     fn has_lean(&self) -> bool {
-        self.lean[1] != 0.0
+        self.lean != 0.0
+    }
+
+    /// `(cos alpha, sin alpha)` of the lean.
+    #[inline]
+    fn lean_cos_sin(&self) -> (f32, f32) {
+        ((1.0 - self.lean * self.lean).sqrt(), self.lean)
     }
 
     /// Shading frame to scratch frame: `x = w . b`, `b = t x n = (sin beta, -cos beta, 0)`;
@@ -233,14 +238,14 @@ impl ScratchLobe {
         if !self.has_lean() {
             return v;
         }
-        let [c, s] = self.lean;
+        let (c, s) = self.lean_cos_sin();
         Vec3::new(v.x, c * v.y - s * v.z, c * v.z + s * v.y)
     }
 
     #[inline]
     pub fn from_scratch(&self, v: Vec3) -> Vec3 {
         let v = if self.has_lean() {
-            let [c, s] = self.lean;
+            let (c, s) = self.lean_cos_sin();
             Vec3::new(v.x, c * v.y + s * v.z, c * v.z - s * v.y)
         } else {
             v

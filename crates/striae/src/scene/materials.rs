@@ -393,7 +393,7 @@ mod tests {
                 };
                 let mut cache = crate::layers::CoverageCache::new();
                 if let Bsdf::Scratched(b) = m.shade(&hit, view, &mut cache).1 {
-                    assert_eq!(b.lobes()[0].lean[1] != 0.0, leaned, "{lean} {uv:?}");
+                    assert_eq!(b.lobes()[0].lean != 0.0, leaned, "{lean} {uv:?}");
                     covered += 1;
                 }
             }

@@ -204,7 +204,7 @@ fn nondelta_sampler_chi2(t: &ScratchLobeTable) {
         ),
     ];
     for (base, lobes) in &cases {
-        let leaned = lobes.iter().any(|l| l.lean[1] != 0.0);
+        let leaned = lobes.iter().any(|l| l.lean != 0.0);
         // A lean cuts the cells at the surface's horizon: finer quadrature finds their slivers.
         let grid = SphereGrid {
             sub: if leaned { 32 } else { grid.sub },
@@ -402,7 +402,7 @@ fn mirror_walls_delta(t: &ScratchLobeTable, l: ScratchLobe) {
         for _ in 0..50_000 {
             let Some(s) = sample(&b, wo, &mut rng) else {
                 // (A leaned lobe's exit below the surface: no sample.)
-                assert!(l.lean[1] != 0.0);
+                assert!(l.lean != 0.0);
                 e.push(0.0);
                 scratch += 1;
                 continue;
@@ -442,7 +442,7 @@ fn mirror_walls_delta(t: &ScratchLobeTable, l: ScratchLobe) {
             e.mean()
         );
         assert!(lo > 0.7, "{lo}");
-        if l.lean[1] == 0.0 {
+        if l.lean == 0.0 {
             assert_eq!(lo, hi);
         }
     }
@@ -784,7 +784,7 @@ fn lean_follows_the_tapered_groove() {
                 _ => panic!("the hit lies on the scratch"),
             };
             let (l_lean, l_plain) = (frame(&leaned), frame(&plain));
-            assert_eq!(l_plain.lean, [1.0, 0.0]);
+            assert_eq!(l_plain.lean, 0.0);
             // The tapered V in world units along t = the scratch's direction, b = t x n:
             // `h(x, s) = -2 depth w(s) (1 - |x| / w(s))`, `w(s) = 2 w_0 sqrt(1 - (s / 2l)^2)`.
             let (l, w0) = (2.0 * sc.half_length, 2.0 * sc.half_width);
