@@ -365,8 +365,9 @@ impl Profile {
     /// The groove's cross-section area below the opening, in units of the opening's width
     /// squared (the shoelace formula over the polyline closed along the opening): `d / 2` for a
     /// V of depth `d`. Scaled about the opening's centre, a groove whose width changes at the
-    /// rate `W'` along its axis tilts its walls toward the axis by `2 area W'` on average over
-    /// the opening, exactly for a V ([`crate::scratched::ScratchedMaterial`]'s `lean`).
+    /// rate `W'` along its axis tilts its walls' normals along the axis, toward its wider part,
+    /// by `tan = 2 area |W'|` on average over the opening, and exactly so at every wall point of a
+    /// V (`lean = true`, [`crate::scratched::ScratchedMaterial::with_lean`]).
     pub fn area(&self) -> f64 {
         let twice: f64 = self
             .points

@@ -174,7 +174,7 @@ impl ScratchedMaterial {
     /// explicit grooves): the scratch frame at a hit tilted along the scratch as the walls of
     /// its tapered groove lean there. A groove whose width `W(s) = 2 w sqrt(1 - (s/l)^2)`
     /// shrinks toward its tips, its depth in proportion, leans its walls toward its middle by
-    /// `tan alpha = 2 A W'(s)` (`A` the profile's [`crate::profile::Profile::area`]): exactly
+    /// `tan alpha = 2 A |W'(s)|` (`A` the profile's [`crate::profile::Profile::area`]): exactly
     /// for a V, whose walls all lean alike, and on average over the opening for other
     /// profiles. The seed's extruded groove has no lean.
     pub fn with_lean(mut self, on: bool) -> Self {
