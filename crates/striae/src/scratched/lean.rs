@@ -70,7 +70,7 @@ fn lean_place(ctx: &ShadingContext, sc: &Scratch, along: Along) -> f64 {
     let offset = ctx.pixel.map_or(DVec2::ZERO, |h| h.offset.as_dvec2());
     let centre = a - (offset.x * dx + offset.y * dy).dot(d) / sc.half_length;
     let e = 0.5 * (dx.dot(d).abs() + dy.dot(d).abs()) / sc.half_length;
-    if !(e > 0.0) {
+    if e.is_nan() || e <= 0.0 {
         return a; // no footprint (no ray differentials): the hit's own place
     }
     let (lo, hi) = match ((centre - e).max(-1.0), (centre + e).min(1.0)) {
