@@ -4,7 +4,9 @@
 //! dielectric and the scratched material with its three coverage modes: `footprint` (the
 //! default: METHOD.md section 6, one exact coverage per pixel and chain of delta bounces,
 //! cached footprint tiles elsewhere), `sample` (the exact footprint of every sample) and
-//! `point`. Single-threaded, 128 x 96 pixels, 16 spp; every render starts with empty caches.
+//! `point`; and `lean`, the default coverage with the tapered groove's lean (`lean = true`,
+//! BENCHMARKS.md, "The tapered groove's lean"). Single-threaded, 128 x 96 pixels, 16 spp;
+//! every render starts with empty caches.
 //!
 //! `cargo bench -p striae --bench scratched`; the standing figures (`scripts/scratched_cost.py`
 //! at 512 x 384) are in BENCHMARKS.md, "Scratched glass over smooth glass".
@@ -24,7 +26,8 @@ const SCENES: [(&str, &str); 2] = [
     ),
 ];
 
-/// The scene text with its glass material replaced: `smooth`, or scratched with a coverage mode.
+/// The scene text with its glass material replaced: `smooth`, or scratched with a coverage mode,
+/// or `lean`.
 fn variant(text: &str, kind: &str) -> String {
     let start = text.find("[materials.glass]").expect("glass material");
     let end = text.find("[[shapes]]").expect("shapes");
@@ -34,6 +37,9 @@ fn variant(text: &str, kind: &str) -> String {
             "layer_mix = \"max\"",
             &format!("layer_mix = \"max\"\ncoverage = \"{kind}\""),
         ),
+        "lean" => {
+            text[start..end].replace("layer_mix = \"max\"", "layer_mix = \"max\"\nlean = true")
+        }
         _ => text[start..end].to_string(),
     };
     format!("{}{}{}", &text[..start], material, &text[end..])
@@ -55,7 +61,7 @@ fn bench(c: &mut Criterion) {
     g.sample_size(10);
     g.throughput(Throughput::Elements(128 * 96 * 16));
     for (name, text) in SCENES {
-        for kind in ["smooth", "footprint", "sample", "point"] {
+        for kind in ["smooth", "footprint", "sample", "point", "lean"] {
             let scene =
                 Scene::parse(&variant(text, kind), Path::new(name), Path::new("."), &o).unwrap();
             g.bench_with_input(BenchmarkId::new(name, kind), &scene, |b, s| {
