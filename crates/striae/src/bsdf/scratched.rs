@@ -271,20 +271,27 @@ impl ScratchLobe {
         Vec3::new(v.x * k, v.y * k, HORIZON.copysign(wo.z))
     }
 
-    /// The factor taking the lobe's value in the scratch frame (a BSDF for the cosine
-    /// `wi_s.z`) to the shading frame's (for `wi.z`): `wi_s.z / wi.z`, so that a leaned lobe
-    /// scatters the energy it does unleaned; 0 where the lean puts `wi` on the other side of
-    /// the frame's horizon than the surface's (the lobe's sampler then fails there too). 1
-    /// without a lean.
+    /// `wi` in the scratch frame, and the factor taking the lobe's value there (a BSDF for the
+    /// cosine `wi_s.z`) to the shading frame's (for `wi.z`): `wi_s.z / wi.z`, so that a leaned
+    /// lobe scatters the energy it does unleaned (1 without a lean). `None` where the lean puts
+    /// `wi` on the other side of the frame's horizon than the surface's: not in the lobe
+    /// ([`Self::wi_from_scratch`] fails there too).
     #[inline]
-    pub fn cosine_factor(&self, wi: Vec3, wi_s: Vec3) -> f32 {
+    pub fn wi_to_scratch(&self, wi: Vec3) -> Option<(Vec3, f32)> {
+        let wi_s = self.to_scratch(wi);
         if !self.has_lean() {
-            1.0
-        } else if wi.z * wi_s.z > 0.0 {
-            wi_s.z / wi.z
-        } else {
-            0.0
+            return Some((wi_s, 1.0));
         }
+        (wi.z * wi_s.z > 0.0).then(|| (wi_s, wi_s.z / wi.z))
+    }
+
+    /// A direction sampled in the scratch frame, in the shading frame; `None` where it is not
+    /// in the lobe, judged on its own image in the scratch frame as `eval` and `pdf` see it
+    /// ([`Self::wi_to_scratch`]).
+    #[inline]
+    pub fn wi_from_scratch(&self, v: Vec3) -> Option<Vec3> {
+        let wi = self.from_scratch(v);
+        (!self.has_lean() || self.wi_to_scratch(wi).is_some()).then_some(wi)
     }
 }
 
@@ -486,11 +493,9 @@ impl<'a> ScratchedBsdf<'a> {
         }
         let mut f = 0.0f64;
         for (k, l) in self.lobes().iter().enumerate() {
-            let wi_s = l.to_scratch(wi);
-            let lean = l.cosine_factor(wi, wi_s);
-            if lean == 0.0 {
+            let Some((wi_s, lean)) = l.wi_to_scratch(wi) else {
                 continue;
-            }
+            };
             let c = self.terms(k, wo);
             let fk = self.table.brdf().eval_at(&c.terms, wi_s);
             f += (l.coverage * c.scale * lean) as f64 * fk;
@@ -506,10 +511,9 @@ impl<'a> ScratchedBsdf<'a> {
         }
         let mut p = 0.0f64;
         for (k, l) in self.lobes().iter().enumerate() {
-            let wi_s = l.to_scratch(wi);
-            if l.cosine_factor(wi, wi_s) == 0.0 {
+            let Some((wi_s, _)) = l.wi_to_scratch(wi) else {
                 continue;
-            }
+            };
             let c = self.terms(k, wo);
             let pk = self.lobe_probability(l, &c);
             if pk > 0.0 {
@@ -527,11 +531,9 @@ impl<'a> ScratchedBsdf<'a> {
         }
         let (mut f, mut p) = (0.0f64, 0.0f64);
         for (k, l) in self.lobes().iter().enumerate() {
-            let wi_s = l.to_scratch(wi);
-            let lean = l.cosine_factor(wi, wi_s);
-            if lean == 0.0 {
+            let Some((wi_s, lean)) = l.wi_to_scratch(wi) else {
                 continue;
-            }
+            };
             let c = self.terms(k, wo);
             let (fk, pdf_k) = self.table.brdf().eval_pdf_at(&c.terms, wi_s);
             f += (l.coverage * c.scale * lean) as f64 * fk;
@@ -611,11 +613,7 @@ impl<'a> ScratchedBsdf<'a> {
             .table
             .brdf()
             .sample_at(&c.terms, [u.x as f64, u.y as f64])?;
-        let wi = l.from_scratch(s.wi);
-        // (`wi`'s own image in the scratch frame, as `eval` and `pdf` see it.)
-        if l.cosine_factor(wi, l.to_scratch(wi)) == 0.0 {
-            return None;
-        }
+        let wi = l.wi_from_scratch(s.wi)?;
         if s.delta || self.lobes().len() == 1 {
             // The delta lobe (coefficient c_k s value over P_k pmf), or one smooth lobe (the
             // `max` mode: the mixture's pdf is P_k times the lobe's, its value c_k s f): the

@@ -617,11 +617,9 @@ impl<'a> ScratchedGlassBsdf<'a> {
         }
         let (mut f, mut p) = (0.0f32, 0.0f32);
         for l in self.lobes.as_slice() {
-            let wi_s = l.to_scratch(wi);
-            let lean = l.cosine_factor(wi, wi_s);
-            if lean == 0.0 {
+            let Some((wi_s, lean)) = l.wi_to_scratch(wi) else {
                 continue;
-            }
+            };
             let c = table.corners(l.wo_to_scratch(wo));
             let (fk, pk) = table.eval_pdf(&c, wi_s);
             f += l.coverage * fk * lean;
@@ -683,12 +681,8 @@ impl<'a> ScratchedGlassBsdf<'a> {
                     GlassWalls::Traced(g) => g.sample(w, u0, u),
                     GlassWalls::Table(t) => t.sample_smooth(w, u0, u),
                 }?;
-                let wi = l.from_scratch(s.wi);
-                if l.cosine_factor(wi, l.to_scratch(wi)) == 0.0 {
-                    return None;
-                }
                 return Some(BsdfSample {
-                    wi,
+                    wi: l.wi_from_scratch(s.wi)?,
                     weight: Rgb::splat(s.weight),
                     pdf: l.coverage * s.pdf,
                     delta: false,
@@ -698,10 +692,7 @@ impl<'a> ScratchedGlassBsdf<'a> {
         };
         let corners = table.corners(l.wo_to_scratch(wo));
         let (wi_s, lobe) = table.sample(&corners, u0, u)?;
-        let wi = l.from_scratch(wi_s);
-        if l.cosine_factor(wi, l.to_scratch(wi)) == 0.0 {
-            return None; // a leaned lobe's exit across the surface: not in its pdf
-        }
+        let wi = l.wi_from_scratch(wi_s)?;
         let (f, pdf) = self.eval_pdf(wo, wi);
         if !(pdf > 0.0) {
             return None;

@@ -55,11 +55,9 @@ impl<'a> ScratchedMetalBsdf<'a> {
         }
         let mut sum = (0.0f32, 0.0f32);
         for lobe in self.lobes.as_slice() {
-            let wi_s = lobe.to_scratch(wi);
-            let lean = lobe.cosine_factor(wi, wi_s);
-            if lean == 0.0 {
+            let Some((wi_s, lean)) = lobe.wi_to_scratch(wi) else {
                 continue;
-            }
+            };
             let corners = self.table.corners(lobe.wo_to_scratch(wo));
             let (f, pdf) = self.table.eval_pdf(&corners, wi_s);
             sum = (
@@ -89,10 +87,7 @@ impl<'a> ScratchedMetalBsdf<'a> {
         let (k, u0) = self.lobes.pick(u_lobe, base);
         let lobe = &self.lobes.as_slice()[k];
         let corners = self.table.corners(lobe.wo_to_scratch(wo));
-        let wi = lobe.from_scratch(self.table.sample(&corners, u0, u)?.0);
-        if lobe.cosine_factor(wi, lobe.to_scratch(wi)) == 0.0 {
-            return None; // a leaned lobe's exit below the surface: not in its pdf
-        }
+        let wi = lobe.wi_from_scratch(self.table.sample(&corners, u0, u)?.0)?;
         let (f, pdf) = self.eval_pdf(wo, wi);
         (pdf > 0.0).then(|| BsdfSample::reflected(wi, f, pdf))
     }

@@ -375,7 +375,7 @@ impl ScratchedMaterial {
             }
         }
         match met {
-            Some(sc) if self.lean != 0.0 => {
+            Some(sc) if self.has_lean() => {
                 InsideHit::Ridge(leaned_lobe(self, ctx, &sc, 1.0, Along::Hit))
             }
             Some(sc) => {
@@ -620,7 +620,7 @@ impl RidgeReach {
 /// Scratch lobe of `layer` with coverage `c` ([`lobe_along`] its direction at the hit; with
 /// `lean`, [`leaned_lobe`] of the scratch at the hit, `u` uniform in `[0, 1)` placing it).
 fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32, u: f32) -> ScratchLobe {
-    if p.lean != 0.0 {
+    if p.has_lean() {
         if let Some(sc) = p.layers.scratch_at(layer, ctx.uv.as_dvec2()) {
             let along = if p.coverage == CoverageMode::Point {
                 Along::Hit
