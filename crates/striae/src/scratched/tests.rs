@@ -77,6 +77,14 @@ fn schlick_diffuse() -> Arc<ScratchLobeTable> {
     )
 }
 
+/// The `F = 1` conductor (`preset = "none"`).
+fn perfect_mirror() -> ConductorIor {
+    ConductorIor {
+        eta: Rgb::ZERO,
+        k: Rgb::ONE,
+    }
+}
+
 fn dir(theta_deg: f32, phi_deg: f32) -> Vec3 {
     let (t, p) = (theta_deg.to_radians(), phi_deg.to_radians());
     Vec3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos())
@@ -144,10 +152,7 @@ fn albedo_table_matches_quadrature() {
     let t = lossless_diffuse();
     let b = ScratchedBsdf::new(
         ScratchedBase::Metal {
-            ior: ConductorIor {
-                eta: Rgb::ZERO,
-                k: Rgb::ONE,
-            },
+            ior: perfect_mirror(),
         },
         &t,
         Rgb::ONE,
@@ -187,10 +192,7 @@ fn nondelta_sampler_chi2(t: &ScratchLobeTable) {
     let mut rng = Pcg64::seed_from_u64(21);
     let glass = ScratchedBase::Glass { eta: 1.5 };
     let metal = ScratchedBase::Metal {
-        ior: ConductorIor {
-            eta: Rgb::ZERO,
-            k: Rgb::ONE,
-        },
+        ior: perfect_mirror(),
     };
     let cases: Vec<(ScratchedBase, Vec<ScratchLobe>)> = vec![
         (glass, vec![lobe(0.7, 0.6)]),
@@ -350,10 +352,7 @@ fn metal_energy_is_base_plus_scratch_albedo() {
 
 fn metal_energy(t: &ScratchLobeTable) {
     let lobes = [lobe(0.5, 0.9)];
-    let none = ConductorIor {
-        eta: Rgb::ZERO,
-        k: Rgb::ONE,
-    };
+    let none = perfect_mirror();
     let b = ScratchedBsdf::new(ScratchedBase::Metal { ior: none }, t, Rgb::ONE, &lobes);
     assert!(!b.has_transmission());
     let mut rng = Pcg64::seed_from_u64(23);
@@ -385,10 +384,7 @@ fn mirror_walls_give_a_delta_in_theta() {
 }
 
 fn mirror_walls_delta(t: &ScratchLobeTable, l: ScratchLobe) {
-    let none = ConductorIor {
-        eta: Rgb::ZERO,
-        k: Rgb::ONE,
-    };
+    let none = perfect_mirror();
     let b = ScratchedBsdf::new(ScratchedBase::Metal { ior: none }, t, Rgb::ONE, &[l]);
     assert!(b.is_delta());
     let mut rng = Pcg64::seed_from_u64(24);
@@ -643,10 +639,7 @@ fn material_transmission_matches_its_bsdf() {
         );
         assert_eq!(m.has_transmission(), bsdf.has_transmission(), "{text}");
     }
-    let mirror = ConductorIor {
-        eta: Rgb::ZERO,
-        k: Rgb::ONE,
-    };
+    let mirror = perfect_mirror();
     let layers = wide_layers(4, 7);
     let mut rng = Pcg64::seed_from_u64(31);
     for (base, transmits) in [
@@ -752,10 +745,7 @@ fn lean_follows_the_tapered_groove() {
         layers: 1,
     };
     let layers = LayerSet::new(params, 3).unwrap();
-    let none = ConductorIor {
-        eta: Rgb::ZERO,
-        k: Rgb::ONE,
-    };
+    let none = perfect_mirror();
     let material = |lean| {
         ScratchedMaterial::new(
             ScratchedBase::Metal { ior: none },
@@ -1090,10 +1080,7 @@ fn inside_hits_read_no_footprint() {
     for base in [
         ScratchedBase::Glass { eta: 1.5 },
         ScratchedBase::Metal {
-            ior: ConductorIor {
-                eta: Rgb::ZERO,
-                k: Rgb::ONE,
-            },
+            ior: perfect_mirror(),
         },
     ] {
         let m = ScratchedMaterial::new(
