@@ -16,6 +16,15 @@ pub fn mix64(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// `x / 2^32` for `x < 2^32`, exactly `x as f64 / 2^32`: the 32 bits set as the high mantissa
+/// bits of a number in `[1, 2)`, then 1 taken away (exact). A shift, an or and a subtraction,
+/// where AVX2 has no conversion from 64-bit integers, lane-wise or unsigned.
+#[inline(always)]
+pub fn unit_from_u32(x: u64) -> f64 {
+    debug_assert!(x >> 32 == 0);
+    f64::from_bits(0x3FF0_0000_0000_0000 | (x << 20)) - 1.0
+}
+
 /// One SplitMix64 step from state `x`: `mix64(x + GOLDEN)`.
 #[inline(always)]
 pub fn splitmix64(x: u64) -> u64 {
@@ -33,5 +42,28 @@ mod tests {
         assert_eq!(splitmix64(0), 0xE220_A839_7B1D_CDAF);
         assert_eq!(splitmix64(GOLDEN), 0x6E78_9E6A_A1B9_65F4);
         assert_eq!(mix64(0), 0);
+    }
+
+    #[test]
+    fn unit_from_u32_is_the_exact_quotient() {
+        let mut x = 0;
+        let edges = [
+            0,
+            1,
+            2,
+            3,
+            (1 << 31) - 1,
+            1 << 31,
+            (1 << 32) - 2,
+            (1 << 32) - 1,
+        ];
+        let hashed = (0..100_000).map(|_| {
+            x = splitmix64(x);
+            x >> 32
+        });
+        for v in edges.into_iter().chain(hashed) {
+            let want = v as f64 / 4_294_967_296.0;
+            assert_eq!(unit_from_u32(v).to_bits(), want.to_bits(), "{v}");
+        }
     }
 }

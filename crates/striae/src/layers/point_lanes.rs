@@ -11,8 +11,7 @@
 //! axis (longer ones are split): the four cells from the box's lower corner.
 
 use super::layer::{ScratchLayer, CENTRE};
-use super::worley::floor_i64;
-use crate::hash::mix64;
+use super::worley::{cell_offset, floor_pair};
 use glam::DVec2;
 
 /// Layers a group tests together.
@@ -20,9 +19,6 @@ const LANES: usize = 8;
 
 /// The most pieces [`PointLanes::capsule_mask`] splits a segment into.
 const MAX_PIECES: usize = 64;
-
-/// `[0, 2^32)` to `[0, 1)`, as [`super::Worley::offset`].
-const TO_UNIT: f64 = 1.0 / 4_294_967_296.0;
 
 /// Eight layers' noise maps and hash keys; a lane that is not tested here has `r2 = -1`.
 #[derive(Clone, Debug)]
@@ -142,13 +138,7 @@ impl Group {
     /// The offset of lane `lane`'s feature point inside cell `(i, j)`, in `[0, 1)^2`.
     #[inline(always)]
     fn offset(&self, lane: usize, i: i64, j: i64) -> (f64, f64) {
-        let mask = self.mask[lane];
-        let (iw, jw) = ((i & mask) as u64, (j & mask) as u64);
-        let h = mix64((iw | (jw << 32)) ^ self.key[lane]);
-        (
-            (h >> 32) as f64 * TO_UNIT,
-            (h & 0xffff_ffff) as f64 * TO_UNIT,
-        )
+        cell_offset(self.key[lane], self.mask[lane], i, j)
     }
 
     /// Lane `lane`'s linear map to noise space (`M v`).
@@ -168,11 +158,11 @@ impl Group {
         let (ax, ay) = self.to_noise(lane, d);
         let (vx, vy) = self.to_noise(lane, v);
         let tau = self.tau[lane];
-        let (i, j) = (
-            floor_i64(ax.min(ax + vx) - tau),
-            floor_i64(ay.min(ay + vy) - tau),
+        let ((fi, i), (fj, j)) = (
+            floor_pair(ax.min(ax + vx) - tau),
+            floor_pair(ay.min(ay + vy) - tau),
         );
-        let (fx, fy) = (ax - i as f64, ay - j as f64);
+        let (fx, fy) = (ax - fi, ay - fj);
         let vv = vx * vx + vy * vy;
         let inv = if vv > 0.0 { 1.0 / vv } else { 0.0 };
         let r2 = self.r2[lane];
@@ -191,16 +181,18 @@ impl Group {
     #[inline(always)]
     fn lane_hit(&self, lane: usize, d: DVec2) -> bool {
         let (qx, qy) = self.to_noise(lane, d);
-        let (i, j) = (floor_i64(qx), floor_i64(qy));
-        let (fx, fy) = (qx - i as f64, qy - j as f64);
-        let di: i64 = if fx < 0.5 { -1 } else { 1 };
-        let dj: i64 = if fy < 0.5 { -1 } else { 1 };
+        let ((fi, i), (fj, j)) = (floor_pair(qx), floor_pair(qy));
+        let (fx, fy) = (qx - fi, qy - fj);
+        // The nearer neighbouring column and row, as integers and as floats.
+        let side = |f: f64| if f < 0.5 { (-1, -1.0) } else { (1, 1.0) };
+        let ((di, dfi), (dj, dfj)) = (side(fx), side(fy));
         let r2 = self.r2[lane];
-        let near = |a: i64, b: i64| {
+        let near = |(a, af): (i64, f64), (b, bf): (i64, f64)| {
             let (ox, oy) = self.offset(lane, i + a, j + b);
-            let (px, py) = (a as f64 + ox - fx, b as f64 + oy - fy);
+            let (px, py) = (af + ox - fx, bf + oy - fy);
             px * px + py * py < r2
         };
-        near(0, 0) | near(di, 0) | near(0, dj) | near(di, dj)
+        let (o, x, y) = ((0, 0.0), (di, dfi), (dj, dfj));
+        near(o, o) | near(x, o) | near(o, y) | near(x, y)
     }
 }

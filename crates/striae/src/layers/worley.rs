@@ -10,7 +10,7 @@
 //! point sits in a far corner; nothing beyond the ring can matter, because F2 < 2 always).
 
 use super::LayerError;
-use crate::hash::mix64;
+use crate::hash::{mix64, unit_from_u32};
 use glam::DVec2;
 
 /// The result of one Worley lookup.
@@ -32,6 +32,31 @@ pub struct WorleySample {
 pub(crate) fn floor_i64(x: f64) -> i64 {
     let t = x as i64;
     t - ((t as f64) > x) as i64
+}
+
+/// `floor(x)` as a float and as an integer, `|x| < 2^51`, in float arithmetic alone: adding
+/// `1.5 * 2^52` rounds `x` to an integer held in the sum's low mantissa bits, a step down where
+/// that rounded up. [`floor_i64`]'s value, where a vector of AVX2 has no conversion between
+/// 64-bit integers and floats.
+#[inline(always)]
+pub(crate) fn floor_pair(x: f64) -> (f64, i64) {
+    const SHIFT: f64 = 6_755_399_441_055_744.0;
+    let y = x + SHIFT;
+    let r = y - SHIFT;
+    let n = y.to_bits() as i64 - SHIFT.to_bits() as i64;
+    if r > x {
+        (r - 1.0, n - 1)
+    } else {
+        (r, n)
+    }
+}
+
+/// The offset of cell `(i, j)`'s feature point inside its cell, in `[0, 1)^2`, for the hash
+/// key `key` and the period mask `mask` ([`Worley::hash_key`]): one hash, its two halves.
+#[inline(always)]
+pub(crate) fn cell_offset(key: u64, mask: i64, i: i64, j: i64) -> (f64, f64) {
+    let h = mix64(((i & mask) as u64 | ((j & mask) as u64) << 32) ^ key);
+    (unit_from_u32(h >> 32), unit_from_u32(h & 0xffff_ffff))
 }
 
 /// Tileable Worley noise with period `P` (a power of two) in both axes.
@@ -75,11 +100,8 @@ impl Worley {
     /// The offset of cell `(i, j)`'s feature point inside its cell, in `[0, 1)^2`.
     #[inline(always)]
     pub fn offset(&self, i: i64, j: i64) -> DVec2 {
-        let iw = (i & self.mask) as u64;
-        let jw = (j & self.mask) as u64;
-        let h = mix64((iw | (jw << 32)) ^ self.key);
-        const S: f64 = 1.0 / 4_294_967_296.0;
-        DVec2::new((h >> 32) as f64 * S, (h & 0xffff_ffff) as f64 * S)
+        let (x, y) = cell_offset(self.key, self.mask, i, j);
+        DVec2::new(x, y)
     }
 
     /// Cell `(i, j)`'s feature point.
@@ -239,6 +261,36 @@ mod tests {
         }
         d.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap());
         (d[0].0, d[1].0, d[0].1)
+    }
+
+    #[test]
+    fn floor_pair_is_floor() {
+        let mut x = 7;
+        let hashed = (0..100_000).map(|k| {
+            x = crate::hash::splitmix64(x);
+            let unit = crate::hash::unit_from_u32(x >> 32) - 0.5;
+            // Wide values, then values within an ulp of integers, then near zero.
+            match k % 3 {
+                0 => unit * 2f64.powi((x & 63) as i32 - 12),
+                1 => ((x >> 8) % 2001) as f64 - 1000.0 + unit * 1e-12,
+                _ => unit * 1e-300,
+            }
+        });
+        let edges = [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            2f64.powi(51) - 0.5,
+            -(2f64.powi(51) - 1.0),
+        ];
+        for v in edges.into_iter().chain(hashed) {
+            let (f, i) = floor_pair(v);
+            assert_eq!(i, floor_i64(v), "{v}");
+            assert_eq!(f, v.floor(), "{v}");
+        }
     }
 
     #[test]
