@@ -112,7 +112,8 @@ fn map_scratch(a: &[Vec2; 2], s: &Scratch) -> (Vec2, f32, f32) {
     let d = a[0] * s.direction.x as f32 + a[1] * s.direction.y as f32;
     let det = (a[0].x * a[1].y - a[0].y * a[1].x).abs();
     let len = d.length();
-    (d / len, s.half_width as f32 * det / len, len)
+    let (_, half_width) = s.mapped_half_axes(len as f64, det as f64);
+    (d / len, half_width as f32, len)
 }
 
 /// The interval of `t` in `[-a, a]` where `p + t d` lies in `[0, 1]^2`, if any.

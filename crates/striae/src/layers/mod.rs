@@ -154,6 +154,16 @@ pub struct Scratch {
     pub half_width: f64,
 }
 
+impl Scratch {
+    /// The half-length and half-width of the scratch's image under a linear map `A` from
+    /// texture space to a surface, given `|A d|` (`along`, the image of its direction's length)
+    /// and `|det A|` (`area`): `l |A d|` and `w |det A| / |A d|`, the thin ellipse of the same
+    /// area along `A d` (exact for a similarity; `geometry::carve` builds its grooves so).
+    pub fn mapped_half_axes(&self, along: f64, area: f64) -> (f64, f64) {
+        (self.half_length * along, self.half_width * area / along)
+    }
+}
+
 /// `K` scratch layers drawn from one seed (METHOD.md section 5). Layer `k`'s angle and noise
 /// seed depend only on `(seed, k)`, so adding layers keeps the first ones unchanged.
 #[derive(Clone, Debug)]

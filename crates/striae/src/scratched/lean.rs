@@ -40,7 +40,7 @@ pub(super) fn leaned(
     let along_world = map(d);
     let along_len = along_world.length();
     let area = along_world.cross(map(d.perp())).length();
-    let (l, w) = (sc.half_length * along_len, sc.half_width * area / along_len);
+    let (l, w) = sc.mapped_half_axes(along_len, area);
     let s = lean_place(ctx, sc, along).clamp(-MAX_LEAN_S, MAX_LEAN_S);
     let tan = lean * -2.0 * w * s / (l * (1.0 - s * s).sqrt());
     if tan.is_finite() {

@@ -606,7 +606,7 @@ impl RidgeReach {
         let t = (centre.dot(across) / reach.dot(across)).clamp(0.0, 1.0);
         let t = if t.is_finite() { t } else { 0.0 };
         let s = (reach * t - centre).dot(along) / (sc.half_length * d_len);
-        let half_width = sc.half_width * self.det.abs() / d_len * (1.0 - s * s).sqrt();
+        let half_width = sc.mapped_half_axes(d_len, self.det.abs()).1 * (1.0 - s * s).sqrt();
         let open = half_width > 0.0;
         if !open {
             return false;
