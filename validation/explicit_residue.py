@@ -5,7 +5,7 @@
     python3 validation/explicit_residue.py EXPLICIT SV [--sum SUM] [--background B] [--profiles]
 
 EXPLICIT, SV and SUM are path prefixes: `PREFIX_0.exr` and `PREFIX_1.exr` (render seeds 0
-and 1) are read and averaged. Differences are given as fractions of the scratches' light, the
+and 1: `striae render SCENE --seed S -o PREFIX_S.exr`) are read and averaged. Differences are given as fractions of the scratches' light, the
 SV render less the plain surface's radiance `B` (0.02: the metal scenes' environment in the
 mirror base), with their noise from the two seeds. The scratched pixels (SV above `B`, grown by
 a pixel) are split into connected pieces:

@@ -89,7 +89,7 @@ pub(super) fn carve(
         bytes = bytes.saturating_add(
             (faces.len() as f64
                 * per_face
-                * (triangles_per_groove(segments) * BYTES_PER_TRIANGLE) as f64)
+                * (triangles_per_groove(segments, spec.stations) * BYTES_PER_TRIANGLE) as f64)
                 .min(usize::MAX as f64) as usize,
         );
         if bytes > MAX_EXPLICIT_BYTES {
@@ -117,7 +117,7 @@ pub(super) fn carve(
             if !(depth < room) {
                 return Err(invalid(file, key, true, format!("grooves up to {depth} deep do not fit in shapes[{i}], {room} thick: make it thicker or the scratches narrower or shallower")));
             }
-            let mut carving = Carving::new(face, &scratches, &spec.profile.points);
+            let mut carving = Carving::new(face, &scratches, &spec.profile.points, spec.stations);
             if carving.is_empty() {
                 carve.carvings.push(carving);
                 continue;
@@ -201,6 +201,42 @@ mod tests {
         assert!(carve.grooves() > 100, "{} grooves", carve.grooves());
         // The face and one wall shape.
         assert_eq!(s.geometry.shapes().len(), 2);
+    }
+
+    #[test]
+    fn stations_set_the_walls_triangles_and_are_checked() {
+        let triangles = |stations: &str| {
+            let s = scene(
+                "type = \"rectangle\"",
+                &format!("setting = 2\nlayers = 1\n{stations}"),
+            )
+            .unwrap();
+            let walls = &s.geometry.shapes()[1];
+            let crate::geometry::ShapeGeometry::Mesh(m) = &walls.geometry else {
+                panic!("walls are a mesh")
+            };
+            (s.geometry.carve().unwrap().grooves(), m.triangle_count())
+        };
+        // A V has two segments: 2 x 2 x (stations - 1) triangles a groove, less the pointed
+        // ends' degenerate ones (one per segment at each tip of a whole groove).
+        let (g16, t16) = triangles("");
+        let (g64, t64) = triangles("stations = 64");
+        assert_eq!(g16, g64);
+        assert!(
+            t16 <= 4 * 15 * g16 && t16 >= 4 * 15 * g16 - 4 * g16,
+            "{t16}, {g16}"
+        );
+        assert!(
+            t64 <= 4 * 63 * g64 && t64 >= 4 * 63 * g64 - 4 * g64,
+            "{t64}, {g64}"
+        );
+        for bad in ["stations = 2", "stations = 5000"] {
+            let e = error_of(scene(
+                "type = \"rectangle\"",
+                &format!("setting = 2\n{bad}"),
+            ));
+            assert!(e.contains("materials.plate.scratches.stations"), "{e}");
+        }
     }
 
     #[test]

@@ -30,12 +30,14 @@
 //! layer_mix = "max"              # or "sum" ([Raymond16])
 //! # table = "my-table.npz"       # load a table instead of computing one
 //! # explicit = true              # real grooves on planar faces (METHOD.md 8.3)
+//! # stations = 16                # stations along each explicit groove
 //! ```
 
 use super::materials::{conductor_ior, invalid, MaterialError};
 use crate::bsdf::GrooveWall;
 use crate::bsdf::{ConductorIor, GlassWalls, ScratchedBase, TracedGroove};
 use crate::fresnel::FresnelLaw;
+use crate::geometry::carve::{DEFAULT_STATIONS, STATIONS_RANGE};
 use crate::layers::{LayerError, LayerParams, LayerSet, Orientation, MAX_LAYERS};
 use crate::material::Material;
 use crate::math::Rgb;
@@ -126,6 +128,9 @@ pub struct ScratchSpec {
     /// (default `false`, the seed's extruded groove; [`ScratchedMaterial::with_lean`]).
     /// Explicit grooves have the lean of their geometry whatever this says.
     pub lean: Option<bool>,
+    /// Stations along each explicit groove (default [`DEFAULT_STATIONS`]): its opening is the
+    /// polygon through them (`geometry::carve`). The SV-BRDF does not read it.
+    pub stations: Option<usize>,
 }
 
 /// Deserialisers of the scratched material's word-valued keys that put the key in the error.
@@ -210,6 +215,8 @@ pub struct Resolved {
     pub orientation: Orientation,
     pub mix: LayerMix,
     pub coverage: CoverageMode,
+    /// Stations along each explicit groove.
+    pub stations: usize,
 }
 
 /// The base's defaults for the scratch table.
@@ -288,6 +295,21 @@ impl ScratchedDesc {
             orientation: s.orientation.unwrap_or_default(),
             mix: s.layer_mix.unwrap_or_default(),
             coverage: s.coverage.unwrap_or_default(),
+            stations: match s.stations {
+                None => DEFAULT_STATIONS,
+                Some(n) if STATIONS_RANGE.contains(&n) => n,
+                Some(n) => {
+                    return Err(invalid(
+                        "scratches.stations",
+                        n,
+                        format!(
+                            "between {} and {} stations along each explicit groove",
+                            STATIONS_RANGE.start(),
+                            STATIONS_RANGE.end()
+                        ),
+                    ))
+                }
+            },
         })
     }
 
@@ -724,6 +746,8 @@ pub struct ExplicitSpec {
     pub profile: Profile,
     pub face: Material,
     pub wall: Material,
+    /// Stations along each groove (`scratches.stations`).
+    pub stations: usize,
 }
 
 impl ScratchedDesc {
@@ -791,6 +815,7 @@ impl ScratchedDesc {
             profile: params.profile,
             face,
             wall,
+            stations: r.stations,
         })
     }
 }
@@ -822,6 +847,7 @@ impl ScratchedDesc {
                 eta,
                 roughness: params.roughness as f32,
             },
+            stations: r.stations,
         })
     }
 }
