@@ -77,10 +77,12 @@ pub struct GonioSettings {
     pub phi_i: f64,
     pub side: LightSide,
     /// `Inside` only: also trace the light aimed at the flat surface beside the opening that
-    /// meets the groove first. Seen from inside, a groove is a ridge of air below the surface,
-    /// and at grazing incidence it intercepts more light than crosses its opening (the ridge's
-    /// projected width over the opening's: [`GonioOutput::intercept`]). The fractions stay per
-    /// unit opening, so a lossless groove's `albedo_r + albedo_t` is the intercept.
+    /// meets the groove first, or, totally reflected there, right after. Seen from inside, a
+    /// groove is a ridge of air below the surface, and at grazing incidence it intercepts more
+    /// light than crosses its opening: the ridge's projected width over the opening's on the
+    /// way to the surface, and under total internal reflection as much again on the way back
+    /// from it ([`GonioOutput::intercept`]). The fractions stay per unit opening, so a lossless
+    /// groove's `albedo_r + albedo_t` is the intercept.
     pub beside: bool,
     /// Paths traced (entry points, stratified over the opening, or the band of `beside`).
     pub paths: u64,
@@ -233,7 +235,7 @@ struct Acc {
     transmitted: Vec<u64>,
     dropped: u64,
     lost: u64,
-    /// Paths of the `beside` band whose first surface is the flat one (not the groove's).
+    /// Paths of the `beside` band that pass the groove (before and after the flat surface).
     missed: u64,
 }
 
@@ -366,10 +368,25 @@ struct Ray {
 
 /// Where entry points start on the line `z = 0` and the width they cover, for light along
 /// `d`: the opening `[-1/2, 1/2]`, or with `beside` every line through the groove's bounding
-/// box (a line reaches `z = cs.z_min` at `dx` from where it crosses `z = 0`).
-fn entry_band(cs: &CrossSection, d: [f64; 3], beside: bool) -> (f64, f64) {
-    let dx = if beside { cs.z_min * d[0] / d[2] } else { 0.0 };
-    (-0.5 - dx.max(0.0), 1.0 + dx.abs())
+/// box before it reaches the surface (a line reaches `z = cs.z_min` at `dx` from where it
+/// crosses `z = 0`), and under total internal reflection ([`totally_reflected`]) after it
+/// too, the surface beside the opening reflecting the light into the groove.
+fn entry_band(cs: &CrossSection, d: [f64; 3], beside: bool, ior: f64) -> (f64, f64) {
+    if !beside {
+        return (-0.5, 1.0);
+    }
+    let dx = cs.z_min * d[0] / d[2];
+    if totally_reflected(d, ior) {
+        (-0.5 - dx.abs(), 1.0 + 2.0 * dx.abs())
+    } else {
+        (-0.5 - dx.max(0.0), 1.0 + dx.abs())
+    }
+}
+
+/// Whether light inside the object along the unit `d` is totally reflected at the flat
+/// surface: `n^2 (1 - d_z^2) > 1`.
+pub fn totally_reflected(d: [f64; 3], ior: f64) -> bool {
+    ior * ior * (1.0 - d[2] * d[2]) > 1.0
 }
 
 /// How a path ended ([`Tracer::run`]).
@@ -409,7 +426,7 @@ impl Tracer {
     fn new(profile: &Profile, s: &GonioSettings) -> Self {
         let cs = CrossSection::new(profile);
         let d0 = s.incident_travel();
-        let (band_start, band_width) = entry_band(&cs, d0, s.beside);
+        let (band_start, band_width) = entry_band(&cs, d0, s.beside, s.ior);
         Tracer {
             band_start,
             band_width,
@@ -466,9 +483,12 @@ impl Tracer {
         }
     }
 
-    /// Follow `ray` until it leaves the groove (`beside`: a path from inside that passes the
-    /// groove at its first step is `Missed`).
+    /// Follow `ray` until it leaves the groove (`beside`: a path from inside that does not meet
+    /// the groove before it reaches the flat surface, or, totally reflected there, right
+    /// after, is `Missed`).
     fn run(&self, mut ray: Ray, path_key: u64, beside: bool) -> Outcome {
+        // Aimed beside the groove and not yet in it.
+        let mut aimed = beside;
         for bounce in 0..self.s.max_bounces {
             // This bounce's random numbers, drawn only where needed.
             let u = Draws {
@@ -497,14 +517,16 @@ impl Tracer {
             };
             match hit {
                 Some((seg, t, _)) if t < t_flat => {
+                    aimed = false;
                     ray.pos = [ray.pos[0] + t * d2[0], ray.pos[1] + t * d2[1]];
                     ray.skip = seg;
                     if let Scatter::Absorbed = self.wall(&mut ray, seg, u) {
                         return Outcome::Absorbed;
                     }
                 }
-                _ if t_flat.is_finite() && bounce == 0 && beside => {
-                    // Aimed beside the groove and passing it: the flat surface's light.
+                _ if aimed && !(t_flat.is_finite() && totally_reflected(ray.d, self.s.ior)) => {
+                    // Aimed beside the groove and passing it (before the flat surface, or
+                    // after reflecting there): the flat surface's light.
                     return Outcome::Missed;
                 }
                 _ if t_flat.is_finite() => {
@@ -710,7 +732,7 @@ impl GroovePaths {
     pub fn trace(&self, d0: [f64; 3], x: f64, key: u64) -> Option<GrooveExit> {
         let t = &self.tracer;
         let inside = d0[2] > 0.0;
-        let (start, width) = entry_band(&t.cs, d0, inside);
+        let (start, width) = entry_band(&t.cs, d0, inside, t.s.ior);
         for attempt in 0..ENTRY_TRIES {
             let path_key = mix64(key.wrapping_add(attempt.wrapping_mul(GOLDEN)));
             let u = if attempt == 0 { x } else { t.draw(path_key, 0) };
@@ -1157,8 +1179,11 @@ mod tests {
     /// along the groove) meets it over the ridge's projected width `cos a` while the arc's end
     /// tangent hides it (`a <= 90 deg - alpha`, `sin alpha = 1 / 2R`), then `cos a / 2 + R -
     /// c sin a` (the rim on one side, the arc's far point on the other), so the intercept is
-    /// that over `cos a`: 1.171 at 60 degrees for `s = 0.3`. With lossless walls what the band
-    /// meets all leaves: `albedo_r + albedo_t` is the intercept.
+    /// that over `cos a`: 1.171 at 60 degrees for `s = 0.3`. Under total internal reflection
+    /// the flat surface beside the opening mirrors the light into the groove from the other
+    /// side, a second band as wide as the first beyond the opening (the groove being
+    /// symmetric): the intercept is `(2 width - cos a) / cos a`, 1.341 there. With lossless
+    /// walls what the band meets all leaves: `albedo_r + albedo_t` is the intercept.
     #[test]
     fn beside_light_meets_the_ridge_over_its_projected_width() {
         let sag = 0.3f64;
@@ -1170,6 +1195,7 @@ mod tests {
             (40.0, -60.0),
             (-20.0, 75.0),
             (10.0, 20.0),
+            (5.0, 38.0),
         ] {
             let a = phi_deg.abs().to_radians();
             let width = if a <= FRAC_PI_2 - alpha {
@@ -1177,7 +1203,6 @@ mod tests {
             } else {
                 0.5 * a.cos() + r - c * a.sin()
             };
-            let expect = width / a.cos();
             let s = GonioSettings {
                 walls: GrooveWalls::Dielectric,
                 fresnel_law: FresnelLaw::None,
@@ -1189,8 +1214,10 @@ mod tests {
                 bins: 8,
                 ..GonioSettings::default()
             };
+            let tir = totally_reflected(s.incident_travel(), s.ior);
+            let expect = if tir { 2.0 * width - a.cos() } else { width } / a.cos();
             let o = run("round:depth=0.3,segments=1024", &s);
-            let what = format!("theta_i {theta_deg}, phi_i {phi_deg}");
+            let what = format!("theta_i {theta_deg}, phi_i {phi_deg}, tir {tir}");
             let k = o.intercept.unwrap();
             assert!(
                 (k - expect).abs() < 1e-3 * expect,

@@ -209,11 +209,12 @@ impl WallTableParams {
     }
 
     /// The text [`Self::hash`] digests: the kind, the profile, the walls (dielectric: the
-    /// index and `beside`, their inside lobes being per intercepted light; specular: the
-    /// law), the roughness, the sizes, the paths and the seed.
+    /// index and `beside-reflected`, their inside lobes being per intercepted light, beside the
+    /// opening on the way to the surface and after total internal reflection there; specular:
+    /// the law), the roughness, the sizes, the paths and the seed.
     pub fn hash_text(&self) -> String {
         let walls = match self.walls {
-            WallKind::Dielectric => format!("{:016x}|beside", self.ior.to_bits()),
+            WallKind::Dielectric => format!("{:016x}|beside-reflected", self.ior.to_bits()),
             WallKind::Specular { law } => format!("law {}", law_json(&law)),
         };
         format!(
@@ -933,8 +934,8 @@ mod tests {
     }
 
     /// A dielectric table's hash digests every parameter and says that its inside lobes are
-    /// per intercepted light (`beside`), so tables traced through the opening only are not
-    /// taken from the cache for it.
+    /// per intercepted light, the light the flat surface reflects into the groove included
+    /// (`beside-reflected`), so tables traced otherwise are not taken from the cache for it.
     #[test]
     fn dielectric_hash_text() {
         let p = WallTableParams {
@@ -947,7 +948,7 @@ mod tests {
         assert_eq!(
             p.hash_text(),
             "dielectric-walls|\"v:depth=0.5\"|[[-0.5, 0.0], [0.0, -0.5], [0.5, 0.0]]|\
-             3ff8000000000000|beside|0000000000000000|8|16|32|20000|0"
+             3ff8000000000000|beside-reflected|0000000000000000|8|16|32|20000|0"
         );
         let d = Sha256::digest(p.hash_text().as_bytes());
         assert_eq!(p.hash(), format!("{d:x}"));

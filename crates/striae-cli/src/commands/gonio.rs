@@ -39,7 +39,8 @@ pub struct Args {
     side: SideArg,
     /// With `--side inside`: also trace the light aimed beside the opening that meets the
     /// groove (a groove seen from inside is a ridge, wider than its opening at grazing
-    /// incidence); fractions stay per unit opening, and the npz gains `intercept`.
+    /// incidence), on its way to the flat surface or, totally reflected there, right after;
+    /// fractions stay per unit opening, and the npz gains `intercept`.
     #[arg(long)]
     beside: bool,
     /// Paths (entry points stratified over the opening, or the band of --beside).

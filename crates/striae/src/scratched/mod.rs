@@ -17,6 +17,7 @@ use crate::bsdf::{
     Bsdf, Conductor, Dielectric, GlassWalls, ScratchLobe, ScratchLobeTable, ScratchedBase,
     ScratchedBsdf, ScratchedGlassBsdf, ScratchedMetalBsdf, WallLobeTable,
 };
+use crate::groove::totally_reflected;
 use crate::layers::cache::PixelKey;
 use crate::layers::lattice::TileQuery;
 use crate::layers::layer::MAX_FOOTPRINT_CELLS;
@@ -313,11 +314,13 @@ impl ScratchedMaterial {
     /// angle meets it beside its opening (the table's inside lobes are per unit of that
     /// intercepted light, [`crate::wall_table`]). The ray back along `wo` passes under the
     /// surface within the grooves' depth over the horizontal reach `R = D tan theta` (the
-    /// deepest groove's `D`); one capsule test of that segment ([`LayerSet::capsule_mask`],
-    /// which holds the hit itself) finds the layers whose scratches come within reach, most
-    /// hits none, and for each of their scratches near the segment the ray is met against the
-    /// groove's cross-section, the profile scaled to the scratch's local width
-    /// ([`RidgeReach::meets_ridge`]). The first scratch met scatters with coverage 1, as the point
+    /// deepest groove's `D`), and under total internal reflection the ray on from the hit,
+    /// mirrored, over as much again past it ([`RidgeReach::reflected`]); one capsule test of
+    /// that segment ([`LayerSet::capsule_mask`], which holds the hit itself) finds the layers
+    /// whose scratches come within reach, most hits none, and for each of their scratches near
+    /// the segment the ray is met against the groove's cross-section, the profile scaled to
+    /// the scratch's local width ([`RidgeReach::meets_ridge`]), first on the way to the hit,
+    /// then on the way back. The first scratch met scatters with coverage 1, as the point
     /// test's covered hits do. Randomly oriented layers are searched by point tests along the
     /// segment, spaced half the narrowest groove's width: a ridge where a scratch tapers
     /// narrower is missed (about 2 % of them at 85 degrees).
@@ -330,9 +333,15 @@ impl ScratchedMaterial {
     ) -> InsideHit {
         let reach = RidgeReach::new(self, ctx, walls);
         let uv = ctx.uv.as_dvec2();
-        let maybe = match &reach {
-            Some(r) => self.layers.capsule_mask(uv, r.reach_uv),
-            None => u64::MAX,
+        // Under total internal reflection the ray's reach continues past the hit, mirrored.
+        let reflected = reach
+            .as_ref()
+            .filter(|r| totally_reflected(r.wo.to_array(), walls.ior() as f64))
+            .map(RidgeReach::reflected);
+        let maybe = match (&reach, &reflected) {
+            (Some(r), Some(_)) => self.layers.capsule_mask(uv - r.reach_uv, 2.0 * r.reach_uv),
+            (Some(r), None) => self.layers.capsule_mask(uv, r.reach_uv),
+            _ => u64::MAX,
         };
         if maybe == 0 {
             return InsideHit::Plain;
@@ -343,17 +352,40 @@ impl ScratchedMaterial {
         let Some(r) = reach else {
             return InsideHit::Plain;
         };
-        let profile = walls.profile();
+        let met = self
+            .ridge_met(&r, uv, maybe, walls.profile())
+            .or_else(|| reflected.and_then(|m| self.ridge_met(&m, uv, maybe, walls.profile())));
+        match met {
+            Some(sc) if self.has_lean() => {
+                InsideHit::Ridge(leaned_lobe(self, ctx, &sc, 1.0, Along::Hit))
+            }
+            Some(sc) => {
+                let d = sc.direction.as_vec2();
+                InsideHit::Ridge(lobe_along(ctx, [d.x, d.y], 1.0))
+            }
+            None => InsideHit::Plain,
+        }
+    }
+
+    /// The first scratch of the layers in `maybe` whose groove the reach `r` from `uv` meets
+    /// beside its opening ([`RidgeReach::meets_ridge`]).
+    #[inline(always)]
+    fn ridge_met(
+        &self,
+        r: &RidgeReach,
+        uv: glam::DVec2,
+        maybe: u64,
+        profile: &crate::profile::Profile,
+    ) -> Option<Scratch> {
         let mut met = None;
         if self.layers.orientation() == Orientation::Random {
-            'search: for j in 1..=r.tests {
+            for j in 1..=r.tests {
                 let q = uv + r.reach_uv * (j as f64 / r.tests as f64);
                 let mask = self.layers.scratched_mask(q.as_vec2());
                 for k in (0..self.layers.len()).filter(|k| mask >> k & 1 == 1) {
                     if let Some(sc) = self.layers.scratch_at(k, q) {
                         if r.meets_ridge(&sc, uv, profile) {
-                            met = Some(sc);
-                            break 'search;
+                            return Some(sc);
                         }
                     }
                 }
@@ -374,16 +406,7 @@ impl ScratchedMaterial {
                 }
             }
         }
-        match met {
-            Some(sc) if self.has_lean() => {
-                InsideHit::Ridge(leaned_lobe(self, ctx, &sc, 1.0, Along::Hit))
-            }
-            Some(sc) => {
-                let d = sc.direction.as_vec2();
-                InsideHit::Ridge(lobe_along(ctx, [d.x, d.y], 1.0))
-            }
-            None => InsideHit::Plain,
-        }
+        met
     }
 
     /// Each layer's coverage at the hit into `cov`, as the material's [`CoverageMode`] asks;
@@ -533,6 +556,7 @@ const MAX_RIDGE_TESTS: usize = 16;
 
 /// The ray back from a hit inside the glass, in the face's tangent plane, over the reach where
 /// it passes under the surface within the grooves' depth.
+#[derive(Clone, Copy)]
 struct RidgeReach {
     /// `wo` in the shading frame (`z < 0`).
     wo: glam::DVec3,
@@ -584,6 +608,16 @@ impl RidgeReach {
             reach_uv,
             tests,
         })
+    }
+
+    /// The same reach after the flat surface's mirror reflection at the hit: the ray on from
+    /// the hit, `wo`'s tangent part reversed.
+    fn reflected(&self) -> Self {
+        RidgeReach {
+            wo: glam::DVec3::new(-self.wo.x, -self.wo.y, self.wo.z),
+            reach_uv: -self.reach_uv,
+            ..*self
+        }
     }
 
     /// Whether the ray from texture point `uv` meets scratch `sc`'s groove beside its opening:
