@@ -315,9 +315,11 @@ impl ScratchedMaterial {
     /// intercepted light, [`crate::wall_table`]). The ray back along `wo` passes under the
     /// surface within the grooves' depth over the horizontal reach `R = D tan theta` (the
     /// deepest groove's `D`), and under total internal reflection the ray on from the hit,
-    /// mirrored, over as much again past it ([`RidgeReach::reflected`]); one capsule test of
-    /// that segment ([`LayerSet::capsule_mask`], which holds the hit itself) finds the layers
-    /// whose scratches come within reach, most hits none, and for each of their scratches near
+    /// mirrored, over as much again past it ([`RidgeReach::reflected`]). The point test comes
+    /// first (every hit needs it, and a covered hit needs nothing more); at a grazing hit it
+    /// leaves uncovered, one capsule test of that segment ([`LayerSet::capsule_mask`]) finds
+    /// the layers whose scratches come within reach, most hits none, and for each of their
+    /// scratches near
     /// the segment the ray is met against the groove's cross-section, the profile scaled to
     /// the scratch's local width ([`RidgeReach::meets_ridge`]), first on the way to the hit,
     /// then on the way back. The first scratch met scatters with coverage 1, as the point
@@ -331,27 +333,23 @@ impl ScratchedMaterial {
         walls: &GlassWalls,
         cov: &mut [f32],
     ) -> InsideHit {
-        let reach = RidgeReach::new(self, ctx, walls);
+        if self.point_coverage(ctx.uv, cov) {
+            return InsideHit::Covered;
+        }
+        let Some(r) = RidgeReach::new(self, ctx, walls) else {
+            return InsideHit::Plain;
+        };
         let uv = ctx.uv.as_dvec2();
         // Under total internal reflection the ray's reach continues past the hit, mirrored.
-        let reflected = reach
-            .as_ref()
-            .filter(|r| totally_reflected(r.wo.to_array(), walls.ior() as f64))
-            .map(RidgeReach::reflected);
-        let maybe = match (&reach, &reflected) {
-            (Some(r), Some(_)) => self.layers.capsule_mask(uv - r.reach_uv, 2.0 * r.reach_uv),
-            (Some(r), None) => self.layers.capsule_mask(uv, r.reach_uv),
-            _ => u64::MAX,
+        let reflected =
+            totally_reflected(r.wo.to_array(), walls.ior() as f64).then(|| r.reflected());
+        let maybe = match reflected {
+            Some(_) => self.layers.capsule_mask(uv - r.reach_uv, 2.0 * r.reach_uv),
+            None => self.layers.capsule_mask(uv, r.reach_uv),
         };
         if maybe == 0 {
             return InsideHit::Plain;
         }
-        if self.point_coverage(ctx.uv, cov) {
-            return InsideHit::Covered;
-        }
-        let Some(r) = reach else {
-            return InsideHit::Plain;
-        };
         let met = self
             .ridge_met(&r, uv, maybe, walls.profile())
             .or_else(|| reflected.and_then(|m| self.ridge_met(&m, uv, maybe, walls.profile())));
