@@ -450,14 +450,17 @@ impl ScratchedMaterial {
     }
 
     /// [`CoverageMode::Point`]: 1 in `cov` for each layer scratched at `uv`, 0 for the others;
-    /// `false` where none is.
+    /// `false`, `cov` untouched, where none is.
     #[inline(always)]
     fn point_coverage(&self, uv: crate::math::Vec2, cov: &mut [f32]) -> bool {
         let mask = self.layers.scratched_mask(uv);
+        if mask == 0 {
+            return false;
+        }
         for (i, c) in cov.iter_mut().enumerate() {
             *c = ((mask >> i) & 1) as f32;
         }
-        mask != 0
+        true
     }
 
     /// `layer_mix = "max"` (METHOD.md section 6): the lobe of the layer with the largest
