@@ -32,6 +32,8 @@ fn cross(a: DVec2, b: DVec2) -> f64 {
 pub struct ScratchLayer {
     index: usize,
     alpha: f64,
+    /// `(cos alpha, sin alpha)`, kept: the scratches built at every ridge search read it.
+    direction: [f64; 2],
     noise: Worley,
     tau: f64,
     length: f64,
@@ -59,6 +61,7 @@ impl ScratchLayer {
         Ok(ScratchLayer {
             index,
             alpha,
+            direction: [c, s],
             noise: Worley::new(noise_seed, LAYER_NOISE_PERIOD)?,
             tau: params.threshold,
             length: l,
@@ -95,8 +98,7 @@ impl ScratchLayer {
 
     /// The scratch direction `d = (cos alpha, sin alpha)` in texture space.
     pub fn direction(&self) -> [f64; 2] {
-        let (s, c) = self.alpha.sin_cos();
-        [c, s]
+        self.direction
     }
 
     pub fn noise(&self) -> &Worley {
