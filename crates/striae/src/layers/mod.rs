@@ -323,8 +323,11 @@ impl LayerSet {
         } else {
             0.0
         };
-        for j in worley::floor_i64(lo.y)..=worley::floor_i64(hi.y) {
-            for i in worley::floor_i64(lo.x)..=worley::floor_i64(hi.x) {
+        // (Half-open ranges: an inclusive one checks its end twice a step.)
+        let (i0, i1) = (worley::floor_i64(lo.x), worley::floor_i64(hi.x) + 1);
+        let (j0, j1) = (worley::floor_i64(lo.y), worley::floor_i64(hi.y) + 1);
+        for j in j0..j1 {
+            for i in i0..i1 {
                 let p = layer.noise().feature_point(i, j);
                 let t = ((p - q0).dot(d) * inv).clamp(0.0, 1.0);
                 if (q0 + d * t - p).length_squared() >= tau * tau {
