@@ -637,6 +637,12 @@ impl RidgeReach {
         let d_len = d.length();
         let (along, across) = (d / d_len, (d / d_len).perp());
         let centre = map(sc.centre - uv);
+        // The ray runs toward the scratch's axis, or it cannot meet the groove (most of the
+        // scratches near the reach lie behind it).
+        let dx = glam::DVec2::new(self.wo.x, self.wo.y).dot(across);
+        if !(centre.dot(across) * dx > 0.0) {
+            return false;
+        }
         let reach = map(self.reach_uv);
         let t = (centre.dot(across) / reach.dot(across)).clamp(0.0, 1.0);
         let t = if t.is_finite() { t } else { 0.0 };
@@ -647,7 +653,6 @@ impl RidgeReach {
             return false;
         }
         let x = -centre.dot(across) / (2.0 * half_width);
-        let dx = glam::DVec2::new(self.wo.x, self.wo.y).dot(across);
         x.abs() >= 0.5 && profile.ray_meets_ridge(x, dx, self.wo.z)
     }
 }
