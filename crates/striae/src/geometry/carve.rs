@@ -263,7 +263,7 @@ impl Carving {
         for (gi, g) in self.grooves.iter().enumerate() {
             let (s0, s1) = g.ends();
             let w = g.hw.iter().fold(0.0f32, |m, &h| m.max(h));
-            let perp = Vec2::new(-g.dir.y, g.dir.x);
+            let perp = across(g.dir);
             let ends = [g.centre + s0 * g.dir, g.centre + s1 * g.dir];
             let glo = ends[0].min(ends[1]) - Vec2::splat(w) - lo;
             let ghi = ends[0].max(ends[1]) + Vec2::splat(w) - lo;
@@ -328,7 +328,7 @@ impl Carving {
         if !(width > 0.0) {
             return false;
         }
-        let across = (rel.dot(DVec2::new(-g.dir.y as f64, g.dir.x as f64)) / width) as f32;
+        let across = (rel.dot(across(g.dir).as_dvec2()) / width) as f32;
         let margin = ((self.margin / width) as f32).min(MAX_MARGIN);
         if on_face {
             return across.abs() < 0.5 - margin;
@@ -347,7 +347,7 @@ impl Carving {
         self.tri_groove.clear();
         for (gi, g) in self.grooves.iter().enumerate() {
             let base = positions.len() as u32;
-            let perp = Vec2::new(-g.dir.y, g.dir.x);
+            let perp = across(g.dir);
             for k in 0..g.s.len() {
                 let width = 2.0 * g.hw[k];
                 for p in &self.profile {
@@ -392,6 +392,13 @@ impl Carving {
     pub fn wall_groove(&self, tri: u32) -> u32 {
         self.tri_groove[tri as usize]
     }
+}
+
+/// The profile's `x` axis for a groove along the unit `dir`, in the face's frame `(e1, e2, n)`:
+/// `b = t x n` (METHOD.md section 1), the scratch frame's `x` that the model's lobes are read in,
+/// so that an asymmetric profile is cut facing the way its lobes face.
+fn across(dir: Vec2) -> Vec2 {
+    Vec2::new(dir.y, -dir.x)
 }
 
 /// Whether `(x, z)` (width-1 units, `|x| < 1/2`) lies inside the profile polygon closed by its

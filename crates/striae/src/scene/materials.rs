@@ -212,8 +212,9 @@ fn check_reflectance(reflectance: &Texture) -> Result<(), MaterialError> {
 
 impl MaterialDesc {
     /// Check every value's range (IOR >= 1, roughness >= 0, albedo in `[0, 1]`, a known preset
-    /// or a complete `eta`/`k`, every scratch key). Nothing is loaded or computed.
-    pub fn validate(&self) -> Result<(), MaterialError> {
+    /// or a complete `eta`/`k`, every scratch key; a profile file, relative to `base_dir`, the
+    /// scene file's folder, is read). No table is loaded or computed.
+    pub fn validate(&self, base_dir: &Path) -> Result<(), MaterialError> {
         match self {
             MaterialDesc::Diffuse { reflectance } => check_reflectance(reflectance),
             MaterialDesc::Dielectric {
@@ -241,7 +242,7 @@ impl MaterialDesc {
                 conductor_ior(preset.as_deref(), *eta, *k)?;
                 check_roughness(*roughness)
             }
-            MaterialDesc::Scratched(m) => m.resolve(Path::new(".")).map(|_| ()),
+            MaterialDesc::Scratched(m) => m.resolve(base_dir).map(|_| ()),
         }
     }
 
@@ -249,7 +250,7 @@ impl MaterialDesc {
     /// `base_dir`, the scene file's folder), presets resolved, a scratched material's table
     /// obtained (memory, disk cache, file or computation) and its layers drawn.
     pub fn prepare(&self, base_dir: &Path) -> Result<Material, MaterialError> {
-        self.validate()?;
+        self.validate(base_dir)?;
         Ok(match self {
             MaterialDesc::Scratched(m) => Material::Scratched(Box::new(m.prepare(base_dir)?)),
             MaterialDesc::Diffuse { reflectance } => {
@@ -293,7 +294,7 @@ mod tests {
 
     fn parse(s: &str) -> Result<MaterialDesc, String> {
         let m: MaterialDesc = toml::from_str(s).map_err(|e| e.to_string())?;
-        m.validate().map_err(|e| e.to_string())?;
+        m.validate(Path::new(".")).map_err(|e| e.to_string())?;
         Ok(m)
     }
 

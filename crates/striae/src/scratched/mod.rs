@@ -635,7 +635,8 @@ impl RidgeReach {
         let map = |v: glam::DVec2| self.au * v.x + self.av * v.y;
         let d = map(sc.direction);
         let d_len = d.length();
-        let (along, across) = (d / d_len, (d / d_len).perp());
+        // `across` is the scratch frame's `x`, `b = t x n` (METHOD.md section 1), the profile's.
+        let (along, across) = (d / d_len, -(d / d_len).perp());
         let centre = map(sc.centre - uv);
         // The ray runs toward the scratch's axis, or it cannot meet the groove (most of the
         // scratches near the reach lie behind it).

@@ -957,7 +957,8 @@ fn ridges_meet_grazing_light_from_inside() {
                 let v = uv - sc.centre;
                 let s = v.dot(sc.direction) / sc.half_length;
                 let half_width = sc.half_width * (1.0 - s * s).max(0.0).sqrt();
-                let across = sc.direction.perp();
+                // The scratch frame's `x`, `b = t x n` (METHOD.md section 1).
+                let across = -sc.direction.perp();
                 let dx = wo.x as f64 * across.x + wo.y as f64 * across.y;
                 let x = v.dot(across) / (2.0 * half_width);
                 half_width > 0.0 && x.abs() >= 0.5 && profile.ray_meets_ridge(x, dx, wo.z as f64)

@@ -5,7 +5,8 @@ use crate::scene::materials::MaterialDesc;
 
 fn parse(text: &str) -> Result<ScratchedDesc, String> {
     let m: MaterialDesc = toml::from_str(text).map_err(|e| e.to_string())?;
-    m.validate().map_err(|e| e.to_string())?;
+    m.validate(std::path::Path::new("."))
+        .map_err(|e| e.to_string())?;
     match m {
         MaterialDesc::Scratched(s) => Ok(s),
         _ => Err("not scratched".into()),
