@@ -640,7 +640,7 @@ impl RidgeReach {
         // The ray runs toward the scratch's axis, or it cannot meet the groove (most of the
         // scratches near the reach lie behind it).
         let dx = glam::DVec2::new(self.wo.x, self.wo.y).dot(across);
-        if !(centre.dot(across) * dx > 0.0) {
+        if centre.dot(across) * dx <= 0.0 {
             return false;
         }
         let reach = map(self.reach_uv);
