@@ -250,7 +250,11 @@ impl MaterialDesc {
     /// `base_dir`, the scene file's folder), presets resolved, a scratched material's table
     /// obtained (memory, disk cache, file or computation) and its layers drawn.
     pub fn prepare(&self, base_dir: &Path) -> Result<Material, MaterialError> {
-        self.validate(base_dir)?;
+        // A scratched material validates in its own `prepare`, which resolves it (its profile
+        // file read) once.
+        if !matches!(self, MaterialDesc::Scratched(_)) {
+            self.validate(base_dir)?;
+        }
         Ok(match self {
             MaterialDesc::Scratched(m) => Material::Scratched(Box::new(m.prepare(base_dir)?)),
             MaterialDesc::Diffuse { reflectance } => {

@@ -321,10 +321,10 @@ impl ScratchedMaterial {
     /// the layers whose scratches come within reach, most hits none, and for each of their
     /// scratches near the segment the ray is met against the groove's cross-section, the
     /// profile scaled to the scratch's local width ([`RidgeReach::meets_ridge`]), first on the
-    /// way to the hit, then on the way back. The first scratch met scatters with coverage 1, as the point
-    /// test's covered hits do. Randomly oriented layers are searched by point tests along the
-    /// segment, spaced half the narrowest groove's width: a ridge where a scratch tapers
-    /// narrower is missed (about 2 % of them at 85 degrees).
+    /// way to the hit, then on the way back. The first scratch met scatters with coverage 1, as
+    /// the point test's covered hits do. Randomly oriented layers are searched by point tests
+    /// along the segment, spaced half the narrowest groove's width: a ridge where a scratch
+    /// tapers narrower is missed (about 2 % of them at 85 degrees).
     #[inline(always)]
     fn inside_coverage(
         &self,
