@@ -81,7 +81,7 @@ fn thread_counts_out_of_range_are_refused_by_every_subcommand() {
 fn striae_simd_caps_the_render_loop_and_a_bad_value_is_named() {
     const SCENE: &str = concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../../scenes/glass-teapot.toml"
+        "/../striae/scenes/glass-teapot.toml"
     );
     let dir = std::env::temp_dir().join(format!("striae-simd-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -246,16 +246,16 @@ fn sample_ranges_merge_and_bad_ranges_are_refused() {
     let read = |name: &str| {
         (
             dir.join(name),
-            striae::parts::Part::read(&dir.join(name)).unwrap(),
+            striae::render::parts::Part::read(&dir.join(name)).unwrap(),
         )
     };
-    let (whole, _) = striae::parts::merge(&[read("whole.part")]).unwrap();
+    let (whole, _) = striae::render::parts::merge(&[read("whole.part")]).unwrap();
     for set in [
         vec!["b.part", "a.part"],
         vec!["t0b.part", "t1.part", "t0a.part"],
     ] {
         let parts: Vec<_> = set.iter().map(|n| read(n)).collect();
-        let (merged, _) = striae::parts::merge(&parts).unwrap();
+        let (merged, _) = striae::render::parts::merge(&parts).unwrap();
         for (p, q) in merged.pixels.iter().zip(&whole.pixels) {
             assert!(
                 (*p - *q).abs().max_element() <= 1e-5 * q.max_element(),
@@ -383,7 +383,9 @@ fn dielectric_wall_table_sizes_come_from_their_flags() {
     args.extend(sizes);
     let (ok, err) = striae(&args, &out);
     assert!(ok, "{err}");
-    let t = striae::wall_table::WallTable::load(&out).unwrap().unwrap();
+    let t = striae::precompute::wall_table::WallTable::load(&out)
+        .unwrap()
+        .unwrap();
     assert_eq!((t.theta_i.len(), t.phi_i.len()), (2, 3));
     assert_eq!((t.params.bins, t.params.paths), (6, 50));
     std::fs::remove_file(&out).unwrap();

@@ -11,13 +11,13 @@ use pyo3::types::PyBytes;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
-use striae::integrator::{self, Simd};
 use striae::layers::{LayerParams, LayerSet as Layers};
 use striae::math::{Rgb, Vec2, Vec3};
-use striae::parts::{Part, PartError};
-use striae::scene::{Overrides, Scene};
-use striae::table::{ScratchBrdf, ScratchTable, TableParams};
-use striae::trace2d::{TraceSettings, THETA_SLICES};
+use striae::precompute::table::{ScratchBrdf, ScratchTable, TableParams};
+use striae::precompute::trace2d::{TraceSettings, THETA_SLICES};
+use striae::render::integrator::{self, Simd};
+use striae::render::parts::{Part, PartError};
+use striae::render::scene::{Overrides, Scene};
 
 pyo3::create_exception!(_striae, StriaeError, pyo3::exceptions::PyException);
 
@@ -110,7 +110,10 @@ fn load_scene(kind: &str, source: &str, overrides: &Overrides) -> PyResult<(Scen
 }
 
 /// An image as an `(h, w, 3)` float32 array.
-fn image_array<'py>(py: Python<'py>, image: &striae::film::Image) -> Bound<'py, PyArray3<f32>> {
+fn image_array<'py>(
+    py: Python<'py>,
+    image: &striae::render::film::Image,
+) -> Bound<'py, PyArray3<f32>> {
     let (w, h) = (image.width as usize, image.height as usize);
     let flat: Vec<f32> = image.pixels.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
     Array3::from_shape_vec((h, w, 3), flat)
@@ -131,18 +134,18 @@ fn scene_with(
 ) -> PyResult<(Scene, String)> {
     let sampler = sampler
         .map(|s| {
-            striae::sampler::SamplerKind::from_name(s).ok_or_else(|| {
+            striae::render::sampler::SamplerKind::from_name(s).ok_or_else(|| {
                 PyValueError::new_err(format!(
                     "sampler {s:?} is not {}",
-                    striae::sampler::SamplerKind::allowed_names()
+                    striae::render::sampler::SamplerKind::allowed_names()
                 ))
             })
         })
         .transpose()?;
-    if spp.is_some_and(|s| s == 0 || s > striae::sampler::MAX_SPP) {
+    if spp.is_some_and(|s| s == 0 || s > striae::render::sampler::MAX_SPP) {
         return Err(PyValueError::new_err(format!(
             "spp must lie in 1..={}",
-            striae::sampler::MAX_SPP
+            striae::render::sampler::MAX_SPP
         )));
     }
     let overrides = Overrides {
@@ -178,7 +181,7 @@ fn render<'py>(
     let pool = pool(threads)?;
     let (w, h) = scene.camera.resolution();
     if let Some(tile) = tile {
-        striae::parts::part_pixel_count((w, h), tile.0, tile.1).map_err(err)?;
+        striae::render::parts::part_pixel_count((w, h), tile.0, tile.1).map_err(err)?;
         let part = run_interruptibly(py, progress.as_ref(), |cancel, done| {
             let count = |n| {
                 done.fetch_add(n, Ordering::Relaxed);
@@ -199,7 +202,7 @@ fn render<'py>(
     })?
     .map_err(|_| PyKeyboardInterrupt::new_err("render cancelled"))?
     .0;
-    let mut image = striae::film::Image::new(w, h);
+    let mut image = striae::render::film::Image::new(w, h);
     for (&t, px) in tiles.iter().zip(&pixels) {
         integrator::place_tile(&mut image, t, px);
     }
@@ -223,7 +226,7 @@ fn merge<'py>(
         })
         .collect::<Result<Vec<_>, PartError>>()
         .map_err(err)?;
-    let (image, exposure) = striae::parts::merge(&parts).map_err(err)?;
+    let (image, exposure) = striae::render::parts::merge(&parts).map_err(err)?;
     Ok((image_array(py, &image), exposure))
 }
 
@@ -235,7 +238,7 @@ fn write_image(image: numpy::PyReadonlyArray3<f32>, path: PathBuf, exposure: f32
     if c != 3 {
         return Err(PyValueError::new_err("the image must have shape (h, w, 3)"));
     }
-    let mut img = striae::film::Image::new(w as u32, h as u32);
+    let mut img = striae::render::film::Image::new(w as u32, h as u32);
     for (i, p) in img.pixels.iter_mut().enumerate() {
         *p = Rgb::new(
             a[(i / w, i % w, 0)],
@@ -258,8 +261,10 @@ fn read_exr<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyArray3
     use exr::prelude::{read_first_rgba_layer_from_file, Vec2 as Size};
     let image = read_first_rgba_layer_from_file(
         &path,
-        |size: Size<usize>, _| striae::film::Image::new(size.0 as u32, size.1 as u32),
-        |image: &mut striae::film::Image, pos: Size<usize>, (r, g, b, _): (f32, f32, f32, f32)| {
+        |size: Size<usize>, _| striae::render::film::Image::new(size.0 as u32, size.1 as u32),
+        |image: &mut striae::render::film::Image,
+         pos: Size<usize>,
+         (r, g, b, _): (f32, f32, f32, f32)| {
             image.pixels[pos.1 * image.width as usize + pos.0] = Rgb::new(r, g, b);
         },
     )
@@ -447,7 +452,7 @@ fn precompute(
     groove_slices: usize,
     threads: Option<usize>,
 ) -> PyResult<Table> {
-    let profile = striae::profile::Profile::parse(profile).map_err(err)?;
+    let profile = striae::precompute::profile::Profile::parse(profile).map_err(err)?;
     let trace = TraceSettings {
         walls: named("walls", walls)?,
         m,
@@ -457,7 +462,7 @@ fn precompute(
         max_bounces,
         seed,
         fresnel_mode: named("fresnel", fresnel)?,
-        fresnel_law: striae::fresnel::FresnelLaw::parse(fresnel_law, ior)
+        fresnel_law: striae::optics::fresnel::FresnelLaw::parse(fresnel_law, ior)
             .map_err(|e| PyValueError::new_err(format!("fresnel_law: {e}")))?,
         estimator: named("estimator", estimator)?,
         groove_slices,

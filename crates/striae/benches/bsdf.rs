@@ -9,15 +9,15 @@
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use rand::{Rng, SeedableRng};
 use std::sync::Arc;
-use striae::bsdf::{
+use striae::math::{Rgb, Vec2, Vec3};
+use striae::precompute::profile::Profile;
+use striae::precompute::wall_table::{WallTable, WallTableParams};
+use striae::render::bsdf::{
     Bsdf, Conductor, ConductorIor, Dielectric, Diffuse, GlassWalls, RoughConductor,
     RoughDielectric, ScratchLobe, ScratchedGlassBsdf, TracedGroove, WallLobeTable,
 };
-use striae::envmap::EnvMap;
-use striae::math::{Rgb, Vec2, Vec3};
-use striae::profile::Profile;
+use striae::render::envmap::EnvMap;
 use striae::sampling::square_to_uniform_sphere;
-use striae::wall_table::{WallTable, WallTableParams};
 
 const BATCH: usize = 1024;
 

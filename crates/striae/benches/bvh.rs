@@ -14,8 +14,8 @@ use criterion::measurement::{Measurement, ValueFormatter};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
-use striae::geometry::{BvhKind, Geometry, Shape, ShapeGeometry, TriangleMesh};
 use striae::math::{Ray, Vec2, Vec3};
+use striae::render::geometry::{BvhKind, Geometry, Shape, ShapeGeometry, TriangleMesh};
 use striae::sampling::square_to_uniform_sphere;
 
 const SUBDIVISIONS: u32 = 64;

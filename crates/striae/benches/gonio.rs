@@ -3,9 +3,9 @@
 //! glass walls. Throughput is reported in paths.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use striae::fresnel::FresnelLaw;
-use striae::groove::{trace_groove, GonioSettings, GrooveWalls};
-use striae::profile::Profile;
+use striae::optics::fresnel::FresnelLaw;
+use striae::precompute::groove::{trace_groove, GonioSettings, GrooveWalls};
+use striae::precompute::profile::Profile;
 
 fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("gonio");

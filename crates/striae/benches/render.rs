@@ -10,9 +10,9 @@
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::path::Path;
-use striae::integrator::{render, render_with, Simd};
-use striae::sampler::{PixelSampler, SamplerKind};
-use striae::scene::{Overrides, Scene};
+use striae::render::integrator::{render, render_with, Simd};
+use striae::render::sampler::{PixelSampler, SamplerKind};
+use striae::render::scene::{Overrides, Scene};
 
 fn bench_render(c: &mut Criterion) {
     let mut g = c.benchmark_group("render");
@@ -26,7 +26,7 @@ fn bench_render(c: &mut Criterion) {
             sampler: None,
         };
         let scene = Scene::parse(
-            striae::scene::DEFAULT_SCENE,
+            striae::render::scene::DEFAULT_SCENE,
             Path::new("glass-teapot.toml"),
             Path::new("."),
             &o,
@@ -46,7 +46,7 @@ fn bench_render(c: &mut Criterion) {
         sampler: None,
     };
     let smooth = Scene::parse(
-        include_str!("../../../scenes/glass-teapot.toml"),
+        include_str!("../scenes/glass-teapot.toml"),
         Path::new("glass-teapot.toml"),
         Path::new("."),
         &o,

@@ -13,16 +13,16 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::path::Path;
-use striae::scene::{Overrides, Scene};
+use striae::render::scene::{Overrides, Scene};
 
 const SCENES: [(&str, &str); 2] = [
     (
         "teapot-s1",
-        include_str!("../../../scenes/glass-teapot-setting1.toml"),
+        include_str!("../scenes/glass-teapot-setting1.toml"),
     ),
     (
         "closeup-s1",
-        include_str!("../../../scenes/glass-plate-closeup.toml"),
+        include_str!("../scenes/glass-plate-closeup.toml"),
     ),
 ];
 
@@ -65,7 +65,7 @@ fn bench(c: &mut Criterion) {
             let scene =
                 Scene::parse(&variant(text, kind), Path::new(name), Path::new("."), &o).unwrap();
             g.bench_with_input(BenchmarkId::new(name, kind), &scene, |b, s| {
-                b.iter(|| pool.install(|| striae::integrator::render(s, &|_| {})))
+                b.iter(|| pool.install(|| striae::render::integrator::render(s, &|_| {})))
             });
         }
     }

@@ -5,8 +5,8 @@
 //! (BENCHMARKS.md, "Precompute, layers, BSDFs, BVH").
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use striae::profile::Profile;
-use striae::trace2d::{trace, Estimator, TraceSettings, Walls};
+use striae::precompute::profile::Profile;
+use striae::precompute::trace2d::{trace, Estimator, TraceSettings, Walls};
 
 fn bench(c: &mut Criterion) {
     let profile = Profile::parse("v:angle=90").unwrap();

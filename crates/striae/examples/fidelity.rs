@@ -14,8 +14,8 @@
 
 use std::error::Error;
 use std::path::{Path, PathBuf};
-use striae::film::Image;
-use striae::scene::{Overrides, Scene};
+use striae::render::film::Image;
+use striae::render::scene::{Overrides, Scene};
 
 const BLOCK: u32 = 16;
 
@@ -28,7 +28,7 @@ fn render(text: &str, file: &Path, spp: Option<u32>, seed: u64) -> Result<Image,
     };
     let scene = Scene::parse(text, file, base, &o)?;
     let start = std::time::Instant::now();
-    let (image, _) = striae::integrator::render(&scene, &|_| {});
+    let (image, _) = striae::render::integrator::render(&scene, &|_| {});
     eprintln!(
         "  {} spp, seed {seed}: {:.1} s",
         scene.settings.spp,

@@ -19,9 +19,9 @@ use arrayvec::ArrayVec;
 use std::error::Error;
 use std::path::Path;
 use std::time::Instant;
-use striae::geometry::PACKET;
 use striae::math::{Ray, Vec3};
-use striae::scene::{Overrides, Scene};
+use striae::render::geometry::PACKET;
+use striae::render::scene::{Overrides, Scene};
 
 #[derive(Clone, Copy, PartialEq)]
 enum Query {
@@ -79,7 +79,7 @@ striae::loop_copy_avx512! {
 
 /// The queries compiled as the render loop's copy that `striae render` runs on this CPU.
 fn run_best(scene: &Scene, rays: &[Ray], query: Query) -> (usize, f32) {
-    use striae::integrator::{LoopCopy, Simd};
+    use striae::render::integrator::{LoopCopy, Simd};
     match LoopCopy::chosen(Simd::Auto) {
         // SAFETY: `chosen` picks only copies whose features the CPU has.
         #[cfg(target_arch = "x86_64")]

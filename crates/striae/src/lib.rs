@@ -5,11 +5,17 @@
 //! Raymond, Guennebaud, Barla 2016); modules follow its pipeline:
 //!
 //! ```text
-//! profile -> trace2d -> table (slices, gamma, eval, sample)      (METHOD.md sections 2-4, 6)
-//! layers (worley, layer set, raster, footprint queries)         (section 5)
-//! geometry (shapes, teapot, obj, bvh) -> camera, lights, scene
-//! bsdf / material / texture -> integrator -> film (exr, png)    (section 6-7)
+//! optics      Fresnel (eq. 2, exact dielectric and conductor), GGX          (below every stage)
+//! precompute  profile -> cross_section -> trace2d -> table                 (METHOD.md 2-4, 6)
+//!             groove (the exact 2.5D groove) -> groove_slices, wall_table   (8.1-8.2)
+//! layers      worley -> layer set, raster, footprint queries               (5)
+//! render      geometry, camera, lights, scene -> material, scratched, bsdf
+//!             -> integrator -> film, parts                                  (6-7)
+//! lab         gonio, fidelity, figures, plot: measuring the model         (7-8)
 //! ```
+//!
+//! Each stage imports only the stages above it in this list (and the shared `math`, `hash`,
+//! `sampling`, `io`, `log`).
 //!
 //! ## Conventions (stated once, used everywhere)
 //!
@@ -17,15 +23,13 @@
 //! * Colours are linear RGB, [`math::Rgb`].
 //! * BSDFs work in a local shading frame with `z` along the shading normal. Both `wo` and
 //!   `wi` point **away** from the surface (pbrt's convention); `wo` is given, `wi` sampled.
-//! * [`bsdf::Bsdf::eval`] returns `f(wo, wi)` **without** the cosine; `pdf` is per unit solid
+//! * [`render::bsdf::Bsdf::eval`] returns `f(wo, wi)` **without** the cosine; `pdf` is per unit solid
 //!   angle; a sample's `weight` is `f * |cos theta_i| / pdf`.
 //! * Texture space `(u, v)` is `[0, 1]^2`; scratch directions live in texture space and are
 //!   carried to 3D through `dP/du`, `dP/dv`.
 //! * Every random choice is driven by an explicit seed; the same seed gives bit-identical
 //!   output whatever the thread count.
 
-pub mod cache;
-pub mod fresnel;
 pub mod hash;
 pub mod io;
 pub mod log;
@@ -34,42 +38,21 @@ pub mod sampling;
 pub mod strict_array;
 pub mod testing;
 
-// The scratch BRDF precompute (METHOD.md sections 2-4, 6).
-pub mod plot;
-pub mod profile;
-pub mod table;
-pub mod trace2d;
+// Fresnel equations and the GGX microfacet distribution, shared by the precompute's tracers and
+// the renderer's BSDFs.
+pub mod optics;
 
-// The exact groove (METHOD.md 8.1): shared cross-section geometry, angle bins, the 2.5D tracer.
-pub mod angle_bins;
-pub(crate) mod cross_section;
-pub mod fidelity;
-pub mod gonio;
-pub mod groove;
-pub mod groove_slices;
-pub mod wall_table;
+// The scratch BRDF and the exact groove (METHOD.md sections 2-4, 8.1-8.2).
+pub mod precompute;
 
 // Scratch layers from Worley cell noise (section 5).
 pub mod layers;
 
 // The path tracer (sections 6-7).
-pub mod bsdf;
-pub mod camera;
-pub mod envmap;
-pub mod film;
-pub mod geometry;
-pub mod integrator;
-pub mod lights;
-pub mod material;
-pub mod parts;
-pub mod sampler;
-pub mod scene;
-pub mod shading;
-pub mod texture;
+pub mod render;
 
-// Scratched glass and metal (section 6), and the seed's figures (section 7).
-pub mod figures;
-pub mod scratched;
+// The goniometer, the fidelity study, the seed's figures and plots (sections 7-8).
+pub mod lab;
 
 /// The crate version, stored in every table and image the crate writes.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

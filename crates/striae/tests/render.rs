@@ -3,9 +3,9 @@
 //! few samples: the whole file runs in a few seconds.
 
 use std::path::Path;
-use striae::film::Image;
-use striae::integrator::{render_with, LoopCopy, Simd};
-use striae::scene::{Overrides, Scene, SceneError};
+use striae::render::film::Image;
+use striae::render::integrator::{render_with, LoopCopy, Simd};
+use striae::render::scene::{Overrides, Scene, SceneError};
 use striae::testing::MeanEstimate;
 
 mod common;
@@ -240,7 +240,7 @@ emission = [1, 2, 3]
 
 #[test]
 fn image_is_bit_identical_across_thread_counts() {
-    let text = striae::scene::DEFAULT_SCENE;
+    let text = striae::render::scene::DEFAULT_SCENE;
     let o = Overrides {
         spp: Some(4),
         resolution: Some((40, 30)),
@@ -257,7 +257,7 @@ fn image_is_bit_identical_across_thread_counts() {
     assert_ne!(a.pixels, c.pixels);
     // The independent sampler too, and its image is not the Sobol one.
     let o3 = Overrides {
-        sampler: Some(striae::sampler::SamplerKind::Independent),
+        sampler: Some(striae::render::sampler::SamplerKind::Independent),
         ..o
     };
     let s3 = Scene::parse(text, Path::new("default.toml"), Path::new("."), &o3).unwrap();
@@ -325,8 +325,8 @@ fn simd_and_portable_render_loops_give_the_same_image() {
         max_depth: None,
         sampler: None,
     };
-    let smooth = include_str!("../../../scenes/glass-teapot.toml");
-    for text in [striae::scene::DEFAULT_SCENE, smooth, rough] {
+    let smooth = include_str!("../scenes/glass-teapot.toml");
+    for text in [striae::render::scene::DEFAULT_SCENE, smooth, rough] {
         let s = Scene::parse(text, Path::new("t.toml"), Path::new("."), &o).unwrap();
         let (a, _) = render_with(&s, &|_| {}, Simd::Auto);
         let (b, _) = render_with(&s, &|_| {}, Simd::Avx2);
@@ -493,7 +493,7 @@ fn pixel_width(dist: f64, fov_deg: f64, height: f64) -> f64 {
 
 const FOOTPRINT_CAMERA: &str = "[render]\nwidth = 64\nheight = 64\n[camera]\nposition = [0, 0, 4]\nlook_at = [0, 0, 0]\nfov = 30\n";
 
-fn assert_footprint(ctx: &striae::shading::ShadingContext, expected_du: f64, what: &str) {
+fn assert_footprint(ctx: &striae::render::shading::ShadingContext, expected_du: f64, what: &str) {
     let (duvdx, duvdy) = ctx.footprint_uv();
     for (name, d) in [("duvdx", duvdx), ("duvdy", duvdy)] {
         let got = d.length() as f64;
@@ -513,7 +513,8 @@ fn assert_footprint(ctx: &striae::shading::ShadingContext, expected_du: f64, wha
 fn footprint_of_a_plane_seen_head_on() {
     // A rectangle scaled by 2 maps world x in [-2, 2] to u in [0, 1]: du = dx / 4.
     let s = scene(&format!("{FOOTPRINT_CAMERA}[materials.d]\ntype = \"diffuse\"\n[[shapes]]\ntype = \"rectangle\"\nmaterial = \"d\"\ntransform = {{ scale = 2 }}\n"));
-    let ctx = striae::integrator::trace_contexts(&s, striae::math::Vec2::new(32.0, 32.0), 4);
+    let ctx =
+        striae::render::integrator::trace_contexts(&s, striae::math::Vec2::new(32.0, 32.0), 4);
     assert_eq!(ctx.len(), 1);
     assert_footprint(&ctx[0], pixel_width(4.0, 30.0, 64.0) / 4.0, "head-on plane");
     assert!(
@@ -531,7 +532,8 @@ fn footprint_after_a_mirror_grows_with_the_unfolded_distance() {
          [[shapes]]\ntype = \"rectangle\"\nmaterial = \"m\"\ntransform = [{{ scale = 3 }}, {{ rotate = {{ axis = [0, 1, 0], angle = 45 }} }}]\n\
          [[shapes]]\ntype = \"rectangle\"\nmaterial = \"d\"\ntransform = [{{ scale = 2 }}, {{ rotate = {{ axis = [0, 1, 0], angle = -90 }} }}, {{ translate = [3, 0, 0] }}]\n"
     ));
-    let ctx = striae::integrator::trace_contexts(&s, striae::math::Vec2::new(32.0, 32.0), 4);
+    let ctx =
+        striae::render::integrator::trace_contexts(&s, striae::math::Vec2::new(32.0, 32.0), 4);
     assert_eq!(ctx.len(), 2, "mirror, then the plane");
     assert_footprint(
         &ctx[1],
@@ -549,7 +551,8 @@ fn footprint_behind_a_glass_slab_uses_the_reduced_distance() {
          [[shapes]]\ntype = \"box\"\nmaterial = \"g\"\ntransform = {{ scale = [3, 3, 0.5] }}\n\
          [[shapes]]\ntype = \"rectangle\"\nmaterial = \"d\"\ntransform = [{{ scale = 2 }}, {{ translate = [0, 0, -2] }}]\n"
     ));
-    let ctx = striae::integrator::trace_contexts(&s, striae::math::Vec2::new(32.0, 32.0), 4);
+    let ctx =
+        striae::render::integrator::trace_contexts(&s, striae::math::Vec2::new(32.0, 32.0), 4);
     assert_eq!(ctx.len(), 3, "front face, back face, plane");
     assert_footprint(
         &ctx[2],
@@ -696,7 +699,7 @@ material = "d"
     for y in 0..120 {
         for x in 0..160 {
             let film = striae::math::Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-            let Some(ctx) = striae::integrator::trace_contexts(&s, film, 1).pop() else {
+            let Some(ctx) = striae::render::integrator::trace_contexts(&s, film, 1).pop() else {
                 continue;
             };
             let wo = (eye - ctx.p).normalize();
@@ -716,7 +719,7 @@ fn obj_mesh_path_is_relative_to_the_scene_file() {
     // transform, renders like the built-in rectangle under the same transform.
     let dir = std::env::temp_dir().join(format!("striae-objtest-{}", std::process::id()));
     std::fs::create_dir_all(dir.join("meshes")).unwrap();
-    striae::geometry::TriangleMesh::rectangle()
+    striae::render::geometry::TriangleMesh::rectangle()
         .write_obj(dir.join("meshes/quad.obj"))
         .unwrap();
     let make = |shape: &str| {

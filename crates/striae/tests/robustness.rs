@@ -8,13 +8,13 @@
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
-use striae::film::Image;
-use striae::integrator::render;
 use striae::math::Rgb;
-use striae::profile::Profile;
-use striae::scene::{Overrides, Scene};
-use striae::table::{ScratchTable, TableParams};
-use striae::trace2d::TraceSettings;
+use striae::precompute::profile::Profile;
+use striae::precompute::table::{ScratchTable, TableParams};
+use striae::precompute::trace2d::TraceSettings;
+use striae::render::film::Image;
+use striae::render::integrator::render;
+use striae::render::scene::{Overrides, Scene};
 
 /// Every kind of shape, material, light, transform and input file.
 const EVERYTHING: &str = include_str!("data/every-kind.toml");

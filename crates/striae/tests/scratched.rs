@@ -5,12 +5,12 @@
 //! Tiny tables and images: the file runs in a few seconds (tables are cached on disk).
 
 use std::path::Path;
-use striae::bsdf::Bsdf;
-use striae::integrator::trace_contexts;
 use striae::layers::CoverageCache;
-use striae::material::Material;
 use striae::math::Vec2;
-use striae::scene::{Overrides, Scene};
+use striae::render::bsdf::Bsdf;
+use striae::render::integrator::trace_contexts;
+use striae::render::material::Material;
+use striae::render::scene::{Overrides, Scene};
 use striae::testing::MeanEstimate;
 
 mod common;
@@ -55,7 +55,7 @@ radiance = 1
 fn furnace_lit_by_a_map(material: &str, scratches: &str) -> Scene {
     let dir = std::env::temp_dir().join(format!("striae-furnace-map-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let mut sky = striae::film::Image::new(16, 8);
+    let mut sky = striae::render::film::Image::new(16, 8);
     sky.pixels.fill(striae::math::Rgb::ONE);
     sky.write_exr(&dir.join("white.exr")).unwrap();
     let text = furnace_text(material, scratches).replace(
@@ -72,7 +72,7 @@ fn furnace_lit_by_a_map(material: &str, scratches: &str) -> Scene {
     std::fs::remove_dir_all(&dir).unwrap();
     assert!(matches!(
         s.environment(),
-        Some(striae::lights::Environment::Map(_))
+        Some(striae::render::lights::Environment::Map(_))
     ));
     s
 }
@@ -486,7 +486,7 @@ fn pixel_footprint_coverage_equals_supersampled_point_coverage() {
     };
     let pixel = render("footprint", 4, 1);
     let (a, b) = (render("point", 128, 2), render("point", 128, 3));
-    let rmse = |p: &striae::film::Image, q: &striae::film::Image| {
+    let rmse = |p: &striae::render::film::Image, q: &striae::render::film::Image| {
         let n = p.pixels.len() as f64;
         (p.pixels
             .iter()

@@ -3,10 +3,10 @@
 use anyhow::Context;
 use std::path::PathBuf;
 use std::time::Instant;
-use striae::fidelity::study::{plot_case, run_study, write_csv, StudySettings};
-use striae::fresnel::FresnelLaw;
-use striae::profile::Profile;
-use striae::trace2d::TraceSettings;
+use striae::lab::fidelity::study::{plot_case, run_study, write_csv, StudySettings};
+use striae::optics::fresnel::FresnelLaw;
+use striae::precompute::profile::Profile;
+use striae::precompute::trace2d::TraceSettings;
 
 /// The profiles of docs/fidelity.md.
 const PROFILES: &str = "v90=v:angle=90;v60=v:angle=60;round=round:depth=0.5;\

@@ -1,11 +1,11 @@
 //! `striae figures -o DIR [--spp N] [--res WxH]`: regenerate the seed's figures (Fig. 2, 4 a-c,
 //! 6 a-b, 7 a-b, 8 a) as PNGs plus an `index.html` showing them side by side with their
-//! parameters and render times (`striae::figures`).
+//! parameters and render times (`striae::lab::figures`).
 
 use anyhow::Context;
 use std::path::PathBuf;
 use std::time::Instant;
-use striae::figures::{generate, FigureOptions};
+use striae::lab::figures::{generate, FigureOptions};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -14,7 +14,7 @@ pub struct Args {
     pub out: PathBuf,
     /// Samples per pixel of the renders (Figs. 6-8).
     #[arg(long, default_value_t = FigureOptions::default().spp,
-          value_parser = clap::value_parser!(u32).range(1..=striae::sampler::MAX_SPP as i64))]
+          value_parser = clap::value_parser!(u32).range(1..=striae::render::sampler::MAX_SPP as i64))]
     pub spp: u32,
     /// Render size as WIDTHxHEIGHT.
     #[arg(long, value_parser = super::render::parse_resolution, default_value = "384x288")]
@@ -29,7 +29,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     // The figures are rendered: a bad `STRIAE_SIMD` stops them as it stops `striae render`.
-    striae::integrator::LoopCopy::env_cap().map_err(anyhow::Error::msg)?;
+    striae::render::integrator::LoopCopy::env_cap().map_err(anyhow::Error::msg)?;
     striae::layers::raster::check_resolution(args.layer_res)
         .with_context(|| format!("invalid --layer-res {}", args.layer_res))?;
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);

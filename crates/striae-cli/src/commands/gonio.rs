@@ -3,9 +3,9 @@
 use anyhow::Context;
 use std::path::PathBuf;
 use std::time::Instant;
-use striae::fresnel::FresnelLaw;
-use striae::groove::{trace_groove, GonioSettings, GrooveWalls, LightSide};
-use striae::profile::Profile;
+use striae::optics::fresnel::FresnelLaw;
+use striae::precompute::groove::{trace_groove, GonioSettings, GrooveWalls, LightSide};
+use striae::precompute::profile::Profile;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -133,7 +133,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let out = pool.install(|| trace_groove(&profile, &s, &|k| bar.inc(k)))?;
     let secs = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
-    striae::gonio::save_npz(&out, &a.output)
+    striae::lab::gonio::save_npz(&out, &a.output)
         .with_context(|| format!("writing {}", a.output.display()))?;
     let title = format!(
         "{}: {:?} walls{}, {}, theta_i {} phi_i {} deg, from {:?}, {} paths",
@@ -154,7 +154,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         s.paths
     );
     if let Some(p) = &a.plot {
-        striae::gonio::plot(&out, &title, p)?;
+        striae::lab::gonio::plot(&out, &title, p)?;
     }
     println!("{title}");
     println!(

@@ -1,11 +1,11 @@
 //! `striae merge PART... -o NAME`: the image of the part files of one render (`striae render
 //! --tile I/N`, `--samples A..B`), as NAME.exr and NAME.png: identical bit for bit to the render
 //! made at once where every part holds all its samples, within Monte Carlo noise where samples
-//! are split (`striae::parts`).
+//! are split (`striae::render::parts`).
 
 use anyhow::Context;
 use std::path::PathBuf;
-use striae::parts::{merge, Part};
+use striae::render::parts::{merge, Part};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -26,7 +26,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .parts
         .iter()
         .map(|path| Ok((path.clone(), Part::read(path)?)))
-        .collect::<Result<Vec<_>, striae::parts::PartError>>()?;
+        .collect::<Result<Vec<_>, striae::render::parts::PartError>>()?;
     let (image, exposure) = merge(&parts)?;
     let (exr, png) = super::render::image_outputs(Some(&args.output), None)?;
     image

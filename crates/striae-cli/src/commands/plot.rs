@@ -3,7 +3,7 @@
 
 use anyhow::Context;
 use std::path::PathBuf;
-use striae::table::ScratchTable;
+use striae::precompute::table::ScratchTable;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -31,19 +31,24 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             a.output.display()
         );
     }
-    let walls = striae::wall_table::WallTable::load(&a.table)
+    let walls = striae::precompute::wall_table::WallTable::load(&a.table)
         .with_context(|| format!("loading {}", a.table.display()))?;
     if let Some(walls) = walls {
-        walls.plot(a.theta_i.to_radians(), a.phi_i.to_radians(), &a.output)?;
+        striae::lab::plot::plot_wall_table(
+            &walls,
+            a.theta_i.to_radians(),
+            a.phi_i.to_radians(),
+            &a.output,
+        )?;
         println!("wrote {}", a.output.display());
         return Ok(());
     }
     let table =
         ScratchTable::load(&a.table).with_context(|| format!("loading {}", a.table.display()))?;
     if a.heatmap {
-        striae::plot::plot_heatmap(&table, &a.output)?;
+        striae::lab::plot::plot_heatmap(&table, &a.output)?;
     } else {
-        striae::plot::plot_lobe(&table, a.phi_i, &a.output)?;
+        striae::lab::plot::plot_lobe(&table, a.phi_i, &a.output)?;
     }
     println!("wrote {}", a.output.display());
     Ok(())

@@ -3,10 +3,10 @@
 use anyhow::Context;
 use std::path::PathBuf;
 use std::time::Instant;
-use striae::fresnel::FresnelLaw;
-use striae::profile::Profile;
-use striae::table::{ScratchTable, TableParams};
-use striae::trace2d::{Estimator, FresnelMode, TraceSettings, Walls};
+use striae::optics::fresnel::FresnelLaw;
+use striae::precompute::profile::Profile;
+use striae::precompute::table::{ScratchTable, TableParams};
+use striae::precompute::trace2d::{Estimator, FresnelMode, TraceSettings, Walls};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -137,7 +137,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     let profile =
         Profile::parse(&a.profile).with_context(|| format!("--profile `{}`", a.profile))?;
-    use striae::wall_table::WallTableParams;
+    use striae::precompute::wall_table::WallTableParams;
     match a.walls {
         WallsArg::Dielectric => {
             return wall_table(WallTableParams::new(profile, a.ior, a.roughness), &a);
@@ -256,10 +256,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 }
 
 /// `--walls dielectric` or `--walls specular --roughness A`: the wall table
-/// (`striae::wall_table`; four lobes, or rough specular walls' one), and with `--check N` its
+/// (`striae::precompute::wall_table`; four lobes, or rough specular walls' one), and with `--check N` its
 /// error against the exact trace at N off-grid incident directions.
-fn wall_table(params: striae::wall_table::WallTableParams, a: &Args) -> anyhow::Result<()> {
-    use striae::wall_table::{WallTable, WallTableParams, LOBES};
+fn wall_table(
+    params: striae::precompute::wall_table::WallTableParams,
+    a: &Args,
+) -> anyhow::Result<()> {
+    use striae::precompute::wall_table::{WallTable, WallTableParams, LOBES};
     let (theta_bins, phi_bins) = a.incident.unwrap_or((params.theta_bins, params.phi_bins));
     let params = WallTableParams {
         seed: a.seed,

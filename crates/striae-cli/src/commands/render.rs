@@ -6,15 +6,15 @@
 use anyhow::{bail, Context};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
-use striae::sampler::SamplerKind;
-use striae::scene::{Overrides, Scene};
+use striae::render::sampler::SamplerKind;
+use striae::render::scene::{Overrides, Scene};
 
 #[derive(clap::Args)]
 pub struct Args {
     /// Scene file (TOML, see docs/scenes.md). Without it the built-in default scene renders.
     pub scene: Option<PathBuf>,
     /// Samples per pixel (overrides `render.spp`).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=striae::sampler::MAX_SPP as i64))]
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=striae::render::sampler::MAX_SPP as i64))]
     pub spp: Option<u32>,
     /// Image size as WIDTHxHEIGHT, e.g. 512x384 (overrides `render.width`, `render.height`).
     #[arg(long, value_parser = parse_resolution)]
@@ -80,7 +80,7 @@ fn parse_tile(s: &str) -> Result<(u32, u32), String> {
 /// `--samples A..B`: two sample indices, `A < B`; `B` is checked against the spp
 /// (`parts::check_samples`).
 fn parse_samples(s: &str) -> Result<[u32; 2], String> {
-    let range = striae::parts::parse_samples(s)?;
+    let range = striae::render::parts::parse_samples(s)?;
     if range[0] >= range[1] {
         return Err(format!("`{s}`: A must be less than B (A..B excludes B)"));
     }
@@ -165,13 +165,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(e) = args.exposure.filter(|e| !e.is_finite()) {
         bail!("--exposure {e}: must be finite");
     }
-    striae::integrator::LoopCopy::env_cap().map_err(anyhow::Error::msg)?;
+    striae::render::integrator::LoopCopy::env_cap().map_err(anyhow::Error::msg)?;
     super::print_library_messages(args.quiet);
     let (mut scene, scene_text) = match &args.scene {
         Some(path) => Scene::load_with_text(path, &overrides).context("cannot load the scene")?,
         None => (
             Scene::default_scene(&overrides).context("building the built-in default scene")?,
-            striae::scene::DEFAULT_SCENE.to_string(),
+            striae::render::scene::DEFAULT_SCENE.to_string(),
         ),
     };
     if let Some(e) = args.exposure {
@@ -182,11 +182,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let s = &scene.settings;
     if let Some(range) = args.samples {
-        striae::parts::check_samples(range, s.spp).context("--samples")?;
+        striae::render::parts::check_samples(range, s.spp).context("--samples")?;
     }
     let tile = args.tile.or(args.samples.map(|_| (0, 1)));
     let pixels = match tile {
-        Some((i, n)) => striae::parts::part_pixel_count((s.width, s.height), i, n)? as u64,
+        Some((i, n)) => striae::render::parts::part_pixel_count((s.width, s.height), i, n)? as u64,
         None => s.width as u64 * s.height as u64,
     };
     let size = format!("--res {}x{}", s.width, s.height);
@@ -219,7 +219,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let cancel = std::sync::atomic::AtomicBool::new(false);
         let (part, stats) = pool.install(|| {
             let progress = |n| bar.inc(n);
-            striae::parts::Part::render(&scene, &scene_text, tile, args.samples, &progress, &cancel)
+            striae::render::parts::Part::render(
+                &scene,
+                &scene_text,
+                tile,
+                args.samples,
+                &progress,
+                &cancel,
+            )
         })?;
         bar.finish_and_clear();
         part.write(&path)?;
@@ -228,7 +235,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let (exr_path, png_path) = image_outputs(args.output.as_deref(), args.scene.as_deref())?;
-    let (image, stats) = pool.install(|| striae::integrator::render(&scene, &|n| bar.inc(n)));
+    let (image, stats) =
+        pool.install(|| striae::render::integrator::render(&scene, &|n| bar.inc(n)));
     bar.finish_and_clear();
 
     image
@@ -295,7 +303,7 @@ fn progress_bar(total: u64, quiet: bool) -> ProgressBar {
 }
 
 /// The render's summary line: wall time, samples/s, rays/s.
-fn print_summary(stats: &striae::integrator::RenderStats) {
+fn print_summary(stats: &striae::render::integrator::RenderStats) {
     eprintln!(
         "done in {:.2} s: {:.3} M samples/s, {:.2} M rays/s ({} rays, {} render loop){}",
         stats.seconds,
@@ -315,7 +323,7 @@ fn export_meshes(scene: &Scene, dir: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     for (i, shape) in scene.geometry.shapes().iter().enumerate() {
         match &shape.geometry {
-            striae::geometry::ShapeGeometry::Mesh(mesh) => {
+            striae::render::geometry::ShapeGeometry::Mesh(mesh) => {
                 let path = dir.join(format!("shape-{i}.obj"));
                 mesh.write_obj(&path)
                     .with_context(|| format!("writing {}", path.display()))?;
@@ -325,7 +333,7 @@ fn export_meshes(scene: &Scene, dir: &Path) -> anyhow::Result<()> {
                     mesh.triangle_count()
                 );
             }
-            striae::geometry::ShapeGeometry::Sphere { centre, radius } => {
+            striae::render::geometry::ShapeGeometry::Sphere { centre, radius } => {
                 eprintln!(
                     "shape {i}: analytic sphere, centre {centre}, radius {radius} (not exported)"
                 );

@@ -1,9 +1,9 @@
 //! Helpers shared by the scene tests.
 
 use std::path::Path;
-use striae::film::Image;
-use striae::integrator::{render, RenderStats};
-use striae::scene::{Overrides, Scene};
+use striae::render::film::Image;
+use striae::render::integrator::{render, RenderStats};
+use striae::render::scene::{Overrides, Scene};
 
 /// A scene from TOML text (named `test.toml`, relative paths from the working folder); panics
 /// with the loader's message if it does not parse.

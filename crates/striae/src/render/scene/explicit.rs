@@ -1,0 +1,271 @@
+//! Explicit scratch geometry in a scene (METHOD.md 8.3): `scratches.explicit = true` turns a
+//! scratched material's scratches on every rectangle and box that uses it into grooves
+//! ([`crate::render::geometry::carve`]): each face gets its [`Carving`], the walls become one more mesh
+//! shape with the wall material, and the face keeps the smooth base. Everything is checked
+//! before anything is built: the shape must be planar, the grooves must fit in a box's
+//! thickness, and the estimated memory must stay under [`MAX_EXPLICIT_BYTES`].
+
+use super::file::{ShapeSection, ShapeType};
+use super::scratches::ExplicitSpec;
+use super::{invalid, SceneError};
+use crate::layers::Scratch;
+use crate::render::geometry::carve::{triangles_per_groove, Carve, CarveRole, Carving, Face};
+use crate::render::geometry::{Shape, ShapeGeometry, TriangleMesh};
+use crate::render::material::Material;
+use std::path::Path;
+use std::time::Instant;
+
+/// Memory per wall triangle, measured (mesh vertices and indices, BVH primitives and nodes,
+/// the build's temporaries; `BENCHMARKS.md`).
+pub const BYTES_PER_TRIANGLE: usize = 400;
+/// The most memory explicit geometry may take (estimated up front).
+pub const MAX_EXPLICIT_BYTES: usize = 6 << 30;
+
+/// The faces of a rectangle or box mesh: face `f` is vertices `4f..4f + 4` with uv `(0, 0),
+/// (1, 0), (1, 1), (0, 1)` (`TriangleMesh::rectangle`, `TriangleMesh::cuboid`; a transform
+/// keeps the vertex order), its triangles `2f`, `2f + 1`.
+fn faces(mesh: &TriangleMesh) -> Vec<Face> {
+    let p = mesh.positions();
+    (0..mesh.triangle_count() / 2)
+        .map(|f| {
+            let [a, b, c] = mesh.triangle(2 * f);
+            Face {
+                origin: p[4 * f],
+                dpdu: p[4 * f + 1] - p[4 * f],
+                dpdv: p[4 * f + 3] - p[4 * f],
+                n: (b - a).cross(c - a).normalize(),
+            }
+        })
+        .collect()
+}
+
+/// The distance from face `f` of a box to the opposite face (`f ^ 1`, `TriangleMesh::cuboid`'s
+/// order), or infinity for a rectangle.
+fn thickness(kind: ShapeType, faces: &[Face], f: usize) -> f32 {
+    match kind {
+        ShapeType::Box => (faces[f ^ 1].origin - faces[f].origin)
+            .dot(faces[f].n)
+            .abs(),
+        _ => f32::INFINITY,
+    }
+}
+
+/// Carves the shapes whose material is explicit (`specs[material]`), appending the wall
+/// shapes and their materials; `None` when no material is explicit.
+pub(super) fn carve(
+    sections: &[ShapeSection],
+    file: &Path,
+    names: &[&String],
+    specs: &[Option<ExplicitSpec>],
+    materials: &mut Vec<Material>,
+    shapes: &mut Vec<Shape>,
+) -> Result<Option<Carve>, SceneError> {
+    if specs.iter().all(Option::is_none) {
+        return Ok(None);
+    }
+    let start = Instant::now();
+    let mut carve = Carve::default();
+    let mut walls = Vec::new();
+    let mut bytes = 0usize;
+    for (i, s) in sections.iter().enumerate() {
+        let m = shapes[i].material;
+        let Some(spec) = specs.get(m as usize).and_then(Option::as_ref) else {
+            continue;
+        };
+        let key = format!("materials.{}.scratches.explicit", names[m as usize]);
+        let ShapeGeometry::Mesh(mesh) = &shapes[i].geometry else {
+            return Err(not_planar(file, &key, i, s.kind));
+        };
+        if !matches!(s.kind, ShapeType::Rectangle | ShapeType::Box) {
+            return Err(not_planar(file, &key, i, s.kind));
+        }
+        let faces = faces(mesh);
+        // Up front, before anything is enumerated: a layer has about one scratch per noise cell,
+        // `1 / (L W)` cells per face (the texture square), plus a rim of cells the ellipses
+        // reach in from outside.
+        let p = spec.layers.params();
+        let per_face = p.layers as f64 * (1.0 + 2.0 * p.threshold).powi(2) / (p.length * p.width);
+        let segments = spec.profile.points.len() - 1;
+        bytes = bytes.saturating_add(
+            (faces.len() as f64
+                * per_face
+                * (triangles_per_groove(segments, spec.stations) * BYTES_PER_TRIANGLE) as f64)
+                .min(usize::MAX as f64) as usize,
+        );
+        if bytes > MAX_EXPLICIT_BYTES {
+            return Err(invalid(
+                file,
+                key,
+                true,
+                format!(
+                    "the grooves would take about {:.1} GiB (over the {} GiB allowed): use fewer layers, wider scratches or fewer explicit shapes",
+                    bytes as f64 / (1u64 << 30) as f64,
+                    MAX_EXPLICIT_BYTES >> 30
+                ),
+            ));
+        }
+        let scratches: Vec<Scratch> = Face::scratches(&spec.layers);
+        let z_min = spec.profile.points.iter().map(|p| p[1]).fold(0.0, f64::min) as f32;
+        let wall_material = materials.len() as u32;
+        materials.push(spec.wall.clone());
+        let first = carve.carvings.len() as u32;
+        for (f, face) in faces.iter().enumerate() {
+            let (depth, room) = (
+                face.max_depth(&scratches, z_min),
+                thickness(s.kind, &faces, f),
+            );
+            if !(depth < room) {
+                return Err(invalid(file, key, true, format!("grooves up to {depth} deep do not fit in shapes[{i}], {room} thick: make it thicker or the scratches narrower or shallower")));
+            }
+            let mut carving = Carving::new(face, &scratches, &spec.profile.points, spec.stations);
+            if carving.is_empty() {
+                carve.carvings.push(carving);
+                continue;
+            }
+            let (positions, indices) = carving.walls();
+            let mesh = TriangleMesh::new(positions, indices, None, None, None)
+                .map_err(|e| invalid(file, format!("shapes[{i}]"), s.kind, e))?;
+            walls.push((carve.carvings.len() as u32, wall_material, mesh));
+            carve.carvings.push(carving);
+        }
+        set_role(&mut carve.roles, i, CarveRole::Faces { first });
+    }
+    let triangles: usize = walls.iter().map(|w| w.2.triangle_count()).sum();
+    for (carving, material, mesh) in walls {
+        set_role(&mut carve.roles, shapes.len(), CarveRole::Walls { carving });
+        shapes.push(Shape {
+            geometry: ShapeGeometry::Mesh(mesh),
+            material,
+            area_light: None,
+        });
+    }
+    crate::log::info(&format!(
+        "explicit scratches: {} grooves, {} wall triangles (about {} MiB estimated), built in {:.2} s",
+        carve.grooves(),
+        triangles,
+        (triangles * BYTES_PER_TRIANGLE) >> 20,
+        start.elapsed().as_secs_f64()
+    ));
+    Ok(Some(carve))
+}
+
+fn set_role(roles: &mut Vec<Option<CarveRole>>, shape: usize, role: CarveRole) {
+    if roles.len() <= shape {
+        roles.resize(shape + 1, None);
+    }
+    roles[shape] = Some(role);
+}
+
+fn not_planar(file: &Path, key: &str, i: usize, kind: ShapeType) -> SceneError {
+    invalid(
+        file,
+        key,
+        true,
+        format!("explicit scratch grooves are carved into planar faces (a rectangle or a box); shapes[{i}] is a {kind:?}"),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::render::scene::{Overrides, Scene, SceneError};
+    use std::path::Path;
+
+    /// A metal scene whose one shape (`shape`, TOML lines) uses `scratches` (TOML lines).
+    fn scene(shape: &str, scratches: &str) -> Result<Scene, SceneError> {
+        let text = format!(
+            "[render]\nwidth = 8\nheight = 8\nspp = 1\n\
+             [camera]\nposition = [0, 0, 3]\nlook_at = [0, 0, 0]\nfov = 30\n\
+             [materials.plate]\ntype = \"scratched\"\nbase = \"metal\"\npreset = \"gold\"\n\
+             [materials.plate.scratches]\nexplicit = true\n{scratches}\n\
+             [[shapes]]\nmaterial = \"plate\"\n{shape}\n"
+        );
+        Scene::parse(
+            &text,
+            Path::new("t.toml"),
+            Path::new("."),
+            &Overrides::default(),
+        )
+    }
+
+    fn error_of(r: Result<Scene, SceneError>) -> String {
+        match r {
+            Ok(_) => panic!("expected an error"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn explicit_grooves_are_carved_into_a_rectangle() {
+        let s = scene("type = \"rectangle\"", "setting = 2\nlayers = 2").unwrap();
+        let carve = s.geometry.carve().expect("carved");
+        assert!(carve.grooves() > 100, "{} grooves", carve.grooves());
+        // The face and one wall shape.
+        assert_eq!(s.geometry.shapes().len(), 2);
+    }
+
+    #[test]
+    fn stations_set_the_walls_triangles_and_are_checked() {
+        let triangles = |stations: &str| {
+            let s = scene(
+                "type = \"rectangle\"",
+                &format!("setting = 2\nlayers = 1\n{stations}"),
+            )
+            .unwrap();
+            let walls = &s.geometry.shapes()[1];
+            let crate::render::geometry::ShapeGeometry::Mesh(m) = &walls.geometry else {
+                panic!("walls are a mesh")
+            };
+            (s.geometry.carve().unwrap().grooves(), m.triangle_count())
+        };
+        // A V has two segments: 2 x 2 x (stations - 1) triangles a groove, less the pointed
+        // ends' degenerate ones (one per segment at each tip of a whole groove).
+        let (g16, t16) = triangles("");
+        let (g64, t64) = triangles("stations = 64");
+        assert_eq!(g16, g64);
+        assert!(
+            t16 <= 4 * 15 * g16 && t16 >= 4 * 15 * g16 - 4 * g16,
+            "{t16}, {g16}"
+        );
+        assert!(
+            t64 <= 4 * 63 * g64 && t64 >= 4 * 63 * g64 - 4 * g64,
+            "{t64}, {g64}"
+        );
+        for bad in ["stations = 2", "stations = 5000"] {
+            let e = error_of(scene(
+                "type = \"rectangle\"",
+                &format!("setting = 2\n{bad}"),
+            ));
+            assert!(e.contains("materials.plate.scratches.stations"), "{e}");
+        }
+    }
+
+    #[test]
+    fn explicit_on_a_shape_that_cannot_be_carved_names_the_key() {
+        let e = error_of(scene("type = \"sphere\"", "setting = 2"));
+        assert!(e.contains("materials.plate.scratches.explicit"), "{e}");
+        assert!(e.contains("planar"), "{e}");
+        let e = error_of(scene("type = \"teapot\"\nsubdivisions = 2", "setting = 2"));
+        assert!(e.contains("materials.plate.scratches.explicit"), "{e}");
+    }
+
+    #[test]
+    fn grooves_deeper_than_a_box_and_sets_too_large_are_errors() {
+        // Setting 2 (W 0.01): grooves about 1e-3 deep on a face 2 wide, in a box 1e-4 thick.
+        let thin = "type = \"box\"\ntransform = [{ scale = [1, 1, 0.00005] }]";
+        let e = error_of(scene(thin, "setting = 2\nlayers = 1"));
+        assert!(
+            e.contains("materials.plate.scratches.explicit") && e.contains("thick"),
+            "{e}"
+        );
+        let e = error_of(scene(
+            "type = \"rectangle\"",
+            "length = 0.3\nwidth = 0.00001\nthreshold = 0.1\nlayers = 64",
+        ));
+        assert!(
+            e.contains("materials.plate.scratches.explicit") && e.contains("GiB"),
+            "{e}"
+        );
+        let e = error_of(scene("type = \"rectangle\"", "table = \"t.npz\""));
+        assert!(e.contains("scratches.explicit"), "{e}");
+    }
+}

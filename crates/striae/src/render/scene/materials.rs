@@ -1,0 +1,467 @@
+//! Materials as a scene file describes them (`[materials.NAME]` tables): plain data, validated
+//! once and prepared into the immutable runtime [`Material`] (presets resolved, textures
+//! loaded, scratch tables and layers attached).
+//!
+//! ```toml
+//! type = "diffuse"
+//! reflectance = [0.8, 0.8, 0.8]          # or a grey number, or a texture table (see texture)
+//!
+//! type = "dielectric"
+//! ior = 1.5                              # interior index (default 1.5)
+//! ext_ior = 1.0                          # exterior index (default 1.0)
+//! roughness = 0.0                        # GGX alpha; > 0 makes it a rough dielectric
+//!
+//! type = "conductor"
+//! preset = "gold"                        # or eta = [r, g, b] and k = [r, g, b]
+//! roughness = 0.0                        # GGX alpha; > 0 makes it a rough conductor
+//!
+//! type = "scratched"                     # glass or metal with scratches: see
+//! base = "glass"                         # `scene::scratches` and docs/scratched.md
+//! ```
+//!
+//! `roughness` is the GGX `alpha` (Mitsuba's `alpha`, not squared). Mitsuba's dielectric
+//! defaults differ from ours (`int_ior` 1.5046, `ext_ior` 1.000277): set both explicitly in
+//! both renderers when comparing. Conductor presets and their sources are listed in
+//! [`crate::render::bsdf::CONDUCTOR_PRESETS`].
+
+use super::scratches::ScratchedDesc;
+use crate::math::Rgb;
+use crate::render::bsdf::ConductorIor;
+use crate::render::material::Material;
+use crate::render::texture::{Texture, TextureError};
+use serde::Deserialize;
+use std::path::Path;
+
+/// A material description that is out of range or refers to something unknown. The message
+/// names the key and the value; the scene loader adds the file (and material name).
+#[derive(Debug, thiserror::Error)]
+pub enum MaterialError {
+    #[error("invalid `{key}` = {value}: {reason}")]
+    InvalidValue {
+        key: &'static str,
+        value: String,
+        reason: String,
+    },
+    #[error("unknown conductor `preset` = \"{value}\"; known presets: {known}")]
+    UnknownPreset { value: String, known: String },
+    #[error("conductor needs either `preset` or both `eta` and `k` ({reason})")]
+    ConductorIor { reason: &'static str },
+    #[error("texture `{key}`: {source}")]
+    Texture {
+        key: &'static str,
+        source: TextureError,
+    },
+    /// The scratched material's table could not be obtained.
+    #[error("`{key}`: {source}")]
+    ScratchTable {
+        key: &'static str,
+        source: Box<crate::precompute::table::TableError>,
+    },
+}
+
+/// [`MaterialError::InvalidValue`].
+pub(crate) fn invalid(
+    key: &'static str,
+    value: impl std::fmt::Display,
+    reason: impl Into<String>,
+) -> MaterialError {
+    MaterialError::InvalidValue {
+        key,
+        value: value.to_string(),
+        reason: reason.into(),
+    }
+}
+
+fn default_reflectance() -> Texture {
+    Texture::Constant(Rgb::splat(0.5))
+}
+fn default_ior() -> f32 {
+    1.5
+}
+fn one() -> f32 {
+    1.0
+}
+
+/// A material as written in a scene file.
+// Read once, at load time: the size difference between the variants does not matter.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum MaterialDesc {
+    /// Lambertian; `reflectance` in `[0, 1]` (default 0.5 grey).
+    Diffuse {
+        #[serde(default = "default_reflectance")]
+        reflectance: Texture,
+    },
+    /// A dielectric interface with relative index `ior / ext_ior`; GGX `roughness` (alpha,
+    /// default 0 = smooth).
+    Dielectric {
+        #[serde(default = "default_ior")]
+        ior: f32,
+        #[serde(default = "one")]
+        ext_ior: f32,
+        #[serde(default)]
+        roughness: f32,
+    },
+    /// A conductor given by a `preset` name or by `eta` and `k`; GGX `roughness` (alpha,
+    /// default 0 = smooth).
+    Conductor {
+        #[serde(default)]
+        preset: Option<String>,
+        #[serde(default, deserialize_with = "crate::strict_array::optional")]
+        eta: Option<[f32; 3]>,
+        #[serde(default, deserialize_with = "crate::strict_array::optional")]
+        k: Option<[f32; 3]>,
+        #[serde(default)]
+        roughness: f32,
+    },
+    /// A smooth glass or metal base with scratches ([`ScratchedDesc`]).
+    Scratched(ScratchedDesc),
+}
+
+fn check_roughness(roughness: f32) -> Result<(), MaterialError> {
+    if !(roughness.is_finite() && roughness >= 0.0) {
+        return Err(invalid(
+            "roughness",
+            roughness,
+            "must be a finite GGX alpha >= 0 (0 = smooth)",
+        ));
+    }
+    Ok(())
+}
+
+pub(crate) fn fmt3(v: [f32; 3]) -> String {
+    format!("[{}, {}, {}]", v[0], v[1], v[2])
+}
+
+/// A conductor's complex IOR from a preset name or explicit `eta` and `k` (exactly one of the
+/// two), checked: finite, `>= 0`, and not both 0 in a channel.
+pub fn conductor_ior(
+    preset: Option<&str>,
+    eta: Option<[f32; 3]>,
+    k: Option<[f32; 3]>,
+) -> Result<ConductorIor, MaterialError> {
+    let ior = match (preset, eta, k) {
+        (Some(name), None, None) => {
+            ConductorIor::preset(name).ok_or_else(|| MaterialError::UnknownPreset {
+                value: name.to_string(),
+                known: ConductorIor::preset_names(),
+            })?
+        }
+        (None, Some(eta), Some(k)) => ConductorIor {
+            eta: Rgb::from(eta),
+            k: Rgb::from(k),
+        },
+        (Some(_), _, _) => {
+            return Err(MaterialError::ConductorIor {
+                reason: "`preset` excludes `eta` and `k`",
+            })
+        }
+        (None, _, _) => {
+            return Err(MaterialError::ConductorIor {
+                reason: "give both `eta` and `k`",
+            })
+        }
+    };
+    for (key, v) in [("eta", ior.eta), ("k", ior.k)] {
+        if !(v.is_finite() && v.min_element() >= 0.0) {
+            return Err(invalid(key, fmt3(v.to_array()), "must be finite and >= 0"));
+        }
+    }
+    if (0..3).any(|c| ior.eta[c] == 0.0 && ior.k[c] == 0.0) {
+        return Err(invalid(
+            "eta",
+            fmt3(ior.eta.to_array()),
+            "eta and k cannot both be 0 in a channel",
+        ));
+    }
+    Ok(ior)
+}
+
+/// The range check of a diffuse `reflectance` (image textures are checked once loaded).
+fn check_reflectance(reflectance: &Texture) -> Result<(), MaterialError> {
+    if let Texture::Checkerboard { scale, .. } | Texture::Image { scale, .. } = reflectance {
+        if !(scale.is_finite() && *scale != 0.0) {
+            return Err(invalid(
+                "reflectance.scale",
+                scale,
+                "must be finite and non-zero",
+            ));
+        }
+    }
+    if let Some((lo, hi)) = reflectance.range() {
+        if !(lo >= 0.0 && hi <= 1.0) {
+            let value = match reflectance {
+                Texture::Constant(c) => fmt3(c.to_array()),
+                Texture::Checkerboard { color0, color1, .. } => {
+                    format!("{} / {}", fmt3(color0.to_array()), fmt3(color1.to_array()))
+                }
+                Texture::Image { path, .. } => {
+                    format!("image `{}` (values {lo} .. {hi})", path.display())
+                }
+            };
+            return Err(invalid(
+                "reflectance",
+                value,
+                "a diffuse albedo must lie in [0, 1]",
+            ));
+        }
+    }
+    Ok(())
+}
+
+impl MaterialDesc {
+    /// Check every value's range (IOR >= 1, roughness >= 0, albedo in `[0, 1]`, a known preset
+    /// or a complete `eta`/`k`, every scratch key; a profile file, relative to `base_dir`, the
+    /// scene file's folder, is read). No table is loaded or computed.
+    pub fn validate(&self, base_dir: &Path) -> Result<(), MaterialError> {
+        match self {
+            MaterialDesc::Diffuse { reflectance } => check_reflectance(reflectance),
+            MaterialDesc::Dielectric {
+                ior,
+                ext_ior,
+                roughness,
+            } => {
+                for (key, v) in [("ior", *ior), ("ext_ior", *ext_ior)] {
+                    if !(v.is_finite() && v >= 1.0) {
+                        return Err(invalid(
+                            key,
+                            v,
+                            "an index of refraction must be finite and >= 1",
+                        ));
+                    }
+                }
+                check_roughness(*roughness)
+            }
+            MaterialDesc::Conductor {
+                preset,
+                eta,
+                k,
+                roughness,
+            } => {
+                conductor_ior(preset.as_deref(), *eta, *k)?;
+                check_roughness(*roughness)
+            }
+            MaterialDesc::Scratched(m) => m.resolve(base_dir).map(|_| ()),
+        }
+    }
+
+    /// Validate, then build the runtime material: image textures loaded (paths relative to
+    /// `base_dir`, the scene file's folder), presets resolved, a scratched material's table
+    /// obtained (memory, disk cache, file or computation) and its layers drawn.
+    pub fn prepare(&self, base_dir: &Path) -> Result<Material, MaterialError> {
+        // A scratched material validates in its own `prepare`, which resolves it (its profile
+        // file read) once.
+        if !matches!(self, MaterialDesc::Scratched(_)) {
+            self.validate(base_dir)?;
+        }
+        Ok(match self {
+            MaterialDesc::Scratched(m) => Material::Scratched(Box::new(m.prepare(base_dir)?)),
+            MaterialDesc::Diffuse { reflectance } => {
+                let mut reflectance = reflectance.clone();
+                reflectance
+                    .load_images(base_dir)
+                    .map_err(|source| MaterialError::Texture {
+                        key: "reflectance",
+                        source,
+                    })?;
+                check_reflectance(&reflectance)?;
+                Material::Diffuse { reflectance }
+            }
+            MaterialDesc::Dielectric {
+                ior,
+                ext_ior,
+                roughness,
+            } => Material::Dielectric {
+                eta: ior / ext_ior,
+                roughness: *roughness,
+            },
+            MaterialDesc::Conductor {
+                preset,
+                eta,
+                k,
+                roughness,
+            } => Material::Conductor {
+                ior: conductor_ior(preset.as_deref(), *eta, *k)?,
+                roughness: *roughness,
+            },
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::{Vec2, Vec3};
+    use crate::render::bsdf::Bsdf;
+    use crate::render::bsdf::CONDUCTOR_PRESETS;
+
+    fn parse(s: &str) -> Result<MaterialDesc, String> {
+        let m: MaterialDesc = toml::from_str(s).map_err(|e| e.to_string())?;
+        m.validate(Path::new(".")).map_err(|e| e.to_string())?;
+        Ok(m)
+    }
+
+    /// The runtime material a valid description prepares into.
+    fn prepared(s: &str) -> Material {
+        parse(s).unwrap().prepare(Path::new(".")).unwrap()
+    }
+
+    /// The BSDF of a material on a flat hit at `uv`, seen from above.
+    fn bsdf_at(m: &Material, uv: Vec2) -> Bsdf<'_> {
+        let hit = crate::render::geometry::SurfaceHit::flat(uv);
+        let view = crate::render::material::HitView {
+            wo: Vec3::Z,
+            rd: None,
+            u_layer: None,
+            pixel: None,
+        };
+        m.shade(&hit, view, &mut crate::layers::CoverageCache::new())
+            .1
+    }
+
+    #[test]
+    fn good_materials_parse_into_the_right_bsdf() {
+        let uv = Vec2::new(0.3, 0.6);
+        let m = prepared("type = \"dielectric\"\nior = 1.5");
+        assert!(matches!(bsdf_at(&m, uv), Bsdf::Dielectric(d) if d.eta == 1.5));
+        let m =
+            prepared("type = \"dielectric\"\nior = 1.5046\next_ior = 1.000277\nroughness = 0.1");
+        assert!(
+            matches!(bsdf_at(&m, uv), Bsdf::RoughDielectric(d) if (d.eta - 1.5046 / 1.000277).abs() < 1e-6)
+        );
+        let m = prepared("type = \"conductor\"\npreset = \"gold\"");
+        let Bsdf::Conductor(c) = bsdf_at(&m, uv) else {
+            panic!()
+        };
+        assert_eq!(c.ior.eta, ConductorIor::preset("Au").unwrap().eta);
+        let m = prepared(
+            "type = \"conductor\"\neta = [0.2, 0.9, 1.1]\nk = [3.9, 2.4, 2.1]\nroughness = 0.3",
+        );
+        assert!(matches!(bsdf_at(&m, uv), Bsdf::RoughConductor(_)));
+        let m = prepared("type = \"diffuse\"\nreflectance = [0.2, 0.4, 0.6]");
+        assert!(
+            matches!(bsdf_at(&m, uv), Bsdf::Diffuse(d) if d.reflectance == Rgb::new(0.2, 0.4, 0.6))
+        );
+        let m = prepared("type = \"diffuse\"\nreflectance = { type = \"checkerboard\", color0 = [1, 1, 1], color1 = [0, 0, 0] }");
+        assert!(
+            matches!(bsdf_at(&m, Vec2::new(0.1, 0.1)), Bsdf::Diffuse(d) if d.reflectance == Rgb::ONE)
+        );
+        assert!(
+            matches!(bsdf_at(&m, Vec2::new(0.6, 0.1)), Bsdf::Diffuse(d) if d.reflectance == Rgb::ZERO)
+        );
+        // Every preset resolves, and none reflects more than all of the light.
+        for (names, _, _) in CONDUCTOR_PRESETS {
+            for n in *names {
+                let m = prepared(&format!("type = \"conductor\"\npreset = \"{n}\""));
+                let Bsdf::Conductor(c) = bsdf_at(&m, uv) else {
+                    panic!()
+                };
+                for cos in [1.0, 0.5, 0.1] {
+                    let f = c.ior.fresnel(cos);
+                    assert!(
+                        f.min_element() > 0.3 && f.max_element() <= 1.0 + 1e-5,
+                        "{n}: {f:?}"
+                    );
+                }
+            }
+        }
+        // The "none" preset is a perfect mirror.
+        let m = prepared("type = \"conductor\"\npreset = \"none\"");
+        let Bsdf::Conductor(c) = bsdf_at(&m, uv) else {
+            panic!()
+        };
+        for cos in [1.0, 0.7, 0.2, 0.01] {
+            assert!((c.ior.fresnel(cos) - Rgb::ONE).abs().max_element() < 1e-6);
+        }
+    }
+
+    /// `scratches.lean = true` leans the scratch lobes' frames; without it they have none.
+    #[test]
+    fn scratched_lean_key_leans_the_lobes() {
+        let text = |lean: &str| {
+            format!(
+                "type = \"scratched\"\nbase = \"metal\"\npreset = \"none\"\n[scratches]\nwalls = \"specular\"\nfresnel_law = \"none\"\nm = 8\nn = 50\nlength = 0.3\nwidth = 0.05\nthreshold = 1.0\nlayers = 1\ncoverage = \"point\"\n{lean}"
+            )
+        };
+        for (lean, leaned) in [("", false), ("lean = false", false), ("lean = true", true)] {
+            let m = prepared(&text(lean));
+            let mut covered = 0;
+            for i in 0..49 {
+                let uv = Vec2::new((i % 7) as f32 + 0.5, (i / 7) as f32 + 0.5) / 7.0;
+                let hit = crate::render::geometry::SurfaceHit::flat(uv);
+                let view = crate::render::material::HitView {
+                    wo: Vec3::Z,
+                    rd: None,
+                    u_layer: Some(0.3),
+                    pixel: None,
+                };
+                let mut cache = crate::layers::CoverageCache::new();
+                if let Bsdf::Scratched(b) = m.shade(&hit, view, &mut cache).1 {
+                    assert_eq!(b.lobes()[0].lean != 0.0, leaned, "{lean} {uv:?}");
+                    covered += 1;
+                }
+            }
+            assert!(covered >= 10, "{lean}: {covered}");
+        }
+        let e = parse(&text("lean = \"yes\"")).unwrap_err();
+        assert!(e.contains("lean") || e.contains("boolean"), "{e}");
+    }
+
+    #[test]
+    fn bad_materials_are_rejected_with_key_and_value() {
+        let cases = [
+            ("type = \"dielectric\"\nior = 0.8", &["`ior`", "0.8", ">= 1"][..]),
+            ("type = \"dielectric\"\next_ior = 0.5", &["`ext_ior`", "0.5"]),
+            ("type = \"dielectric\"\nroughness = -0.1", &["`roughness`", "-0.1"]),
+            ("type = \"conductor\"\npreset = \"gold\"\nroughness = -1", &["`roughness`", "-1"]),
+            ("type = \"conductor\"\npreset = \"unobtainium\"", &["unobtainium", "preset", "gold"]),
+            ("type = \"conductor\"\neta = [1, 1, 1]", &["`eta` and `k`"]),
+            ("type = \"conductor\"\npreset = \"gold\"\neta = [1, 1, 1]", &["excludes"]),
+            ("type = \"conductor\"\neta = [1, -1, 1]\nk = [1, 1, 1]", &["`eta`", "-1"]),
+            ("type = \"diffuse\"\nreflectance = [0.5, 1.2, 0.5]", &["`reflectance`", "1.2", "[0, 1]"]),
+            ("type = \"diffuse\"\nreflectance = -0.5", &["`reflectance`", "-0.5"]),
+            (
+                "type = \"diffuse\"\nreflectance = { type = \"checkerboard\", color0 = [2, 1, 1], color1 = [0, 0, 0] }",
+                &["`reflectance`", "2"],
+            ),
+            ("type = \"diffuse\"\nalbedo = 0.5", &["albedo"]),
+            ("type = \"dielectric\"\nior = 1.5\nroughnes = 0.1", &["roughnes"]),
+            ("type = \"plastic\"", &["plastic"]),
+            ("ior = 1.5", &["type"]),
+        ];
+        for (src, needles) in cases {
+            let e = parse(src).expect_err(src);
+            for n in needles {
+                assert!(e.contains(n), "error for {src:?} should mention {n:?}: {e}");
+            }
+        }
+    }
+
+    #[test]
+    fn prepare_loads_images_and_names_missing_files() {
+        let dir = std::env::temp_dir().join(format!("striae-material-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let m: MaterialDesc = toml::from_str(
+            "type = \"diffuse\"\nreflectance = { type = \"image\", path = \"missing.png\" }",
+        )
+        .unwrap();
+        let e = m.prepare(&dir).unwrap_err().to_string();
+        assert!(
+            e.contains("missing.png") && e.contains("reflectance"),
+            "{e}"
+        );
+        image::RgbImage::from_pixel(1, 1, image::Rgb([255, 255, 255]))
+            .save(dir.join("white.png"))
+            .unwrap();
+        let m: MaterialDesc = toml::from_str(
+            "type = \"diffuse\"\nreflectance = { type = \"image\", path = \"white.png\" }",
+        )
+        .unwrap();
+        let m = m.prepare(&dir).unwrap();
+        assert!(
+            matches!(bsdf_at(&m, Vec2::splat(0.3)), Bsdf::Diffuse(d) if d.reflectance == Rgb::ONE)
+        );
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

@@ -1,0 +1,879 @@
+//! The scratched material as a scene file describes it (`type = "scratched"`, METHOD.md
+//! sections 5-7, `docs/scratched.md`): its keys, their validation and defaults
+//! ([`ScratchedDesc::resolve`]), and its preparation into the runtime
+//! [`ScratchedMaterial`] (table obtained through [`crate::render::cache`], layers drawn).
+//!
+//! ```toml
+//! [materials.glass]
+//! type = "scratched"
+//! base = "glass"                 # or "metal" (with preset = "gold", or eta and k)
+//! ior = 1.5                      # glass only
+//! [materials.glass.scratches]
+//! profile = "v:angle=90"         # the syntax of `striae precompute --profile`
+//! walls = "diffuse"              # "specular" = mirror walls, [Raymond16]'s delta lobe;
+//!                                # "dielectric" = glass walls, reflecting and transmitting
+//!                                # from both sides (METHOD.md 8.1-8.2, glass only)
+//! # roughness = 0.2              # GGX alpha of dielectric walls, or of a metal's specular
+//!                                # walls (default 0: smooth)
+//! # lobes = "table"              # smooth dielectric walls: read a precomputed table instead
+//!                                # of tracing the exact groove at every sample (default
+//!                                # "traced"; rough walls always read a table)
+//! fresnel = "seed"               # or "walls"
+//! fresnel_law = "schlick"        # dielectric | conductor:ETA,K | none
+//! m = 256                        # table size M, N, N_r (default: the seed's,
+//! n = 10000                      # `TraceSettings::default`)
+//! nr = 100
+//! # groove_slices = 6           # exact-groove theta_i slices instead of eq. (3) (diffuse walls)
+//! setting = 1                    # the seed's Table 1, or length / width / threshold
+//! layers = 8
+//! seed = 1
+//! layer_mix = "max"              # or "sum" ([Raymond16])
+//! # table = "my-table.npz"       # load a table instead of computing one
+//! # explicit = true              # real grooves on planar faces (METHOD.md 8.3)
+//! # stations = 16                # stations along each explicit groove
+//! ```
+
+use super::materials::{conductor_ior, invalid, MaterialError};
+use crate::layers::{LayerError, LayerParams, LayerSet, Orientation, MAX_LAYERS};
+use crate::math::Rgb;
+use crate::optics::fresnel::FresnelLaw;
+use crate::precompute::profile::Profile;
+use crate::precompute::table::{TableError, TableParams};
+use crate::precompute::trace2d::{FresnelMode, TraceError, TraceSettings, Walls};
+use crate::precompute::wall_table::{WallKind, WallTableParams};
+use crate::render::bsdf::GrooveWall;
+use crate::render::bsdf::{ConductorIor, GlassWalls, ScratchedBase, TracedGroove};
+use crate::render::geometry::carve::{DEFAULT_STATIONS, STATIONS_RANGE};
+use crate::render::material::Material;
+use crate::render::scratched::{CoverageMode, LayerMix, ScratchModel, ScratchedMaterial};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// The smooth base under the scratches.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum BaseKind {
+    /// A smooth dielectric (`ior`, default 1.5, the seed's glass).
+    Glass,
+    /// A smooth conductor (`preset`, or `eta` and `k`).
+    Metal,
+}
+
+/// Default profile: a 90-degree V groove.
+pub const DEFAULT_PROFILE: &str = "v:angle=90";
+/// Default layer-set seed.
+pub const DEFAULT_LAYER_SEED: u64 = 1;
+
+/// `[materials.NAME.scratches]`. Every key is optional; the defaults depend on the base
+/// (see [`ScratchedDesc::resolve`] and `docs/scratched.md`).
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ScratchSpec {
+    /// Profile spec, as `striae precompute --profile` (`file:` paths are relative to the scene).
+    pub profile: Option<String>,
+    /// Wall micro-BRDF: glass default `diffuse` (the seed), metal `specular` ([Raymond16]);
+    /// `dielectric`: the groove's own glass (METHOD.md 8.1-8.2).
+    #[serde(default, deserialize_with = "keyed::walls")]
+    pub walls: Option<WallsKey>,
+    /// GGX `alpha` of dielectric walls, or of a metal's specular walls, in `[0, 1]` (default
+    /// 0: smooth; the metal's mirror walls then keep the seed's 2D table).
+    pub roughness: Option<f64>,
+    /// Where Fresnel is applied: glass default `seed`, metal `walls`.
+    #[serde(default, deserialize_with = "keyed::fresnel")]
+    pub fresnel: Option<FresnelMode>,
+    /// `schlick`, `dielectric`, `conductor:ETA,K` or `none`; glass default `schlick`, metal the
+    /// base's complex IOR in its brightest channel (`none` for a perfect mirror base).
+    pub fresnel_law: Option<String>,
+    /// Index for `schlick` / `dielectric` (default: the glass base's `ior`, else 1.5).
+    pub ior: Option<f64>,
+    pub m: Option<usize>,
+    pub n: Option<usize>,
+    pub nr: Option<usize>,
+    /// Facet albedo per bounce (default 1).
+    pub albedo: Option<f64>,
+    pub max_bounces: Option<usize>,
+    /// Seed of the 2D trace (default 0).
+    pub trace_seed: Option<u64>,
+    /// Exact-groove `theta_i` slices (`crate::precompute::groove_slices`, 1 to 32) evaluated instead of
+    /// eq. (3); diffuse walls, `fresnel` then defaults to (and must be) `walls`.
+    pub groove_slices: Option<usize>,
+    /// The seed's Table 1 (1 or 2); excludes `length`, `width`, `threshold`.
+    pub setting: Option<u32>,
+    pub length: Option<f64>,
+    pub width: Option<f64>,
+    pub threshold: Option<f64>,
+    /// Number of layers `K` (default 8).
+    pub layers: Option<usize>,
+    /// Seed of the layer set (default 1).
+    pub seed: Option<u64>,
+    /// `layer` (default, the seed: a direction per layer) or `random` (a direction per scratch).
+    #[serde(default, deserialize_with = "keyed::orientation")]
+    pub orientation: Option<Orientation>,
+    #[serde(default, deserialize_with = "keyed::layer_mix")]
+    pub layer_mix: Option<LayerMix>,
+    /// `footprint` (default, section 6) or `point` (see [`CoverageMode`]).
+    #[serde(default, deserialize_with = "keyed::coverage")]
+    pub coverage: Option<CoverageMode>,
+    /// A table file (`.npz`, relative to the scene file) to load instead of computing one;
+    /// excludes the table keys above.
+    pub table: Option<PathBuf>,
+    /// Smooth dielectric walls: `traced` (default: no table, each groove sample traces one
+    /// path through the exact groove) or `table` (the precomputed lobes).
+    #[serde(default, deserialize_with = "keyed::lobes")]
+    pub lobes: Option<LobesKey>,
+    /// Build the scratches as real grooves on the shape's planar faces instead of the
+    /// SV-BRDF (METHOD.md 8.3; `scene::explicit`).
+    pub explicit: Option<bool>,
+    /// Lean the SV-BRDF's scratch frame along the scratch as the tapered groove's walls lean
+    /// (default `false`, the seed's extruded groove; [`ScratchedMaterial::with_lean`]).
+    /// Explicit grooves have the lean of their geometry whatever this says.
+    pub lean: Option<bool>,
+    /// Stations along each explicit groove (default [`DEFAULT_STATIONS`]): its opening is the
+    /// polygon through them (`geometry::carve`). The SV-BRDF does not read it.
+    pub stations: Option<usize>,
+}
+
+/// Deserialisers of the scratched material's word-valued keys that put the key in the error.
+/// A material is an internally tagged enum, which serde buffers, so `toml` can point only at the
+/// material's table and its message would name the bad word but not the key.
+mod keyed {
+    use super::{BaseKind, CoverageMode, FresnelMode, LayerMix, LobesKey, Orientation, WallsKey};
+    use serde::de::{Deserialize, Deserializer, Error};
+
+    fn named<'de, T: Deserialize<'de>, D: Deserializer<'de>>(
+        d: D,
+        key: &str,
+    ) -> Result<T, D::Error> {
+        T::deserialize(d).map_err(|e| D::Error::custom(format_args!("key `{key}`: {e}")))
+    }
+
+    pub fn base<'de, D: Deserializer<'de>>(d: D) -> Result<BaseKind, D::Error> {
+        named(d, "base")
+    }
+    pub fn walls<'de, D: Deserializer<'de>>(d: D) -> Result<Option<WallsKey>, D::Error> {
+        named(d, "scratches.walls")
+    }
+    pub fn fresnel<'de, D: Deserializer<'de>>(d: D) -> Result<Option<FresnelMode>, D::Error> {
+        named(d, "scratches.fresnel")
+    }
+    pub fn layer_mix<'de, D: Deserializer<'de>>(d: D) -> Result<Option<LayerMix>, D::Error> {
+        named(d, "scratches.layer_mix")
+    }
+    pub fn coverage<'de, D: Deserializer<'de>>(d: D) -> Result<Option<CoverageMode>, D::Error> {
+        named(d, "scratches.coverage")
+    }
+    pub fn orientation<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Orientation>, D::Error> {
+        named(d, "scratches.orientation")
+    }
+    pub fn lobes<'de, D: Deserializer<'de>>(d: D) -> Result<Option<LobesKey>, D::Error> {
+        named(d, "scratches.lobes")
+    }
+}
+
+/// `scratches.lobes`: how smooth dielectric walls' groove lobes are found (rough walls' are
+/// always read from a table).
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum LobesKey {
+    /// Read from the precomputed wall table (METHOD.md 8.1).
+    Table,
+    /// Sampled by tracing the exact groove at render time, one path a sample (the default).
+    Traced,
+}
+
+/// `scratches.walls`: the 2D table's walls ([`Walls`]) or the groove's own glass.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum WallsKey {
+    Diffuse,
+    Specular,
+    Dielectric,
+}
+
+/// Where a material's table comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TableSource {
+    Compute(TableParams),
+    /// A wall table (METHOD.md 8.1; dielectric, or a metal's rough specular walls), computed
+    /// or cached.
+    Walls(WallTableParams),
+    /// Smooth dielectric walls with no table, traced at render time (`lobes = "traced"`, the
+    /// default for them).
+    Traced(WallTableParams),
+    /// A table file: the seed's or a wall table (`kind` says which).
+    File(PathBuf),
+}
+
+/// Everything a scratched material resolves to before its table is built.
+#[derive(Clone, Debug)]
+pub struct Resolved {
+    pub base: ScratchedBase,
+    pub tint: Rgb,
+    pub table: TableSource,
+    pub layers: LayerParams,
+    pub layer_seed: u64,
+    pub orientation: Orientation,
+    pub mix: LayerMix,
+    pub coverage: CoverageMode,
+    /// Stations along each explicit groove.
+    pub stations: usize,
+}
+
+/// The base's defaults for the scratch table.
+struct BaseDefaults {
+    base: ScratchedBase,
+    tint: Rgb,
+    law: FresnelLaw,
+    walls: Walls,
+    mode: FresnelMode,
+}
+
+/// `type = "scratched"` in a scene file.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScratchedDesc {
+    #[serde(deserialize_with = "keyed::base")]
+    pub base: BaseKind,
+    /// Glass: interior index (default 1.5; the exterior is 1).
+    pub ior: Option<f32>,
+    /// Metal: a conductor preset (see `bsdf::CONDUCTOR_PRESETS`) or `eta` and `k`.
+    pub preset: Option<String>,
+    #[serde(default, deserialize_with = "crate::strict_array::optional")]
+    pub eta: Option<[f32; 3]>,
+    #[serde(default, deserialize_with = "crate::strict_array::optional")]
+    pub k: Option<[f32; 3]>,
+    #[serde(default)]
+    pub scratches: ScratchSpec,
+}
+
+/// `scratches.KEY` for a trace parameter's name.
+fn trace_key(key: &str) -> &'static str {
+    match key {
+        "m" => "scratches.m",
+        "n" => "scratches.n",
+        "nr" => "scratches.nr",
+        "albedo" => "scratches.albedo",
+        "max_bounces" => "scratches.max_bounces",
+        "fresnel_law" => "scratches.fresnel_law",
+        "ior" => "scratches.ior",
+        "fresnel" => "scratches.fresnel",
+        "groove_slices" => "scratches.groove_slices",
+        _ => "scratches",
+    }
+}
+
+fn layer_error(e: LayerError) -> MaterialError {
+    let key = match e {
+        LayerError::Length(_) => "scratches.length",
+        LayerError::Width(_) => "scratches.width",
+        LayerError::Threshold(_) => "scratches.threshold",
+        LayerError::LayerCount(_) => "scratches.layers",
+        LayerError::Setting(_) => "scratches.setting",
+        _ => "scratches",
+    };
+    let value = match &e {
+        LayerError::Length(v) | LayerError::Width(v) | LayerError::Threshold(v) => v.to_string(),
+        LayerError::LayerCount(v) => v.to_string(),
+        LayerError::Setting(v) => v.to_string(),
+        _ => String::new(),
+    };
+    invalid(key, value, e.to_string())
+}
+
+impl ScratchedDesc {
+    /// Check every key and work out the defaults (no table is computed).
+    pub fn resolve(&self, base_dir: &Path) -> Result<Resolved, MaterialError> {
+        let defaults = self.resolve_base()?;
+        let table = self.resolve_table(&defaults, base_dir)?;
+        let s = &self.scratches;
+        Ok(Resolved {
+            base: defaults.base,
+            tint: defaults.tint,
+            table,
+            layers: self.resolve_layers()?,
+            layer_seed: s.seed.unwrap_or(DEFAULT_LAYER_SEED),
+            orientation: s.orientation.unwrap_or_default(),
+            mix: s.layer_mix.unwrap_or_default(),
+            coverage: s.coverage.unwrap_or_default(),
+            stations: match s.stations {
+                None => DEFAULT_STATIONS,
+                Some(n) if STATIONS_RANGE.contains(&n) => n,
+                Some(n) => {
+                    return Err(invalid(
+                        "scratches.stations",
+                        n,
+                        format!(
+                            "between {} and {} stations along each explicit groove",
+                            STATIONS_RANGE.start(),
+                            STATIONS_RANGE.end()
+                        ),
+                    ))
+                }
+            },
+        })
+    }
+
+    /// The base (`ior`, or a conductor's `preset` / `eta` and `k`) and the table defaults it
+    /// implies: glass takes the seed's model (diffuse walls, Schlick, one Fresnel factor), metal
+    /// [Raymond16]'s (mirror walls, Fresnel per wall hit).
+    fn resolve_base(&self) -> Result<BaseDefaults, MaterialError> {
+        match self.base {
+            BaseKind::Glass => {
+                for (key, given) in [
+                    ("preset", self.preset.is_some()),
+                    ("eta", self.eta.is_some()),
+                    ("k", self.k.is_some()),
+                ] {
+                    if given {
+                        return Err(invalid(key, "(given)", "applies to base = \"metal\" only"));
+                    }
+                }
+                let ior = self.ior.unwrap_or(1.5);
+                if !(ior.is_finite() && ior >= 1.0) {
+                    return Err(invalid(
+                        "ior",
+                        ior,
+                        "an index of refraction must be finite and >= 1",
+                    ));
+                }
+                Ok(BaseDefaults {
+                    base: ScratchedBase::Glass { eta: ior },
+                    tint: Rgb::ONE,
+                    law: FresnelLaw::Schlick {
+                        n: self.scratches.ior.unwrap_or(ior as f64),
+                    },
+                    walls: Walls::Diffuse,
+                    mode: FresnelMode::Seed,
+                })
+            }
+            BaseKind::Metal => {
+                if let Some(ior) = self.ior {
+                    return Err(invalid(
+                        "ior",
+                        ior,
+                        "applies to base = \"glass\" only (metal takes preset or eta and k)",
+                    ));
+                }
+                let ior = conductor_ior(self.preset.as_deref(), self.eta, self.k)?;
+                let (law, tint) = metal_law_and_tint(&ior);
+                Ok(BaseDefaults {
+                    base: ScratchedBase::Metal { ior },
+                    tint,
+                    law,
+                    walls: Walls::Specular,
+                    mode: FresnelMode::Walls,
+                })
+            }
+        }
+    }
+
+    /// Where the table comes from: a file (`scratches.table`, excluding every table key) or
+    /// the parameters of a computation.
+    fn resolve_table(
+        &self,
+        defaults: &BaseDefaults,
+        base_dir: &Path,
+    ) -> Result<TableSource, MaterialError> {
+        let s = &self.scratches;
+        let table_keys = [
+            ("scratches.profile", s.profile.is_some()),
+            ("scratches.walls", s.walls.is_some()),
+            ("scratches.roughness", s.roughness.is_some()),
+            ("scratches.trace_seed", s.trace_seed.is_some()),
+            ("scratches.lobes", s.lobes.is_some()),
+        ];
+        if let Some(path) = &s.table {
+            let two_d = self.two_d_table_keys();
+            if let Some((key, _)) = table_keys.iter().chain(&two_d).find(|(_, given)| *given) {
+                return Err(invalid(key, "(given)", "`scratches.table` loads a precomputed table; its parameters cannot be given too"));
+            }
+            return Ok(TableSource::File(base_dir.join(path)));
+        }
+        let spec = s
+            .profile
+            .clone()
+            .unwrap_or_else(|| DEFAULT_PROFILE.to_string());
+        let profile = match spec.strip_prefix("file:") {
+            Some(p) if Path::new(p).is_relative() => {
+                Profile::parse(&format!("file:{}", base_dir.join(p).display()))
+            }
+            _ => Profile::parse(&spec),
+        }
+        .map_err(|e| invalid("scratches.profile", format!("{spec:?}"), e.to_string()))?;
+        if s.walls == Some(WallsKey::Dielectric) {
+            let params = self.resolve_walls(defaults, profile)?;
+            let smooth = params.roughness == 0.0;
+            return match s.lobes {
+                Some(LobesKey::Traced) if !smooth => Err(invalid(
+                    "scratches.lobes",
+                    "\"traced\"",
+                    "needs smooth walls: rough walls' lobes are light-sampled with MIS, which needs the table's density (leave out `roughness` or `lobes`)",
+                )),
+                Some(LobesKey::Traced) | None if smooth => Ok(TableSource::Traced(params)),
+                _ => Ok(TableSource::Walls(params)),
+            };
+        }
+        if let Some(lobes) = s.lobes {
+            return Err(invalid(
+                "scratches.lobes",
+                format!("{lobes:?}").to_lowercase(),
+                "applies to walls = \"dielectric\" only",
+            ));
+        }
+        if let Some(r) = s.roughness {
+            if let Some(params) = self.resolve_rough_specular(defaults, &profile, r)? {
+                return Ok(TableSource::Walls(params));
+            }
+        }
+        let law = self.resolve_law(defaults)?;
+        let seed = TraceSettings::default();
+        let groove_slices = match s.groove_slices {
+            Some(0) => {
+                return Err(invalid(
+                    "scratches.groove_slices",
+                    0,
+                    "must be in 1..=32 (leave the key out for the seed's eq. (3))",
+                ))
+            }
+            Some(n) => n,
+            None => 0,
+        };
+        let mode = match groove_slices {
+            0 => defaults.mode,
+            _ => FresnelMode::Walls,
+        };
+        let walls = match s.walls {
+            Some(WallsKey::Specular) => Walls::Specular,
+            Some(WallsKey::Diffuse) => Walls::Diffuse,
+            Some(WallsKey::Dielectric) | None => defaults.walls,
+        };
+        let trace = TraceSettings {
+            walls,
+            m: s.m.unwrap_or(seed.m),
+            n: s.n.unwrap_or(seed.n),
+            nr: s.nr.unwrap_or(seed.nr),
+            albedo: s.albedo.unwrap_or(seed.albedo),
+            max_bounces: s.max_bounces.unwrap_or(seed.max_bounces),
+            seed: s.trace_seed.unwrap_or(seed.seed),
+            fresnel_mode: s.fresnel.unwrap_or(mode),
+            fresnel_law: law,
+            groove_slices,
+            ..seed
+        };
+        trace.validate().map_err(|e| {
+            let TraceError::BadParameter { key, value, why } = e;
+            invalid(trace_key(key), value, why)
+        })?;
+        Ok(TableSource::Compute(TableParams::new(profile, trace)))
+    }
+
+    /// `roughness` with other than dielectric walls: a metal's specular walls only, in
+    /// `[0, 1]`. `Some` wall table for rough walls; `None` for 0, the seed's mirror walls (its
+    /// 2D table, unchanged).
+    fn resolve_rough_specular(
+        &self,
+        defaults: &BaseDefaults,
+        profile: &Profile,
+        roughness: f64,
+    ) -> Result<Option<WallTableParams>, MaterialError> {
+        let s = &self.scratches;
+        let specular = match s.walls {
+            Some(w) => w == WallsKey::Specular,
+            None => defaults.walls == Walls::Specular,
+        };
+        if !(specular && matches!(defaults.base, ScratchedBase::Metal { .. })) {
+            return Err(invalid(
+                "scratches.roughness",
+                roughness,
+                "applies to walls = \"dielectric\" (glass) and to a metal's walls = \"specular\" only (the 2D table's Lambertian walls have no roughness)",
+            ));
+        }
+        if !(roughness.is_finite() && (0.0..=1.0).contains(&roughness)) {
+            return Err(invalid(
+                "scratches.roughness",
+                roughness,
+                "must be in [0, 1] (GGX alpha; 0: mirror walls)",
+            ));
+        }
+        if roughness == 0.0 {
+            return Ok(None);
+        }
+        let law_keys = ["scratches.fresnel_law", "scratches.ior"];
+        let two_d = self.two_d_table_keys();
+        if let Some((key, _)) = two_d
+            .iter()
+            .find(|(key, given)| *given && !law_keys.contains(key))
+        {
+            return Err(invalid(
+                key,
+                "(given)",
+                "applies to the 2D table; rough specular walls (`scratches.roughness` > 0) are traced exactly, with Fresnel at every wall hit",
+            ));
+        }
+        let params = WallTableParams {
+            seed: s.trace_seed.unwrap_or(0),
+            ..WallTableParams::specular(profile.clone(), self.resolve_law(defaults)?, roughness)
+        };
+        params.validate().map_err(|e| {
+            let key = match e.key {
+                "roughness" => "scratches.roughness",
+                "fresnel-law" => "scratches.fresnel_law",
+                "ior" => "scratches.ior",
+                _ => "scratches",
+            };
+            invalid(key, e.value, e.why)
+        })?;
+        Ok(Some(params))
+    }
+
+    /// The 2D table's (and rough specular walls') Fresnel law: `fresnel_law` with
+    /// `scratches.ior`, else the base's.
+    fn resolve_law(&self, defaults: &BaseDefaults) -> Result<FresnelLaw, MaterialError> {
+        let s = &self.scratches;
+        let law = match &s.fresnel_law {
+            Some(text) => {
+                let n = s.ior.unwrap_or(match defaults.base {
+                    ScratchedBase::Glass { eta } => eta as f64,
+                    ScratchedBase::Metal { .. } => 1.5,
+                });
+                FresnelLaw::parse(text, n)
+                    .map_err(|e| invalid("scratches.fresnel_law", format!("{text:?}"), e))?
+            }
+            None => defaults.law,
+        };
+        if let (Some(n), Some(_)) = (
+            s.ior,
+            s.fresnel_law
+                .as_deref()
+                .filter(|l| l.starts_with("conductor") || *l == "none"),
+        ) {
+            return Err(invalid(
+                "scratches.ior",
+                n,
+                "applies to the schlick and dielectric laws only",
+            ));
+        }
+        Ok(law)
+    }
+
+    /// The keys of the 2D table alone, each with whether it is given.
+    fn two_d_table_keys(&self) -> [(&'static str, bool); 9] {
+        let s = &self.scratches;
+        [
+            ("scratches.fresnel", s.fresnel.is_some()),
+            ("scratches.fresnel_law", s.fresnel_law.is_some()),
+            ("scratches.ior", s.ior.is_some()),
+            ("scratches.m", s.m.is_some()),
+            ("scratches.n", s.n.is_some()),
+            ("scratches.nr", s.nr.is_some()),
+            ("scratches.albedo", s.albedo.is_some()),
+            ("scratches.max_bounces", s.max_bounces.is_some()),
+            ("scratches.groove_slices", s.groove_slices.is_some()),
+        ]
+    }
+
+    /// `walls = "dielectric"`: glass only; the 2D table's keys do not apply; `roughness` in
+    /// `[0, 1]`; `trace_seed` seeds the trace.
+    fn resolve_walls(
+        &self,
+        defaults: &BaseDefaults,
+        profile: Profile,
+    ) -> Result<WallTableParams, MaterialError> {
+        let s = &self.scratches;
+        let ScratchedBase::Glass { eta } = defaults.base else {
+            return Err(invalid(
+                "scratches.walls",
+                "\"dielectric\"",
+                "dielectric walls are glass: they need base = \"glass\"",
+            ));
+        };
+        if let Some((key, _)) = self.two_d_table_keys().iter().find(|(_, given)| *given) {
+            return Err(invalid(
+                key,
+                "(given)",
+                "applies to the 2D table (walls = \"diffuse\" or \"specular\"); dielectric walls take the glass's `ior` and `roughness`",
+            ));
+        }
+        let roughness = s.roughness.unwrap_or(0.0);
+        let params = WallTableParams {
+            seed: s.trace_seed.unwrap_or(0),
+            ..WallTableParams::new(profile, eta as f64, roughness)
+        };
+        params.validate().map_err(|e| {
+            let key = match e.key {
+                "roughness" => "scratches.roughness",
+                "ior" => "ior",
+                _ => "scratches",
+            };
+            invalid(key, e.value, e.why)
+        })?;
+        Ok(params)
+    }
+
+    /// The layer parameters: a `setting` of the seed's Table 1, or all of `length`, `width`
+    /// and `threshold`; then `layers`.
+    fn resolve_layers(&self) -> Result<LayerParams, MaterialError> {
+        let s = &self.scratches;
+        let mut layers = match (s.setting, s.length, s.width, s.threshold) {
+            (Some(n), None, None, None) => LayerParams::setting(n).map_err(layer_error)?,
+            (Some(_), ..) => {
+                return Err(invalid(
+                    "scratches.setting",
+                    s.setting.unwrap_or(0),
+                    "a setting excludes `length`, `width` and `threshold`",
+                ));
+            }
+            (None, None, None, None) => LayerParams::setting(1).map_err(layer_error)?,
+            (None, Some(length), Some(width), Some(threshold)) => LayerParams {
+                length,
+                width,
+                threshold,
+                layers: LayerParams::DEFAULT_LAYERS,
+            },
+            (None, ..) => {
+                return Err(invalid(
+                    "scratches.length",
+                    format!("{:?}/{:?}/{:?}", s.length, s.width, s.threshold),
+                    "give all of `length`, `width` and `threshold` (or a `setting`)",
+                ));
+            }
+        };
+        layers.layers = s.layers.unwrap_or(LayerParams::DEFAULT_LAYERS);
+        if layers.layers > MAX_LAYERS {
+            return Err(layer_error(LayerError::LayerCount(layers.layers)));
+        }
+        layers.validate().map_err(layer_error)?;
+        Ok(layers)
+    }
+
+    /// Validate, then obtain the table (memory, disk cache, file or computation) and build the
+    /// layer set.
+    pub fn prepare(&self, base_dir: &Path) -> Result<ScratchedMaterial, MaterialError> {
+        let r = self.resolve(base_dir)?;
+        let key = if self.scratches.table.is_some() {
+            "scratches.table"
+        } else {
+            "scratches"
+        };
+        let table_error = |e: TableError| MaterialError::ScratchTable {
+            key,
+            source: Box::new(e),
+        };
+        let model = match &r.table {
+            TableSource::Compute(params) => {
+                ScratchModel::Seed(crate::render::cache::obtain_table(params).map_err(table_error)?)
+            }
+            TableSource::Walls(params) => {
+                let table = crate::render::cache::obtain_wall_table(params).map_err(table_error)?;
+                match params.walls {
+                    WallKind::Dielectric => ScratchModel::DielectricWalls(GlassWalls::Table(table)),
+                    WallKind::Specular { .. } => ScratchModel::SpecularWalls(table),
+                }
+            }
+            TableSource::Traced(params) => ScratchModel::DielectricWalls(GlassWalls::Traced(
+                std::sync::Arc::new(TracedGroove::new(params)),
+            )),
+            TableSource::File(path) => {
+                let model = crate::render::cache::load_any_table_file(path).map_err(table_error)?;
+                self.check_wall_table_base(&r.base, &model)?;
+                model
+            }
+        };
+        let layers = LayerSet::with_orientation(r.layers, r.layer_seed, r.orientation)
+            .map_err(layer_error)?;
+        Ok(
+            ScratchedMaterial::with_model(r.base, r.tint, model, layers, r.mix, r.coverage)
+                .with_lean(self.scratches.lean == Some(true)),
+        )
+    }
+
+    /// A dielectric-wall table file fits a glass base of its own index only, a specular-wall
+    /// one a metal base.
+    fn check_wall_table_base(
+        &self,
+        base: &ScratchedBase,
+        model: &ScratchModel,
+    ) -> Result<(), MaterialError> {
+        let walls = match model {
+            ScratchModel::Seed(_) => return Ok(()),
+            ScratchModel::SpecularWalls(_) if matches!(base, ScratchedBase::Metal { .. }) => {
+                return Ok(())
+            }
+            ScratchModel::SpecularWalls(_) => {
+                return Err(invalid(
+                    "scratches.table",
+                    format!(
+                        "{:?}",
+                        self.scratches.table.as_deref().unwrap_or(Path::new(""))
+                    ),
+                    "a specular-wall table (rough metal walls) needs base = \"metal\"",
+                ))
+            }
+            ScratchModel::DielectricWalls(walls) => walls,
+        };
+        match *base {
+            ScratchedBase::Glass { eta } if (eta - walls.ior()).abs() <= 1e-6 * eta => Ok(()),
+            ScratchedBase::Glass { eta } => Err(invalid(
+                "scratches.table",
+                format!(
+                    "{:?}",
+                    self.scratches.table.as_deref().unwrap_or(Path::new(""))
+                ),
+                format!(
+                    "a dielectric-wall table traced for index {}, on glass of ior {eta}",
+                    walls.ior()
+                ),
+            )),
+            ScratchedBase::Metal { .. } => Err(invalid(
+                "scratches.table",
+                format!(
+                    "{:?}",
+                    self.scratches.table.as_deref().unwrap_or(Path::new(""))
+                ),
+                "a dielectric-wall table needs base = \"glass\"",
+            )),
+        }
+    }
+}
+
+/// What explicit scratch geometry (METHOD.md 8.3) takes from a scratched material: its layers
+/// and profile, the material of the flat face (the smooth base) and of the groove walls (the
+/// BSDF the table assumes: glass walls smooth glass; metal walls Lambertian or mirror times
+/// the table's Fresnel law and the lobe's tint).
+#[derive(Clone, Debug)]
+pub struct ExplicitSpec {
+    pub layers: LayerSet,
+    pub profile: Profile,
+    pub face: Material,
+    pub wall: Material,
+    /// Stations along each groove (`scratches.stations`).
+    pub stations: usize,
+}
+
+impl ScratchedDesc {
+    /// Whether `scratches.explicit = true`.
+    pub fn is_explicit(&self) -> bool {
+        self.scratches.explicit == Some(true)
+    }
+
+    /// The explicit geometry's ingredients (validated like [`ScratchedDesc::resolve`]).
+    pub fn explicit(&self, base_dir: &Path) -> Result<ExplicitSpec, MaterialError> {
+        let r = self.resolve(base_dir)?;
+        if let TableSource::Walls(params) | TableSource::Traced(params) = &r.table {
+            if let WallKind::Specular { .. } = params.walls {
+                return Err(invalid(
+                    "scratches.explicit",
+                    true,
+                    "explicit grooves have mirror or Lambertian metal walls: leave out `scratches.roughness` to carve them",
+                ));
+            }
+            return self.explicit_glass(&r, params);
+        }
+        let TableSource::Compute(params) = r.table else {
+            return Err(invalid(
+                "scratches.explicit",
+                true,
+                "explicit grooves need the profile and walls: give them instead of `scratches.table`",
+            ));
+        };
+        if let Some(n) = self.scratches.groove_slices {
+            return Err(invalid(
+                "scratches.groove_slices",
+                n,
+                "applies to the SV-BRDF's table; explicit grooves are traced exactly",
+            ));
+        }
+        if r.orientation != Orientation::Layer {
+            return Err(invalid(
+                "scratches.explicit",
+                true,
+                "explicit grooves follow the layers' directions: they cannot be carved with `orientation = \"random\"`",
+            ));
+        }
+        let (face, wall) = match r.base {
+            ScratchedBase::Glass { eta } => {
+                let glass = Material::Dielectric {
+                    eta,
+                    roughness: 0.0,
+                };
+                (glass.clone(), glass)
+            }
+            ScratchedBase::Metal { ior } => (
+                Material::Conductor {
+                    ior,
+                    roughness: 0.0,
+                },
+                Material::GrooveWall(GrooveWall {
+                    specular: params.trace.walls == Walls::Specular,
+                    law: params.trace.fresnel_law,
+                    tint: r.tint,
+                }),
+            ),
+        };
+        Ok(ExplicitSpec {
+            layers: LayerSet::new(r.layers, r.layer_seed).map_err(layer_error)?,
+            profile: params.profile,
+            face,
+            wall,
+            stations: r.stations,
+        })
+    }
+}
+
+impl ScratchedDesc {
+    /// Explicit grooves with dielectric walls: smooth glass faces, walls of the glass with the
+    /// walls' roughness.
+    fn explicit_glass(
+        &self,
+        r: &Resolved,
+        params: &WallTableParams,
+    ) -> Result<ExplicitSpec, MaterialError> {
+        if r.orientation != Orientation::Layer {
+            return Err(invalid(
+                "scratches.explicit",
+                true,
+                "explicit grooves follow the layers' directions: they cannot be carved with `orientation = \"random\"`",
+            ));
+        }
+        let eta = params.ior as f32;
+        Ok(ExplicitSpec {
+            layers: LayerSet::new(r.layers, r.layer_seed).map_err(layer_error)?,
+            profile: params.profile.clone(),
+            face: Material::Dielectric {
+                eta,
+                roughness: 0.0,
+            },
+            wall: Material::Dielectric {
+                eta,
+                roughness: params.roughness as f32,
+            },
+            stations: r.stations,
+        })
+    }
+}
+
+/// Metal scratches: the table's Fresnel law is a scalar, so it takes the base's complex IOR in
+/// the channel that reflects most at normal incidence (`none` when that channel is the perfect
+/// mirror `eta = 0`), and the lobe is tinted by `F_rgb(1) / F_max(1) <= 1` (an approximation:
+/// the colour of one reflection at normal incidence; documented in `docs/scratched.md`).
+fn metal_law_and_tint(ior: &ConductorIor) -> (FresnelLaw, Rgb) {
+    let f = ior.fresnel(1.0);
+    let c = if f.x >= f.y && f.x >= f.z {
+        0
+    } else if f.y >= f.z {
+        1
+    } else {
+        2
+    };
+    let (eta, k) = (ior.eta[c] as f64, ior.k[c] as f64);
+    let law = if eta > 0.0 {
+        FresnelLaw::Conductor { eta, k }
+    } else {
+        FresnelLaw::None
+    };
+    let fmax = f[c].max(1e-6);
+    (law, (f / fmax).min(Rgb::ONE))
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,720 @@
+//! The scratched material at render time (METHOD.md sections 5-6, `docs/scratched.md`): a
+//! smooth glass or metal base, a scratch layer set (section 5, evaluated procedurally) and a
+//! shared scratch BRDF table (sections 3-4), combined at a hit as section 6 prescribes. Its
+//! scene-file description and preparation are `scene::scratches`.
+//!
+//! At a hit ([`ScratchedMaterial::bsdf`]): every layer's coverage of the pixel footprint
+//! (`uv` and `ShadingContext::footprint_uv`; exact, [`crate::layers`]); in `max` mode (section
+//! 6) the layer with the largest coverage, one chosen by `ShadingContext::u_layer` among ties
+//! (where several scratches cross); in `sum` mode ([Raymond16]) every layer with some coverage
+//! (at most [`MAX_SCRATCH_LOBES`], the largest). The scratch frame's `t` is the layer's texture
+//! direction `d` carried to 3D by `d.x dP/du + d.y dP/dv` and projected into the shading plane.
+//! Where no layer covers the footprint the BSDF is the base itself, at no extra cost; glass seen
+//! from inside skips the layer queries (its scratches are on the outer side, `bsdf::scratched`).
+
+use crate::layers::cache::PixelKey;
+use crate::layers::lattice::TileQuery;
+use crate::layers::layer::MAX_FOOTPRINT_CELLS;
+use crate::layers::{CoverageCache, LayerSet, Orientation, Scratch, MAX_LAYERS};
+use crate::math::{Rgb, Vec3};
+use crate::precompute::groove::totally_reflected;
+use crate::render::bsdf::scratched::MAX_SCRATCH_LOBES;
+use crate::render::bsdf::{
+    Bsdf, Conductor, Dielectric, GlassWalls, ScratchLobe, ScratchLobeTable, ScratchedBase,
+    ScratchedBsdf, ScratchedGlassBsdf, ScratchedMetalBsdf, WallLobeTable,
+};
+use crate::render::shading::ShadingContext;
+use lean::Along;
+use serde::Deserialize;
+use std::sync::Arc;
+
+/// How the layers covering one footprint combine.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum LayerMix {
+    /// The layer with the largest coverage (METHOD.md section 6, the seed).
+    #[default]
+    Max,
+    /// `(1 - sum c_k) f_base + sum c_k f_scratch,k` over every layer ([Raymond16]).
+    Sum,
+    /// As `Sum`, with the coverages scaled to add up to the union's, `1 - prod(1 - c_k)`
+    /// (exact for independent layers): `max` takes one layer's share of a footprint that holds
+    /// scratches of several, `sum` counts their overlaps twice (`docs/fidelity.md`).
+    Union,
+}
+
+/// How a hit measures the layers' scratch coverage.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum CoverageMode {
+    /// The exact share of the pixel footprint (the hit's `uv` and
+    /// `ShadingContext::footprint_uv`) each layer's scratches cover (METHOD.md section 6,
+    /// [Raymond16]): at hits reached from the camera by delta
+    /// bounces only (the camera ray's first hit, surfaces seen through the glass or in a
+    /// mirror), of the footprint centred on the pixel centre's ray, computed once per pixel and
+    /// chain of bounces ([`LayerSet::coverage_of_pixel`]); at other hits, with the footprint
+    /// snapped to the footprint-shaped tile that holds the hit and cached per tile
+    /// ([`crate::layers::lattice`]).
+    #[default]
+    Footprint,
+    /// The same exact coverage, of the footprint centred on each sample: no snapping, no
+    /// reuse (several microseconds per hit where a pixel spans many scratches).
+    Sample,
+    /// The scratch test at the hit point only (`c` is 0 or 1 per layer). The camera ray's hit
+    /// is uniformly distributed over the pixel's footprint, so averaging a pixel's samples
+    /// estimates the same coverage without bias in `sum` mode (in `max` mode a footprint
+    /// covered by several layers counts once per layer it picks, not the largest share).
+    Point,
+}
+
+/// The scratch model and its shared table.
+#[derive(Clone, Debug)]
+pub enum ScratchModel {
+    /// The seed's (METHOD.md sections 3-6): the scratch BRDF replaces the base's reflection.
+    Seed(Arc<ScratchLobeTable>),
+    /// Dielectric walls (METHOD.md 8.1-8.2, glass only): the groove's four lobes, reflected
+    /// and transmitted from either side ([`ScratchedGlassBsdf`]).
+    DielectricWalls(GlassWalls),
+    /// Rough specular walls (METHOD.md 8.1, metal only): the seed's metal with its groove lobe
+    /// read from a 4D table of GGX-rough conductor walls ([`ScratchedMetalBsdf`]).
+    SpecularWalls(Arc<WallLobeTable>),
+}
+
+impl ScratchModel {
+    /// The groove's cross-section.
+    pub fn profile(&self) -> &crate::precompute::profile::Profile {
+        match self {
+            ScratchModel::Seed(t) => &t.table().params.profile,
+            ScratchModel::DielectricWalls(w) => w.profile(),
+            ScratchModel::SpecularWalls(t) => t.profile(),
+        }
+    }
+
+    /// The table's parameter hash.
+    pub fn hash(&self) -> &str {
+        match self {
+            ScratchModel::Seed(t) => t.hash(),
+            ScratchModel::DielectricWalls(w) => w.hash(),
+            ScratchModel::SpecularWalls(t) => t.hash(),
+        }
+    }
+}
+
+/// A prepared scratched material: the base, the shared table, the layer set.
+#[derive(Clone)]
+pub struct ScratchedMaterial {
+    pub base: ScratchedBase,
+    /// RGB factor on the scratch lobe (metal: the base's colour; glass: 1).
+    pub tint: Rgb,
+    pub model: ScratchModel,
+    pub layers: LayerSet,
+    /// Each layer's scratch direction `d_k` in texture space ([`LayerSet::direction`]), as `f32`,
+    /// computed once here rather than with a `sin_cos` per hit.
+    directions: Vec<[f32; 2]>,
+    pub mix: LayerMix,
+    pub coverage: CoverageMode,
+    /// `lean = true`: twice the profile's cross-section area ([`Self::with_lean`]); 0 without.
+    lean: f64,
+}
+
+impl std::fmt::Debug for ScratchedMaterial {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ScratchedMaterial")
+            .field("base", &self.base)
+            .field("table", &self.model.hash())
+            .field("layers", &self.layers.len())
+            .field("mix", &self.mix)
+            .field("coverage", &self.coverage)
+            .finish()
+    }
+}
+
+impl ScratchedMaterial {
+    pub fn new(
+        base: ScratchedBase,
+        tint: Rgb,
+        table: Arc<ScratchLobeTable>,
+        layers: LayerSet,
+        mix: LayerMix,
+        coverage: CoverageMode,
+    ) -> ScratchedMaterial {
+        Self::with_model(base, tint, ScratchModel::Seed(table), layers, mix, coverage)
+    }
+
+    /// A material of any [`ScratchModel`] (dielectric walls: `base` must be glass; specular
+    /// walls: metal).
+    pub fn with_model(
+        base: ScratchedBase,
+        tint: Rgb,
+        model: ScratchModel,
+        layers: LayerSet,
+        mix: LayerMix,
+        coverage: CoverageMode,
+    ) -> ScratchedMaterial {
+        let directions = (0..layers.len())
+            .map(|k| layers.direction(k).map(|x| x as f32))
+            .collect();
+        ScratchedMaterial {
+            base,
+            tint,
+            model,
+            layers,
+            directions,
+            mix,
+            coverage,
+            lean: 0.0,
+        }
+    }
+
+    /// Whether its lobes lean ([`Self::with_lean`]).
+    pub fn has_lean(&self) -> bool {
+        self.lean != 0.0
+    }
+
+    /// The same material with `lean = true` (an option of ours beside METHOD.md 8.3's
+    /// explicit grooves): the scratch frame at a hit tilted along the scratch as the walls of
+    /// its tapered groove lean there. A groove whose width `W(s) = 2 w sqrt(1 - (s/l)^2)`
+    /// shrinks toward its tips, its depth in proportion, leans its walls toward its middle by
+    /// `tan alpha = 2 A |W'(s)|` (`A` the profile's [`crate::precompute::profile::Profile::area`]): exactly
+    /// for a V, whose walls all lean alike, and on average over the opening for other
+    /// profiles. The seed's extruded groove has no lean.
+    pub fn with_lean(mut self, on: bool) -> Self {
+        self.lean = if on {
+            2.0 * self.model.profile().area()
+        } else {
+            0.0
+        };
+        self
+    }
+
+    /// Whether its BSDF transmits, at every hit: glass does (scratched or not, from either
+    /// side), metal does not.
+    #[inline]
+    pub fn has_transmission(&self) -> bool {
+        matches!(self.base, ScratchedBase::Glass { .. })
+    }
+
+    /// The smooth base's BSDF.
+    #[inline]
+    pub fn base_bsdf(&self) -> Bsdf<'static> {
+        match self.base {
+            ScratchedBase::Glass { eta } => Bsdf::Dielectric(Dielectric::new(eta)),
+            ScratchedBase::Metal { ior } => Bsdf::Conductor(Conductor { ior }),
+        }
+    }
+
+    /// Whether [`Self::bsdf`] reads the pixel footprint: every coverage mode but `point`.
+    pub fn reads_footprint(&self) -> bool {
+        self.coverage != CoverageMode::Point
+    }
+
+    /// Whether [`Self::bsdf`] reads the hit's footprint and `u_layer` for `wo` (world, toward
+    /// the viewer) and the geometric normal `ng`: not for glass seen from inside (its smooth
+    /// base).
+    #[inline]
+    pub fn reads_hit_context(&self, wo: Vec3, ng: Vec3) -> bool {
+        !self.seen_from_inside(wo, ng)
+    }
+
+    /// Whether [`Self::bsdf`] reads the hit's footprint (and its pixel) for `wo` and `ng` as
+    /// [`Self::reads_hit_context`]: where it reads the context at all, except glass with
+    /// dielectric walls seen from inside, whose hits take the point test
+    /// ([`Self::inside_coverage`]) and read only `u_layer`.
+    #[inline]
+    pub fn reads_footprint_at(&self, wo: Vec3, ng: Vec3) -> bool {
+        let inside_walls = matches!(self.model, ScratchModel::DielectricWalls(_))
+            && matches!(self.base, ScratchedBase::Glass { .. })
+            && wo.dot(ng) <= 0.0;
+        self.reads_footprint() && !inside_walls
+    }
+
+    /// Glass seen from inside under the seed's model, which has no scratches there
+    /// (`bsdf::scratched`); dielectric walls scatter from both sides.
+    #[inline]
+    fn seen_from_inside(&self, wo: Vec3, ng: Vec3) -> bool {
+        matches!(self.base, ScratchedBase::Glass { .. })
+            && matches!(self.model, ScratchModel::Seed(_))
+            && wo.dot(ng) <= 0.0
+    }
+
+    /// The BSDF at a hit (see the module notes), with the render worker's coverage caches.
+    #[inline(always)]
+    pub fn bsdf(&self, ctx: &ShadingContext, cache: &mut CoverageCache) -> Bsdf<'_> {
+        if self.seen_from_inside(ctx.wo, ctx.ng) {
+            return self.base_bsdf();
+        }
+        let k = self.layers.len();
+        let mut cov = [0.0f32; MAX_LAYERS];
+        let covered = match (&self.model, self.base) {
+            (ScratchModel::DielectricWalls(walls), ScratchedBase::Glass { eta })
+                if ctx.wo.dot(ctx.ng) <= 0.0 =>
+            {
+                match self.inside_coverage(ctx, walls, &mut cov[..k]) {
+                    InsideHit::Covered => true,
+                    InsideHit::Ridge(l) => {
+                        return Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(eta, walls, &[l]))
+                    }
+                    InsideHit::Plain => false,
+                }
+            }
+            _ => self.layer_coverage(ctx, cache, &mut cov[..k]),
+        };
+        if !covered {
+            return self.base_bsdf();
+        }
+        let mut lobes = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
+        let count = match self.mix {
+            LayerMix::Max => self.largest_lobe(ctx, &cov[..k], &mut lobes),
+            LayerMix::Sum => self.covering_lobes(ctx, &cov[..k], &mut lobes),
+            LayerMix::Union => {
+                let n = self.covering_lobes(ctx, &cov[..k], &mut lobes);
+                let scale = union_scale(&cov[..k]);
+                for l in &mut lobes[..n] {
+                    l.coverage *= scale;
+                }
+                n
+            }
+        };
+        if count == 0 {
+            return self.base_bsdf();
+        }
+        let table = match &self.model {
+            ScratchModel::Seed(table) => table,
+            ScratchModel::DielectricWalls(walls) => {
+                let ScratchedBase::Glass { eta } = self.base else {
+                    return self.base_bsdf();
+                };
+                return Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(eta, walls, &lobes[..count]));
+            }
+            ScratchModel::SpecularWalls(walls) => {
+                let ScratchedBase::Metal { ior } = self.base else {
+                    return self.base_bsdf();
+                };
+                let b = ScratchedMetalBsdf::new(ior, self.tint, walls, &lobes[..count]);
+                return Bsdf::ScratchedMetal(b);
+            }
+        };
+        // The integrator evaluates and samples it with `wo` in this frame: precompute the
+        // first lobe's `wo` terms once (`ScratchedBsdf::at_wo`; the same results bit for bit).
+        Bsdf::Scratched(
+            ScratchedBsdf::new(self.base, table, self.tint, &lobes[..count])
+                .at_wo(ctx.frame.to_local(ctx.wo)),
+        )
+    }
+
+    /// A hit from inside dielectric-walled glass (METHOD.md 8.1): the point test's coverage
+    /// (`cov`: 1 for each layer scratched at the hit, [`CoverageMode::Point`], whatever the
+    /// material's mode), and where no scratch covers the hit, the groove whose ridge the light
+    /// met on its way. These hits lie behind a refraction, where the camera's footprint says
+    /// little and the seed's model has no scratches at all, and a path through a plate makes
+    /// many of them: the point test estimates the same pixel average without bias
+    /// (`sum`/`union`) at a fraction of the footprint's cost (BENCHMARKS.md, "Dielectric walls
+    /// over the seed's model"). Seen from
+    /// inside, a groove is a ridge of air below the surface, and light arriving at a grazing
+    /// angle meets it beside its opening (the table's inside lobes are per unit of that
+    /// intercepted light, [`crate::precompute::wall_table`]). The ray back along `wo` passes under the
+    /// surface within the grooves' depth over the horizontal reach `R = D tan theta` (the
+    /// deepest groove's `D`), and under total internal reflection the ray on from the hit,
+    /// mirrored, over as much again past it ([`RidgeReach::reflected`]). The point test comes
+    /// first (every hit needs it, and a covered hit needs nothing more); at a grazing hit it
+    /// leaves uncovered, one capsule test of that segment ([`LayerSet::capsule_mask`]) finds
+    /// the layers whose scratches come within reach, most hits none, and for each of their
+    /// scratches near the segment the ray is met against the groove's cross-section, the
+    /// profile scaled to the scratch's local width ([`RidgeReach::meets_ridge`]), first on the
+    /// way to the hit, then on the way back. The first scratch met scatters with coverage 1, as
+    /// the point test's covered hits do. Randomly oriented layers are searched by point tests
+    /// along the segment, spaced half the narrowest groove's width: a ridge where a scratch
+    /// tapers narrower is missed (about 2 % of them at 85 degrees).
+    #[inline(always)]
+    fn inside_coverage(
+        &self,
+        ctx: &ShadingContext,
+        walls: &GlassWalls,
+        cov: &mut [f32],
+    ) -> InsideHit {
+        if self.point_coverage(ctx.uv, cov) {
+            return InsideHit::Covered;
+        }
+        let Some(r) = RidgeReach::new(self, ctx, walls) else {
+            return InsideHit::Plain;
+        };
+        let uv = ctx.uv.as_dvec2();
+        // Under total internal reflection the ray's reach continues past the hit, mirrored.
+        let reflected =
+            totally_reflected(r.wo.to_array(), walls.ior() as f64).then(|| r.reflected());
+        let maybe = match reflected {
+            Some(_) => self.layers.capsule_mask(uv - r.reach_uv, 2.0 * r.reach_uv),
+            None => self.layers.capsule_mask(uv, r.reach_uv),
+        };
+        if maybe == 0 {
+            return InsideHit::Plain;
+        }
+        let met = self
+            .ridge_met(&r, uv, maybe, walls.profile())
+            .or_else(|| reflected.and_then(|m| self.ridge_met(&m, uv, maybe, walls.profile())));
+        match met {
+            Some(sc) if self.has_lean() => {
+                InsideHit::Ridge(leaned_lobe(self, ctx, &sc, 1.0, Along::Hit))
+            }
+            Some(sc) => {
+                let d = sc.direction.as_vec2();
+                InsideHit::Ridge(lobe_along(ctx, [d.x, d.y], 1.0))
+            }
+            None => InsideHit::Plain,
+        }
+    }
+
+    /// The first scratch of the layers in `maybe` whose groove the reach `r` from `uv` meets
+    /// beside its opening ([`RidgeReach::meets_ridge`]).
+    #[inline(always)]
+    fn ridge_met(
+        &self,
+        r: &RidgeReach,
+        uv: glam::DVec2,
+        maybe: u64,
+        profile: &crate::precompute::profile::Profile,
+    ) -> Option<Scratch> {
+        let mut met = None;
+        if self.layers.orientation() == Orientation::Random {
+            for j in 1..=r.tests {
+                let q = uv + r.reach_uv * (j as f64 / r.tests as f64);
+                let mask = self.layers.scratched_mask(q.as_vec2());
+                for k in (0..self.layers.len()).filter(|k| mask >> k & 1 == 1) {
+                    if let Some(sc) = self.layers.scratch_at(k, q) {
+                        if r.meets_ridge(&sc, uv, profile) {
+                            return Some(sc);
+                        }
+                    }
+                }
+            }
+        } else {
+            for k in (0..self.layers.len()).filter(|k| maybe >> k & 1 == 1) {
+                let found = self
+                    .layers
+                    .find_scratch_near_segment(k, uv, r.reach_uv, |sc| {
+                        let hit = r.meets_ridge(sc, uv, profile);
+                        if hit {
+                            met = Some(*sc);
+                        }
+                        hit
+                    });
+                if found {
+                    break;
+                }
+            }
+        }
+        met
+    }
+
+    /// Each layer's coverage at the hit into `cov`, as the material's [`CoverageMode`] asks;
+    /// `false` where the point test finds no scratch.
+    #[inline(always)]
+    fn layer_coverage(
+        &self,
+        ctx: &ShadingContext,
+        cache: &mut CoverageCache,
+        cov: &mut [f32],
+    ) -> bool {
+        let query = match self.mix {
+            LayerMix::Max => TileQuery::Max,
+            LayerMix::Sum | LayerMix::Union => TileQuery::All,
+        };
+        match self.coverage {
+            CoverageMode::Footprint => match ctx.pixel {
+                Some(hit) => cache.of_pixel(
+                    &self.layers,
+                    ctx.uv,
+                    || ctx.footprint_uv(),
+                    PixelKey {
+                        shape: hit.shape,
+                        chain: hit.chain,
+                    },
+                    hit.offset,
+                    query,
+                    cov,
+                ),
+                None => {
+                    let (duvdx, duvdy) = ctx.footprint_uv();
+                    cache.tiled(&self.layers, ctx.uv, duvdx, duvdy, query, cov)
+                }
+            },
+            CoverageMode::Sample => {
+                let (duvdx, duvdy) = ctx.footprint_uv();
+                self.layers
+                    .coverage_query(query, ctx.uv, duvdx, duvdy, MAX_FOOTPRINT_CELLS, cov)
+            }
+            CoverageMode::Point => return self.point_coverage(ctx.uv, cov),
+        }
+        true
+    }
+
+    /// [`CoverageMode::Point`]: 1 in `cov` for each layer scratched at `uv`, 0 for the others;
+    /// `false`, `cov` untouched, where none is.
+    #[inline(always)]
+    fn point_coverage(&self, uv: crate::math::Vec2, cov: &mut [f32]) -> bool {
+        let mask = self.layers.scratched_mask(uv);
+        if mask == 0 {
+            return false;
+        }
+        for (i, c) in cov.iter_mut().enumerate() {
+            *c = ((mask >> i) & 1) as f32;
+        }
+        true
+    }
+
+    /// `layer_mix = "max"` (METHOD.md section 6): the lobe of the layer with the largest
+    /// coverage, one chosen by `ctx.u_layer` among ties; 0 lobes where no layer covers the hit.
+    #[inline(always)]
+    fn largest_lobe(
+        &self,
+        ctx: &ShadingContext,
+        cov: &[f32],
+        lobes: &mut [ScratchLobe; MAX_SCRATCH_LOBES],
+    ) -> usize {
+        let best = cov.iter().copied().fold(0.0f32, f32::max);
+        if best <= 0.0 {
+            // (`best` is never NaN: `f32::max` drops NaN.)
+            return 0;
+        }
+        // Ties (several scratches crossing the footprint equally): one at random. `c > 0`: with
+        // a tiny best (a disc grazing the footprint) an uncovered layer must not count as a
+        // tie. The ties as a bit mask (one pass, no branch per layer), the pick as its
+        // `pick`-th set bit.
+        const _: () = assert!(MAX_LAYERS <= 64);
+        let ties = cov.iter().enumerate().fold(0u64, |mask, (i, &c)| {
+            mask | (((c > 0.0) & (c >= best - 1e-6)) as u64) << i
+        });
+        let count = ties.count_ones();
+        let (layer, u) = if count == 1 {
+            (ties.trailing_zeros() as usize, ctx.u_layer)
+        } else {
+            let pick = ((ctx.u_layer * count as f32) as u32).min(count - 1);
+            let mut rest = ties;
+            for _ in 0..pick {
+                rest &= rest - 1;
+            }
+            // `u_layer`'s place within the pick's share, for the lean.
+            let u = (ctx.u_layer * count as f32 - pick as f32).clamp(0.0, 1.0);
+            (rest.trailing_zeros() as usize, u)
+        };
+        lobes[0] = lobe(self, ctx, layer, cov[layer], u);
+        1
+    }
+
+    /// `layer_mix = "sum"` ([Raymond16]): a lobe for every covering layer, the
+    /// [`MAX_SCRATCH_LOBES`] largest where more cover the hit.
+    #[inline(always)]
+    fn covering_lobes(
+        &self,
+        ctx: &ShadingContext,
+        cov: &[f32],
+        lobes: &mut [ScratchLobe; MAX_SCRATCH_LOBES],
+    ) -> usize {
+        let mut order: [usize; MAX_LAYERS] = std::array::from_fn(|i| i);
+        let mut covered = 0;
+        for (i, &c) in cov.iter().enumerate() {
+            if c > 0.0 {
+                order[covered] = i;
+                covered += 1;
+            }
+        }
+        if covered > MAX_SCRATCH_LOBES {
+            order[..covered].sort_by(|&a, &b| cov[b].total_cmp(&cov[a]).then(a.cmp(&b)));
+        }
+        let n = covered.min(MAX_SCRATCH_LOBES);
+        for j in 0..n {
+            lobes[j] = lobe(self, ctx, order[j], cov[order[j]], ctx.u_layer);
+        }
+        n
+    }
+}
+
+/// The factor that takes the coverages `cov` to add up to their union's coverage
+/// `1 - prod(1 - c_k)` (layers independent), `<= 1`; 1 where nothing is covered.
+pub fn union_scale(cov: &[f32]) -> f32 {
+    let sum: f32 = cov.iter().sum();
+    if sum <= 0.0 || sum.is_nan() {
+        return 1.0;
+    }
+    let uncovered: f32 = cov.iter().map(|c| 1.0 - c.clamp(0.0, 1.0)).product();
+    ((1.0 - uncovered) / sum).min(1.0)
+}
+
+/// What a hit from inside dielectric-walled glass meets ([`ScratchedMaterial::inside_coverage`]).
+enum InsideHit {
+    /// A scratch's opening: the coverages are set.
+    Covered,
+    /// A groove's ridge beside its opening: its lobe, coverage 1.
+    Ridge(ScratchLobe),
+    /// The flat glass.
+    Plain,
+}
+
+/// The most points the search of randomly oriented layers tests along a ray's reach: enough
+/// for a groove of depth 0.3 (in opening widths) up to 84 degrees from the normal.
+const MAX_RIDGE_TESTS: usize = 16;
+
+/// The ray back from a hit inside the glass, in the face's tangent plane, over the reach where
+/// it passes under the surface within the grooves' depth.
+#[derive(Clone, Copy)]
+struct RidgeReach {
+    /// `wo` in the shading frame (`z < 0`).
+    wo: glam::DVec3,
+    /// The face's texture-to-tangent-plane map `A = [a_u a_v]` and its determinant.
+    au: glam::DVec2,
+    av: glam::DVec2,
+    det: f64,
+    /// The reach as a texture vector, and how many point tests span it (random layers).
+    reach_uv: glam::DVec2,
+    tests: usize,
+}
+
+impl RidgeReach {
+    /// `None` where no groove can be met beside its opening: light from outside, or steeper
+    /// than the profile's rims let it reach a wall (`GlassWalls::ridge_tan`).
+    #[inline(always)]
+    fn new(m: &ScratchedMaterial, ctx: &ShadingContext, walls: &GlassWalls) -> Option<Self> {
+        use glam::DVec2;
+        let wo = ctx.frame.to_local(ctx.wo).as_dvec3();
+        let h_len = (wo.x * wo.x + wo.y * wo.y).sqrt();
+        let tan = h_len / -wo.z;
+        let grazing = wo.z < 0.0 && tan > walls.ridge_tan();
+        if !grazing {
+            return None;
+        }
+        let (s, t) = (ctx.frame.s, ctx.frame.t);
+        let tangent = |v: Vec3| DVec2::new(v.dot(s) as f64, v.dot(t) as f64);
+        let (au, av) = (tangent(ctx.dpdu), tangent(ctx.dpdv));
+        let det = au.perp_dot(av);
+        // World half-widths lie within `w sigma_min .. w sigma_max` (`A`'s singular values).
+        let (e, f, g) = (au.length_squared(), au.dot(av), av.length_squared());
+        let spread = ((0.5 * (e - g)).powi(2) + f * f).sqrt();
+        let sigma_max = (0.5 * (e + g) + spread).sqrt();
+        if !(det.abs() > 1e-30 && sigma_max.is_finite()) {
+            return None;
+        }
+        let sigma_min = det.abs() / sigma_max;
+        // Every layer of a set has the same scratch width.
+        let w = m.layers.layers()[0].half_axes().1;
+        let reach = walls.profile().depth() * 2.0 * w * sigma_max * tan;
+        let v = DVec2::new(wo.x, wo.y) * (reach / h_len);
+        let reach_uv = DVec2::new(v.perp_dot(av), au.perp_dot(v)) / det;
+        let tests = ((reach / (w * sigma_min)).ceil() as usize).clamp(1, MAX_RIDGE_TESTS);
+        Some(RidgeReach {
+            wo,
+            au,
+            av,
+            det,
+            reach_uv,
+            tests,
+        })
+    }
+
+    /// The same reach after the flat surface's mirror reflection at the hit: the ray on from
+    /// the hit, `wo`'s tangent part reversed.
+    fn reflected(&self) -> Self {
+        RidgeReach {
+            wo: glam::DVec3::new(-self.wo.x, -self.wo.y, self.wo.z),
+            reach_uv: -self.reach_uv,
+            ..*self
+        }
+    }
+
+    /// Whether the ray from texture point `uv` meets scratch `sc`'s groove beside its opening:
+    /// in the tangent plane, the groove's cross-section where the ray's reach crosses the
+    /// scratch's axis (the scratch's local width there, as the explicit geometry carves it,
+    /// METHOD.md 8.3) met by the ray's projection across the scratch.
+    #[inline(always)]
+    fn meets_ridge(
+        &self,
+        sc: &Scratch,
+        uv: glam::DVec2,
+        profile: &crate::precompute::profile::Profile,
+    ) -> bool {
+        let map = |v: glam::DVec2| self.au * v.x + self.av * v.y;
+        let d = map(sc.direction);
+        let d_len = d.length();
+        // `across` is the scratch frame's `x`, `b = t x n` (METHOD.md section 1), the profile's.
+        let (along, across) = (d / d_len, -(d / d_len).perp());
+        let centre = map(sc.centre - uv);
+        // The ray runs toward the scratch's axis, or it cannot meet the groove (most of the
+        // scratches near the reach lie behind it).
+        let dx = glam::DVec2::new(self.wo.x, self.wo.y).dot(across);
+        if centre.dot(across) * dx <= 0.0 {
+            return false;
+        }
+        let reach = map(self.reach_uv);
+        let t = (centre.dot(across) / reach.dot(across)).clamp(0.0, 1.0);
+        let t = if t.is_finite() { t } else { 0.0 };
+        let s = (reach * t - centre).dot(along) / (sc.half_length * d_len);
+        let half_width = sc.mapped_half_axes(d_len, self.det.abs()).1 * (1.0 - s * s).sqrt();
+        let open = half_width > 0.0;
+        if !open {
+            return false;
+        }
+        let x = -centre.dot(across) / (2.0 * half_width);
+        x.abs() >= 0.5 && profile.ray_meets_ridge(x, dx, self.wo.z)
+    }
+}
+
+/// Scratch lobe of `layer` with coverage `c` ([`lobe_along`] its direction at the hit; with
+/// `lean`, [`leaned_lobe`] of the scratch at the hit, `u` uniform in `[0, 1)` placing it).
+fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32, u: f32) -> ScratchLobe {
+    if p.has_lean() {
+        if let Some(sc) = p.layers.scratch_at(layer, ctx.uv.as_dvec2()) {
+            let along = if p.coverage == CoverageMode::Point {
+                Along::Hit
+            } else {
+                Along::Footprint(u)
+            };
+            return leaned_lobe(p, ctx, &sc, c, along);
+        }
+    }
+    let d = if p.layers.orientation() == Orientation::Random {
+        // The scratch at the hit point (or nearest to it): the hit is spread uniformly over the
+        // footprint, so each scratch of the footprint is chosen in proportion to its share.
+        p.layers.direction_at(layer, ctx.uv).map(|x| x as f32)
+    } else {
+        p.directions[layer]
+    };
+    lobe_along(ctx, d, c)
+}
+
+/// Scratch `sc`'s lobe with coverage `c`, its frame leaned as the tapered groove's walls lean
+/// where `along` places it ([`lean::leaned`]).
+fn leaned_lobe(
+    p: &ScratchedMaterial,
+    ctx: &ShadingContext,
+    sc: &Scratch,
+    c: f32,
+    along: Along,
+) -> ScratchLobe {
+    let d = sc.direction;
+    lean::leaned(
+        lobe_along(ctx, [d.x as f32, d.y as f32], c),
+        p.lean,
+        ctx,
+        sc,
+        along,
+    )
+}
+
+/// Scratch lobe of texture direction `d` with coverage `c`: `t = d.x dP/du + d.y dP/dv` in the
+/// shading plane, as `(cos beta, sin beta)` against the frame's `s` axis (METHOD.md section 1).
+#[inline(always)]
+fn lobe_along(ctx: &ShadingContext, d: [f32; 2], c: f32) -> ScratchLobe {
+    let t: Vec3 = ctx.dpdu * d[0] + ctx.dpdv * d[1];
+    let (x, y) = (t.dot(ctx.frame.s), t.dot(ctx.frame.t));
+    let len = (x * x + y * y).sqrt();
+    let (cos, sin) = if len > 1e-20 && len.is_finite() {
+        (x / len, y / len)
+    } else {
+        (1.0, 0.0)
+    };
+    ScratchLobe::new(c, cos, sin)
+}
+
+mod lean;
+
+#[cfg(test)]
+mod tests;
