@@ -229,7 +229,7 @@ fn smooth_dielectric_lobes_and_energy() {
 #[test]
 fn ggx_is_normalised() {
     for alpha in [0.02f32, 0.1, 0.3, 1.0] {
-        let g = microfacet::Ggx::isotropic(alpha);
+        let g = crate::optics::microfacet::Ggx::isotropic(alpha);
         let n = 200_000;
         let h = std::f64::consts::FRAC_PI_2 / n as f64;
         let total: f64 = (0..n)
@@ -248,7 +248,7 @@ fn ggx_is_normalised() {
 fn visible_normal_sampler_chi2() {
     let mut rng = Pcg64::seed_from_u64(11);
     for (alpha, theta) in [(0.15f32, 0.3f32), (0.6, 1.2), (0.9, 1.55)] {
-        let g = microfacet::Ggx {
+        let g = crate::optics::microfacet::Ggx {
             alpha_x: alpha,
             alpha_y: alpha * 0.7,
         };
