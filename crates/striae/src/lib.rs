@@ -34,6 +34,7 @@ pub mod hash;
 pub mod io;
 pub mod log;
 pub mod math;
+pub mod memory;
 pub mod sampling;
 pub mod strict_array;
 pub mod testing;
