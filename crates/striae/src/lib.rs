@@ -37,6 +37,7 @@ pub mod math;
 pub mod memory;
 pub mod sampling;
 pub mod strict_array;
+#[cfg(any(test, feature = "testing"))]
 pub mod testing;
 
 // Fresnel equations and the GGX microfacet distribution, shared by the precompute's tracers and

@@ -3,7 +3,8 @@
 use anyhow::Context;
 use std::path::PathBuf;
 use std::time::Instant;
-use striae::lab::fidelity::study::{plot_case, run_study, write_csv, StudySettings};
+use striae::lab::fidelity::study::{run_study, write_csv, StudySettings};
+use striae::lab::plot::plot_fidelity_case;
 use striae::optics::fresnel::FresnelLaw;
 use striae::precompute::profile::Profile;
 use striae::precompute::trace2d::TraceSettings;
@@ -169,7 +170,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             .find(|c| c.profile == name && c.theta_i_deg == t && c.phi_i_deg == f)
             .with_context(|| format!("--plot {name}@{t},{f}: no such case in the study"))?;
         let path = a.output.join(format!("{name}_t{t}_p{f}.png"));
-        plot_case(case, &models, &path)?;
+        plot_fidelity_case(case, &models, &path)?;
         println!("wrote {}", path.display());
     }
     Ok(())

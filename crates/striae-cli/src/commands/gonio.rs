@@ -154,7 +154,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         s.paths
     );
     if let Some(p) = &a.plot {
-        striae::lab::gonio::plot(&out, &title, p)?;
+        striae::lab::plot::plot_gonio(&out, &title, p)?;
     }
     println!("{title}");
     println!(

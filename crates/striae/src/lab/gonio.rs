@@ -1,14 +1,13 @@
-//! The goniometer's outputs (`striae gonio`, METHOD.md 8.1): the `.npz` file and the plot.
+//! The goniometer's output (`striae gonio`, METHOD.md 8.1): the `.npz` file (its plot is
+//! [`crate::lab::plot::plot_gonio`]).
 //!
 //! The `.npz` holds exactly `theta[B]`, `phi[B]` (bin centres, radians, over `[-pi/2, pi/2]`),
 //! `reflected[B, B]` and `transmitted[B, B]` (fractions of the incident energy per
 //! `[theta bin, phi bin]`, see [`crate::precompute::groove`]) and the scalars `albedo_r`, `albedo_t`.
 
-use crate::lab::plot::{heat_panel, render, HeatMap, PlotError};
 use crate::precompute::groove::GonioOutput;
 use ndarray::{arr0, Array1, Array2};
 use ndarray_npy::NpzWriter;
-use plotters::prelude::*;
 use std::path::Path;
 
 /// Write `out` as `.npz` (atomically).
@@ -33,47 +32,6 @@ pub fn save_npz(out: &GonioOutput, path: &Path) -> std::io::Result<()> {
         }
         w.finish().map_err(err)?;
         Ok(())
-    })
-}
-
-/// Heat maps of the two histograms side by side (x: `phi_o`, y: `theta_o`, degrees), each
-/// with its own colour bar saturating at its maximum; `title` heads the figure.
-pub fn plot(out: &GonioOutput, title: &str, path: &Path) -> Result<(), PlotError> {
-    let (w, h) = (1500u32, 720u32);
-    render(path, (w, h), |tmp| {
-        let root = BitMapBackend::new(tmp, (w, h)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| e.to_string())?;
-        let root = root
-            .titled(title, ("sans-serif", 20))
-            .map_err(|e| e.to_string())?;
-        let (left, right) = root.split_horizontally(w / 2);
-        let panels = [
-            (&left, &out.reflected, "reflected", out.albedo_r),
-            (
-                &right,
-                &out.transmitted,
-                "transmitted (inside mirrored up)",
-                out.albedo_t,
-            ),
-        ];
-        for (area, hist, name, albedo) in panels {
-            let vmax = hist.iter().cloned().fold(0.0, f64::max);
-            let caption = format!("{name}: albedo {albedo:.4}");
-            let map = HeatMap {
-                values: hist,
-                n: out.bins,
-                vmax: if vmax > 0.0 { vmax } else { 1.0 },
-                caption: if vmax > 0.0 {
-                    caption
-                } else {
-                    format!("{caption} (empty)")
-                },
-                y_desc: "theta_o (degrees)",
-                bar_desc: "fraction per bin",
-            };
-            heat_panel(area, &map)?;
-        }
-        root.present().map_err(|e| e.to_string())
     })
 }
 
@@ -124,7 +82,7 @@ mod tests {
             .unwrap();
         assert_eq!(a.into_scalar(), out.albedo_t);
         let png = dir.join("g.png");
-        plot(&out, "test", &png).unwrap();
+        crate::lab::plot::plot_gonio(&out, "test", &png).unwrap();
         let img = image::open(&png).unwrap().to_rgb8();
         assert_eq!(img.dimensions(), (1500, 720));
         std::fs::remove_dir_all(&dir).ok();

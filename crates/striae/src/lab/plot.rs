@@ -5,6 +5,8 @@
 //! Text uses DejaVu Sans, embedded with `include_bytes!` (licence in
 //! `crates/striae/assets/DejaVuSans-LICENSE.txt`) and registered with plotters' ab_glyph backend.
 
+use crate::lab::fidelity::study::{Case, ModelResult};
+use crate::precompute::groove::GonioOutput;
 use crate::precompute::table::ScratchTable;
 use crate::precompute::wall_table::{WallKind, WallTable};
 use plotters::prelude::*;
@@ -345,6 +347,117 @@ pub fn plot_wall_table(
         }
         root.present().map_err(|e| e.to_string())
     })
+}
+
+/// The goniometer's two histograms (`striae gonio --plot`) as heat maps side by side (x: `phi_o`, y: `theta_o`, degrees), each
+/// with its own colour bar saturating at its maximum; `title` heads the figure.
+pub fn plot_gonio(out: &GonioOutput, title: &str, path: &Path) -> Result<(), PlotError> {
+    let (w, h) = (1500u32, 720u32);
+    render(path, (w, h), |tmp| {
+        let root = BitMapBackend::new(tmp, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let root = root
+            .titled(title, ("sans-serif", 20))
+            .map_err(|e| e.to_string())?;
+        let (left, right) = root.split_horizontally(w / 2);
+        let panels = [
+            (&left, &out.reflected, "reflected", out.albedo_r),
+            (
+                &right,
+                &out.transmitted,
+                "transmitted (inside mirrored up)",
+                out.albedo_t,
+            ),
+        ];
+        for (area, hist, name, albedo) in panels {
+            let vmax = hist.iter().cloned().fold(0.0, f64::max);
+            let caption = format!("{name}: albedo {albedo:.4}");
+            let map = HeatMap {
+                values: hist,
+                n: out.bins,
+                vmax: if vmax > 0.0 { vmax } else { 1.0 },
+                caption: if vmax > 0.0 {
+                    caption
+                } else {
+                    format!("{caption} (empty)")
+                },
+                y_desc: "theta_o (degrees)",
+                bar_desc: "fraction per bin",
+            };
+            heat_panel(area, &map)?;
+        }
+        root.present().map_err(|e| e.to_string())
+    })
+}
+
+/// `striae fidelity --plot`: one row of heat maps per model of `case` named in `models`: the model's lobe, the exact
+/// lobe (both on the same colour scale) and `|model - exact|` (its own scale).
+pub fn plot_fidelity_case(case: &Case, models: &[&str], path: &Path) -> Result<(), PlotError> {
+    let rows: Vec<&ModelResult> = case
+        .models
+        .iter()
+        .filter(|m| models.contains(&m.name.as_str()))
+        .collect();
+    let (pw, ph) = (560u32, 420u32);
+    let (w, h) = (3 * pw, rows.len().max(1) as u32 * ph + 40);
+    let title = format!(
+        "{}: theta_i {} deg, phi_i {} deg (fraction of the incident energy per bin)",
+        case.profile, case.theta_i_deg, case.phi_i_deg
+    );
+    render(path, (w, h), |tmp| {
+        let root = BitMapBackend::new(tmp, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let root = root
+            .titled(&title, ("sans-serif", 22))
+            .map_err(|e| e.to_string())?;
+        let areas = root.split_evenly((rows.len().max(1), 3));
+        for (k, m) in rows.iter().enumerate() {
+            let exact = if m.lossless {
+                case.exact_lossless.as_ref().expect("lossless")
+            } else {
+                &case.exact
+            };
+            let diff: Vec<f64> = m
+                .hist
+                .iter()
+                .zip(&exact.mean)
+                .map(|(a, b)| (a - b).abs())
+                .collect();
+            let max = |v: &[f64]| v.iter().cloned().fold(1e-300, f64::max);
+            let vmax = max(&m.hist).max(max(&exact.mean));
+            let c = &m.cmp;
+            let panels = [
+                (
+                    &m.hist,
+                    vmax,
+                    format!("{}: albedo {:.4}", m.name, c.albedo_model),
+                ),
+                (
+                    &exact.mean,
+                    vmax,
+                    format!("exact: albedo {:.4}", c.albedo_exact),
+                ),
+                (
+                    &diff,
+                    max(&diff),
+                    format!("|diff|: L1 {:.4}, noise {:.4}", c.l1, c.noise_l1),
+                ),
+            ];
+            for (j, (values, vmax, caption)) in panels.into_iter().enumerate() {
+                let map = HeatMap {
+                    values,
+                    n: exact.bins,
+                    vmax,
+                    caption,
+                    y_desc: "theta_o (degrees)",
+                    bar_desc: "fraction per bin",
+                };
+                heat_panel(&areas[3 * k + j], &map)?;
+            }
+        }
+        root.present().map_err(|e| e.to_string())
+    })?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -2,14 +2,12 @@
 //! profiles and incident directions, written as CSV and drawn as side-by-side heat maps.
 
 use super::{compare, model_histogram, reference, Comparison, Reference};
-use crate::lab::plot::{heat_panel, render, HeatMap, PlotError};
 use crate::math::Vec3;
 use crate::optics::fresnel::FresnelLaw;
 use crate::precompute::groove::{GonioError, GonioSettings, GrooveWalls};
 use crate::precompute::profile::Profile;
 use crate::precompute::table::{ScratchBrdf, ScratchTable, TableError, TableParams};
 use crate::precompute::trace2d::{FresnelMode, TraceSettings, Walls};
-use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -68,8 +66,6 @@ pub enum StudyError {
     Table(#[from] TableError),
     #[error(transparent)]
     Gonio(#[from] GonioError),
-    #[error(transparent)]
-    Plot(#[from] PlotError),
     #[error("writing {path}: {source}")]
     Io {
         path: std::path::PathBuf,
@@ -294,76 +290,6 @@ pub fn write_csv(cases: &[Case], path: &Path) -> Result<(), StudyError> {
     })
 }
 
-/// One row of heat maps per model of `case` named in `models`: the model's lobe, the exact
-/// lobe (both on the same colour scale) and `|model - exact|` (its own scale).
-pub fn plot_case(case: &Case, models: &[&str], path: &Path) -> Result<(), StudyError> {
-    let rows: Vec<&ModelResult> = case
-        .models
-        .iter()
-        .filter(|m| models.contains(&m.name.as_str()))
-        .collect();
-    let (pw, ph) = (560u32, 420u32);
-    let (w, h) = (3 * pw, rows.len().max(1) as u32 * ph + 40);
-    let title = format!(
-        "{}: theta_i {} deg, phi_i {} deg (fraction of the incident energy per bin)",
-        case.profile, case.theta_i_deg, case.phi_i_deg
-    );
-    render(path, (w, h), |tmp| {
-        let root = BitMapBackend::new(tmp, (w, h)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| e.to_string())?;
-        let root = root
-            .titled(&title, ("sans-serif", 22))
-            .map_err(|e| e.to_string())?;
-        let areas = root.split_evenly((rows.len().max(1), 3));
-        for (k, m) in rows.iter().enumerate() {
-            let exact = if m.lossless {
-                case.exact_lossless.as_ref().expect("lossless")
-            } else {
-                &case.exact
-            };
-            let diff: Vec<f64> = m
-                .hist
-                .iter()
-                .zip(&exact.mean)
-                .map(|(a, b)| (a - b).abs())
-                .collect();
-            let max = |v: &[f64]| v.iter().cloned().fold(1e-300, f64::max);
-            let vmax = max(&m.hist).max(max(&exact.mean));
-            let c = &m.cmp;
-            let panels = [
-                (
-                    &m.hist,
-                    vmax,
-                    format!("{}: albedo {:.4}", m.name, c.albedo_model),
-                ),
-                (
-                    &exact.mean,
-                    vmax,
-                    format!("exact: albedo {:.4}", c.albedo_exact),
-                ),
-                (
-                    &diff,
-                    max(&diff),
-                    format!("|diff|: L1 {:.4}, noise {:.4}", c.l1, c.noise_l1),
-                ),
-            ];
-            for (j, (values, vmax, caption)) in panels.into_iter().enumerate() {
-                let map = HeatMap {
-                    values,
-                    n: exact.bins,
-                    vmax,
-                    caption,
-                    y_desc: "theta_o (degrees)",
-                    bar_desc: "fraction per bin",
-                };
-                heat_panel(&areas[3 * k + j], &map)?;
-            }
-        }
-        root.present().map_err(|e| e.to_string())
-    })?;
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -402,7 +328,7 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("striae-fidelity-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let png = dir.join("case.png");
-        plot_case(&cases[1], &["seed", "lossless"], &png).unwrap();
+        crate::lab::plot::plot_fidelity_case(&cases[1], &["seed", "lossless"], &png).unwrap();
         let img = image::open(&png).unwrap().to_rgb8();
         assert_eq!(img.dimensions(), (3 * 560, 2 * 420 + 40));
         std::fs::remove_dir_all(&dir).ok();
