@@ -189,7 +189,9 @@ def render(
     render`` writes for the same arguments (``res = (w, h)``). ``progress``, if given, is
     called on this thread with the number of camera samples finished since its last call
     (``tqdm(total=w * h * spp).update`` fits). Ctrl-C stops the render and raises
-    ``KeyboardInterrupt``."""
+    ``KeyboardInterrupt``; a film larger than the memory the machine leaves (``MemAvailable``,
+    ``ulimit -v``, the cgroup's limit) raises ``MemoryError`` naming the limit, before any
+    work."""
     kind, source = _scene_source(scene)
     return _striae.render(
         kind, source, spp, _res(res), seed, threads, max_depth, sampler, progress, None
@@ -240,8 +242,9 @@ def merge(parts: Sequence[Union[bytes, str, "os.PathLike[str]"]]) -> np.ndarray:
             data.append(bytes(p))
             names.append(f"<part {i}>")
         else:
-            with open(p, "rb") as f:
-                data.append(f.read())
+            # Read by the library, as `striae merge` reads it: a regular file only, its size
+            # checked against its header before the pixels are read.
+            data.append(None)
             names.append(os.fspath(p))
     image, _exposure = _striae.merge(data, names)
     return image

@@ -131,3 +131,18 @@ def test_ctrl_c_stops_a_render():
     with pytest.raises(KeyboardInterrupt):
         striae.render(big, spp=256, threads=1)
     assert time.monotonic() - start < 20
+
+
+def test_part_files_are_read_as_the_cli_reads_them(tmp_path):
+    """A path is read by the library as `striae merge` reads it: a folder is refused by name,
+    and a file cut short by its size against its header, before its pixels are read."""
+    part = striae.render_part(SCENE, 0, 1, spp=1)
+    with pytest.raises(striae.StriaeError, match="is a folder, not a regular file"):
+        striae.merge([tmp_path])
+    short = tmp_path / "short.part"
+    short.write_bytes(part[:-5])
+    with pytest.raises(striae.StriaeError, match=f"short.part.* is {len(part) - 5} bytes"):
+        striae.merge([short])
+    whole = tmp_path / "whole.part"
+    whole.write_bytes(part)
+    np.testing.assert_array_equal(striae.merge([whole]), striae.merge([part]))

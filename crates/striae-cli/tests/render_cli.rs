@@ -34,6 +34,7 @@ fn bad_render_flags_name_the_flag_and_write_nothing() {
         ("--seed", "-1"),
         ("--threads", "-2"),
         ("--res", "100000x100000"),
+        ("--exposure", "1e30"),
     ] {
         let (ok, err) = striae(&["render", flag, value, "-q"], &out);
         assert!(!ok, "{flag} {value} should fail");
@@ -408,5 +409,225 @@ fn dielectric_wall_table_sizes_come_from_their_flags() {
         assert!(!ok && err.contains(flag), "{args:?}: {err}");
         assert!(!out.exists(), "{args:?} wrote");
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A wall table refuses the 2D table's options it would ignore, naming the option; one of
+/// more than 10^11 paths (hours to days) or over the memory limit is refused before it starts,
+/// naming the flags that size it; a 2D table refuses `--check`, which only wall tables read.
+#[test]
+fn wall_tables_refuse_what_they_would_ignore_or_could_not_finish() {
+    let dir = std::env::temp_dir().join(format!("striae-walls-ignored-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("w.npz");
+    let small = [
+        "--incident",
+        "2x2",
+        "--exit-bins",
+        "4",
+        "--wall-paths",
+        "10",
+    ];
+    let dielectric = ["precompute", "--walls", "dielectric"];
+    let specular = ["precompute", "--walls", "specular", "--roughness", "0.3"];
+    let wall = |walls: &[&'static str]| -> Vec<&'static str> {
+        walls.iter().chain(&small).copied().collect()
+    };
+    for (base, extra, flag) in [
+        (
+            wall(&dielectric),
+            &["--groove-slices", "4"][..],
+            "--groove-slices",
+        ),
+        (
+            wall(&dielectric),
+            &["--estimator", "kernel"],
+            "--estimator kernel",
+        ),
+        (
+            wall(&dielectric),
+            &["--fresnel-law", "none"],
+            "--fresnel-law",
+        ),
+        (wall(&dielectric), &["--fresnel", "walls"], "--fresnel"),
+        (wall(&dielectric), &["--m", "64"], "--m"),
+        (wall(&dielectric), &["--nr", "4"], "--nr"),
+        (
+            wall(&specular),
+            &["--groove-slices", "2"],
+            "--groove-slices",
+        ),
+        (wall(&specular), &["--max-bounces", "8"], "--max-bounces"),
+        (vec!["precompute", "--m", "4"], &["--check", "3"], "--check"),
+    ] {
+        let args = [&base[..], extra].concat();
+        let (ok, err) = striae(&args, &out);
+        let named = err.contains(&format!("{flag}:")) || err.contains(&format!("{flag} applies"));
+        assert!(!ok && named, "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?} wrote");
+    }
+    // Rough specular walls read `--fresnel-law`.
+    let args: Vec<&str> = specular
+        .iter()
+        .chain(&small)
+        .chain(&["--fresnel-law", "none"])
+        .copied()
+        .collect();
+    let (ok, err) = striae(&args, &out);
+    assert!(ok, "{err}");
+    std::fs::remove_file(&out).unwrap();
+    for (args, expect) in [
+        (
+            &["--incident", "256x256", "--wall-paths", "1000000000"][..],
+            &["--wall-paths 1000000000", "--incident 256x256"][..],
+        ),
+        (
+            &[
+                "--incident",
+                "16x16",
+                "--exit-bins",
+                "256",
+                "--roughness",
+                "0.3",
+                "--wall-paths",
+                "10",
+            ],
+            &["--exit-bins 256", "GiB"],
+        ),
+    ] {
+        let args: Vec<&str> = dielectric
+            .iter()
+            .chain(args)
+            .chain(&["--max-memory", "1G"])
+            .copied()
+            .collect();
+        let start = std::time::Instant::now();
+        let (ok, err) = striae(&args, &out);
+        assert!(
+            !ok && expect.iter().all(|e| err.contains(e)),
+            "{args:?}: {err}"
+        );
+        assert!(start.elapsed().as_secs_f64() < 30.0, "{args:?} ran");
+        assert!(!out.exists(), "{args:?} wrote");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `gonio`, `fidelity`, `plot` and `layers` check every flag and output before anything is
+/// computed or written: a plot name of another format, a folder that does not exist, a
+/// `fidelity --plot` case or `--plot-models` model the study does not have, `--bins` and
+/// `--slice-m` out of range, an absurd `--length` (quoted as written).
+#[test]
+fn lab_commands_check_flags_and_outputs_before_any_work() {
+    let dir = std::env::temp_dir().join(format!("striae-lab-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let empty = |what: &str| {
+        let left: Vec<_> = std::fs::read_dir(&dir).unwrap().flatten().collect();
+        assert!(left.is_empty(), "{what} wrote {left:?}");
+    };
+    let gonio = ["gonio", "--paths", "2000", "--bins", "8"];
+    let missing = dir.join("missing").join("g.png");
+    for (plot, out, expect) in [
+        ("g.jpg", "g.npz", "not .jpg"),
+        (missing.to_str().unwrap(), "g.npz", "does not exist"),
+        ("g.png", "missing/g.npz", "does not exist"),
+    ] {
+        let plot = dir.join(plot).display().to_string();
+        let mut args = gonio.to_vec();
+        args.extend(["--plot", &plot]);
+        let (ok, err) = striae(&args, &dir.join(out));
+        assert!(!ok && err.contains(expect), "--plot {plot}: {err}");
+        empty(&format!("gonio --plot {plot} -o {out}"));
+    }
+    let fid = dir.join("fid");
+    let small = [
+        "fidelity",
+        "--profiles",
+        "v90=v:angle=90",
+        "--theta-i",
+        "0",
+        "--phi-i",
+        "0",
+        "--paths",
+        "2000",
+        "--runs",
+        "2",
+        "--table",
+        "8,200,2",
+        "--slices",
+        "1",
+        "--slice-paths",
+        "200",
+    ];
+    for (extra, expect) in [
+        (&["--plot", "v60@0,0"][..], "no profile `v60`"),
+        (&["--plot", "v90@45,0"], "theta 45 is not one of --theta-i"),
+        (&["--plot", "v90@0,30"], "phi 30 is not one of --phi-i"),
+        (
+            &["--plot-models", "seed,groove_slices6"],
+            "`groove_slices6`",
+        ),
+        (&["--bins", "0"], "`--bins` = 0"),
+        (&["--slice-m", "0"], "slice_m 0"),
+    ] {
+        let mut args = small.to_vec();
+        args.extend(extra);
+        let (ok, err) = striae(&args, &fid);
+        assert!(!ok && err.contains(expect), "{extra:?}: {err}");
+        empty(&format!("fidelity {extra:?}"));
+    }
+    let table = dir.join("t.npz");
+    let (ok, err) = striae(
+        &["precompute", "--m", "4", "--n", "20", "--nr", "2"],
+        &table,
+    );
+    assert!(ok, "{err}");
+    let (ok, err) = striae(&["plot", table.to_str().unwrap()], &dir.join("lobe.jpg"));
+    assert!(!ok && err.contains("not .jpg"), "{err}");
+    assert!(!dir.join("lobe.jpg").exists(), "a .jpg plot was written");
+    std::fs::remove_file(&table).unwrap();
+    let layers = [
+        "layers",
+        "--width",
+        "0.01",
+        "--threshold",
+        "0.1",
+        "--length",
+    ];
+    let (ok, err) = striae(&[&layers[..], &["1e308"]].concat(), &dir.join("l"));
+    assert!(
+        !ok && err.contains("`length`") && err.contains("1e308"),
+        "{err}"
+    );
+    empty("layers --length 1e308");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `striae merge` refuses an output that would replace one of its part files, before reading
+/// them.
+#[test]
+fn merge_refuses_to_overwrite_its_parts() {
+    let dir = std::env::temp_dir().join(format!("striae-merge-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = glass_sphere(&dir, 1);
+    // A part file named like the merge's EXR.
+    let part = dir.join("m.exr");
+    let (ok, err) = striae(
+        &["render", scene.to_str().unwrap(), "-q", "--tile", "0/1"],
+        &part,
+    );
+    assert!(ok, "{err}");
+    let before = std::fs::read(&part).unwrap();
+    let (ok, err) = striae(&["merge", part.to_str().unwrap()], &dir.join("m"));
+    assert!(
+        !ok && err.contains("would overwrite the part file"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read(&part).unwrap(),
+        before,
+        "the part was replaced"
+    );
+    assert!(!dir.join("m.png").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }

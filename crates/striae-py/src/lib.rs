@@ -5,7 +5,7 @@
 
 use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray2};
-use pyo3::exceptions::{PyKeyboardInterrupt, PyValueError};
+use pyo3::exceptions::{PyKeyboardInterrupt, PyMemoryError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;
 use std::path::{Path, PathBuf};
@@ -30,6 +30,13 @@ fn err(e: impl std::error::Error) -> PyErr {
         source = s.source();
     }
     StriaeError::new_err(message)
+}
+
+/// A job or an allocation that does not fit in the memory left (a refused estimate, or an
+/// allocation the allocator refused) as Python's `MemoryError`, with the library's message
+/// (which names the limit that binds: MemAvailable, ulimit -v or -d, a cgroup's limit).
+fn memory_err(e: striae::memory::MemoryError) -> PyErr {
+    PyMemoryError::new_err(e.to_string())
 }
 
 /// A rayon pool of `threads` workers (all cores when `None`).
@@ -113,12 +120,14 @@ fn load_scene(kind: &str, source: &str, overrides: &Overrides) -> PyResult<(Scen
 fn image_array<'py>(
     py: Python<'py>,
     image: &striae::render::film::Image,
-) -> Bound<'py, PyArray3<f32>> {
+) -> PyResult<Bound<'py, PyArray3<f32>>> {
     let (w, h) = (image.width as usize, image.height as usize);
-    let flat: Vec<f32> = image.pixels.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
-    Array3::from_shape_vec((h, w, 3), flat)
+    let mut flat =
+        striae::memory::try_with_capacity(3 * w * h, "the image's array").map_err(memory_err)?;
+    flat.extend(image.pixels.iter().flat_map(|p| [p.x, p.y, p.z]));
+    Ok(Array3::from_shape_vec((h, w, 3), flat)
         .expect("w * h * 3 values")
-        .into_pyarray(py)
+        .into_pyarray(py))
 }
 
 /// A scene and the overrides of `render`'s arguments, as loaded by [`load_scene`].
@@ -180,8 +189,13 @@ fn render<'py>(
     let (scene, text) = scene_with(kind, source, spp, res, seed, max_depth, sampler)?;
     let pool = pool(threads)?;
     let (w, h) = scene.camera.resolution();
+    let size = match res {
+        Some(_) => format!("res=({w}, {h})"),
+        None => format!("the scene's render.width x render.height, {w}x{h} (res=)"),
+    };
     if let Some(tile) = tile {
-        striae::render::parts::part_pixel_count((w, h), tile.0, tile.1).map_err(err)?;
+        let n = striae::render::parts::part_pixel_count((w, h), tile.0, tile.1).map_err(err)?;
+        integrator::check_memory(&scene, n as u64, &size, None).map_err(memory_err)?;
         let part = run_interruptibly(py, progress.as_ref(), |cancel, done| {
             let count = |n| {
                 done.fetch_add(n, Ordering::Relaxed);
@@ -193,6 +207,9 @@ fn render<'py>(
         .0;
         return Ok(PyBytes::new(py, &part.to_bytes()).into_any());
     }
+    integrator::check_memory(&scene, w as u64 * h as u64, &size, None).map_err(memory_err)?;
+    // Allocated before the first sample: a film the allocator refuses fails at once.
+    let mut image = striae::render::film::Image::try_new(w, h, &size).map_err(memory_err)?;
     let tiles: Vec<u32> = (0..integrator::tile_count(w, h)).collect();
     let pixels = run_interruptibly(py, progress.as_ref(), |cancel, done| {
         let count = |n| {
@@ -202,19 +219,21 @@ fn render<'py>(
     })?
     .map_err(|_| PyKeyboardInterrupt::new_err("render cancelled"))?
     .0;
-    let mut image = striae::render::film::Image::new(w, h);
     for (&t, px) in tiles.iter().zip(&pixels) {
         integrator::place_tile(&mut image, t, px);
     }
-    Ok(image_array(py, &image).into_any())
+    drop(pixels);
+    Ok(image_array(py, &image)?.into_any())
 }
 
-/// The image of part-file contents (`render(..., tile=...)` or `striae render --tile`), each
-/// named in errors by `names`; with the preview exposure they carry.
+/// The image of parts (`render(..., tile=...)` or `striae render --tile`), each given as a
+/// part file's contents or, where `None`, as the part file named by `names`, read as the CLI
+/// reads it (a regular file, its size checked against its header before its pixels are read);
+/// each named in errors by `names`. With the preview exposure they carry.
 #[pyfunction]
 fn merge<'py>(
     py: Python<'py>,
-    parts: Vec<Vec<u8>>,
+    parts: Vec<Option<Vec<u8>>>,
     names: Vec<String>,
 ) -> PyResult<(Bound<'py, PyArray3<f32>>, f32)> {
     let parts = parts
@@ -222,12 +241,28 @@ fn merge<'py>(
         .zip(names)
         .map(|(bytes, name)| {
             let name = PathBuf::from(name);
-            Ok((name.clone(), Part::from_bytes(bytes, &name)?))
+            let part = match bytes {
+                Some(bytes) => Part::from_bytes(bytes, &name)?,
+                None => Part::read(&name)?,
+            };
+            Ok((name, part))
         })
         .collect::<Result<Vec<_>, PartError>>()
         .map_err(err)?;
-    let (image, exposure) = striae::render::parts::merge(&parts).map_err(err)?;
-    Ok((image_array(py, &image), exposure))
+    let (w, h) = parts.first().map_or((0, 0), |(_, p)| {
+        (p.header.render.width, p.header.render.height)
+    });
+    striae::memory::check(
+        &format!("merging {} parts into a {w}x{h} image", parts.len()),
+        striae::render::parts::merge_memory_estimate(&parts),
+        None,
+    )
+    .map_err(memory_err)?;
+    let (image, exposure) = striae::render::parts::merge(&parts).map_err(|e| match e {
+        PartError::Memory(e) => memory_err(e),
+        e => err(e),
+    })?;
+    Ok((image_array(py, &image)?, exposure))
 }
 
 /// Write an `(h, w, 3)` float32 image as `NAME.exr` and `NAME.png` (atomically), as the CLI.
@@ -269,7 +304,7 @@ fn read_exr<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyArray3
         },
     )
     .map_err(|e| StriaeError::new_err(format!("cannot read {}: {e}", path.display())))?;
-    Ok(image_array(py, &image.layer_data.channel_data.pixels))
+    image_array(py, &image.layer_data.channel_data.pixels)
 }
 
 /// `(N, 3)` float64 rows as `Vec3`s (the renderer's f32), named `what` in errors.
@@ -468,6 +503,14 @@ fn precompute(
         groove_slices,
     };
     trace.validate().map_err(err)?;
+    // `striae precompute --m`'s figures: 80 bytes per M^2, and the groove slices' arrays.
+    let m2 = (m as u64).saturating_mul(m as u64);
+    let slices = match groove_slices {
+        0 => 0,
+        s => (16 * s as u64 + 16 * 64).saturating_mul(m2),
+    };
+    striae::memory::check(&format!("m={m}"), (80 * m2).saturating_add(slices), None)
+        .map_err(memory_err)?;
     let params = TableParams::new(profile, trace);
     let pool = pool(threads)?;
     let table = run_interruptibly(py, None, |_, _| {
@@ -546,14 +589,22 @@ impl LayerSet {
 
     /// `(K, R, R)` float32 coverage masks (`striae layers`' images; row 0 at the top).
     fn masks<'py>(&self, py: Python<'py>, res: usize) -> PyResult<Bound<'py, PyArray3<f32>>> {
-        striae::layers::raster::check_resolution(res).map_err(err)?;
+        use striae::layers::{raster, LayerError};
+        raster::check_resolution(res).map_err(err)?;
         let k = self.set.len();
+        let what = format!("res={res} ({k} layers)");
+        striae::memory::check(&what, raster::masks_bytes(res, k), None).map_err(memory_err)?;
         let flat = py.detach(|| {
-            (0..k)
-                .map(|i| Ok(self.set.rasterize(i, res)?.level(0).1.to_vec()))
-                .collect::<Result<Vec<_>, striae::layers::LayerError>>()
+            let mut flat = striae::memory::try_with_capacity(k * res * res, &what)?;
+            for i in 0..k {
+                flat.extend_from_slice(self.set.rasterize(i, res)?.level(0).1);
+            }
+            Ok::<_, LayerError>(flat)
         });
-        let flat: Vec<f32> = flat.map_err(err)?.concat();
+        let flat = flat.map_err(|e| match e {
+            LayerError::Memory(e) => memory_err(e),
+            e => err(e),
+        })?;
         Ok(Array3::from_shape_vec((k, res, res), flat)
             .expect("K x R x R")
             .into_pyarray(py))

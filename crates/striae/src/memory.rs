@@ -380,6 +380,21 @@ pub fn check(what: &str, need: u64, max_memory: Option<u64>) -> Result<(), Memor
     check_against(what, need, max_memory, available())
 }
 
+/// [`check`] for a job that already holds `held` bytes, allocated before its size was known (a
+/// loaded scene's meshes and BVH): what is left on the machine must take `need`, as it already
+/// excludes `held`; `max_memory` must take both.
+pub fn check_more(
+    what: &str,
+    need: u64,
+    held: u64,
+    max_memory: Option<u64>,
+) -> Result<(), MemoryError> {
+    if max_memory.is_some() {
+        check_against(what, need.saturating_add(held), max_memory, None)?;
+    }
+    check_against(what, need, None, available())
+}
+
 fn check_against(
     what: &str,
     need: u64,
@@ -833,6 +848,17 @@ mod tests {
             e.to_string().contains("--res 9999x9999") && e.to_string().contains("2.27 GiB"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn held_bytes_count_against_the_cap_only() {
+        // 0.25 GiB more on top of 2 GiB held: over a 2 GiB cap, though the machine has room.
+        let e = check_more("--res 8x8", GIB / 4, 2 * GIB, Some(2 * GIB)).unwrap_err();
+        assert_eq!(e.limit().unwrap().source, LimitSource::MaxMemoryFlag);
+        assert_eq!(e.need(), 2 * GIB + GIB / 4 + BASE_BYTES);
+        assert!(check_more("--res 8x8", GIB / 4, GIB, Some(2 * GIB)).is_ok());
+        // Without a cap, only the machine's headroom counts (it excludes what is held).
+        assert!(check_more("--res 8x8", 1 << 20, u64::MAX / 2, None).is_ok());
     }
 
     #[test]

@@ -415,7 +415,7 @@ fn bad_scene_files_give_clear_errors() {
         "{CAMERA}[materials.g]\ntype = \"scratched\"\nbase = \"glass\"\n[materials.g.scratches]\nwalls = \"rough\"\n"
     ));
     assert!(
-        msg.contains("[materials.g]") && msg.contains("`scratches.walls`"),
+        msg.contains("[materials.g]") && msg.contains("`materials.g.scratches.walls`"),
         "{msg}"
     );
     let msg = parse_err(&format!(

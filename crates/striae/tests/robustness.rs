@@ -377,3 +377,232 @@ fn errors_blame_the_key_or_flag_with_the_value_as_written() {
     assert!(msg.contains("line 4 has 2 vertices"), "{msg}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Part files (`striae merge`, Python's `merge`) are read as strictly as the scene's inputs:
+/// a regular file only, its size checked against its header before its pixels are read, a
+/// header within what a render can be (the renderer's largest image, a part count within the
+/// tiles, an spp and an exposure in range), finite pixels; every refusal names the file. A set
+/// missing many parts lists the first few and counts the rest.
+#[test]
+fn part_files_are_refused_naming_the_file_before_anything_large_is_read() {
+    use striae::render::parts::{merge, part_pixel_count, Part, PartHeader, RenderId, FORMAT};
+    let dir = std::env::temp_dir().join(format!("striae-parts-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // Part `index` of `count` of a `width x height` image, its pixels 0.5.
+    let part = |(width, height): (u32, u32), index: u32, count: u32| {
+        let render = RenderId {
+            scene_hash: "0".repeat(64),
+            width,
+            height,
+            spp: 4,
+            seed: 1,
+            max_depth: 8,
+            rr_depth: 5,
+            sampler: "sobol".into(),
+            version: striae::VERSION.into(),
+        };
+        let n = part_pixel_count((width, height), index, count).unwrap();
+        let header = PartHeader {
+            format: FORMAT,
+            render,
+            index,
+            count,
+            exposure: 0.0,
+            samples: None,
+        };
+        Part {
+            header,
+            pixels: vec![Rgb::splat(0.5); n],
+        }
+    };
+    // 64 x 48 pixels: 4 x 3 = 12 tiles.
+    let small = (64, 48);
+    let write = |name: &str, bytes: &[u8]| {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        path
+    };
+    let refused = |path: &Path, expect: &str| {
+        let e = Part::read(path).unwrap_err().to_string();
+        assert!(
+            e.contains(expect) && e.contains(&path.display().to_string()),
+            "{}: {e}",
+            path.display()
+        );
+    };
+    let good = write("good.part", &part(small, 0, 1).to_bytes());
+    assert_eq!(Part::read(&good).unwrap(), part(small, 0, 1));
+
+    // Special files, refused unopened (a folder first: without the check it fails at once,
+    // where /dev/zero would be read until memory runs out).
+    refused(&dir, "a folder");
+    refused(Path::new("/dev/zero"), "a device");
+    let fifo = dir.join("fifo");
+    if std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .is_ok_and(|s| s.success())
+    {
+        refused(&fifo, "a FIFO");
+    }
+    // Cut short on disk: its size against its header, before the pixels are read.
+    let bytes = part(small, 0, 1).to_bytes();
+    let short = write("short.part", &bytes[..bytes.len() - 5]);
+    refused(&short, &format!("is {} bytes", bytes.len() - 5));
+    // A header of the largest image in a file of a few hundred bytes.
+    let mut claim = part(small, 0, 1);
+    (claim.header.render.width, claim.header.render.height) = (32768, 32768);
+    let claim = write("claim.part", &claim.to_bytes());
+    refused(&claim, "part 0/1 of a 32768x32768 image is 128849");
+
+    // Headers beyond what a render can be, and pixels no render writes: through the file
+    // (read) and through the bytes (Python's parts) alike.
+    let forged = |edit: &dyn Fn(&mut Part), expect: &str| {
+        let mut p = part(small, 0, 2);
+        edit(&mut p);
+        let path = write("forged.part", &p.to_bytes());
+        refused(&path, expect);
+        let e = Part::from_bytes(&p.to_bytes(), &path)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(expect) && e.contains("forged.part"), "{e}");
+    };
+    forged(
+        &|p| p.header.render.width = 100_000,
+        "image size 100000x48 is beyond the renderer's",
+    );
+    forged(&|p| p.header.count = 13, "only 12 tiles");
+    forged(&|p| p.header.index = 2, "must lie in 0..2");
+    forged(&|p| p.header.render.spp = 0, "spp 0");
+    forged(&|p| p.header.exposure = 1e30, "exposure 1e30 is beyond");
+    // Part 0 of 2 holds tiles 0, 2, 4, ...: its pixel 17 is (1, 1) of tile 0.
+    forged(
+        &|p| p.pixels[17].y = f32::NAN,
+        "pixel (1, 1) is [0.5, NaN, 0.5]",
+    );
+    forged(&|p| p.pixels[40].x = f32::INFINITY, "pixel (8, 2)");
+
+    // A part built in memory with a count beyond the tiles: refused, naming it, before the
+    // merge sizes anything by that count.
+    let mut many = part(small, 0, 12);
+    many.header.count = 4_000_000_000;
+    let e = merge(&[(dir.join("many.part"), many)])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("many.part") && e.contains("only 12 tiles"),
+        "{e}"
+    );
+    // 256 x 256 pixels in 256 parts, one given: the first ten missing, and a count.
+    let one = part((256, 256), 0, 256);
+    let e = merge(&[(dir.join("one.part"), one)])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("parts missing: [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, ...] (245 more, 255 in all)"),
+        "{e}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A value of the wrong type names its full key, inside a material too (where serde reads a
+/// buffered table that `toml` cannot point into); keys that apply to nothing are refused by
+/// name; values beyond what the renderer takes (an OBJ vertex beyond the bound of the scene's
+/// points, an exposure, a scratch length) are refused with the value as written.
+#[test]
+fn mistyped_foreign_and_absurd_values_name_their_key() {
+    let dir = input_files("keys");
+    let file = dir.join("everything.toml");
+    let load = |text: &str| {
+        Scene::parse(text, &file, &dir, &Overrides::default())
+            .map(|_| ())
+            .unwrap_err()
+            .to_string()
+    };
+    let mix = "layer_mix = \"sum\"";
+    let with = |key: &str| format!("{mix}\n{key}");
+    for (from, to, expect) in [
+        (
+            mix,
+            with("explicit = \"yes\""),
+            "key `materials.scratched.scratches.explicit`: invalid type: string \"yes\", expected a boolean",
+        ),
+        (
+            mix,
+            with("lean = \"true\""),
+            "`materials.scratched.scratches.lean`",
+        ),
+        (
+            mix,
+            "layer_mix = \"avg\"".into(),
+            "`materials.scratched.scratches.layer_mix`: unknown variant `avg`",
+        ),
+        (
+            mix,
+            with("bogus = 1"),
+            "`materials.scratched.scratches.bogus`: unknown field",
+        ),
+        (
+            "scale = 8.0 }",
+            "scale = \"x\" }".into(),
+            "`materials.floor.reflectance",
+        ),
+        (
+            "eta = [0.143, 0.375, 1.442]",
+            "eta = [0.143, 0.375, \"x\"]".into(),
+            "`materials.metal.eta[2]`",
+        ),
+        (
+            "type = \"dielectric\"",
+            "type = 7".into(),
+            "`materials.rough.type`",
+        ),
+        (
+            "type = \"dielectric\"",
+            "type = \"glas\"".into(),
+            "`materials.rough.type`: unknown variant `glas`",
+        ),
+        (
+            "preset = \"gold\"\nroughness = 0.1",
+            "preset = \"gold\"\nroughness = \"0.1\"".into(),
+            "`materials.gold.roughness`",
+        ),
+        // Keys that apply to nothing.
+        (
+            mix,
+            with("stations = 16"),
+            "`materials.scratched.scratches.stations` = 16: applies to explicit grooves only",
+        ),
+        (
+            "type = \"map\"\npath = \"sky.exr\"",
+            "type = \"constant\"\nradiance = 1.0".into(),
+            "`environment.scale` = 1.0: `scale` does not apply to a constant environment",
+        ),
+        // Absurd values, as written.
+        (
+            "exposure = 0.5",
+            "exposure = 1e30".into(),
+            "`render.exposure` = 1e30",
+        ),
+        (
+            "setting = 1",
+            "length = 1e30\nwidth = 0.01\nthreshold = 0.1".into(),
+            "`materials.scratched.scratches.length` = 1e30",
+        ),
+    ] {
+        assert!(EVERYTHING.contains(from), "{from}");
+        let msg = load(&EVERYTHING.replacen(from, &to, 1));
+        assert!(msg.contains(expect), "{to}: {msg}");
+    }
+    // An OBJ vertex beyond the bound of sphere centres (`MAX_COORDINATE`).
+    for v in ["v 1e20 0 0", "v 0 0 -1e39"] {
+        let obj = format!("v 0 0 0\nv 1 0 0\n{v}\nf 1 2 3\n");
+        std::fs::write(dir.join("tet.obj"), obj).unwrap();
+        let msg = load(EVERYTHING);
+        assert!(
+            msg.contains("tet.obj") && msg.contains(&format!("line 3 (`{v}`)")),
+            "{v}: {msg}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -58,12 +58,10 @@ pub struct Args {
     /// Cases to plot, NAME@THETA,PHI (degrees), repeatable.
     #[arg(long)]
     plot: Vec<String>,
-    /// Models drawn in each plot, comma-separated.
-    #[arg(
-        long,
-        value_delimiter = ',',
-        default_value = "seed,walls,groove_slices6"
-    )]
+    /// Models drawn in each plot, comma-separated: seed, seed_theta_exact, walls,
+    /// groove_slicesS (with --slices S > 0), lossless (default: seed, walls and, with
+    /// --slices S > 0, groove_slicesS).
+    #[arg(long, value_delimiter = ',')]
     plot_models: Vec<String>,
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -130,25 +128,81 @@ fn settings(a: &Args) -> anyhow::Result<StudySettings> {
     })
 }
 
-/// `NAME@THETA,PHI`.
-fn plot_case_key(s: &str) -> anyhow::Result<(String, f64, f64)> {
+/// `NAME@THETA,PHI`: a case of the study `study` (a profile of `--profiles`, a `--theta-i`
+/// and a `--phi-i`), checked before anything is computed.
+fn plot_case_key(s: &str, study: &StudySettings) -> anyhow::Result<(String, f64, f64)> {
     let bad = || format!("--plot `{s}`: expected NAME@THETA,PHI");
     let (name, angles) = s.split_once('@').with_context(bad)?;
     let (t, f) = angles.split_once(',').with_context(bad)?;
-    Ok((
+    let (name, t, f): (String, f64, f64) = (
         name.to_string(),
         t.trim().parse().with_context(bad)?,
         f.trim().parse().with_context(bad)?,
-    ))
+    );
+    let list = |v: &[f64]| v.iter().map(f64::to_string).collect::<Vec<_>>().join(", ");
+    if !study.profiles.iter().any(|(n, _)| *n == name) {
+        let names: Vec<&str> = study.profiles.iter().map(|(n, _)| n.as_str()).collect();
+        anyhow::bail!(
+            "--plot `{s}`: no profile `{name}` in --profiles (names: {})",
+            names.join(", ")
+        );
+    }
+    if !study.theta_i_deg.contains(&t) {
+        anyhow::bail!(
+            "--plot `{s}`: theta {t} is not one of --theta-i ({})",
+            list(&study.theta_i_deg)
+        );
+    }
+    if !study.phi_i_deg.contains(&f) {
+        anyhow::bail!(
+            "--plot `{s}`: phi {f} is not one of --phi-i ({})",
+            list(&study.phi_i_deg)
+        );
+    }
+    Ok((name, t, f))
+}
+
+/// `--plot-models`, each a model the study compares, or the default.
+fn plot_models(models: &[String], study: &StudySettings) -> anyhow::Result<Vec<String>> {
+    let known = study.model_names();
+    if let Some(m) = models.iter().find(|m| !known.contains(m)) {
+        anyhow::bail!(
+            "--plot-models `{m}`: not a model of this study (models: {})",
+            known.join(", ")
+        );
+    }
+    if !models.is_empty() {
+        return Ok(models.to_vec());
+    }
+    let mut default = vec!["seed".to_string(), "walls".into()];
+    if study.slices > 0 {
+        default.push(format!("groove_slices{}", study.slices));
+    }
+    Ok(default)
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     let s = settings(&a)?;
+    // Every flag checked before anything is computed or written.
+    s.validate()?;
     let plots = a
         .plot
         .iter()
-        .map(|p| plot_case_key(p))
+        .map(|p| plot_case_key(p, &s))
         .collect::<anyhow::Result<Vec<_>>>()?;
+    let models = plot_models(&a.plot_models, &s)?;
+    if a.output.exists() && !a.output.is_dir() {
+        anyhow::bail!("-o {}: exists and is not a folder", a.output.display());
+    }
+    let threads = a.threads.unwrap_or_else(rayon::current_num_threads);
+    striae::memory::check(
+        &format!(
+            "--bins {} (with --table M {}, --runs {}, --slice-m {}, {threads} threads)",
+            s.bins, s.table.m, s.runs, s.slice_m
+        ),
+        s.memory_estimate(threads),
+        None,
+    )?;
     std::fs::create_dir_all(&a.output)
         .with_context(|| format!("creating {}", a.output.display()))?;
     let pool = rayon::ThreadPoolBuilder::new()
@@ -163,7 +217,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         csv.display(),
         start.elapsed().as_secs_f64()
     );
-    let models: Vec<&str> = a.plot_models.iter().map(|m| m.as_str()).collect();
+    let models: Vec<&str> = models.iter().map(|m| m.as_str()).collect();
     for (name, t, f) in plots {
         let case = cases
             .iter()

@@ -119,6 +119,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let profile =
         Profile::parse(&a.profile).with_context(|| format!("--profile `{}`", a.profile))?;
     let s = settings(&a)?;
+    super::check_output_file("-o", &a.output)?;
+    if let Some(plot) = &a.plot {
+        striae::lab::plot::check_png_name(plot).map_err(|e| anyhow::anyhow!("--plot {e}"))?;
+        super::check_output_file("--plot", plot)?;
+    }
     let bar = indicatif::ProgressBar::new(s.paths);
     bar.set_style(
         indicatif::ProgressStyle::with_template(
@@ -129,6 +134,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))
         .build()?;
+    let threads = pool.current_num_threads();
+    striae::memory::check(
+        &format!("--bins {} (on {threads} threads, --threads)", s.bins),
+        striae::lab::gonio::memory_estimate(s.bins, threads, s.paths),
+        None,
+    )?;
     let start = Instant::now();
     let out = pool.install(|| trace_groove(&profile, &s, &|k| bar.inc(k)))?;
     let secs = start.elapsed().as_secs_f64();

@@ -48,9 +48,9 @@ pub struct Args {
     /// Output folder (created if missing).
     #[arg(short = 'o', long = "out")]
     out: PathBuf,
-    /// Refuse the job if its estimated memory exceeds this (bytes, or with K, M, G, T); the
-    /// memory available is always a limit.
-    #[arg(long, value_parser = super::memory::parse_size)]
+    /// Refuse the job if its estimated memory exceeds this (bytes, or with K, M, G, T); what
+    /// the machine leaves (MemAvailable, ulimit -v and -d, the cgroup's limit) always is one.
+    #[arg(long, value_parser = striae::memory::parse_size)]
     max_memory: Option<u64>,
 }
 
@@ -81,18 +81,18 @@ pub fn run(args: Args) -> Result<()> {
         .context("invalid scratch layer parameters")?;
     let res = args.res;
     raster::check_resolution(res).context("invalid --res")?;
-    let texels = (res as u64) * (res as u64);
-    let per_texel = 14 + set.len() as u64 + if args.stages { 6 } else { 0 };
-    super::memory::check(&format!("--res {res}"), texels * per_texel, args.max_memory)?;
+    let size = format!("--res {res}");
+    let need = raster::images_bytes(res, set.len(), args.stages);
+    striae::memory::check(&size, need, args.max_memory)?;
     if args.out.exists() && !args.out.is_dir() {
         bail!("output {} exists and is not a folder", args.out.display());
     }
 
     let mut files: Vec<(String, Vec<u8>)> = Vec::new();
-    let mut combined = CombinedImage::new(res);
+    let mut combined = CombinedImage::new(res).context(size.clone())?;
     let mut entries = Vec::new();
     for (k, layer) in set.layers().iter().enumerate() {
-        let r = set.rasterize(k, res)?;
+        let r = set.rasterize(k, res).context(size.clone())?;
         let name = format!("layer-{k}.png");
         let png = r.to_png()?;
         if args.stages && k == 0 {
@@ -119,12 +119,12 @@ pub fn run(args: Args) -> Result<()> {
     files.push(("layers.png".into(), combined.to_png()?));
     if args.stages {
         let layer0 = &set.layers()[0];
-        let a = raster::stage_noise(layer0, res)?;
+        let a = raster::stage_noise(layer0, res).context(size.clone())?;
         files.push((
             "stage-a-noise.png".into(),
             raster::encode_png(res, &raster::to_u8(&a), 1, "stage a")?,
         ));
-        let b = raster::stage_stretched(layer0, res)?;
+        let b = raster::stage_stretched(layer0, res).context(size.clone())?;
         files.push((
             "stage-b-stretched.png".into(),
             raster::encode_png(res, &raster::to_u8(&b), 1, "stage b")?,

@@ -22,13 +22,45 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let (exr, png) = super::render::image_outputs(Some(&args.output), None)?;
+    if let Some(input) = args
+        .parts
+        .iter()
+        .find(|p| striae::io::same_file(p, &exr) || striae::io::same_file(p, &png))
+    {
+        anyhow::bail!(
+            "-o {}: would overwrite the part file {}",
+            args.output.display(),
+            input.display()
+        );
+    }
+    // Every part is held while merging: the files' sizes, and the largest once more while it
+    // is read.
+    let sizes: Vec<u64> = args
+        .parts
+        .iter()
+        .map(|p| std::fs::metadata(p).map_or(0, |m| m.len()))
+        .collect();
+    let reading = sizes.iter().copied().max().unwrap_or(0);
+    striae::memory::check(
+        "reading the part files",
+        sizes.iter().sum::<u64>().saturating_add(reading),
+        None,
+    )?;
     let parts = args
         .parts
         .iter()
         .map(|path| Ok((path.clone(), Part::read(path)?)))
         .collect::<Result<Vec<_>, striae::render::parts::PartError>>()?;
+    let (w, h) = parts.first().map_or((0, 0), |(_, p)| {
+        (p.header.render.width, p.header.render.height)
+    });
+    striae::memory::check(
+        &format!("merging {} parts into a {w}x{h} image", parts.len()),
+        striae::render::parts::merge_memory_estimate(&parts),
+        None,
+    )?;
     let (image, exposure) = merge(&parts)?;
-    let (exr, png) = super::render::image_outputs(Some(&args.output), None)?;
     image
         .write_exr_and_png(&exr, &png, exposure)
         .with_context(|| format!("writing {} and {}", exr.display(), png.display()))?;

@@ -2,7 +2,6 @@ pub mod fidelity;
 pub mod figures;
 pub mod gonio;
 pub mod layers;
-pub mod memory;
 pub mod merge;
 pub mod plot;
 pub mod precompute;
@@ -17,4 +16,22 @@ pub fn print_library_messages(quiet: bool) {
         striae::log::Level::Info if !quiet => eprintln!("striae: {message}"),
         striae::log::Level::Info => {}
     })));
+}
+
+/// The output file `path` of `flag`, checked before anything is computed: its folder exists,
+/// and its name holds a regular file or nothing (`io::check_destination`).
+pub fn check_output_file(flag: &str, path: &std::path::Path) -> anyhow::Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => std::path::Path::new("."),
+    };
+    if !dir.is_dir() {
+        anyhow::bail!(
+            "{flag} {}: the folder {} does not exist",
+            path.display(),
+            dir.display()
+        );
+    }
+    striae::io::check_destination(path)
+        .map_err(|e| anyhow::anyhow!("{flag} {}: {e}", path.display()))
 }

@@ -25,6 +25,8 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    striae::lab::plot::check_png_name(&a.output).map_err(|e| anyhow::anyhow!("-o {e}"))?;
+    super::check_output_file("-o", &a.output)?;
     if striae::io::same_file(&a.table, &a.output) {
         anyhow::bail!(
             "-o {} would overwrite the table it plots",

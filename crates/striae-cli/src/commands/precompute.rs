@@ -17,30 +17,30 @@ pub struct Args {
     /// Wall micro-BRDF.
     #[arg(long, value_enum, default_value_t = WallsArg::Diffuse)]
     walls: WallsArg,
-    /// Angle bins M.
-    #[arg(long, default_value_t = 256)]
-    m: usize,
-    /// Entry points per incident angle N.
-    #[arg(long, default_value_t = 10_000)]
-    n: usize,
-    /// Walks per entry point N_r (diffuse walls).
-    #[arg(long, default_value_t = 100)]
-    nr: usize,
+    /// Angle bins M [default: 256].
+    #[arg(long)]
+    m: Option<usize>,
+    /// Entry points per incident angle N [default: 10000].
+    #[arg(long)]
+    n: Option<usize>,
+    /// Walks per entry point N_r (diffuse walls) [default: 100].
+    #[arg(long)]
+    nr: Option<usize>,
     /// Index of refraction for schlick / dielectric.
     #[arg(long, default_value_t = 1.5)]
     ior: f64,
     /// Where Fresnel is applied [default: seed; walls with --groove-slices].
     #[arg(long, value_enum)]
     fresnel: Option<ModeArg>,
-    /// Fresnel law: schlick, dielectric, conductor:ETA,K or none (F = 1).
-    #[arg(long, default_value = "schlick")]
-    fresnel_law: String,
-    /// Facet albedo per bounce.
-    #[arg(long, default_value_t = 1.0)]
-    albedo: f64,
-    /// Bounce cap.
-    #[arg(long, default_value_t = 64)]
-    max_bounces: usize,
+    /// Fresnel law: schlick, dielectric, conductor:ETA,K or none (F = 1) [default: schlick].
+    #[arg(long)]
+    fresnel_law: Option<String>,
+    /// Facet albedo per bounce [default: 1].
+    #[arg(long)]
+    albedo: Option<f64>,
+    /// Bounce cap [default: 64].
+    #[arg(long)]
+    max_bounces: Option<usize>,
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Diffuse-wall estimator. `walks`: the seed's N_r scheme (METHOD.md 3.1). `kernel`: a
@@ -84,7 +84,7 @@ pub struct Args {
     output: PathBuf,
     /// Refuse the job if its estimated memory exceeds this (bytes, or with K, M, G, T); the
     /// memory available is always a limit.
-    #[arg(long, value_parser = super::memory::parse_size)]
+    #[arg(long, value_parser = striae::memory::parse_size)]
     max_memory: Option<u64>,
 }
 
@@ -119,12 +119,59 @@ enum ModeArg {
     Walls,
 }
 
-/// Parse `--fresnel-law` (the syntax is shared with the scene files' `fresnel_law`).
-fn parse_law(s: &str, ior: f64) -> anyhow::Result<FresnelLaw> {
-    FresnelLaw::parse(s, ior).map_err(|e| anyhow::anyhow!("--fresnel-law: {e}"))
+/// Parse `--fresnel-law` (the syntax is shared with the scene files' `fresnel_law`), `schlick`
+/// where it is not given.
+fn parse_law(s: Option<&str>, ior: f64) -> anyhow::Result<FresnelLaw> {
+    FresnelLaw::parse(s.unwrap_or("schlick"), ior)
+        .map_err(|e| anyhow::anyhow!("--fresnel-law: {e}"))
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    check_output(&a)?;
+    let profile =
+        Profile::parse(&a.profile).with_context(|| format!("--profile `{}`", a.profile))?;
+    use striae::precompute::wall_table::WallTableParams;
+    match a.walls {
+        WallsArg::Dielectric => {
+            refuse_2d_flags(&a, "dielectric-wall tables (exact Fresnel at --ior)", false)?;
+            return wall_table(WallTableParams::new(profile, a.ior, a.roughness), &a);
+        }
+        WallsArg::Specular if a.roughness != 0.0 => {
+            refuse_2d_flags(&a, "rough specular-wall tables", true)?;
+            let law = parse_law(a.fresnel_law.as_deref(), a.ior)?;
+            return wall_table(WallTableParams::specular(profile, law, a.roughness), &a);
+        }
+        WallsArg::Diffuse if a.roughness != 0.0 => anyhow::bail!(
+            "--roughness {}: applies to dielectric and specular walls, not diffuse ones",
+            a.roughness
+        ),
+        _ => {}
+    }
+    refuse_wall_flags(&a)?;
+    let params = TableParams::new(profile, trace_settings(&a)?);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()?;
+    let total = params.trace.total_paths() + params.trace.groove_paths();
+    let bar = progress_bar(total);
+    let start = Instant::now();
+    let table = pool.install(|| ScratchTable::compute(&params, &|k| bar.inc(k)))?;
+    let secs = start.elapsed().as_secs_f64();
+    bar.finish_and_clear();
+    table
+        .save(&a.output)
+        .with_context(|| format!("writing {}", a.output.display()))?;
+    report(&params, &table, secs, pool.current_num_threads());
+    println!(
+        "wrote {} (params hash {})",
+        a.output.display(),
+        &params.hash()[..16]
+    );
+    Ok(())
+}
+
+/// `-o` is a file that may be written and not the profile file read.
+fn check_output(a: &Args) -> anyhow::Result<()> {
     striae::io::check_destination(&a.output)
         .with_context(|| format!("-o {}", a.output.display()))?;
     if let Some(file) = a.profile.strip_prefix("file:") {
@@ -135,27 +182,42 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             );
         }
     }
-    let profile =
-        Profile::parse(&a.profile).with_context(|| format!("--profile `{}`", a.profile))?;
-    use striae::precompute::wall_table::WallTableParams;
-    match a.walls {
-        WallsArg::Dielectric => {
-            return wall_table(WallTableParams::new(profile, a.ior, a.roughness), &a);
-        }
-        WallsArg::Specular if a.roughness != 0.0 => {
-            let law = parse_law(&a.fresnel_law, a.ior)?;
-            return wall_table(WallTableParams::specular(profile, law, a.roughness), &a);
-        }
-        WallsArg::Diffuse if a.roughness != 0.0 => anyhow::bail!(
-            "--roughness {}: applies to dielectric and specular walls, not diffuse ones",
-            a.roughness
+    Ok(())
+}
+
+/// Refuse the 2D table's options that a wall table (`what`) does not read, naming the first
+/// one given; `--fresnel-law` is read by rough specular walls (`law_read`).
+fn refuse_2d_flags(a: &Args, what: &str, law_read: bool) -> anyhow::Result<()> {
+    let ignored = [
+        ("--m", a.m.is_some()),
+        ("--n", a.n.is_some()),
+        ("--nr", a.nr.is_some()),
+        ("--albedo", a.albedo.is_some()),
+        ("--max-bounces", a.max_bounces.is_some()),
+        ("--fresnel", a.fresnel.is_some()),
+        ("--fresnel-law", a.fresnel_law.is_some() && !law_read),
+        (
+            "--estimator kernel",
+            matches!(a.estimator, EstimatorArg::Kernel),
         ),
-        _ => {}
+        ("--groove-slices", a.groove_slices.is_some()),
+    ];
+    match ignored.iter().find(|(_, given)| *given) {
+        Some((flag, _)) => anyhow::bail!(
+            "{flag}: applies to the 2D table (--walls diffuse, or specular without \
+             --roughness), not to {what}; leave it out"
+        ),
+        None => Ok(()),
     }
+}
+
+/// Refuse the wall tables' options for a 2D table.
+fn refuse_wall_flags(a: &Args) -> anyhow::Result<()> {
     for (flag, given) in [
         ("--incident", a.incident.is_some()),
         ("--exit-bins", a.exit_bins.is_some()),
         ("--wall-paths", a.wall_paths.is_some()),
+        ("--check", a.check != 0),
     ] {
         if given {
             anyhow::bail!(
@@ -163,26 +225,32 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             );
         }
     }
+    Ok(())
+}
+
+/// The 2D table's trace settings from the flags, its memory checked.
+fn trace_settings(a: &Args) -> anyhow::Result<TraceSettings> {
     if a.groove_slices == Some(0) {
         anyhow::bail!("--groove-slices 0: must be in 1..=32 (leave it out for the seed's eq. (3))");
     }
-    let m = a.m as u64;
+    let d = TraceSettings::default();
+    let m = a.m.unwrap_or(d.m) as u64;
     // The slices: rho and its ratio to F, and the goniometer's two M x M histograms per thread.
     let groove = a
         .groove_slices
         .map_or(0, |s| (16 * s as u64 + 16 * 64) * m * m);
-    super::memory::check(&format!("--m {m}"), 80 * m * m + groove, a.max_memory)?;
+    striae::memory::check(&format!("--m {m}"), 80 * m * m + groove, a.max_memory)?;
     let trace = TraceSettings {
         walls: match a.walls {
             WallsArg::Specular => Walls::Specular,
             WallsArg::Diffuse => Walls::Diffuse,
-            WallsArg::Dielectric => unreachable!("handled above"),
+            WallsArg::Dielectric => unreachable!("a wall table"),
         },
-        m: a.m,
-        n: a.n,
-        nr: a.nr,
-        albedo: a.albedo,
-        max_bounces: a.max_bounces,
+        m: a.m.unwrap_or(d.m),
+        n: a.n.unwrap_or(d.n),
+        nr: a.nr.unwrap_or(d.nr),
+        albedo: a.albedo.unwrap_or(d.albedo),
+        max_bounces: a.max_bounces.unwrap_or(d.max_bounces),
         seed: a.seed,
         fresnel_mode: match a.fresnel {
             Some(ModeArg::Seed) => FresnelMode::Seed,
@@ -190,7 +258,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             None if a.groove_slices.is_some() => FresnelMode::Walls,
             None => FresnelMode::Seed,
         },
-        fresnel_law: parse_law(&a.fresnel_law, a.ior)?,
+        fresnel_law: parse_law(a.fresnel_law.as_deref(), a.ior)?,
         estimator: match a.estimator {
             EstimatorArg::Walks => Estimator::Walks,
             EstimatorArg::Kernel => Estimator::Kernel,
@@ -198,8 +266,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         groove_slices: a.groove_slices.unwrap_or(0),
     };
     trace.validate().context("invalid precompute parameters")?;
-    let params = TableParams::new(profile, trace);
-    let total = params.trace.total_paths() + params.trace.groove_paths();
+    Ok(trace)
+}
+
+/// A progress bar of `total` paths with its rate and the time left.
+fn progress_bar(total: u64) -> indicatif::ProgressBar {
     let bar = indicatif::ProgressBar::new(total);
     bar.set_style(
         indicatif::ProgressStyle::with_template(
@@ -207,16 +278,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         )
         .expect("template"),
     );
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(a.threads.unwrap_or(0))
-        .build()?;
-    let start = Instant::now();
-    let table = pool.install(|| ScratchTable::compute(&params, &|k| bar.inc(k)))?;
-    let secs = start.elapsed().as_secs_f64();
-    bar.finish_and_clear();
-    table
-        .save(&a.output)
-        .with_context(|| format!("writing {}", a.output.display()))?;
+    bar
+}
+
+/// What a 2D table took and holds: its sizes, the time and rate, the albedo range and the
+/// energy the bounce cap dropped.
+fn report(params: &TableParams, table: &ScratchTable, secs: f64, threads: usize) {
     let alb = table.albedo_2d();
     let (lo, hi) = alb
         .iter()
@@ -239,21 +306,20 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         Estimator::Walks => "",
         Estimator::Kernel => " (kernel estimator: equivalent N_r-scheme paths)",
     };
+    let total = params.trace.total_paths() + params.trace.groove_paths();
     println!(
-        "wall time {secs:.3} s, {total} paths, {:.3e} paths/s ({} threads){estimator}",
+        "wall time {secs:.3} s, {total} paths, {:.3e} paths/s ({threads} threads){estimator}",
         total as f64 / secs,
-        pool.current_num_threads()
     );
     println!(
         "2D albedo range [{lo:.6}, {hi:.6}]; max energy dropped by the bounce cap {dropped:.3e}"
     );
-    println!(
-        "wrote {} (params hash {})",
-        a.output.display(),
-        &params.hash()[..16]
-    );
-    Ok(())
 }
+
+/// The most paths a wall table may trace (incident directions x sides x `--wall-paths`):
+/// 10^11, 8 hours on one core at the 3.5 million paths a second the groove tracer runs on a V
+/// groove, 40 on a 64-segment round one (0.7 million); the shipped sizes trace 4 x 10^7.
+const MAX_WALL_PATHS: u64 = 100_000_000_000;
 
 /// `--walls dielectric` or `--walls specular --roughness A`: the wall table
 /// (`striae::precompute::wall_table`; four lobes, or rough specular walls' one), and with `--check N` its
@@ -282,24 +348,34 @@ fn wall_table(
         };
         anyhow::anyhow!("{flag}: {} {}: {}", e.key, e.value, e.why)
     })?;
-    // Four lobes of `Bo x B` f64 bins per incident direction, and one trace's histograms.
-    let b2 = (params.bins * params.bins) as u64;
-    let lobe = (params.exit_rows() * params.bins) as u64;
-    let bytes = 32 * (params.theta_bins * params.phi_bins) as u64 * lobe + 64 * b2;
-    super::memory::check(
+    let total = params.total_paths();
+    if total > MAX_WALL_PATHS {
+        anyhow::bail!(
+            "--wall-paths {} x --incident {}x{} x {} side(s) is {total} paths, more than \
+             {MAX_WALL_PATHS} (hours to days: the groove tracer runs 1 to 4 million paths a \
+             second a core); lower --wall-paths or --incident",
+            params.paths,
+            params.theta_bins,
+            params.phi_bins,
+            params.walls.sides().len()
+        );
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()?;
+    striae::memory::check(
         &format!(
             "--exit-bins {} --incident {}x{}",
             params.bins, params.theta_bins, params.phi_bins
         ),
-        bytes,
+        params.memory_estimate(pool.current_num_threads()),
         a.max_memory,
     )?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(a.threads.unwrap_or(0))
-        .build()?;
+    let bar = progress_bar(total);
     let start = Instant::now();
-    let table = pool.install(|| WallTable::compute(&params))?;
+    let table = pool.install(|| WallTable::compute_with(&params, &|k| bar.inc(k)))?;
     let secs = start.elapsed().as_secs_f64();
+    bar.finish_and_clear();
     table
         .save(&a.output)
         .with_context(|| format!("writing {}", a.output.display()))?;

@@ -6,6 +6,7 @@
 use anyhow::{bail, Context};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
+use striae::memory::parse_size;
 use striae::render::sampler::SamplerKind;
 use striae::render::scene::{Overrides, Scene};
 
@@ -32,8 +33,8 @@ pub struct Args {
     /// `render.sampler`).
     #[arg(long, value_parser = parse_sampler)]
     pub sampler: Option<SamplerKind>,
-    /// PNG preview exposure in stops (overrides `render.exposure`).
-    #[arg(long, allow_hyphen_values = true)]
+    /// PNG preview exposure in stops, within +-126 (overrides `render.exposure`).
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_exposure)]
     pub exposure: Option<f32>,
     /// Output path: `NAME.exr`, `NAME.png` or `NAME`; both NAME.exr and NAME.png are written.
     /// Default: `striae` for the built-in scene, the scene file's name otherwise.
@@ -54,9 +55,9 @@ pub struct Args {
     /// is the whole render within Monte Carlo noise, not bit for bit (docs/distributed.md).
     #[arg(long, value_name = "A..B", value_parser = parse_samples)]
     pub samples: Option<[u32; 2]>,
-    /// Refuse the job if its estimated memory exceeds this (bytes, or with K, M, G, T); the
-    /// memory available is always a limit.
-    #[arg(long, value_parser = super::memory::parse_size)]
+    /// Refuse the job if its estimated memory exceeds this (bytes, or with K, M, G, T); what
+    /// the machine leaves (MemAvailable, ulimit -v and -d, the cgroup's limit) always is one.
+    #[arg(long, value_parser = parse_size)]
     pub max_memory: Option<u64>,
     /// No progress bar.
     #[arg(long, short = 'q')]
@@ -96,6 +97,17 @@ pub(crate) fn parse_threads(s: &str) -> Result<usize, String> {
     match s.parse::<usize>() {
         Ok(n) if (1..=MAX_THREADS).contains(&n) => Ok(n),
         _ => Err(format!("`{s}` is not a thread count (1 to {MAX_THREADS})")),
+    }
+}
+
+/// `--exposure`: stops within [`striae::render::film::MAX_EXPOSURE`] either way; the error
+/// quotes the value as written (`1e39` is not reported as `inf`).
+fn parse_exposure(s: &str) -> Result<f32, String> {
+    let max = striae::render::film::MAX_EXPOSURE;
+    // The range checked in f64, the value read as f32 directly (no double rounding).
+    match (s.parse::<f64>(), s.parse::<f32>()) {
+        (Ok(wide), Ok(e)) if wide.abs() <= max as f64 => Ok(e),
+        _ => Err(format!("`{s}` is not an exposure in stops within +-{max}")),
     }
 }
 
@@ -162,9 +174,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         max_depth: args.max_depth,
         sampler: args.sampler,
     };
-    if let Some(e) = args.exposure.filter(|e| !e.is_finite()) {
-        bail!("--exposure {e}: must be finite");
-    }
     striae::render::integrator::LoopCopy::env_cap().map_err(anyhow::Error::msg)?;
     super::print_library_messages(args.quiet);
     let (mut scene, scene_text) = match &args.scene {
@@ -189,8 +198,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some((i, n)) => striae::render::parts::part_pixel_count((s.width, s.height), i, n)? as u64,
         None => s.width as u64 * s.height as u64,
     };
-    let size = format!("--res {}x{}", s.width, s.height);
-    super::memory::check(&size, pixels * 24, args.max_memory)?;
+    let size = match args.res {
+        Some(_) => format!("--res {}x{}", s.width, s.height),
+        None => format!(
+            "--res (the scene's render.width x render.height, {}x{})",
+            s.width, s.height
+        ),
+    };
+    striae::render::integrator::check_memory(&scene, pixels, &size, args.max_memory)?;
     let total = pixels * args.samples.map_or(s.spp, |[a, b]| b - a) as u64;
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
     eprintln!(
@@ -236,7 +251,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let (exr_path, png_path) = image_outputs(args.output.as_deref(), args.scene.as_deref())?;
     let (image, stats) =
-        pool.install(|| striae::render::integrator::render(&scene, &|n| bar.inc(n)));
+        pool.install(|| striae::render::integrator::try_render(&scene, &|n| bar.inc(n), &size))?;
     bar.finish_and_clear();
 
     image

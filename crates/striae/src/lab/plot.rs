@@ -21,6 +21,20 @@ pub enum PlotError {
     Draw { path: PathBuf, why: String },
     #[error("plot: --phi-i {0} degrees is outside (-90, 90)")]
     BadAngle(f64),
+    #[error("{}: plots are PNG files; give NAME.png or NAME, not .{ext}", .path.display())]
+    NotPng { path: PathBuf, ext: String },
+}
+
+/// A plot's name: `NAME.png` or `NAME`; another extension (`.jpg`) is refused, as
+/// `striae render -o` refuses it, instead of PNG bytes written under a JPEG's name.
+pub fn check_png_name(path: &Path) -> Result<(), PlotError> {
+    match path.extension() {
+        Some(e) if !e.eq_ignore_ascii_case("png") => Err(PlotError::NotPng {
+            path: path.to_path_buf(),
+            ext: e.to_string_lossy().into_owned(),
+        }),
+        _ => Ok(()),
+    }
 }
 
 fn register_font() {
@@ -47,6 +61,7 @@ pub(crate) fn render(
     register_font();
     let _ = size;
     let err = draw_err(path);
+    check_png_name(path)?;
     crate::io::check_destination(path).map_err(|e| err(e.to_string()))?;
     // plotters picks the encoder from the extension: keep `.png` on the temporary name.
     let tmp = crate::io::TempFile::new(path, ".png");

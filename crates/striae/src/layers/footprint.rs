@@ -149,8 +149,23 @@ fn union_area<const ARCS: usize, const DISCS: usize>(
     r: f64,
     poly: &[DVec2],
 ) -> f64 {
+    let normals = edge_lines(poly);
+    let normals = &normals[..poly.len()];
+    let mut twice_area = 0.0;
+    // Excluded arcs of the circle at hand, reused from circle to circle.
+    let mut iv = [Arc::EMPTY; ARCS];
+    for (ci, &c) in centres.iter().enumerate() {
+        circle_arcs(ci, c, centres, r, normals, &mut iv, &mut twice_area);
+    }
+    edge_pieces::<DISCS>(centres, r, poly, &mut twice_area);
+    (0.5 * twice_area).max(0.0)
+}
+
+/// The outward unit normal `n` and offset `d` of each edge's line (inside is `n.x <= d`);
+/// zero for a zero-length edge.
+#[inline]
+fn edge_lines(poly: &[DVec2]) -> [(DVec2, f64); MAX_EDGES] {
     let ne = poly.len();
-    // Outward unit normals and offsets of the edges: inside is n.x <= d.
     let mut normals = [(DVec2::ZERO, 0.0f64); MAX_EDGES];
     for e in 0..ne {
         let (a, b) = (poly[e], poly[(e + 1) % ne]);
@@ -163,78 +178,99 @@ fn union_area<const ARCS: usize, const DISCS: usize>(
         let n = DVec2::new(d.y, -d.x) / len;
         normals[e] = (n, n.dot(a));
     }
-    let mut twice_area = 0.0;
+    normals
+}
+
+/// Adds to `twice_area` the boundary integral over the arcs of circle `ci` (centre `c`) that
+/// lie inside the polygon (edge lines `normals`) and outside every other disc. The excluded
+/// angular intervals go to `iv`, kept as unit vectors ordered by a pseudo-angle: no
+/// trigonometry but one `atan2` per kept arc.
+#[inline]
+fn circle_arcs(
+    ci: usize,
+    c: DVec2,
+    centres: &[DVec2],
+    r: f64,
+    normals: &[(DVec2, f64)],
+    iv: &mut [Arc],
+    twice_area: &mut f64,
+) {
     let r2 = r * r;
-    // Arcs: for each circle, the angular intervals excluded (outside the polygon or inside
-    // another disc), kept as unit vectors ordered by a pseudo-angle: no trigonometry but one
-    // atan2 per kept arc.
-    let mut iv = [Arc::EMPTY; ARCS];
-    'circles: for (ci, &c) in centres.iter().enumerate() {
-        let mut n = 0usize;
-        for &(nrm, d) in &normals[..ne] {
-            if nrm == DVec2::ZERO {
-                continue;
-            }
-            let s = d - nrm.dot(c); // signed distance of the centre inside the edge's line
-            if s >= r {
-                continue;
-            }
-            if s <= -r {
-                continue 'circles; // the whole circle is outside the polygon
-            }
-            Arc::push_excluded(&mut iv, &mut n, nrm, s / r);
-        }
-        for (cj, &o) in centres.iter().enumerate() {
-            if cj == ci {
-                continue;
-            }
-            let v = o - c;
-            let dist = v.length();
-            if dist >= 2.0 * r {
-                continue;
-            }
-            if dist == 0.0 {
-                // Coincident circles: keep the boundary of the first copy only.
-                if cj < ci {
-                    continue 'circles;
-                }
-                continue;
-            }
-            Arc::push_excluded(&mut iv, &mut n, v / dist, dist / (2.0 * r));
-        }
-        if n == 0 {
-            twice_area += r2 * TAU; // the whole circle bounds the region
+    let mut n = 0usize;
+    for &(nrm, d) in normals {
+        if nrm == DVec2::ZERO {
             continue;
         }
-        let m = Arc::merge(&mut iv[..n]);
-        // Integrate (x dy - y dx) = r^2 + r (cx cos t + cy sin t) dt over the kept arcs, from
-        // unit vector e0 to e1 counter-clockwise.
-        let mut arc = |e0: DVec2, e1: DVec2| {
-            let mut dt = cross(e0, e1).atan2(e0.dot(e1));
-            if dt < 0.0 {
-                dt += TAU;
-            }
-            twice_area += r2 * dt + r * (c.x * (e1.y - e0.y) - c.y * (e1.x - e0.x));
-        };
-        if iv[0].k0 > 0.0 {
-            arc(DVec2::X, iv[0].e0);
+        let s = d - nrm.dot(c); // signed distance of the centre inside the edge's line
+        if s >= r {
+            continue;
         }
-        for w in 0..m {
-            let next = if w + 1 < m {
-                iv[w + 1]
-            } else {
-                Arc {
-                    k0: 4.0,
-                    e0: DVec2::X,
-                    ..Arc::EMPTY
-                }
-            };
-            if next.k0 > iv[w].k1 {
-                arc(iv[w].e1, next.e0);
+        if s <= -r {
+            return; // the whole circle is outside the polygon
+        }
+        Arc::push_excluded(iv, &mut n, nrm, s / r);
+    }
+    for (cj, &o) in centres.iter().enumerate() {
+        if cj == ci {
+            continue;
+        }
+        let v = o - c;
+        let dist = v.length();
+        if dist >= 2.0 * r {
+            continue;
+        }
+        if dist == 0.0 {
+            // Coincident circles: keep the boundary of the first copy only.
+            if cj < ci {
+                return;
             }
+            continue;
+        }
+        Arc::push_excluded(iv, &mut n, v / dist, dist / (2.0 * r));
+    }
+    if n == 0 {
+        *twice_area += r2 * TAU; // the whole circle bounds the region
+        return;
+    }
+    let m = Arc::merge(&mut iv[..n]);
+    // Integrate (x dy - y dx) = r^2 + r (cx cos t + cy sin t) dt over the kept arcs, from
+    // unit vector e0 to e1 counter-clockwise.
+    let mut arc = |e0: DVec2, e1: DVec2| {
+        let mut dt = cross(e0, e1).atan2(e0.dot(e1));
+        if dt < 0.0 {
+            dt += TAU;
+        }
+        *twice_area += r2 * dt + r * (c.x * (e1.y - e0.y) - c.y * (e1.x - e0.x));
+    };
+    if iv[0].k0 > 0.0 {
+        arc(DVec2::X, iv[0].e0);
+    }
+    for w in 0..m {
+        let next = if w + 1 < m {
+            iv[w + 1]
+        } else {
+            Arc {
+                k0: 4.0,
+                e0: DVec2::X,
+                ..Arc::EMPTY
+            }
+        };
+        if next.k0 > iv[w].k1 {
+            arc(iv[w].e1, next.e0);
         }
     }
-    // Edge pieces inside some disc: (x dy - y dx) along a -> b is cross(a, b) dt.
+}
+
+/// Adds to `twice_area` the boundary integral over the pieces of each polygon edge inside
+/// some disc: `(x dy - y dx)` along `a -> b` is `cross(a, b) dt`.
+#[inline]
+fn edge_pieces<const DISCS: usize>(
+    centres: &[DVec2],
+    r: f64,
+    poly: &[DVec2],
+    twice_area: &mut f64,
+) {
+    let (ne, r2) = (poly.len(), r * r);
     let mut tv = [(0.0f64, 0.0f64); DISCS];
     for e in 0..ne {
         let (a, b) = (poly[e], poly[(e + 1) % ne]);
@@ -261,9 +297,8 @@ fn union_area<const ARCS: usize, const DISCS: usize>(
         }
         let m = merge(&mut tv[..n]);
         let covered: f64 = tv[..m].iter().map(|(t0, t1)| t1 - t0).sum();
-        twice_area += cross(a, b) * covered;
+        *twice_area += cross(a, b) * covered;
     }
-    (0.5 * twice_area).max(0.0)
 }
 
 /// The mean coverage of Worley noise thresholded at `tau` (`F1 < tau`), averaged over the hash:

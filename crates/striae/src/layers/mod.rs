@@ -47,6 +47,9 @@ pub const MAX_LAYERS: usize = 64;
 /// Smallest scratch length or width: below it the scratch is finer than `f32` texture
 /// coordinates can place (their spacing near 1 is 6e-8).
 pub const MIN_SIZE: f64 = 1e-6;
+/// Largest scratch length or width: beyond it the whole texture `[0, 1]^2` lies within a
+/// millionth of one noise cell, under one scratch or none whatever the seed.
+pub const MAX_SIZE: f64 = 1e6;
 /// The noise period of every layer (cells). With `MIN_SIZE` the texture spans at most 1.5e6
 /// cells, so no layer repeats inside `[0, 1]^2`.
 pub const LAYER_NOISE_PERIOD: u64 = 1 << 24;
@@ -54,11 +57,11 @@ pub const LAYER_NOISE_PERIOD: u64 = 1 << 24;
 /// Errors of the scratch-layer module: each names the parameter and the bad value.
 #[derive(Debug, thiserror::Error)]
 pub enum LayerError {
-    #[error("scratch `length` must be a finite number >= {MIN_SIZE}, got {0}")]
+    #[error("scratch `length` must be a finite number in [{MIN_SIZE:e}, {MAX_SIZE:e}], got {0:?}")]
     Length(f64),
-    #[error("scratch `width` must be a finite number >= {MIN_SIZE}, got {0}")]
+    #[error("scratch `width` must be a finite number in [{MIN_SIZE:e}, {MAX_SIZE:e}], got {0:?}")]
     Width(f64),
-    #[error("scratch `threshold` (tau) must lie in (0, 1], got {0}")]
+    #[error("scratch `threshold` (tau) must lie in (0, 1], got {0:?}")]
     Threshold(f64),
     #[error("number of `layers` must be between 1 and {MAX_LAYERS}, got {0}")]
     LayerCount(usize),
@@ -72,6 +75,9 @@ pub enum LayerError {
     LayerIndex { index: usize, count: usize },
     #[error("could not encode {what} as PNG: {msg}")]
     Png { what: String, msg: String },
+    /// A raster the allocator refused.
+    #[error(transparent)]
+    Memory(#[from] crate::memory::MemoryError),
 }
 
 /// The user's scratch parameters (METHOD.md section 5, the seed's Table 1). Deserializes from
@@ -116,10 +122,11 @@ impl LayerParams {
     }
 
     pub fn validate(&self) -> Result<(), LayerError> {
-        if !(self.length.is_finite() && self.length >= MIN_SIZE) {
+        let size = |x: f64| (MIN_SIZE..=MAX_SIZE).contains(&x);
+        if !size(self.length) {
             return Err(LayerError::Length(self.length));
         }
-        if !(self.width.is_finite() && self.width >= MIN_SIZE) {
+        if !size(self.width) {
             return Err(LayerError::Width(self.width));
         }
         if !(self.threshold > 0.0 && self.threshold <= 1.0) {

@@ -25,6 +25,24 @@ pub const MAX_RASTER_CELLS: f64 = 2.0e8;
 /// Rows per parallel work item.
 const BAND: usize = 16;
 
+/// The memory `striae layers` takes for `layers` rasters of side `res` (with `stages`, the
+/// stages of Fig. 4 too): per texel, one layer's coverage and mip chain (5.3 bytes), the
+/// combined image (12), the PNG being encoded (2) and, per layer, its encoded PNG held until
+/// all are written (up to 1); 6 more with the stages. Measured as the peak resident size
+/// (`/usr/bin/time -f %M`) of `striae layers --setting 1`: 317 MB at `--res 4096`, 1231 MB at
+/// `--res 8192` (18.6 bytes a texel between them), 395 MB at `--res 4096 --layers 8`.
+pub fn images_bytes(res: usize, layers: usize, stages: bool) -> u64 {
+    let per_texel = 19 + layers as u64 + if stages { 6 } else { 0 };
+    (res as u64 * res as u64).saturating_mul(per_texel)
+}
+
+/// The memory of `layers` coverage masks of side `res` as one `(K, R, R)` float array (the
+/// Python bindings' `LayerSet.masks`): 4 bytes a texel a layer, and one layer's raster and
+/// mip chain being computed (6).
+pub fn masks_bytes(res: usize, layers: usize) -> u64 {
+    (res as u64 * res as u64).saturating_mul(4 * layers as u64 + 6)
+}
+
 /// The centre of texel `(x, y)` of an `res x res` raster, in texture space.
 #[inline]
 pub fn texel_centre(res: usize, x: usize, y: usize) -> DVec2 {
@@ -173,11 +191,12 @@ pub struct CombinedImage {
 }
 
 impl CombinedImage {
-    pub fn new(res: usize) -> Self {
-        CombinedImage {
+    /// An image of side `res`, or an error where the allocator refuses it.
+    pub fn new(res: usize) -> Result<Self, LayerError> {
+        Ok(CombinedImage {
             res,
-            dark: vec![1.0; 3 * res * res],
-        }
+            dark: crate::memory::try_alloc_vec(3 * res * res, 1.0, "the combined layers image")?,
+        })
     }
 
     pub fn add(&mut self, raster: &CoverageRaster, alpha: f64) {
@@ -211,13 +230,13 @@ pub fn stage_noise(layer: &ScratchLayer, res: usize) -> Result<Vec<f32>, LayerEr
     check_resolution(res)?;
     let (hl, hw) = layer.half_axes();
     let scale = 1.0 / (hl * hw / (layer.threshold() * layer.threshold())).sqrt();
-    Ok(per_texel(res, |p| {
+    per_texel(res, |p| {
         1.0 - layer
             .noise()
             .eval((p - super::layer::CENTRE) * scale)
             .f1
             .min(1.0)
-    }))
+    })
 }
 
 /// Stage (b) of Fig. 4: the same noise after rotation by `alpha` and stretch by `(L, W)`, i.e.
@@ -225,17 +244,23 @@ pub fn stage_noise(layer: &ScratchLayer, res: usize) -> Result<Vec<f32>, LayerEr
 /// which is the anti-aliased coverage raster ([`rasterize`]).
 pub fn stage_stretched(layer: &ScratchLayer, res: usize) -> Result<Vec<f32>, LayerError> {
     check_resolution(res)?;
-    Ok(per_texel(res, |p| 1.0 - layer.noise_at(p).f1.min(1.0)))
+    per_texel(res, |p| 1.0 - layer.noise_at(p).f1.min(1.0))
 }
 
-fn per_texel(res: usize, f: impl Fn(DVec2) -> f64 + Sync) -> Vec<f32> {
-    let mut out = vec![0.0f32; res * res];
+/// A raster of side `res`, or an error where the allocator refuses it.
+fn raster_of(res: usize) -> Result<Vec<f32>, LayerError> {
+    let what = format!("a {res} x {res} layer raster");
+    Ok(crate::memory::try_alloc_vec(res * res, 0.0f32, &what)?)
+}
+
+fn per_texel(res: usize, f: impl Fn(DVec2) -> f64 + Sync) -> Result<Vec<f32>, LayerError> {
+    let mut out = raster_of(res)?;
     out.par_chunks_mut(res).enumerate().for_each(|(y, row)| {
         for (x, o) in row.iter_mut().enumerate() {
             *o = f(texel_centre(res, x, y)) as f32;
         }
     });
-    out
+    Ok(out)
 }
 
 /// One scratch that reaches the texture: its feature point in noise and texture space.
@@ -258,7 +283,7 @@ pub fn rasterize(layer: &ScratchLayer, res: usize) -> Result<CoverageRaster, Lay
         let data = per_texel(res, |p| {
             r.coverage(p, a, b, usize::MAX)
                 .unwrap_or_else(|| r.is_scratched(p) as u8 as f64)
-        });
+        })?;
         return Ok(CoverageRaster::from_coverage(res, data));
     }
     let shape = EllipseShape::of(layer);
@@ -276,7 +301,7 @@ pub fn rasterize(layer: &ScratchLayer, res: usize) -> Result<CoverageRaster, Lay
         }
     }
     let texel = TexelShape::of(layer, r);
-    let mut data = vec![0.0f32; res * res];
+    let mut data = raster_of(res)?;
     data.par_chunks_mut(BAND * res)
         .enumerate()
         .for_each(|(b, chunk)| {

@@ -285,8 +285,15 @@ pub fn trace_groove(
     s.validate()?;
     let tracer = Tracer::new(profile, s);
     let blocks = s.paths.div_ceil(BLOCK);
-    let acc = (0..blocks)
+    // At most about 4 work items a thread, so that at most 5 accumulators a thread are alive
+    // (`lab::gonio::memory_estimate`); the sums are integers, the same however split.
+    let min_len = blocks
+        .div_ceil(4 * rayon::current_num_threads() as u64)
+        .max(1);
+    let acc = (0..blocks as usize)
         .into_par_iter()
+        .with_min_len(min_len as usize)
+        .map(|b| b as u64)
         .fold(
             || Acc::new(s.bins),
             |mut acc, b| {

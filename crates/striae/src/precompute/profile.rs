@@ -48,6 +48,20 @@ pub enum ProfileError {
         line: usize,
         text: String,
     },
+    #[error("profile file {path}, line {line}: `{text}` {why}")]
+    BadPoint {
+        path: PathBuf,
+        line: usize,
+        text: String,
+        why: String,
+    },
+    #[error("profile {what}: point {index} ({x}, {z}) lies more than {MAX_EXTENT} opening widths from the opening's centre")]
+    TooFar {
+        what: String,
+        index: usize,
+        x: f64,
+        z: f64,
+    },
     #[error("profile {what}: has {segments} segment(s), at least 2 are needed")]
     TooFewSegments { what: String, segments: usize },
     #[error("profile {what}: has more than {MAX_SEGMENTS} segments (the most a profile may have)")]
@@ -105,7 +119,7 @@ impl Profile {
     /// V-groove of depth `d` (bottom at `(0, -d)`).
     pub fn v_depth(depth: f64) -> Result<Self, ProfileError> {
         let spec = format!("v:depth={depth}");
-        positive(&spec, "depth", depth)?;
+        depth_in_range(&spec, depth)?;
         Profile::from_points(spec, vec![[-0.5, 0.0], [0.0, -depth], [0.5, 0.0]])
     }
 
@@ -116,6 +130,14 @@ impl Profile {
             return Err(bad(&spec, "angle", deg, "must be in (0, 180) degrees"));
         }
         let depth = 0.5 / (deg.to_radians() / 2.0).tan();
+        if depth > MAX_EXTENT {
+            return Err(bad(
+                &spec,
+                "angle",
+                deg,
+                "makes a groove deeper than 1000 opening widths (profile::MAX_EXTENT)",
+            ));
+        }
         Profile::from_points(spec, vec![[-0.5, 0.0], [0.0, -depth], [0.5, 0.0]])
     }
 
@@ -163,7 +185,7 @@ impl Profile {
     /// Trapezoid of depth `d` with a flat bottom of width `b` in (0, 1).
     pub fn trapezoid(depth: f64, bottom: f64) -> Result<Self, ProfileError> {
         let spec = format!("trapezoid:depth={depth},bottom={bottom}");
-        positive(&spec, "depth", depth)?;
+        depth_in_range(&spec, depth)?;
         if !(bottom.is_finite() && bottom > 0.0 && bottom < 1.0) {
             return Err(bad(
                 &spec,
@@ -197,6 +219,8 @@ impl Profile {
             source,
         })?;
         let mut raw = Vec::new();
+        // Where each vertex was written (line number and text), for errors.
+        let mut written: Vec<(usize, &str)> = Vec::new();
         for (i, line) in text.lines().enumerate() {
             let body = line.split('#').next().unwrap_or("").trim();
             if body.is_empty() {
@@ -213,7 +237,10 @@ impl Profile {
                 });
             }
             match parsed {
-                Some(v) if v.len() == 2 => raw.push([v[0], v[1]]),
+                Some(v) if v.len() == 2 => {
+                    raw.push([v[0], v[1]]);
+                    written.push((i + 1, line));
+                }
                 _ => {
                     return Err(ProfileError::BadLine {
                         path: path.into(),
@@ -231,15 +258,20 @@ impl Profile {
                 segments: raw.len().saturating_sub(1),
             });
         }
-        for (index, p) in raw.iter().enumerate() {
-            if !(p[0].is_finite() && p[1].is_finite()) {
-                return Err(ProfileError::NonFinite {
-                    what,
-                    index,
-                    x: p[0],
-                    z: p[1],
-                });
+        let bad_point = |index: usize, why: String| {
+            let (line, text) = written[index];
+            ProfileError::BadPoint {
+                path: path.into(),
+                line,
+                text: text.to_string(),
+                why,
             }
+        };
+        if let Some(index) = raw
+            .iter()
+            .position(|p| !(p[0].is_finite() && p[1].is_finite()))
+        {
+            return Err(bad_point(index, "is not two finite numbers".into()));
         }
         let (a, b) = (raw[0], raw[raw.len() - 1]);
         if a[1].abs() > Z_TOL || b[1].abs() > Z_TOL || b[0] <= a[0] {
@@ -251,11 +283,26 @@ impl Profile {
                 z1: b[1],
             });
         }
+        if !(b[0] - a[0]).is_finite() {
+            return Err(bad_point(
+                raw.len() - 1,
+                "is further from the first point than a number can hold".into(),
+            ));
+        }
         let s = 1.0 / (b[0] - a[0]);
         let mut points: Vec<[f64; 2]> = raw
             .iter()
             .map(|p| [(p[0] - a[0]) * s - 0.5, p[1] * s])
             .collect();
+        if let Some(index) = points.iter().position(|p| !within_extent(*p)) {
+            return Err(bad_point(
+                index,
+                format!(
+                    "lies more than {MAX_EXTENT} opening widths from the opening's centre \
+                     (the first and last points are the opening)"
+                ),
+            ));
+        }
         let last = points.len() - 1;
         points[0] = [-0.5, 0.0];
         points[last] = [0.5, 0.0];
@@ -278,6 +325,7 @@ impl Profile {
             _ => return Err(ProfileError::UnknownKind(kind.to_string())),
         };
         let mut params: Vec<(String, f64)> = Vec::new();
+        let mut written: Vec<(String, &str)> = Vec::new();
         for item in rest.split(',').map(str::trim).filter(|s| !s.is_empty()) {
             let (k, v) = item
                 .split_once('=')
@@ -306,7 +354,9 @@ impl Profile {
                 why: "not a number".into(),
             })?;
             params.push((k.to_string(), x));
+            written.push((k.to_string(), v));
         }
+        let w = |e| as_written(e, spec, &written);
         let get = |k: &str| params.iter().find(|(p, _)| p == k).map(|(_, v)| *v);
         let need = |k: &'static str| {
             get(k).ok_or_else(|| ProfileError::MissingParameter {
@@ -316,8 +366,8 @@ impl Profile {
         };
         let mut profile = match kind {
             "v" => match (get("depth"), get("angle")) {
-                (Some(d), None) => Profile::v_depth(d)?,
-                (None, Some(a)) => Profile::v_angle(a)?,
+                (Some(d), None) => Profile::v_depth(d).map_err(w)?,
+                (None, Some(a)) => Profile::v_angle(a).map_err(w)?,
                 (Some(_), Some(_)) => {
                     return Err(ProfileError::BadParameter {
                         spec: spec.into(),
@@ -336,16 +386,16 @@ impl Profile {
             "round" => {
                 let segs = get("segments").unwrap_or(64.0);
                 if segs.fract() != 0.0 || !(2.0..=MAX_SEGMENTS as f64).contains(&segs) {
-                    return Err(bad(
+                    return Err(w(bad(
                         spec,
                         "segments",
                         segs,
                         "must be an integer in 2..=4096 (profile::MAX_SEGMENTS)",
-                    ));
+                    )));
                 }
-                Profile::round(need("depth")?, segs as usize)?
+                Profile::round(need("depth")?, segs as usize).map_err(w)?
             }
-            "trapezoid" => Profile::trapezoid(need("depth")?, need("bottom")?)?,
+            "trapezoid" => Profile::trapezoid(need("depth")?, need("bottom")?).map_err(w)?,
             _ => Profile::flat(),
         };
         profile.spec = spec.to_string();
@@ -433,6 +483,40 @@ fn positive(spec: &str, key: &str, v: f64) -> Result<(), ProfileError> {
     }
 }
 
+/// A groove's `depth`: positive and at most [`MAX_EXTENT`].
+fn depth_in_range(spec: &str, depth: f64) -> Result<(), ProfileError> {
+    positive(spec, "depth", depth)?;
+    if depth > MAX_EXTENT {
+        return Err(bad(
+            spec,
+            "depth",
+            depth,
+            "must be at most 1000 opening widths (profile::MAX_EXTENT)",
+        ));
+    }
+    Ok(())
+}
+
+/// A constructor's error with the specification and the parameter's value as the user wrote
+/// them (`written`: key and text); a number printed back can differ from its text (`1e308`
+/// prints as 309 digits).
+fn as_written(e: ProfileError, spec: &str, written: &[(String, &str)]) -> ProfileError {
+    match e {
+        ProfileError::BadParameter {
+            key, value, why, ..
+        } => ProfileError::BadParameter {
+            spec: spec.into(),
+            value: written
+                .iter()
+                .find(|(k, _)| *k == key)
+                .map_or(value, |(_, text)| text.to_string()),
+            key,
+            why,
+        },
+        other => other,
+    }
+}
+
 fn cross(a: [f64; 2], b: [f64; 2]) -> f64 {
     a[0] * b[1] - a[1] * b[0]
 }
@@ -468,6 +552,16 @@ fn segments_touch(p1: [f64; 2], p2: [f64; 2], q1: [f64; 2], q2: [f64; 2]) -> boo
 /// scratch profile needs tens.
 pub const MAX_SEGMENTS: usize = 4096;
 
+/// The farthest a vertex may lie from the opening's centre, in opening widths: 1000. A deeper
+/// or wider groove is no scratch, and beyond it the tracers' absolute tolerances (`1e-10`
+/// along a ray) approach the spacing of `f64` values at such coordinates.
+pub const MAX_EXTENT: f64 = 1000.0;
+
+/// `|x|` and `|z|` at most [`MAX_EXTENT`].
+fn within_extent(p: [f64; 2]) -> bool {
+    p[0].abs() <= MAX_EXTENT && p[1].abs() <= MAX_EXTENT
+}
+
 fn validate(what: &str, points: &[[f64; 2]]) -> Result<(), ProfileError> {
     let what = what.to_string();
     let segs = points.len().saturating_sub(1);
@@ -491,6 +585,14 @@ fn validate(what: &str, points: &[[f64; 2]]) -> Result<(), ProfileError> {
         }
         if p[1] > Z_TOL {
             return Err(ProfileError::AboveSurface {
+                what,
+                index,
+                x: p[0],
+                z: p[1],
+            });
+        }
+        if !within_extent(*p) {
+            return Err(ProfileError::TooFar {
                 what,
                 index,
                 x: p[0],
@@ -759,6 +861,69 @@ mod tests {
                 Profile::parse(&format!("file:{}", f.display())).is_err(),
                 "{name} accepted"
             );
+        }
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// Absurd numbers are refused with the value as the user wrote it (`1e308` printed back
+    /// is 309 digits long): parameters of a specification, and the line of a profile file.
+    #[test]
+    fn absurd_coordinates_are_refused_as_written() {
+        for (spec, key, text) in [
+            ("v:depth=1e308", "depth", "1e308"),
+            ("v:angle=1e-300", "angle", "1e-300"),
+            ("trapezoid:depth=2e3,bottom=0.5", "depth", "2e3"),
+            ("round:depth=1e308", "depth", "1e308"),
+            ("round:depth=0.3,segments=1e308", "segments", "1e308"),
+        ] {
+            let e = Profile::parse(spec).unwrap_err();
+            let message = e.to_string();
+            assert!(
+                matches!(&e, ProfileError::BadParameter { key: k, value, spec: s, .. }
+                    if k == key && value == text && s == spec),
+                "{spec}: {message}"
+            );
+            assert!(message.len() < 200, "{message}");
+        }
+        assert!(Profile::parse("v:depth=1000").is_ok());
+        assert!(matches!(
+            Profile::from_points("p", vec![[-0.5, 0.0], [0.0, -1000.5], [0.5, 0.0]]),
+            Err(ProfileError::TooFar { index: 1, .. })
+        ));
+        let dir = std::env::temp_dir().join(format!("striae-profile-far-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for (name, text, line, why) in [
+            (
+                "deep.txt",
+                "0 0\n1 -1e308\n2 0\n",
+                "1 -1e308",
+                "more than 1000",
+            ),
+            (
+                "wide.txt",
+                "-1e308 0\n0 -1\n1e308 0\n",
+                "1e308 0",
+                "further",
+            ),
+            ("overflow.txt", "0 0\n1 -1e400\n2 0\n", "1 -1e400", "finite"),
+            (
+                "far.txt",
+                "0 0\n0.5 -2000 # too deep\n1 0\n",
+                "0.5 -2000 # too deep",
+                "more than 1000",
+            ),
+        ] {
+            let f = dir.join(name);
+            std::fs::write(&f, text).unwrap();
+            let e = Profile::from_file(&f).unwrap_err();
+            let message = e.to_string();
+            assert!(
+                matches!(&e, ProfileError::BadPoint { text: t, .. } if t == line)
+                    && message.contains(&f.display().to_string())
+                    && message.contains(why),
+                "{name}: {message}"
+            );
+            assert!(message.len() < 300, "{message}");
         }
         std::fs::remove_dir_all(&dir).ok();
     }

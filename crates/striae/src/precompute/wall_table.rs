@@ -33,7 +33,8 @@
 use crate::optics::fresnel::FresnelLaw;
 use crate::precompute::groove::{trace_groove, GonioError, GonioSettings, GrooveWalls, LightSide};
 use crate::precompute::profile::Profile;
-use ndarray::{arr0, Array1, Array2, Array4};
+use crate::precompute::table::check_npz_sizes;
+use ndarray::{arr0, Array1, Array2, Array4, ArrayView4};
 use ndarray_npy::NpzWriter;
 use rayon::prelude::*;
 use sha2::{Digest, Sha256};
@@ -140,6 +141,28 @@ impl WallTableParams {
             walls: WallKind::Specular { law },
             ..Self::new(profile, 1.0, roughness)
         }
+    }
+
+    /// Paths traced in all: [`Self::paths`] per incident direction and side.
+    pub fn total_paths(&self) -> u64 {
+        let directions = (self.theta_bins * self.phi_bins * self.walls.sides().len()) as u64;
+        directions.saturating_mul(self.paths)
+    }
+
+    /// The memory [`WallTable::compute`] and [`WallTable::save`] take on `threads` threads: 64
+    /// bytes per cell of the table (`Bt Bp Bo B` cells of four `f64` lobes, held once as the
+    /// traced directions' results, whose many small blocks the allocator keeps after they are
+    /// freed, and once as the table, which `save` writes without a copy), and per thread 96
+    /// bytes per `B x B` exit bin (up to five of the groove tracer's accumulators, 16 bytes a
+    /// bin as for `striae gonio`, and a trace's output). Measured as the peak resident size
+    /// (`/usr/bin/time -f %M`) of `striae precompute --walls dielectric`: with `--roughness 0.3
+    /// --exit-bins 64 --wall-paths 50`, 269 MB at `--incident 32x32` and 531 MB at `32x64`
+    /// (64.1 bytes a cell between them); with `--incident 2x2 --exit-bins 1024 --wall-paths
+    /// 200000`, 56, 122 and 277 MB on 1, 2 and 4 threads (66 MB, 63 bytes a bin, a thread).
+    pub fn memory_estimate(&self, threads: usize) -> u64 {
+        let cells = (self.theta_bins * self.phi_bins * self.exit_rows()) as u64 * self.bins as u64;
+        let bins2 = (self.bins as u64).pow(2);
+        (64 * cells).saturating_add(96 * bins2 * threads as u64)
     }
 
     /// The walls in words, for titles and reports.
@@ -294,6 +317,15 @@ pub struct WallTable {
 impl WallTable {
     /// Trace every incident direction of the grid from each side of the walls' kind.
     pub fn compute(params: &WallTableParams) -> Result<Self, GonioError> {
+        Self::compute_with(params, &|_| {})
+    }
+
+    /// [`Self::compute`], calling `progress(paths)` from worker threads as paths finish (of
+    /// [`WallTableParams::total_paths`] in all).
+    pub fn compute_with(
+        params: &WallTableParams,
+        progress: &(dyn Fn(u64) + Sync),
+    ) -> Result<Self, GonioError> {
         params.validate()?;
         let (theta_i, phi_i) = (centres(params.theta_bins), centres(params.phi_bins));
         let sides = params.walls.sides();
@@ -308,7 +340,7 @@ impl WallTable {
                 let out = trace_groove(
                     &params.profile,
                     &params.settings(theta_i[t], phi_i[p], side),
-                    &|_| {},
+                    progress,
                 )?;
                 let k = out.intercept.unwrap_or(1.0);
                 let lobes = [out.reflected, out.transmitted].map(|h| {
@@ -414,9 +446,10 @@ impl WallTable {
             p.bins,
         );
         let err = |e: ndarray_npy::WriteNpzError| std::io::Error::other(e.to_string());
+        // Views of the lobes, not copies: a copy would double the table's memory.
         let arrays = self.lobes[..p.walls.lobe_count()]
             .iter()
-            .map(|v| Array4::from_shape_vec(shape, v.clone()).map_err(std::io::Error::other))
+            .map(|v| ArrayView4::from_shape(shape, v).map_err(std::io::Error::other))
             .collect::<Result<Vec<_>, _>>()?;
         crate::io::write_atomically(path, |tmp| {
             let file = std::fs::File::create(tmp)?;
@@ -467,6 +500,7 @@ impl WallTable {
             return Ok(None);
         };
         let err = |e: ndarray_npy::ReadNpzError| std::io::Error::other(e.to_string());
+        check_keys(&r.names().map_err(err)?, &kind)?;
         let walls = match kind.as_str() {
             "specular-walls" => {
                 let json = read_text(&mut r, "fresnel_law")?;
@@ -483,6 +517,12 @@ impl WallTable {
             Ok(a.into_scalar())
         };
         let (ior, roughness) = (f64s("ior")?, f64s("roughness")?);
+        if matches!(walls, WallKind::Specular { .. }) && ior != 1.0 {
+            return Err(std::io::Error::other(format!(
+                "`ior` is {ior}: a specular-walls table has no index (its walls' law is \
+                 `fresnel_law`), it stores 1"
+            )));
+        }
         let mut u64s = |k: &str| -> std::io::Result<u64> {
             let a: Array0<u64> = r.by_name::<OwnedRepr<u64>, Ix0>(k).map_err(err)?;
             Ok(a.into_scalar())
@@ -653,6 +693,41 @@ fn phi_marginal(h: &[f64], b: usize) -> Vec<f64> {
 
 type Reader = ndarray_npy::NpzReader<std::fs::File>;
 
+/// The arrays of every wall table; [`LOBES`] and `intercept_in` beside them for dielectric
+/// walls, `fresnel_law` and `r_out` for specular ones.
+const COMMON_KEYS: [&str; 10] = [
+    "kind",
+    "profile",
+    "ior",
+    "roughness",
+    "paths",
+    "seed",
+    "theta_i",
+    "phi_i",
+    "theta_o",
+    "phi_o",
+];
+
+/// Refuse an array that a table of `kind` does not hold (an unknown key, or a lobe its walls
+/// cannot have: `t_out` in a specular-walls table), naming it.
+fn check_keys(names: &[String], kind: &str) -> std::io::Result<()> {
+    let own: &[&str] = match kind {
+        "specular-walls" => &["fresnel_law", "r_out"],
+        _ => &["r_out", "t_out", "r_in", "t_in", "intercept_in"],
+    };
+    let name = |n: &String| n.strip_suffix(".npy").unwrap_or(n).to_string();
+    match names
+        .iter()
+        .map(name)
+        .find(|n| !COMMON_KEYS.contains(&n.as_str()) && !own.contains(&n.as_str()))
+    {
+        Some(key) => Err(std::io::Error::other(format!(
+            "key `{key}` is not an array of a {kind} table (docs/table-format.md)"
+        ))),
+        None => Ok(()),
+    }
+}
+
 /// Whether an `.npz`'s array names (`NpzReader::names`) hold `key`.
 fn holds(names: &[String], key: &str) -> bool {
     names
@@ -661,10 +736,16 @@ fn holds(names: &[String], key: &str) -> bool {
 }
 
 /// The file as an `.npz` reader, and its kind, when its `kind` array says it is a wall table.
+/// Every entry's declared size is checked against the bytes it holds before anything is
+/// decoded ([`crate::precompute::table`]'s check: a hostile header is an error, not a huge
+/// allocation).
 fn open_kind(path: &Path) -> std::io::Result<Option<(Reader, String)>> {
     use ndarray_npy::NpzReader;
+    use std::io::Seek;
     let err = |e: ndarray_npy::ReadNpzError| std::io::Error::other(e.to_string());
-    let file = crate::io::open_regular(path, crate::io::MAX_BINARY_BYTES)?;
+    let mut file = crate::io::open_regular(path, crate::io::MAX_BINARY_BYTES)?;
+    check_npz_sizes(&file).map_err(std::io::Error::other)?;
+    file.rewind()?;
     let mut r = NpzReader::new(file).map_err(err)?;
     let names = r.names().map_err(err)?;
     if !holds(&names, "kind") {
@@ -984,6 +1065,105 @@ mod tests {
         short.save(&path).unwrap();
         let e = WallTable::load(&path).unwrap_err().to_string();
         assert!(e.contains("`theta_o`"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// Copy entry `from` of the `.npz` at `path` into a new entry `to`.
+    fn add_entry(path: &Path, from: &str, to: &str) {
+        use std::io::{Read, Write};
+        let mut bytes = Vec::new();
+        zip::ZipArchive::new(std::fs::File::open(path).unwrap())
+            .unwrap()
+            .by_name(&format!("{from}.npy"))
+            .unwrap()
+            .read_to_end(&mut bytes)
+            .unwrap();
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(path)
+            .unwrap();
+        let mut z = zip::ZipWriter::new_append(file).unwrap();
+        let stored = zip::write::SimpleFileOptions::default()
+            .compression_method(zip::CompressionMethod::Stored);
+        z.start_file(format!("{to}.npy"), stored).unwrap();
+        z.write_all(&bytes).unwrap();
+        z.finish().unwrap();
+    }
+
+    /// Files whose kind or parameters contradict their arrays, that carry arrays no wall table
+    /// has, or whose headers declare more data than they hold, are refused naming the key.
+    #[test]
+    fn contradicting_unknown_or_hostile_files_are_refused() {
+        let dir = std::env::temp_dir().join(format!("striae-bad-walls-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let glass = small(0.2);
+        let law = FresnelLaw::Conductor { eta: 0.2, k: 3.9 };
+        let metal = WallTable::compute(&WallTableParams {
+            theta_bins: 2,
+            phi_bins: 2,
+            bins: 4,
+            paths: 200,
+            ..WallTableParams::specular(Profile::parse("v:angle=100").unwrap(), law, 0.3)
+        })
+        .unwrap();
+        let refused = |name: &str, t: &WallTable, edit: &dyn Fn(&Path), key: &str| {
+            let path = dir.join(name);
+            t.save(&path).unwrap();
+            WallTable::load(&path).unwrap().unwrap();
+            edit(&path);
+            let e = WallTable::load(&path).unwrap_err().to_string();
+            assert!(e.contains(&format!("`{key}")), "{name}: {e}");
+        };
+        // Arrays no wall table holds, or that the kind's walls cannot have.
+        refused(
+            "extra.npz",
+            &glass,
+            &|p| add_entry(p, "seed", "extra"),
+            "extra",
+        );
+        refused(
+            "t_out.npz",
+            &metal,
+            &|p| add_entry(p, "r_out", "t_out"),
+            "t_out",
+        );
+        refused(
+            "law.npz",
+            &glass,
+            &|p| add_entry(p, "profile", "fresnel_law"),
+            "fresnel_law",
+        );
+        // A specular-wall table's index is 1: any other contradicts its kind.
+        let mut indexed = metal.clone();
+        indexed.params.ior = 1.5;
+        indexed.save(&dir.join("ior.npz")).unwrap();
+        let e = WallTable::load(&dir.join("ior.npz"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`ior` is 1.5"), "{e}");
+        // A lobe's header declaring 80 GB: an error, not an allocation that aborts.
+        let huge = |p: &Path| {
+            let mut bytes = std::fs::read(p).unwrap();
+            let at = |needle: &[u8], from: usize| {
+                from + bytes[from..]
+                    .windows(needle.len())
+                    .position(|w| w == needle)
+                    .unwrap()
+            };
+            let start = at(b"'shape': (3, 4, 8, 8)", 0);
+            let end = at(b"\n", start);
+            let mut header = b"'shape': (3, 4, 100000, 100000)}".to_vec();
+            header.resize(end - start, b' ');
+            bytes[start..end].copy_from_slice(&header);
+            std::fs::write(p, bytes).unwrap();
+        };
+        refused(
+            "huge.npz",
+            &glass,
+            &huge,
+            "r_out.npy` declares 960000000000 bytes",
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
 

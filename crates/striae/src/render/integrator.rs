@@ -411,14 +411,56 @@ pub fn render_with(
     simd: Simd,
 ) -> (Image, RenderStats) {
     let (w, h) = scene.camera.resolution();
-    let tiles: Vec<u32> = (0..tile_count(w, h)).collect();
+    render_into(scene, Image::new(w, h), progress, simd)
+}
+
+/// [`render`] with the film allocated before the first sample: where the allocator refuses it,
+/// an error naming `what` (the flag or key that set the size) instead of an abort.
+pub fn try_render(
+    scene: &Scene,
+    progress: &(dyn Fn(u64) + Sync),
+    what: &str,
+) -> Result<(Image, RenderStats), crate::memory::MemoryError> {
+    let (w, h) = scene.camera.resolution();
+    let image = Image::try_new(w, h, what)?;
+    Ok(render_into(scene, image, progress, Simd::Auto))
+}
+
+/// The render of every tile of `image`'s film, placed into it.
+fn render_into(
+    scene: &Scene,
+    mut image: Image,
+    progress: &(dyn Fn(u64) + Sync),
+    simd: Simd,
+) -> (Image, RenderStats) {
+    let tiles: Vec<u32> = (0..tile_count(image.width, image.height)).collect();
     let (pixels, stats) = render_tiles(scene, &tiles, progress, &AtomicBool::new(false), simd)
         .expect("a render nothing cancels runs to the end");
-    let mut image = Image::new(w, h);
     for (&tile, px) in tiles.iter().zip(&pixels) {
         place_tile(&mut image, tile, px);
     }
     (image, stats)
+}
+
+/// Refuses a render of `pixels` pixels of the loaded `scene` (a part's, or the whole film's)
+/// that would not fit: [`crate::render::film::BYTES_PER_PIXEL`] a pixel, on top of what the
+/// scene holds ([`crate::render::scene::explicit::BYTES_PER_TRIANGLE`] a BVH primitive: its
+/// meshes, explicit grooves and BVH), which counts against `max_memory` only as the machine's
+/// headroom already excludes it. `what` names the flag or key that set the size.
+pub fn check_memory(
+    scene: &Scene,
+    pixels: u64,
+    what: &str,
+    max_memory: Option<u64>,
+) -> Result<(), crate::memory::MemoryError> {
+    let held = scene.geometry.primitive_count() as u64
+        * crate::render::scene::explicit::BYTES_PER_TRIANGLE as u64;
+    crate::memory::check_more(
+        what,
+        pixels.saturating_mul(crate::render::film::BYTES_PER_PIXEL),
+        held,
+        max_memory,
+    )
 }
 
 /// The number of [`TILE`] x [`TILE`] tiles of a `w x h` film (the last row and column may be

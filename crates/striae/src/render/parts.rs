@@ -38,6 +38,18 @@ pub const MAGIC: &[u8] = b"striae part file\n";
 pub const FORMAT: u32 = 1;
 /// The longest header a reader accepts, in bytes.
 const MAX_HEADER: u32 = 1 << 16;
+/// The largest part file a reader opens: the magic line, the longest header, the pixels of
+/// the largest image the renderer makes and the checksum (its header then says how large it
+/// must be).
+const MAX_PART_BYTES: u64 = MAGIC.len() as u64
+    + 4
+    + MAX_HEADER as u64
+    + crate::render::scene::MAX_RESOLUTION as u64
+        * crate::render::scene::MAX_RESOLUTION as u64
+        * 12
+    + 32;
+/// The most parts [`PartError::Missing`] lists before it counts the rest.
+const LISTED: usize = 10;
 
 /// What makes two renders the same image: the scene description, the settings that change
 /// pixels and the crate version.
@@ -106,6 +118,47 @@ impl PartHeader {
     pub fn sample_range(&self) -> [u32; 2] {
         self.samples.unwrap_or([0, self.render.spp])
     }
+
+    /// The number of pixels of the part the header describes, after checking it against what
+    /// a render can be: the format, an image within the renderer's size limit, a part index
+    /// and count within its tiles, an spp within the sampler's, a sample range within it and
+    /// a finite exposure. The reason, as a phrase about the header, where it cannot be.
+    fn pixel_count(&self) -> Result<usize, String> {
+        if self.format != FORMAT {
+            return Err(format!(
+                "format {} (this striae reads format {FORMAT})",
+                self.format
+            ));
+        }
+        let r = &self.render;
+        if !crate::render::scene::resolution_in_range(r.width, r.height) {
+            return Err(format!(
+                "its header's image size {}x{} is beyond the renderer's (each side 1 to {})",
+                r.width,
+                r.height,
+                crate::render::scene::MAX_RESOLUTION
+            ));
+        }
+        let max_spp = crate::render::sampler::MAX_SPP;
+        if !(1..=max_spp).contains(&r.spp) {
+            return Err(format!(
+                "its header's spp {} is beyond the sampler's (1 to {max_spp})",
+                r.spp
+            ));
+        }
+        if let Some(range) = self.samples {
+            check_samples(range, r.spp).map_err(|e| format!("its header's {e}"))?;
+        }
+        if !crate::render::film::exposure_in_range(self.exposure) {
+            return Err(format!(
+                "its header's exposure {:?} is beyond +-{} stops",
+                self.exposure,
+                crate::render::film::MAX_EXPOSURE
+            ));
+        }
+        part_pixel_count((r.width, r.height), self.index, self.count)
+            .map_err(|e| format!("its header's {e}"))
+    }
 }
 
 /// One part of an image: its header and pixels ([`part_tiles`]' tiles, each row by row).
@@ -145,7 +198,10 @@ pub enum PartError {
         first: PathBuf,
         file: PathBuf,
     },
-    #[error("parts missing: {missing:?} of 0..{count} (no part file given for them)")]
+    #[error(
+        "parts missing: {} of 0..{count} (no part file given for them)",
+        listed(.missing)
+    )]
     Missing { missing: Vec<u32>, count: u32 },
     #[error("samples {first}..{end}: {reason}")]
     Samples {
@@ -178,6 +234,23 @@ pub enum PartError {
     Empty,
     #[error(transparent)]
     Cancelled(#[from] Cancelled),
+    /// An image the allocator refused.
+    #[error(transparent)]
+    Memory(#[from] crate::memory::MemoryError),
+}
+
+/// The first [`LISTED`] of `items`, and how many more there are: a render of 10,000 parts
+/// merged from one file does not print 9,999 numbers.
+fn listed(items: &[u32]) -> String {
+    let shown: Vec<String> = items.iter().take(LISTED).map(u32::to_string).collect();
+    match items.len().saturating_sub(LISTED) {
+        0 => format!("[{}]", shown.join(", ")),
+        more => format!(
+            "[{}, ...] ({more} more, {} in all)",
+            shown.join(", "),
+            items.len()
+        ),
+    }
 }
 
 /// The tiles of part `index` of `count` of a film of `tiles` tiles, in increasing order. An
@@ -304,9 +377,9 @@ impl Part {
             file: file.to_path_buf(),
             reason: reason.to_string(),
         };
-        let body = bytes
-            .strip_prefix(MAGIC)
-            .ok_or_else(|| corrupt("it does not start with the part files' magic line"))?;
+        if !bytes.starts_with(MAGIC) {
+            return Err(corrupt("it does not start with the part files' magic line"));
+        }
         if bytes.len() < MAGIC.len() + 4 + 32 {
             return Err(corrupt("it is cut short"));
         }
@@ -316,26 +389,8 @@ impl Part {
                 "its checksum does not match (the file is damaged or cut short)",
             ));
         }
-        let len = u32::from_le_bytes(body[..4].try_into().expect("4 bytes"));
-        let rest = &content[MAGIC.len() + 4..];
-        if len > MAX_HEADER || len as usize > rest.len() {
-            return Err(corrupt("its header length is out of range"));
-        }
-        let (header, data) = rest.split_at(len as usize);
-        let header: PartHeader = serde_json::from_slice(header)
-            .map_err(|e| corrupt(&format!("its header does not parse: {e}")))?;
-        if header.format != FORMAT {
-            return Err(corrupt(&format!(
-                "format {} (this striae reads format {FORMAT})",
-                header.format
-            )));
-        }
-        if let Some(range) = header.samples {
-            check_samples(range, header.render.spp)
-                .map_err(|e| corrupt(&format!("its header's {e}")))?;
-        }
-        let size = (header.render.width, header.render.height);
-        let n = part_pixel_count(size, header.index, header.count)?;
+        let (header, pixels_at, n) = Part::head(content, file)?;
+        let data = &content[pixels_at..];
         if data.len() != n * 12 {
             return Err(corrupt(&format!(
                 "it holds {} bytes of pixels, part {}/{} of a {}x{} image needs {}",
@@ -347,14 +402,47 @@ impl Part {
                 n * 12
             )));
         }
-        let pixels = data
+        let pixels: Vec<Rgb> = data
             .chunks_exact(12)
             .map(|c| {
                 let f = |i: usize| f32::from_le_bytes(c[i..i + 4].try_into().expect("4 bytes"));
                 Rgb::new(f(0), f(4), f(8))
             })
             .collect();
+        // A render drops non-finite samples, so only a damaged or forged file holds one (the
+        // image's writer would blame the scene for it).
+        if let Some(k) = pixels.iter().position(|p| !p.is_finite()) {
+            let (x, y) = pixel_position(&header, k);
+            return Err(corrupt(&format!(
+                "its pixel ({x}, {y}) is {}, not finite",
+                pixels[k]
+            )));
+        }
         Ok(Part { header, pixels })
+    }
+
+    /// The header at the start of a part file's `bytes` (at least the magic line), checked
+    /// ([`PartHeader::pixel_count`]), with where its pixels start and how many there are.
+    fn head(bytes: &[u8], file: &Path) -> Result<(PartHeader, usize, usize), PartError> {
+        let corrupt = |reason: String| PartError::Corrupt {
+            file: file.to_path_buf(),
+            reason,
+        };
+        let body = bytes
+            .strip_prefix(MAGIC)
+            .ok_or_else(|| corrupt("it does not start with the part files' magic line".into()))?;
+        let len = body
+            .get(..4)
+            .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
+            .ok_or_else(|| corrupt("it is cut short".into()))?;
+        let rest = &body[4..];
+        if len > MAX_HEADER || len as usize > rest.len() {
+            return Err(corrupt("its header length is out of range".into()));
+        }
+        let header: PartHeader = serde_json::from_slice(&rest[..len as usize])
+            .map_err(|e| corrupt(format!("its header does not parse: {e}")))?;
+        let n = header.pixel_count().map_err(corrupt)?;
+        Ok((header, MAGIC.len() + 4 + len as usize, n))
     }
 
     /// Write the part file `path` atomically.
@@ -368,14 +456,54 @@ impl Part {
         })
     }
 
-    /// Read the part file `path`.
+    /// Read the part file `path`: a regular file only, whose size is checked against its
+    /// header before its pixels are read (a header cannot make the reader take more than the
+    /// pixels it describes, and a device or FIFO is refused unopened).
     pub fn read(path: &Path) -> Result<Part, PartError> {
-        let bytes = std::fs::read(path).map_err(|e| PartError::Read {
+        use std::io::Read;
+        let read_error = |e: std::io::Error| PartError::Read {
             file: path.to_path_buf(),
             message: e.to_string(),
-        })?;
+        };
+        let file = crate::io::open_regular(path, MAX_PART_BYTES).map_err(read_error)?;
+        let size = file.metadata().map_err(read_error)?.len();
+        let mut bytes = Vec::new();
+        let mut file = file.take(MAGIC.len() as u64 + 4 + MAX_HEADER as u64);
+        file.read_to_end(&mut bytes).map_err(read_error)?;
+        let (header, pixels_at, n) = Part::head(&bytes, path)?;
+        let expected = (pixels_at + n * 12 + 32) as u64;
+        if size != expected {
+            return Err(PartError::Corrupt {
+                file: path.to_path_buf(),
+                reason: format!(
+                    "it is {size} bytes, part {}/{} of a {}x{} image is {expected} (the file is damaged or cut short)",
+                    header.index, header.count, header.render.width, header.render.height
+                ),
+            });
+        }
+        // Read on to exactly the expected size; a file that grew meanwhile fails the checksum.
+        let mut file = file.into_inner().take(expected - bytes.len() as u64);
+        bytes.reserve_exact(expected as usize - bytes.len());
+        file.read_to_end(&mut bytes).map_err(read_error)?;
         Part::from_bytes(&bytes, path)
     }
+}
+
+/// The image position of pixel `k` of the part `header` describes.
+fn pixel_position(header: &PartHeader, k: usize) -> (u32, u32) {
+    let (w, h) = (header.render.width, header.render.height);
+    let tiles = part_tiles(header.index, header.count, integrator::tile_count(w, h))
+        .expect("a checked header");
+    let mut k = k as u32;
+    for t in tiles {
+        let [x0, y0, x1, y1] = integrator::tile_rect(w, h, t);
+        let tw = x1 - x0;
+        if k < tw * (y1 - y0) {
+            return (x0 + k % tw, y0 + k / tw);
+        }
+        k -= tw * (y1 - y0);
+    }
+    unreachable!("pixel {k} beyond the part")
 }
 
 /// The first key on which two renders differ, with both values.
@@ -396,6 +524,14 @@ fn difference(a: &RenderId, b: &RenderId) -> Option<(String, String, String)> {
 pub fn merge(parts: &[(PathBuf, Part)]) -> Result<(Image, f32), PartError> {
     let (first_file, first) = parts.first().ok_or(PartError::Empty)?;
     let (id, count) = (&first.header.render, first.header.count);
+    let checked = |file: &PathBuf, header: &PartHeader| {
+        header.pixel_count().map_err(|reason| PartError::Corrupt {
+            file: file.clone(),
+            reason,
+        })
+    };
+    // Before anything is sized by the first part's count and image.
+    checked(first_file, &first.header)?;
     let mut by_index: Vec<Vec<usize>> = vec![Vec::new(); count as usize];
     for (i, (file, part)) in parts.iter().enumerate() {
         let h = &part.header;
@@ -416,7 +552,7 @@ pub fn merge(parts: &[(PathBuf, Part)]) -> Result<(Image, f32), PartError> {
                 h.count.to_string(),
             ));
         }
-        let n = part_pixel_count((id.width, id.height), h.index, count)?;
+        let n = checked(file, h)?;
         if part.pixels.len() != n {
             return Err(PartError::Corrupt {
                 file: file.clone(),
@@ -434,7 +570,8 @@ pub fn merge(parts: &[(PathBuf, Part)]) -> Result<(Image, f32), PartError> {
     for (index, files) in by_index.iter_mut().enumerate() {
         order_samples(parts, files, (index as u32, count), id.spp)?;
     }
-    let mut image = Image::new(id.width, id.height);
+    let size = format!("the merged {}x{} image", id.width, id.height);
+    let mut image = Image::try_new(id.width, id.height, &size)?;
     for (index, files) in by_index.iter().enumerate() {
         let pixels = match files.as_slice() {
             // All the samples in one part: its pixels as they are (bit for bit).
@@ -444,6 +581,19 @@ pub fn merge(parts: &[(PathBuf, Part)]) -> Result<(Image, f32), PartError> {
         place_part(&mut image, (index as u32, count), &pixels)?;
     }
     Ok((image, first.header.exposure))
+}
+
+/// The memory [`merge`] and writing its image take beyond the parts themselves: the image and
+/// its encoders ([`crate::render::film::BYTES_PER_PIXEL`] a pixel of the first part's render),
+/// and, for the largest part, its pixels' sums in `f64` and their means (36 bytes a pixel).
+pub fn merge_memory_estimate(parts: &[(PathBuf, Part)]) -> u64 {
+    let Some((_, first)) = parts.first() else {
+        return 0;
+    };
+    let id = &first.header.render;
+    let largest = parts.iter().map(|(_, p)| p.pixels.len() as u64).max();
+    (id.width as u64 * id.height as u64 * crate::render::film::BYTES_PER_PIXEL)
+        .saturating_add(largest.unwrap_or(0).saturating_mul(36))
 }
 
 /// Sort the parts `files` (indices into `parts`) of part `index` of `count` by their sample

@@ -7,7 +7,7 @@ use crate::optics::fresnel::FresnelLaw;
 use crate::precompute::groove::{GonioError, GonioSettings, GrooveWalls};
 use crate::precompute::profile::Profile;
 use crate::precompute::table::{ScratchBrdf, ScratchTable, TableError, TableParams};
-use crate::precompute::trace2d::{FresnelMode, TraceSettings, Walls};
+use crate::precompute::trace2d::{FresnelMode, TraceError, TraceSettings, Walls};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -66,6 +66,15 @@ pub enum StudyError {
     Table(#[from] TableError),
     #[error(transparent)]
     Gonio(#[from] GonioError),
+    #[error("the tables' trace settings: {0}")]
+    Trace(TraceError),
+    #[error("the exact-groove slices' table (slices {slices}, slice_m {slice_m}, slice_paths {slice_paths}): {error}")]
+    Slices {
+        slices: usize,
+        slice_m: usize,
+        slice_paths: u64,
+        error: TraceError,
+    },
     #[error("writing {path}: {source}")]
     Io {
         path: std::path::PathBuf,
@@ -108,6 +117,27 @@ fn seed_theta_exact(b: &ScratchBrdf) -> impl Fn([f64; 3], [f64; 3]) -> f64 + Syn
 }
 
 impl StudySettings {
+    /// The memory the study takes on `threads` threads: a goniometer run
+    /// ([`crate::lab::gonio::memory_estimate`]) and the other runs' outputs of its incident
+    /// direction (32 bytes a bin each), every case's histograms and references (72 bytes a
+    /// bin), and one profile's tables while they are computed (80 bytes per `M^2`, as
+    /// `striae precompute`, and the slices table's `16 S + 1024` more per `slice_m^2`).
+    pub fn memory_estimate(&self, threads: usize) -> u64 {
+        let cells = self.bins as u64 * self.bins as u64;
+        let cases = (self.profiles.len() * self.theta_i_deg.len() * self.phi_i_deg.len()) as u64;
+        let m = self.table.m as u64;
+        let sm = self.slice_m as u64;
+        let slices = if self.slices > 0 {
+            (80 + 16 * self.slices as u64 + 1024).saturating_mul(sm * sm)
+        } else {
+            0
+        };
+        crate::lab::gonio::memory_estimate(self.bins, threads, self.paths)
+            .saturating_add(cells.saturating_mul(32 * self.runs as u64 + 72 * cases))
+            .saturating_add((3 * 80 * m).saturating_mul(m))
+            .saturating_add(slices)
+    }
+
     fn gonio(&self, law: FresnelLaw, theta_i_deg: f64, phi_i_deg: f64) -> GonioSettings {
         GonioSettings {
             walls: GrooveWalls::Diffuse,
@@ -119,6 +149,59 @@ impl StudySettings {
             seed: self.seed,
             ..GonioSettings::default()
         }
+    }
+
+    /// The exact-groove slices' table: the renderer's option, a `fresnel = "walls"` table
+    /// with `groove_slices = S`.
+    fn slice_table(&self) -> TraceSettings {
+        TraceSettings {
+            walls: Walls::Diffuse,
+            fresnel_mode: FresnelMode::Walls,
+            m: self.slice_m,
+            n: self.slice_paths as usize,
+            nr: 1,
+            seed: self.seed,
+            groove_slices: self.slices,
+            ..self.table.clone()
+        }
+    }
+
+    /// The names of the models each [`Case`] holds, in order ([`ModelResult::name`]).
+    pub fn model_names(&self) -> Vec<String> {
+        let mut names = vec![
+            "seed".to_string(),
+            "seed_theta_exact".into(),
+            "walls".into(),
+        ];
+        if self.slices > 0 {
+            names.push(format!("groove_slices{}", self.slices));
+        }
+        if self.lossless {
+            names.push("lossless".into());
+        }
+        names
+    }
+
+    /// Every setting checked before anything is computed: the goniometer's at each incident
+    /// direction (its errors name `--theta-i`, `--phi-i`, `--bins`, `--paths`) and the tables'.
+    pub fn validate(&self) -> Result<(), StudyError> {
+        for &t in &self.theta_i_deg {
+            for &f in &self.phi_i_deg {
+                self.gonio(self.table.fresnel_law, t, f).validate()?;
+            }
+        }
+        self.table.validate().map_err(StudyError::Trace)?;
+        if self.slices > 0 {
+            self.slice_table()
+                .validate()
+                .map_err(|error| StudyError::Slices {
+                    slices: self.slices,
+                    slice_m: self.slice_m,
+                    slice_paths: self.slice_paths,
+                    error,
+                })?;
+        }
+        Ok(())
     }
 
     fn models(&self, profile: &Profile) -> Result<Models, StudyError> {
@@ -135,15 +218,7 @@ impl StudySettings {
             fresnel_law: FresnelLaw::None,
             ..seed.clone()
         };
-        // The renderer's option: a `fresnel = "walls"` table with `groove_slices = S`.
-        let groove = TraceSettings {
-            m: self.slice_m,
-            n: self.slice_paths as usize,
-            nr: 1,
-            seed: self.seed,
-            groove_slices: self.slices,
-            ..walls.clone()
-        };
+        let groove = self.slice_table();
         let slices = (self.slices > 0)
             .then(|| brdf(profile, &groove))
             .transpose()?;
@@ -234,6 +309,7 @@ impl StudySettings {
 
 /// Run the study (on the current rayon pool); `log` hears one line per profile.
 pub fn run_study(s: &StudySettings, log: &dyn Fn(&str)) -> Result<Vec<Case>, StudyError> {
+    s.validate()?;
     let mut cases = Vec::new();
     for (name, p) in &s.profiles {
         log(&format!("{name} ({}): tables", p.spec));
@@ -325,6 +401,8 @@ mod tests {
         assert_eq!(lines.len(), 1 + 2 * 5);
         assert!(lines[1..].iter().all(|l| l.split(',').count() == 11));
         assert!(text.contains("v90,groove_slices2,60,30,"));
+        let names: Vec<&str> = cases[0].models.iter().map(|m| m.name.as_str()).collect();
+        assert_eq!(names, s.model_names());
         let dir = std::env::temp_dir().join(format!("striae-fidelity-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let png = dir.join("case.png");

@@ -40,6 +40,12 @@ pub const OFFSET: f32 = 1e-4;
 /// wall without crossing the groove, still 20 times the float error of a hit's position.
 pub const CARVED_OFFSET: f32 = 2e-6;
 
+/// The largest coordinate a point of the scene may have (a scene file's points and vectors,
+/// an OBJ file's vertices). Beyond it `f32` positions are spaced more than 1e8 apart and
+/// squared distances overflow, so a combined check downstream would fail and blame another
+/// key.
+pub const MAX_COORDINATE: f32 = 1e15;
+
 /// Moves a ray origin off the surface at `p` (geometric normal `ng`) toward the side `dir`
 /// leaves to, by `rel (1 + max |p_i|)`: scaled with the magnitude of `p` to stay above float
 /// error.

@@ -32,6 +32,32 @@ fn check_faces(text: &str) -> Result<(), String> {
     Ok(())
 }
 
+/// Every vertex (`v`) within [`super::MAX_COORDINATE`], the bound of the scene file's points:
+/// `tobj` reads `1e39` as infinity and `1e30` as it is, which would overflow the BVH's and the
+/// intersection's arithmetic. The line and the vertex as written name a bad one.
+fn check_vertices(text: &str) -> Result<(), String> {
+    for (i, line) in text.lines().enumerate() {
+        let mut words = line.split('#').next().unwrap_or("").split_whitespace();
+        if words.next() != Some("v") {
+            continue;
+        }
+        // (Words that are not numbers are left to `tobj`'s own errors.)
+        let beyond = words
+            .take(3)
+            .filter_map(|w| w.parse::<f64>().ok())
+            .any(|x| !(x.abs() <= super::MAX_COORDINATE as f64));
+        if beyond {
+            return Err(format!(
+                "the vertex on line {} (`{}`) has a coordinate beyond +-{:e}, the bound of the scene's points",
+                i + 1,
+                line.trim().chars().take(80).collect::<String>(),
+                super::MAX_COORDINATE
+            ));
+        }
+    }
+    Ok(())
+}
+
 impl TriangleMesh {
     /// Loads `path`; errors name the path for a missing, unreadable or corrupt file, and for
     /// a file without triangles.
@@ -42,10 +68,12 @@ impl TriangleMesh {
             message,
         };
         let text = crate::io::read_text(path).map_err(|e| load_error(e.to_string()))?;
-        check_faces(&text).map_err(|reason| GeometryError::ObjInvalid {
-            path: path.to_path_buf(),
-            reason,
-        })?;
+        check_faces(&text)
+            .and_then(|()| check_vertices(&text))
+            .map_err(|reason| GeometryError::ObjInvalid {
+                path: path.to_path_buf(),
+                reason,
+            })?;
         // Points (`p`) and polylines (`l`) are not surfaces: skipped, not made into degenerate
         // triangles. Materials (`mtllib`) are not read: striae's materials come from the scene.
         let options = tobj::LoadOptions {

@@ -17,7 +17,7 @@ pub struct SceneFile {
     #[serde(default)]
     pub render: RenderSection,
     pub camera: CameraSection,
-    #[serde(default)]
+    #[serde(default, deserialize_with = "super::materials::by_name")]
     pub materials: BTreeMap<String, MaterialDesc>,
     #[serde(default)]
     pub shapes: Vec<ShapeSection>,

@@ -82,11 +82,15 @@ fn one() -> f32 {
     1.0
 }
 
-/// A material as written in a scene file.
+/// A material as written in a scene file: a table whose `type` picks the variant
+/// ([`MaterialDesc::from_table`]).
 // Read once, at load time: the size difference between the variants does not matter.
 #[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug, PartialEq, Deserialize)]
-#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+// `remote = "Self"`: the derive makes the inherent `MaterialDesc::deserialize` of the
+// externally tagged form (`{ scratched = { ... } }`), which `from_table` calls; the trait impl
+// below reads the scene's form.
+#[serde(remote = "Self", rename_all = "snake_case", deny_unknown_fields)]
 pub enum MaterialDesc {
     /// Lambertian; `reflectance` in `[0, 1]` (default 0.5 grey).
     Diffuse {
@@ -117,6 +121,105 @@ pub enum MaterialDesc {
     },
     /// A smooth glass or metal base with scratches ([`ScratchedDesc`]).
     Scratched(ScratchedDesc),
+}
+
+impl MaterialDesc {
+    /// The material a scene file's table describes, `prefix` (`materials.NAME`, or empty)
+    /// naming it in errors: a bad value's message names its full key,
+    /// `materials.glass.scratches.explicit`.
+    ///
+    /// serde reads an internally tagged enum (`type = "..."` among the keys) by buffering the
+    /// table in its own form, in which `toml` knows neither the keys nor the positions of the
+    /// values, so its errors could point only at the material's header. Instead the table is
+    /// read as a `toml::Table`, its `type` taken out as the variant of the externally tagged
+    /// form, and that deserialised through `serde_path_to_error`, which tracks the key path
+    /// of any nested value (tables, arrays, textures) with no per-key code.
+    pub fn from_table(mut table: toml::Table, prefix: &str) -> Result<MaterialDesc, String> {
+        let key = |path: &str| match (prefix.is_empty(), path.is_empty()) {
+            (_, true) => prefix.to_string(),
+            (true, false) => path.to_string(),
+            (false, false) => format!("{prefix}.{path}"),
+        };
+        let kind = match table.remove("type") {
+            Some(toml::Value::String(kind)) => kind,
+            Some(v) => {
+                return Err(format!(
+                    "key `{}`: invalid type: {} `{v}`, expected a material type (a string)",
+                    key("type"),
+                    v.type_str()
+                ))
+            }
+            None => return Err(format!("key `{}`: missing field `type`", key("type"))),
+        };
+        let tagged =
+            toml::Value::Table(toml::Table::from_iter([(kind, toml::Value::Table(table))]));
+        let mut track = serde_path_to_error::Track::new();
+        let de = serde_path_to_error::Deserializer::new(tagged, &mut track);
+        MaterialDesc::deserialize(de).map_err(|e| {
+            let path = track.path();
+            let mut segments = path.iter();
+            // The first segment is the variant, `type`'s value; none: `type` itself is bad.
+            let mut at = match segments.next() {
+                Some(_) => String::new(),
+                None => "type".to_string(),
+            };
+            for s in segments {
+                match s {
+                    serde_path_to_error::Segment::Seq { index } => at += &format!("[{index}]"),
+                    serde_path_to_error::Segment::Map { key }
+                    | serde_path_to_error::Segment::Enum { variant: key } => {
+                        if !at.is_empty() {
+                            at.push('.');
+                        }
+                        at += key;
+                    }
+                    serde_path_to_error::Segment::Unknown => at += ".?",
+                }
+            }
+            format!("key `{}`: {}", key(&at), e.message())
+        })
+    }
+}
+
+impl<'de> Deserialize<'de> for MaterialDesc {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<MaterialDesc, D::Error> {
+        let table = toml::Table::deserialize(d)?;
+        MaterialDesc::from_table(table, "").map_err(serde::de::Error::custom)
+    }
+}
+
+/// `[materials]` (`#[serde(deserialize_with)]`): each material read by
+/// [`MaterialDesc::from_table`] under its name, so that its errors name the full key, and
+/// raised at the material's table, where `toml` points.
+pub(crate) fn by_name<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> Result<std::collections::BTreeMap<String, MaterialDesc>, D::Error> {
+    use serde::de::{DeserializeSeed, MapAccess, Visitor};
+    struct Named<'a>(&'a str);
+    impl<'de> DeserializeSeed<'de> for Named<'_> {
+        type Value = MaterialDesc;
+        fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<MaterialDesc, D::Error> {
+            let table = toml::Table::deserialize(d)?;
+            MaterialDesc::from_table(table, &format!("materials.{}", self.0))
+                .map_err(serde::de::Error::custom)
+        }
+    }
+    struct Materials;
+    impl<'de> Visitor<'de> for Materials {
+        type Value = std::collections::BTreeMap<String, MaterialDesc>;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("a table of materials")
+        }
+        fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+            let mut out = std::collections::BTreeMap::new();
+            while let Some(name) = map.next_key::<String>()? {
+                let desc = map.next_value_seed(Named(&name))?;
+                out.insert(name, desc);
+            }
+            Ok(out)
+        }
+    }
+    d.deserialize_map(Materials)
 }
 
 fn check_roughness(roughness: f32) -> Result<(), MaterialError> {

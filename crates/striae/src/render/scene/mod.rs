@@ -10,7 +10,7 @@
 // `!(x > 0.0)` is meant: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-mod explicit;
+pub mod explicit;
 pub mod file;
 pub mod materials;
 pub mod scratches;
@@ -87,9 +87,12 @@ impl Overrides {
     }
 }
 
-/// Image sides from 1 to 32768 pixels.
-fn resolution_in_range(width: u32, height: u32) -> bool {
-    (1..=1 << 15).contains(&width) && (1..=1 << 15).contains(&height)
+/// The longest side of an image the renderer makes, in pixels.
+pub const MAX_RESOLUTION: u32 = 1 << 15;
+
+/// Image sides from 1 to [`MAX_RESOLUTION`] pixels.
+pub fn resolution_in_range(width: u32, height: u32) -> bool {
+    (1..=MAX_RESOLUTION).contains(&width) && (1..=MAX_RESOLUTION).contains(&height)
 }
 
 /// What can be wrong with a scene.
@@ -235,10 +238,7 @@ fn invalid(
     }
 }
 
-/// The largest coordinate a point or vector of the scene file may have. Beyond it `f32`
-/// positions are spaced more than 1e8 apart and squared distances overflow, so a combined
-/// check downstream would fail and blame another key.
-pub const MAX_COORDINATE: f32 = 1e15;
+pub use crate::render::geometry::MAX_COORDINATE;
 
 /// A point or vector key checked on its own: finite and within [`MAX_COORDINATE`].
 fn coordinates(file: &Path, key: impl Into<String>, v: [f32; 3]) -> Result<Vec3, SceneError> {
@@ -442,12 +442,15 @@ fn render_settings(
             "each must lie in 1..=32768",
         ));
     }
-    if !r.exposure.is_finite() {
+    if !crate::render::film::exposure_in_range(r.exposure) {
         return Err(invalid(
             file,
             "render.exposure",
             r.exposure,
-            "must be finite",
+            format!(
+                "must lie within +-{} stops",
+                crate::render::film::MAX_EXPOSURE
+            ),
         ));
     }
     Ok(settings)
@@ -593,13 +596,23 @@ fn environment(f: &SceneFile, file: &Path, base: &Path) -> Result<Option<Light>,
     };
     let e = match env.kind {
         EnvironmentType::Constant => {
-            if env.path.is_some() || env.scale.is_some() || !env.transform.is_identity() {
-                return Err(invalid(
-                    file,
-                    "environment",
-                    env.kind,
-                    "a constant environment takes only `radiance`",
-                ));
+            let foreign = [
+                ("path", env.path.as_ref().map(|p| format!("{p:?}"))),
+                ("scale", env.scale.map(|s| format!("{s:?}"))),
+                (
+                    "transform",
+                    (!env.transform.is_identity()).then(|| format!("{:?}", env.transform)),
+                ),
+            ];
+            if let Some((key, Some(value))) = foreign.into_iter().find(|(_, v)| v.is_some()) {
+                return Err(SceneError::Invalid {
+                    file: file.to_path_buf(),
+                    key: format!("environment.{key}"),
+                    value,
+                    reason: format!(
+                        "`{key}` does not apply to a constant environment (it takes only `radiance`)"
+                    ),
+                });
             }
             let radiance = env.radiance.ok_or_else(|| {
                 invalid(

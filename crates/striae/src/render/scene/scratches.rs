@@ -73,13 +73,13 @@ pub struct ScratchSpec {
     pub profile: Option<String>,
     /// Wall micro-BRDF: glass default `diffuse` (the seed), metal `specular` ([Raymond16]);
     /// `dielectric`: the groove's own glass (METHOD.md 8.1-8.2).
-    #[serde(default, deserialize_with = "keyed::walls")]
+    #[serde(default)]
     pub walls: Option<WallsKey>,
     /// GGX `alpha` of dielectric walls, or of a metal's specular walls, in `[0, 1]` (default
     /// 0: smooth; the metal's mirror walls then keep the seed's 2D table).
     pub roughness: Option<f64>,
     /// Where Fresnel is applied: glass default `seed`, metal `walls`.
-    #[serde(default, deserialize_with = "keyed::fresnel")]
+    #[serde(default)]
     pub fresnel: Option<FresnelMode>,
     /// `schlick`, `dielectric`, `conductor:ETA,K` or `none`; glass default `schlick`, metal the
     /// base's complex IOR in its brightest channel (`none` for a perfect mirror base).
@@ -107,19 +107,19 @@ pub struct ScratchSpec {
     /// Seed of the layer set (default 1).
     pub seed: Option<u64>,
     /// `layer` (default, the seed: a direction per layer) or `random` (a direction per scratch).
-    #[serde(default, deserialize_with = "keyed::orientation")]
+    #[serde(default)]
     pub orientation: Option<Orientation>,
-    #[serde(default, deserialize_with = "keyed::layer_mix")]
+    #[serde(default)]
     pub layer_mix: Option<LayerMix>,
     /// `footprint` (default, section 6) or `point` (see [`CoverageMode`]).
-    #[serde(default, deserialize_with = "keyed::coverage")]
+    #[serde(default)]
     pub coverage: Option<CoverageMode>,
     /// A table file (`.npz`, relative to the scene file) to load instead of computing one;
     /// excludes the table keys above.
     pub table: Option<PathBuf>,
     /// Smooth dielectric walls: `traced` (default: no table, each groove sample traces one
     /// path through the exact groove) or `table` (the precomputed lobes).
-    #[serde(default, deserialize_with = "keyed::lobes")]
+    #[serde(default)]
     pub lobes: Option<LobesKey>,
     /// Build the scratches as real grooves on the shape's planar faces instead of the
     /// SV-BRDF (METHOD.md 8.3; `scene::explicit`).
@@ -131,43 +131,6 @@ pub struct ScratchSpec {
     /// Stations along each explicit groove (default [`DEFAULT_STATIONS`]): its opening is the
     /// polygon through them (`geometry::carve`). The SV-BRDF does not read it.
     pub stations: Option<usize>,
-}
-
-/// Deserialisers of the scratched material's word-valued keys that put the key in the error.
-/// A material is an internally tagged enum, which serde buffers, so `toml` can point only at the
-/// material's table and its message would name the bad word but not the key.
-mod keyed {
-    use super::{BaseKind, CoverageMode, FresnelMode, LayerMix, LobesKey, Orientation, WallsKey};
-    use serde::de::{Deserialize, Deserializer, Error};
-
-    fn named<'de, T: Deserialize<'de>, D: Deserializer<'de>>(
-        d: D,
-        key: &str,
-    ) -> Result<T, D::Error> {
-        T::deserialize(d).map_err(|e| D::Error::custom(format_args!("key `{key}`: {e}")))
-    }
-
-    pub fn base<'de, D: Deserializer<'de>>(d: D) -> Result<BaseKind, D::Error> {
-        named(d, "base")
-    }
-    pub fn walls<'de, D: Deserializer<'de>>(d: D) -> Result<Option<WallsKey>, D::Error> {
-        named(d, "scratches.walls")
-    }
-    pub fn fresnel<'de, D: Deserializer<'de>>(d: D) -> Result<Option<FresnelMode>, D::Error> {
-        named(d, "scratches.fresnel")
-    }
-    pub fn layer_mix<'de, D: Deserializer<'de>>(d: D) -> Result<Option<LayerMix>, D::Error> {
-        named(d, "scratches.layer_mix")
-    }
-    pub fn coverage<'de, D: Deserializer<'de>>(d: D) -> Result<Option<CoverageMode>, D::Error> {
-        named(d, "scratches.coverage")
-    }
-    pub fn orientation<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Orientation>, D::Error> {
-        named(d, "scratches.orientation")
-    }
-    pub fn lobes<'de, D: Deserializer<'de>>(d: D) -> Result<Option<LobesKey>, D::Error> {
-        named(d, "scratches.lobes")
-    }
 }
 
 /// `scratches.lobes`: how smooth dielectric walls' groove lobes are found (rough walls' are
@@ -232,7 +195,6 @@ struct BaseDefaults {
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScratchedDesc {
-    #[serde(deserialize_with = "keyed::base")]
     pub base: BaseKind,
     /// Glass: interior index (default 1.5; the exterior is 1).
     pub ior: Option<f32>,
@@ -272,7 +234,8 @@ fn layer_error(e: LayerError) -> MaterialError {
         _ => "scratches",
     };
     let value = match &e {
-        LayerError::Length(v) | LayerError::Width(v) | LayerError::Threshold(v) => v.to_string(),
+        // Debug: `1e308` as written, not 309 digits.
+        LayerError::Length(v) | LayerError::Width(v) | LayerError::Threshold(v) => format!("{v:?}"),
         LayerError::LayerCount(v) => v.to_string(),
         LayerError::Setting(v) => v.to_string(),
         _ => String::new(),
@@ -297,6 +260,13 @@ impl ScratchedDesc {
             coverage: s.coverage.unwrap_or_default(),
             stations: match s.stations {
                 None => DEFAULT_STATIONS,
+                Some(n) if !self.is_explicit() => {
+                    return Err(invalid(
+                        "scratches.stations",
+                        n,
+                        "applies to explicit grooves only (`scratches.explicit = true`); the SV-BRDF has no stations",
+                    ))
+                }
                 Some(n) if STATIONS_RANGE.contains(&n) => n,
                 Some(n) => {
                     return Err(invalid(
