@@ -163,8 +163,13 @@ impl GonioSettings {
         if !(1..=4096).contains(&self.bins) {
             return bad("bins", self.bins.to_string(), "must be in 1..=4096");
         }
-        if self.paths == 0 || self.paths > 1 << 40 {
-            return bad("paths", self.paths.to_string(), "must be in 1..=2^40");
+        if self.paths == 0 || self.paths > MAX_PATHS {
+            return bad(
+                "paths",
+                self.paths.to_string(),
+                "must be in 1..=2^24 (a bin's fixed-point sum holds 2^24 paths' weight; average \
+                 runs of other seeds for more)",
+            );
         }
         if !(1..=100_000).contains(&self.max_bounces) {
             return bad(
@@ -227,6 +232,10 @@ pub struct GonioOutput {
 
 /// Fixed-point scale of the accumulated weights (`w <= 1`).
 const FIXED: f64 = (1u64 << 40) as f64;
+
+/// The most paths one trace takes: every one of them may land in one bin, whose `u64` sum of
+/// weights at [`FIXED`] scale holds `2^64 / 2^40` of them.
+pub const MAX_PATHS: u64 = 1 << 24;
 
 /// Integer accumulators of a set of paths.
 #[derive(Clone)]
@@ -1292,6 +1301,13 @@ mod tests {
                     ..base.clone()
                 },
                 "theta-i",
+            ),
+            (
+                GonioSettings {
+                    paths: MAX_PATHS + 1,
+                    ..base.clone()
+                },
+                "paths",
             ),
             (
                 GonioSettings {
