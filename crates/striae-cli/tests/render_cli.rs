@@ -478,8 +478,8 @@ fn wall_tables_refuse_what_they_would_ignore_or_could_not_finish() {
     std::fs::remove_file(&out).unwrap();
     for (args, expect) in [
         (
-            &["--incident", "256x256", "--wall-paths", "1000000000"][..],
-            &["--wall-paths 1000000000", "--incident 256x256"][..],
+            &["--incident", "256x256", "--wall-paths", "16777216"][..],
+            &["--wall-paths 16777216", "--incident 256x256"][..],
         ),
         (
             &[
