@@ -21,6 +21,11 @@ pub struct Args {
     /// rough dielectric (dielectric walls).
     #[arg(long, default_value_t = 0.0)]
     roughness: f64,
+    /// Rough walls scatter once per wall hit (the single-scattering GGX BSDF, which loses the
+    /// light that would meet a second microfacet) instead of walking the microsurface
+    /// (METHOD.md 9.7, lossless where the facets are).
+    #[arg(long)]
+    single_scatter: bool,
     /// Fresnel law of diffuse and specular walls: schlick, dielectric (both with --ior),
     /// conductor:ETA,K or none (F = 1). Dielectric walls always use the exact equations.
     #[arg(long)]
@@ -97,6 +102,7 @@ fn settings(a: &Args) -> anyhow::Result<GonioSettings> {
     let s = GonioSettings {
         walls,
         roughness: a.roughness,
+        single_scatter: a.single_scatter,
         fresnel_law,
         ior: a.ior,
         theta_i: a.theta_i.to_radians(),

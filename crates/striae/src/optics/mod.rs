@@ -5,3 +5,4 @@
 pub mod fresnel;
 pub mod fresnel_f32;
 pub mod microfacet;
+pub mod microsurface;

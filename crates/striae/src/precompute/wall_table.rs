@@ -86,6 +86,9 @@ pub struct WallTableParams {
     pub ior: f64,
     /// GGX `alpha` of the walls, in `[0, 1]`; 0: smooth.
     pub roughness: f64,
+    /// Rough walls scatter once instead of walking the microsurface (METHOD.md 9.7): only
+    /// tables read from files written before the walk, which have no `wall_scattering` array.
+    pub single_scatter: bool,
     /// Incident grid: `theta_i` and `phi_i` bins.
     pub theta_bins: usize,
     pub phi_bins: usize,
@@ -111,6 +114,7 @@ impl WallTableParams {
             walls: WallKind::Dielectric,
             ior,
             roughness,
+            single_scatter: false,
             theta_bins: if smooth { 32 } else { 16 },
             phi_bins: if smooth { 128 } else { 32 },
             bins: if smooth { SMOOTH_EXIT_BINS } else { 32 },
@@ -186,6 +190,7 @@ impl WallTableParams {
             walls,
             fresnel_law,
             roughness: self.roughness,
+            single_scatter: self.single_scatter,
             ior: self.ior,
             theta_i,
             phi_i,
@@ -229,15 +234,27 @@ impl WallTableParams {
         d.iter().map(|b| format!("{b:02x}")).collect()
     }
 
+    /// How rough walls scatter, as the `wall_scattering` array of a table file names it.
+    pub fn scattering_name(&self) -> &'static str {
+        if self.single_scatter {
+            "single"
+        } else {
+            "microsurface-walk"
+        }
+    }
+
     /// The text [`Self::hash`] digests: the kind, the profile, the walls (dielectric: the
     /// index and `beside-reflected`, their inside lobes being per intercepted light, beside the
     /// opening on the way to the surface and after total internal reflection there; specular:
-    /// the law), the roughness, the sizes, the paths and the seed.
+    /// the law; rough: how they scatter), the roughness, the sizes, the paths and the seed.
     pub fn hash_text(&self) -> String {
-        let walls = match self.walls {
+        let mut walls = match self.walls {
             WallKind::Dielectric => format!("{:016x}|beside-reflected", self.ior.to_bits()),
             WallKind::Specular { law } => format!("law {}", law_json(&law)),
         };
+        if self.roughness > 0.0 {
+            walls = format!("{walls}|{}", self.scattering_name());
+        }
         format!(
             "{}|{:?}|{:?}|{walls}|{:016x}|{}|{}|{}|{}|{}",
             self.walls.name(),
@@ -464,6 +481,10 @@ impl WallTable {
                 .map_err(err)?;
             w.add_array("ior", &arr0(p.ior)).map_err(err)?;
             w.add_array("roughness", &arr0(p.roughness)).map_err(err)?;
+            if p.roughness > 0.0 {
+                w.add_array("wall_scattering", &text(p.scattering_name()))
+                    .map_err(err)?;
+            }
             w.add_array("paths", &arr0(p.paths)).map_err(err)?;
             w.add_array("seed", &arr0(p.seed)).map_err(err)?;
             w.add_array("theta_i", &Array1::from(self.theta_i.clone()))
@@ -517,6 +538,7 @@ impl WallTable {
             Ok(a.into_scalar())
         };
         let (ior, roughness) = (f64s("ior")?, f64s("roughness")?);
+        let single_scatter = read_scattering(&mut r, roughness)?;
         if matches!(walls, WallKind::Specular { .. }) && ior != 1.0 {
             return Err(std::io::Error::other(format!(
                 "`ior` is {ior}: a specular-walls table has no index (its walls' law is \
@@ -559,6 +581,7 @@ impl WallTable {
             walls,
             ior,
             roughness,
+            single_scatter,
             theta_bins: theta_i.len(),
             phi_bins: phi_i.len(),
             bins: phi_o.len(),
@@ -693,6 +716,29 @@ fn phi_marginal(h: &[f64], b: usize) -> Vec<f64> {
 
 type Reader = ndarray_npy::NpzReader<std::fs::File>;
 
+/// A rough table's `wall_scattering`: `microsurface-walk`, or `single` (also where the array
+/// is absent: files written before the walk); smooth tables have none.
+fn read_scattering(r: &mut Reader, roughness: f64) -> std::io::Result<bool> {
+    let present = r
+        .names()
+        .map_err(|e| std::io::Error::other(e.to_string()))?
+        .iter()
+        .any(|n| n.strip_suffix(".npy").unwrap_or(n) == "wall_scattering");
+    if !present {
+        return Ok(roughness > 0.0);
+    }
+    match read_text(r, "wall_scattering")?.as_str() {
+        _ if roughness == 0.0 => Err(std::io::Error::other(
+            "`wall_scattering` in a table of smooth walls (roughness 0), which scatter once",
+        )),
+        "microsurface-walk" => Ok(false),
+        "single" => Ok(true),
+        other => Err(std::io::Error::other(format!(
+            "`wall_scattering` is {other:?}: \"microsurface-walk\" or \"single\""
+        ))),
+    }
+}
+
 /// The arrays of every wall table; [`LOBES`] and `intercept_in` beside them for dielectric
 /// walls, `fresnel_law` and `r_out` for specular ones.
 const COMMON_KEYS: [&str; 10] = [
@@ -712,8 +758,8 @@ const COMMON_KEYS: [&str; 10] = [
 /// cannot have: `t_out` in a specular-walls table), naming it.
 fn check_keys(names: &[String], kind: &str) -> std::io::Result<()> {
     let own: &[&str] = match kind {
-        "specular-walls" => &["fresnel_law", "r_out"],
-        _ => &["r_out", "t_out", "r_in", "t_in", "intercept_in"],
+        "specular-walls" => &["fresnel_law", "r_out", "wall_scattering"],
+        _ => &["r_out", "t_out", "r_in", "t_in", "intercept_in", "wall_scattering"],
     };
     let name = |n: &String| n.strip_suffix(".npy").unwrap_or(n).to_string();
     match names
@@ -852,29 +898,35 @@ mod tests {
     }
 
     /// A lossless groove reflects plus transmits what arrives, from either side, at every
-    /// incident direction of the grid (up to the bounce cap's share).
+    /// incident direction of the grid: smooth walls to round-off, rough walls walking their
+    /// microsurface within 1e-3 (METHOD.md 9.7); rough walls scattering once lose light.
     #[test]
     fn lossless_groove_conserves_energy() {
-        for rough in [0.0, 0.3] {
-            let t = small(rough);
+        let mut single = WallTableParams {
+            single_scatter: true,
+            ..small(0.3).params
+        };
+        single.paths = 4000;
+        let single = WallTable::compute(&single).unwrap();
+        for t in [small(0.0), small(0.3), single] {
+            let mut worst = 1.0f64;
             for ti in 0..t.theta_i.len() {
                 for pi in 0..t.phi_i.len() {
                     for side in [0, 2] {
                         let r: f64 = t.slice(side, ti, pi).iter().sum();
                         let tr: f64 = t.slice(side + 1, ti, pi).iter().sum();
-                        // Rough walls lose what single scattering drops (a sampled direction
-                        // below the microsurface): up to a fifth at grazing incidence from inside.
-                        let ok = if rough == 0.0 {
-                            (r + tr - 1.0).abs() < 1e-6
-                        } else {
-                            r + tr <= 1.0 + 1e-9 && r + tr > 0.5
-                        };
+                        let p = &t.params;
+                        let tolerance = if p.roughness == 0.0 { 1e-6 } else { 1e-3 };
                         assert!(
-                            ok,
-                            "roughness {rough} side {side} ({ti}, {pi}): R {r} + T {tr}"
+                            p.single_scatter || (r + tr - 1.0).abs() < tolerance,
+                            "{p:?} side {side} ({ti}, {pi}): R {r} + T {tr}"
                         );
+                        worst = worst.min(r + tr);
                     }
                 }
+            }
+            if t.params.single_scatter {
+                assert!(worst < 0.95, "single scattering loses light: {worst}");
             }
         }
     }
@@ -891,6 +943,13 @@ mod tests {
         assert_eq!(back.lobes, t.lobes);
         assert_eq!(back.intercept, t.intercept);
         assert!(t.intercept.iter().any(|&k| k > 1.01), "{:?}", t.intercept);
+        // Scattering once is another table, and the file says so.
+        let mut single = t.clone();
+        single.params.single_scatter = true;
+        single.save(&dir.join("single.npz")).unwrap();
+        let back = WallTable::load(&dir.join("single.npz")).unwrap().unwrap();
+        assert!(back.params.single_scatter);
+        assert_ne!(back.params.hash(), t.params.hash());
         // Grids that are not the bins' centres are refused (lookups assume them).
         let mut odd = t.clone();
         odd.phi_i[1] += 0.01;
