@@ -1214,7 +1214,8 @@ mod tests {
                 ..GonioSettings::default()
             };
             let smooth = run("v:angle=90", &s);
-            for (alpha, single_scatter) in [(0.01, true), (0.01, false), (0.5, true), (0.5, false)] {
+            for (alpha, single_scatter) in [(0.01, true), (0.01, false), (0.5, true), (0.5, false)]
+            {
                 let o = run(
                     "v:angle=90",
                     &GonioSettings {

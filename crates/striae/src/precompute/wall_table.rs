@@ -759,7 +759,14 @@ const COMMON_KEYS: [&str; 10] = [
 fn check_keys(names: &[String], kind: &str) -> std::io::Result<()> {
     let own: &[&str] = match kind {
         "specular-walls" => &["fresnel_law", "r_out", "wall_scattering"],
-        _ => &["r_out", "t_out", "r_in", "t_in", "intercept_in", "wall_scattering"],
+        _ => &[
+            "r_out",
+            "t_out",
+            "r_in",
+            "t_in",
+            "intercept_in",
+            "wall_scattering",
+        ],
     };
     let name = |n: &String| n.strip_suffix(".npy").unwrap_or(n).to_string();
     match names
