@@ -1,6 +1,8 @@
 //! `striae`: the command line. Each subcommand lives in `commands/`; this file only parses.
 
 mod commands;
+mod preview;
+mod tev;
 
 use clap::{Parser, Subcommand};
 

@@ -59,6 +59,12 @@ pub struct Args {
     /// the machine leaves (MemAvailable, ulimit -v and -d, the cgroup's limit) always is one.
     #[arg(long, value_parser = parse_size)]
     pub max_memory: Option<u64>,
+    /// A live view while it renders: `tev` or `tev:HOST:PORT` sends each finished tile, then
+    /// the final image, to a running tev viewer (default 127.0.0.1:14158); `every=SECONDS`
+    /// rewrites the PNG and EXR (atomically) with the tiles done so far. The image is the same
+    /// bit for bit; a tev that is absent, closes or hangs costs a warning, never the render.
+    #[arg(long, value_name = "tev[:HOST:PORT]|every=SECONDS", value_parser = crate::preview::parse_preview, conflicts_with_all = ["tile", "samples", "export_meshes"])]
+    pub preview: Option<crate::preview::PreviewSpec>,
     /// No progress bar.
     #[arg(long, short = 'q')]
     pub quiet: bool,
@@ -205,7 +211,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             s.width, s.height
         ),
     };
-    striae::render::integrator::check_memory(&scene, pixels, &size, args.max_memory)?;
+    // A preview holds a second copy of the film: half as much again.
+    let counted = match args.preview {
+        Some(_) => pixels + pixels / 2,
+        None => pixels,
+    };
+    striae::render::integrator::check_memory(&scene, counted, &size, args.max_memory)?;
     let total = pixels * args.samples.map_or(s.spp, |[a, b]| b - a) as u64;
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
     eprintln!(
@@ -250,13 +261,45 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let (exr_path, png_path) = image_outputs(args.output.as_deref(), args.scene.as_deref())?;
-    let (image, stats) =
-        pool.install(|| striae::render::integrator::try_render(&scene, &|n| bar.inc(n), &size))?;
+    let preview = match args.preview.clone() {
+        Some(spec) => {
+            let warn_bar = bar.clone();
+            Some(crate::preview::Preview::start(
+                spec,
+                (s.width, s.height),
+                exr_path.display().to_string(),
+                (exr_path.clone(), png_path.clone()),
+                s.exposure,
+                std::sync::Arc::new(move |m: String| warn_bar.suspend(|| eprintln!("{m}"))),
+            )?)
+        }
+        None => None,
+    };
+    let on_tile = |tile: u32, px: &[striae::math::Rgb]| {
+        if let Some(p) = &preview {
+            p.on_tile(tile, px)
+        }
+    };
+    let (image, stats) = pool.install(|| {
+        striae::render::integrator::try_render_observed(&scene, &|n| bar.inc(n), &on_tile, &size)
+    })?;
     bar.finish_and_clear();
+    let image = std::sync::Arc::new(image);
+    // An `every=` preview stops before the final outputs are written, a tev preview after.
+    let preview = match preview {
+        Some(p) if matches!(args.preview, Some(crate::preview::PreviewSpec::Every(_))) => {
+            p.finish(image.clone());
+            None
+        }
+        p => p,
+    };
 
     image
         .write_exr_and_png(&exr_path, &png_path, scene.settings.exposure)
         .with_context(|| format!("writing {} and {}", exr_path.display(), png_path.display()))?;
+    if let Some(p) = preview {
+        p.finish(image);
+    }
     print_summary(&stats);
     eprintln!("wrote {} and {}", exr_path.display(), png_path.display());
     Ok(())

@@ -411,7 +411,7 @@ pub fn render_with(
     simd: Simd,
 ) -> (Image, RenderStats) {
     let (w, h) = scene.camera.resolution();
-    render_into(scene, Image::new(w, h), progress, simd)
+    render_into(scene, Image::new(w, h), progress, None, simd)
 }
 
 /// [`render`] with the film allocated before the first sample: where the allocator refuses it,
@@ -423,19 +423,68 @@ pub fn try_render(
 ) -> Result<(Image, RenderStats), crate::memory::MemoryError> {
     let (w, h) = scene.camera.resolution();
     let image = Image::try_new(w, h, what)?;
-    Ok(render_into(scene, image, progress, Simd::Auto))
+    Ok(render_into(scene, image, progress, None, Simd::Auto))
 }
 
-/// The render of every tile of `image`'s film, placed into it.
+/// What [`try_render_observed`] calls with each finished tile: its index and its pixels, row by
+/// row.
+pub type TileObserver<'a> = dyn Fn(u32, &[Rgb]) + Sync + 'a;
+
+/// [`try_render`] that also hands each finished tile's final pixels (its index, [`tile_rect`],
+/// and its pixels row by row, the values the image gets) to `on_tile`, from the worker thread
+/// that rendered it: a live preview reads the film as it fills without changing how any pixel
+/// is computed, so the image is bit for bit [`try_render`]'s.
+pub fn try_render_observed(
+    scene: &Scene,
+    progress: &(dyn Fn(u64) + Sync),
+    on_tile: &TileObserver<'_>,
+    what: &str,
+) -> Result<(Image, RenderStats), crate::memory::MemoryError> {
+    let (w, h) = scene.camera.resolution();
+    let image = Image::try_new(w, h, what)?;
+    Ok(render_into(
+        scene,
+        image,
+        progress,
+        Some(on_tile),
+        Simd::Auto,
+    ))
+}
+
+/// The render of every tile of `image`'s film, placed into it; `on_tile`, where given, as in
+/// [`try_render_observed`].
 fn render_into(
     scene: &Scene,
     mut image: Image,
     progress: &(dyn Fn(u64) + Sync),
+    on_tile: Option<&TileObserver<'_>>,
     simd: Simd,
 ) -> (Image, RenderStats) {
     let tiles: Vec<u32> = (0..tile_count(image.width, image.height)).collect();
-    let (pixels, stats) = render_tiles(scene, &tiles, progress, &AtomicBool::new(false), simd)
-        .expect("a render nothing cancels runs to the end");
+    let spp = scene.settings.spp;
+    // The tile's means, divided as below: the values the image gets.
+    let observe = |tile: u32, sums: &[Rgb]| {
+        if let Some(on_tile) = on_tile {
+            let mut means = sums.to_vec();
+            for p in &mut means {
+                *p /= spp as f32;
+            }
+            on_tile(tile, &means);
+        }
+    };
+    let (mut pixels, stats) = render_tile_sums_observed(
+        scene,
+        &tiles,
+        0..spp,
+        progress,
+        &observe,
+        &AtomicBool::new(false),
+        simd,
+    )
+    .expect("a render nothing cancels runs to the end");
+    for p in pixels.iter_mut().flatten() {
+        *p /= spp as f32;
+    }
     for (&tile, px) in tiles.iter().zip(&pixels) {
         place_tile(&mut image, tile, px);
     }
@@ -528,6 +577,20 @@ pub fn render_tile_sums(
     cancel: &AtomicBool,
     simd: Simd,
 ) -> Result<(Vec<Vec<Rgb>>, RenderStats), Cancelled> {
+    render_tile_sums_observed(scene, tiles, samples, progress, &|_, _| {}, cancel, simd)
+}
+
+/// [`render_tile_sums`] that hands each finished tile's sums (its index and pixels, row by row)
+/// to `on_tile` on the worker thread that rendered it, before `progress` counts it.
+fn render_tile_sums_observed(
+    scene: &Scene,
+    tiles: &[u32],
+    samples: std::ops::Range<u32>,
+    progress: &(dyn Fn(u64) + Sync),
+    on_tile: &TileObserver<'_>,
+    cancel: &AtomicBool,
+    simd: Simd,
+) -> Result<(Vec<Vec<Rgb>>, RenderStats), Cancelled> {
     let copy = LoopCopy::chosen(simd);
     let start = std::time::Instant::now();
     let (w, h) = scene.camera.resolution();
@@ -547,6 +610,7 @@ pub fn render_tile_sums(
             let out = render_tile(scene, tile_rect(w, h, tile), pass, copy, worker);
             rays.fetch_add(std::mem::take(&mut worker.rays), Ordering::Relaxed);
             nonfinite.fetch_add(std::mem::take(&mut worker.nonfinite), Ordering::Relaxed);
+            on_tile(tile, &out);
             progress(out.len() as u64 * n);
             Some(out)
         })
