@@ -30,7 +30,12 @@ fn centre_mean(img: &Image, frac: f32, channel: usize) -> MeanEstimate {
 /// A camera filling its view with a unit sphere of the given material in a uniform white
 /// environment: every pixel's expectation is exactly 1 for a lossless material.
 fn furnace(material: &str) -> Scene {
-    scene(&format!(
+    scene(&furnace_text(material))
+}
+
+/// The text of [`furnace`]'s scene.
+fn furnace_text(material: &str) -> String {
+    format!(
         r#"
 [render]
 width = 24
@@ -50,7 +55,7 @@ material = "m"
 type = "constant"
 radiance = 1
 "#
-    ))
+    )
 }
 
 fn assert_furnace(s: &Scene, what: &str) {
@@ -88,6 +93,97 @@ fn white_furnace_fails_for_a_lossy_material() {
     let (img, _) = render_with_threads(&s, 2);
     let m = centre_mean(&img, 0.5, 0);
     assert!(!m.agrees_with(1.0, 4.0, 1e-3), "mean {}", m.mean());
+}
+
+/// The white furnace of a rough sphere with and without `multiscatter = true`, 32 x 32 pixels
+/// at 64 spp: with it, the mean over a centred square of 0.6 of the image (inside the
+/// sphere) is 1 within noise per channel, and so is each of its 4 x 4 blocks; without it the
+/// sphere is darker (single scattering loses energy), by more than `min_loss`. Both images
+/// are written as PNGs (exposure -1: 1 is mid grey) to the test's temporary folder. Returns
+/// the two means (red channel).
+fn assert_multiscatter_furnace(material: &str, name: &str, min_loss: f64) -> (f64, f64) {
+    let text = |ms: bool| {
+        furnace_text(&format!("{material}\nmultiscatter = {ms}"))
+            .replace("width = 24", "width = 32")
+            .replace("height = 24", "height = 32")
+    };
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"));
+    let mut means = [0.0; 2];
+    for (i, ms) in [true, false].into_iter().enumerate() {
+        let (img, _) = render_with_threads(&scene(&text(ms)), 2);
+        img.write_png(&dir.join(format!("furnace-{name}-ms-{ms}.png")), -1.0)
+            .unwrap();
+        for c in 0..3 {
+            let m = centre_mean(&img, 0.6, c);
+            assert!(m.count() > 300);
+            if c == 0 {
+                means[i] = m.mean();
+            }
+            if ms {
+                assert!(
+                    m.agrees_with(1.0, 4.0, 2e-3),
+                    "{name} multiscatter: channel {c} mean {} +- {}",
+                    m.mean(),
+                    m.std_error()
+                );
+                for (b, block) in square_blocks(&img, 0.6, 4, c).iter().enumerate() {
+                    assert!(
+                        block.agrees_with(1.0, 4.5, 2e-3),
+                        "{name} multiscatter: channel {c} block {b} mean {} +- {}",
+                        block.mean(),
+                        block.std_error()
+                    );
+                }
+            } else {
+                assert!(
+                    m.mean() + 4.0 * m.std_error() < 1.0 - min_loss,
+                    "{name} single scattering: channel {c} mean {} +- {}",
+                    m.mean(),
+                    m.std_error()
+                );
+            }
+        }
+    }
+    eprintln!(
+        "{name}: furnace {:.4} with multiscatter, {:.4} without",
+        means[0], means[1]
+    );
+    (means[0], means[1])
+}
+
+/// The pixel means of the `n x n` blocks of the centred square of side `frac`, per channel.
+fn square_blocks(img: &Image, frac: f32, n: usize, channel: usize) -> Vec<MeanEstimate> {
+    let mut blocks = vec![MeanEstimate::default(); n * n];
+    let (w, h) = (img.width as f32, img.height as f32);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            let (dx, dy) = ((x as f32 + 0.5) / w - 0.5, (y as f32 + 0.5) / h - 0.5);
+            if dx.abs() < frac / 2.0 && dy.abs() < frac / 2.0 {
+                let bx = (((dx / frac + 0.5) * n as f32) as usize).min(n - 1);
+                let by = (((dy / frac + 0.5) * n as f32) as usize).min(n - 1);
+                blocks[by * n + bx].push(img.get(x, y)[channel] as f64);
+            }
+        }
+    }
+    blocks
+}
+
+#[test]
+fn white_furnace_rough_glass_sphere_with_multiscatter() {
+    assert_multiscatter_furnace(
+        "type = \"dielectric\"\nior = 1.5\nroughness = 0.8",
+        "rough-glass",
+        0.02,
+    );
+}
+
+#[test]
+fn white_furnace_rough_perfect_conductor_sphere_with_multiscatter() {
+    assert_multiscatter_furnace(
+        "type = \"conductor\"\npreset = \"none\"\nroughness = 0.8",
+        "rough-mirror",
+        0.03,
+    );
 }
 
 #[test]

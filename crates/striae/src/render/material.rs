@@ -6,6 +6,7 @@
 use crate::layers::CoverageCache;
 use crate::math::{Frame, RayDifferential, Vec2, Vec3};
 use crate::render::bsdf::{Bsdf, Conductor, ConductorIor, Dielectric, Diffuse};
+use crate::render::bsdf::{ConductorCompensation, DielectricCompensation};
 use crate::render::bsdf::{GrooveWall, RoughConductor, RoughDielectric};
 use crate::render::geometry::SurfaceHit;
 use crate::render::scratched::ScratchedMaterial;
@@ -22,6 +23,11 @@ pub enum Material {
     Dielectric { eta: f32, roughness: f32 },
     /// A conductor of complex index `ior`; GGX `roughness` (alpha, 0 = smooth).
     Conductor { ior: ConductorIor, roughness: f32 },
+    /// A rough dielectric with multiple-scattering compensation (`multiscatter = true`), its
+    /// albedo tables built.
+    CompensatedDielectric(Box<DielectricCompensation>),
+    /// A rough conductor with multiple-scattering compensation (`multiscatter = true`).
+    CompensatedConductor(Box<ConductorCompensation>),
     /// A smooth glass or metal base with scratches.
     Scratched(Box<ScratchedMaterial>),
     /// The opaque wall of an explicit scratch groove (METHOD.md 8.3).
@@ -49,10 +55,11 @@ impl Material {
     #[inline]
     pub fn has_transmission(&self) -> bool {
         match self {
-            Material::Dielectric { .. } => true,
-            Material::Diffuse { .. } | Material::Conductor { .. } | Material::GrooveWall(_) => {
-                false
-            }
+            Material::Dielectric { .. } | Material::CompensatedDielectric(_) => true,
+            Material::Diffuse { .. }
+            | Material::Conductor { .. }
+            | Material::CompensatedConductor(_)
+            | Material::GrooveWall(_) => false,
             Material::Scratched(m) => m.has_transmission(),
         }
     }
@@ -145,6 +152,8 @@ impl Material {
                     Bsdf::Conductor(Conductor { ior: *ior })
                 }
             }
+            Material::CompensatedDielectric(c) => Bsdf::CompensatedDielectric(c.bsdf()),
+            Material::CompensatedConductor(c) => Bsdf::CompensatedConductor(c.bsdf()),
             Material::Scratched(m) => m.base_bsdf(),
             Material::GrooveWall(w) => Bsdf::Wall(*w),
         }

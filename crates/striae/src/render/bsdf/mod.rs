@@ -12,6 +12,9 @@
 //! * [`RoughConductor`] and [`RoughDielectric`], GGX microfacet models after Walter et al. 2007,
 //!   sampled by visible normals (Heitz 2018), with the separable Smith shadowing
 //!   `G = G1(wo) G1(wi)` that Mitsuba 3 uses (so that renders agree with it).
+//! * [`CompensatedConductor`] and [`CompensatedDielectric`], the two rough models with the
+//!   energy their single scattering loses restored (`multiscatter = true`; Kulla and Conty
+//!   2017, Turquin 2019; module [`multiscatter`]).
 //!
 //! ## Conventions
 //!
@@ -36,6 +39,7 @@
 mod conductor;
 mod dielectric;
 mod diffuse;
+pub mod multiscatter;
 pub mod scratched;
 pub mod scratched_glass;
 pub mod scratched_metal;
@@ -44,6 +48,9 @@ mod wall;
 pub use conductor::{Conductor, ConductorIor, RoughConductor, CONDUCTOR_PRESETS};
 pub use dielectric::{Dielectric, RoughDielectric};
 pub use diffuse::Diffuse;
+pub use multiscatter::{
+    CompensatedConductor, CompensatedDielectric, ConductorCompensation, DielectricCompensation,
+};
 pub use scratched::{ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf};
 pub use scratched_glass::{GlassWalls, ScratchedGlassBsdf, TracedGroove, WallLobeTable};
 pub use scratched_metal::ScratchedMetalBsdf;
@@ -89,6 +96,10 @@ pub enum Bsdf<'a> {
     Conductor(Conductor),
     RoughDielectric(RoughDielectric),
     RoughConductor(RoughConductor),
+    /// [`RoughDielectric`] with multiple-scattering compensation.
+    CompensatedDielectric(CompensatedDielectric<'a>),
+    /// [`RoughConductor`] with multiple-scattering compensation.
+    CompensatedConductor(CompensatedConductor<'a>),
     /// A smooth dielectric or conductor with scratches (METHOD.md section 6).
     Scratched(ScratchedBsdf<'a>),
     /// Glass with dielectric-wall scratches, reflecting and transmitting (METHOD.md 8.2).
@@ -108,6 +119,8 @@ impl Bsdf<'_> {
             Bsdf::Dielectric(_) | Bsdf::Conductor(_) => Rgb::ZERO,
             Bsdf::RoughDielectric(b) => b.eval(wo, wi),
             Bsdf::RoughConductor(b) => b.eval(wo, wi),
+            Bsdf::CompensatedDielectric(b) => b.eval(wo, wi),
+            Bsdf::CompensatedConductor(b) => b.eval(wo, wi),
             Bsdf::Scratched(b) => b.eval(wo, wi),
             Bsdf::ScratchedGlass(b) => b.eval(wo, wi),
             Bsdf::ScratchedMetal(b) => b.eval_pdf(wo, wi).0,
@@ -123,6 +136,8 @@ impl Bsdf<'_> {
             Bsdf::Dielectric(_) | Bsdf::Conductor(_) => 0.0,
             Bsdf::RoughDielectric(b) => b.pdf(wo, wi),
             Bsdf::RoughConductor(b) => b.pdf(wo, wi),
+            Bsdf::CompensatedDielectric(b) => b.pdf(wo, wi),
+            Bsdf::CompensatedConductor(b) => b.pdf(wo, wi),
             Bsdf::Scratched(b) => b.pdf(wo, wi),
             Bsdf::ScratchedGlass(b) => b.pdf(wo, wi),
             Bsdf::ScratchedMetal(b) => b.eval_pdf(wo, wi).1,
@@ -140,6 +155,8 @@ impl Bsdf<'_> {
             Bsdf::Dielectric(_) | Bsdf::Conductor(_) => (Rgb::ZERO, 0.0),
             Bsdf::RoughDielectric(b) => b.eval_pdf(wo, wi),
             Bsdf::RoughConductor(b) => b.eval_pdf(wo, wi),
+            Bsdf::CompensatedDielectric(b) => b.eval_pdf(wo, wi),
+            Bsdf::CompensatedConductor(b) => b.eval_pdf(wo, wi),
             Bsdf::Scratched(b) => b.eval_pdf(wo, wi),
             Bsdf::ScratchedGlass(b) => b.eval_pdf(wo, wi),
             Bsdf::ScratchedMetal(b) => b.eval_pdf(wo, wi),
@@ -181,6 +198,8 @@ impl Bsdf<'_> {
             Bsdf::Conductor(b) => b.sample(wo),
             Bsdf::RoughDielectric(b) => b.sample(wo, u_lobe, u),
             Bsdf::RoughConductor(b) => b.sample(wo, u),
+            Bsdf::CompensatedDielectric(b) => b.sample(wo, u_lobe, u),
+            Bsdf::CompensatedConductor(b) => b.sample(wo, u_lobe, u),
             Bsdf::Scratched(b) => b.sample(wo, u_lobe, u),
             Bsdf::ScratchedGlass(b) => b.sample(wo, u_lobe, u),
             Bsdf::ScratchedMetal(b) => b.sample(wo, u_lobe, u),
@@ -193,7 +212,10 @@ impl Bsdf<'_> {
     #[inline]
     pub fn has_transmission(&self) -> bool {
         match self {
-            Bsdf::Dielectric(_) | Bsdf::RoughDielectric(_) | Bsdf::ScratchedGlass(_) => true,
+            Bsdf::Dielectric(_)
+            | Bsdf::RoughDielectric(_)
+            | Bsdf::CompensatedDielectric(_)
+            | Bsdf::ScratchedGlass(_) => true,
             Bsdf::Scratched(b) => b.has_transmission(),
             _ => false,
         }

@@ -10,10 +10,12 @@
 //! ior = 1.5                              # interior index (default 1.5)
 //! ext_ior = 1.0                          # exterior index (default 1.0)
 //! roughness = 0.0                        # GGX alpha; > 0 makes it a rough dielectric
+//! multiscatter = false                   # restore the energy single scattering loses
 //!
 //! type = "conductor"
 //! preset = "gold"                        # or eta = [r, g, b] and k = [r, g, b]
 //! roughness = 0.0                        # GGX alpha; > 0 makes it a rough conductor
+//! multiscatter = false                   # restore the energy single scattering loses
 //!
 //! type = "scratched"                     # glass or metal with scratches: see
 //! base = "glass"                         # `scene::scratches` and docs/scratched.md
@@ -23,10 +25,16 @@
 //! defaults differ from ours (`int_ior` 1.5046, `ext_ior` 1.000277): set both explicitly in
 //! both renderers when comparing. Conductor presets and their sources are listed in
 //! [`crate::render::bsdf::CONDUCTOR_PRESETS`].
+//!
+//! `multiscatter = true` adds to a rough dielectric or conductor the light its single
+//! scattering loses to shadowing and masking (module [`crate::render::bsdf::multiscatter`]):
+//! a white furnace then renders 1. It departs from Mitsuba 3 (whose `roughdielectric` and
+//! `roughconductor` scatter once), so the default is `false`. With `roughness = 0` it is
+//! accepted and changes nothing: a smooth interface loses no energy.
 
 use super::scratches::ScratchedDesc;
 use crate::math::Rgb;
-use crate::render::bsdf::ConductorIor;
+use crate::render::bsdf::{ConductorCompensation, ConductorIor, DielectricCompensation};
 use crate::render::material::Material;
 use crate::render::texture::{Texture, TextureError};
 use serde::Deserialize;
@@ -98,7 +106,7 @@ pub enum MaterialDesc {
         reflectance: Texture,
     },
     /// A dielectric interface with relative index `ior / ext_ior`; GGX `roughness` (alpha,
-    /// default 0 = smooth).
+    /// default 0 = smooth); `multiscatter` energy compensation (default false).
     Dielectric {
         #[serde(default = "default_ior")]
         ior: f32,
@@ -106,9 +114,11 @@ pub enum MaterialDesc {
         ext_ior: f32,
         #[serde(default)]
         roughness: f32,
+        #[serde(default)]
+        multiscatter: bool,
     },
     /// A conductor given by a `preset` name or by `eta` and `k`; GGX `roughness` (alpha,
-    /// default 0 = smooth).
+    /// default 0 = smooth); `multiscatter` energy compensation (default false).
     Conductor {
         #[serde(default)]
         preset: Option<String>,
@@ -118,6 +128,8 @@ pub enum MaterialDesc {
         k: Option<[f32; 3]>,
         #[serde(default)]
         roughness: f32,
+        #[serde(default)]
+        multiscatter: bool,
     },
     /// A smooth glass or metal base with scratches ([`ScratchedDesc`]).
     Scratched(ScratchedDesc),
@@ -324,6 +336,7 @@ impl MaterialDesc {
                 ior,
                 ext_ior,
                 roughness,
+                ..
             } => {
                 for (key, v) in [("ior", *ior), ("ext_ior", *ext_ior)] {
                     if !(v.is_finite() && v >= 1.0) {
@@ -341,6 +354,7 @@ impl MaterialDesc {
                 eta,
                 k,
                 roughness,
+                ..
             } => {
                 conductor_ior(preset.as_deref(), *eta, *k)?;
                 check_roughness(*roughness)
@@ -375,19 +389,39 @@ impl MaterialDesc {
                 ior,
                 ext_ior,
                 roughness,
-            } => Material::Dielectric {
-                eta: ior / ext_ior,
-                roughness: *roughness,
-            },
+                multiscatter,
+            } => {
+                if *multiscatter && *roughness > 0.0 {
+                    Material::CompensatedDielectric(Box::new(DielectricCompensation::new(
+                        ior / ext_ior,
+                        *roughness,
+                    )))
+                } else {
+                    Material::Dielectric {
+                        eta: ior / ext_ior,
+                        roughness: *roughness,
+                    }
+                }
+            }
             MaterialDesc::Conductor {
                 preset,
                 eta,
                 k,
                 roughness,
-            } => Material::Conductor {
-                ior: conductor_ior(preset.as_deref(), *eta, *k)?,
-                roughness: *roughness,
-            },
+                multiscatter,
+            } => {
+                let ior = conductor_ior(preset.as_deref(), *eta, *k)?;
+                if *multiscatter && *roughness > 0.0 {
+                    Material::CompensatedConductor(Box::new(ConductorCompensation::new(
+                        ior, *roughness,
+                    )))
+                } else {
+                    Material::Conductor {
+                        ior,
+                        roughness: *roughness,
+                    }
+                }
+            }
         })
     }
 }
@@ -477,6 +511,41 @@ mod tests {
         for cos in [1.0, 0.7, 0.2, 0.01] {
             assert!((c.ior.fresnel(cos) - Rgb::ONE).abs().max_element() < 1e-6);
         }
+    }
+
+    /// `multiscatter = true` makes a rough dielectric or conductor compensated; it is off by
+    /// default, ignored at roughness 0, and a non-boolean value is refused naming the key.
+    #[test]
+    fn multiscatter_key_picks_the_compensated_bsdf() {
+        let uv = Vec2::new(0.3, 0.6);
+        let d = "type = \"dielectric\"\nior = 1.5";
+        let c = "type = \"conductor\"\npreset = \"gold\"";
+        for (base, smooth_ok) in [(d, 0), (c, 1)] {
+            let rough = prepared(&format!("{base}\nroughness = 0.3"));
+            let rough_off = prepared(&format!("{base}\nroughness = 0.3\nmultiscatter = false"));
+            let on = prepared(&format!("{base}\nroughness = 0.3\nmultiscatter = true"));
+            let smooth_on = prepared(&format!("{base}\nmultiscatter = true"));
+            match smooth_ok {
+                0 => {
+                    assert!(matches!(bsdf_at(&rough, uv), Bsdf::RoughDielectric(_)));
+                    assert!(matches!(bsdf_at(&rough_off, uv), Bsdf::RoughDielectric(_)));
+                    assert!(matches!(bsdf_at(&on, uv), Bsdf::CompensatedDielectric(b)
+                        if b.comp.ss.eta == 1.5 && b.comp.ss.distribution.alpha_x == 0.3));
+                    assert!(matches!(bsdf_at(&smooth_on, uv), Bsdf::Dielectric(_)));
+                }
+                _ => {
+                    assert!(matches!(bsdf_at(&rough, uv), Bsdf::RoughConductor(_)));
+                    assert!(matches!(bsdf_at(&rough_off, uv), Bsdf::RoughConductor(_)));
+                    assert!(matches!(bsdf_at(&on, uv), Bsdf::CompensatedConductor(b)
+                        if b.comp.ss.ior == ConductorIor::preset("gold").unwrap()));
+                    assert!(matches!(bsdf_at(&smooth_on, uv), Bsdf::Conductor(_)));
+                }
+            }
+            let e = parse(&format!("{base}\nroughness = 0.3\nmultiscatter = 1")).unwrap_err();
+            assert!(e.contains("multiscatter"), "{e}");
+        }
+        let e = parse("type = \"diffuse\"\nmultiscatter = true").unwrap_err();
+        assert!(e.contains("multiscatter"), "{e}");
     }
 
     /// `scratches.lean = true` leans the scratch lobes' frames; without it they have none.
