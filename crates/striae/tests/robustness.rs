@@ -539,6 +539,11 @@ fn mistyped_foreign_and_absurd_values_name_their_key() {
         ),
         (
             mix,
+            with("model = \"exact\""),
+            "`materials.scratched.scratches.model`: unknown variant `exact`, expected `default` or `seed`",
+        ),
+        (
+            mix,
             with("bogus = 1"),
             "`materials.scratched.scratches.bogus`: unknown field",
         ),

@@ -82,20 +82,37 @@ pub const BEYOND_SCENES: [(&str, &str, &str, &str, &str); 3] = [
     ),
 ];
 
-/// The seed's model of a scene written for dielectric walls: the walls back to the default
-/// (`diffuse`, the seed's glass scratches), their `roughness` and `lobes` dropped, one
-/// direction per layer, no `lean`.
+/// The seed's model of a scene written for dielectric walls: `model = "seed"` in each
+/// `[materials.NAME.scratches]` table (the seed's defaults: `layer_mix = "max"`, no
+/// exact-groove slices, one Fresnel factor a path), the walls back to the default (`diffuse`,
+/// the seed's glass scratches), their `roughness` and `lobes` dropped, one direction per layer,
+/// no `lean`; any `model`, `layer_mix`, `fresnel` or `groove_slices` of the scene dropped.
 pub fn seed_variant(text: &str) -> String {
-    text.lines()
-        .filter(|l| {
-            let key = l.trim_start();
-            !["walls = \"dielectric\"", "roughness =", "lobes =", "lean ="]
-                .iter()
-                .any(|k| key.starts_with(k))
-        })
-        .map(|l| l.replace("orientation = \"random\"", "orientation = \"layer\""))
-        .collect::<Vec<_>>()
-        .join("\n")
+    let mut out = Vec::new();
+    for l in text.lines() {
+        let key = l.trim_start();
+        let dropped = [
+            "walls = \"dielectric\"",
+            "roughness =",
+            "lobes =",
+            "lean =",
+            "model =",
+            "layer_mix =",
+            "fresnel =",
+            "groove_slices =",
+        ]
+        .iter()
+        .any(|k| key.starts_with(k));
+        if dropped {
+            continue;
+        }
+        out.push(l.replace("orientation = \"random\"", "orientation = \"layer\""));
+        let header = key.trim_end();
+        if header.starts_with("[materials.") && header.ends_with(".scratches]") {
+            out.push("model = \"seed\"".to_string());
+        }
+    }
+    out.join("\n")
 }
 
 /// Incident angle of Fig. 2 (degrees).
@@ -591,13 +608,18 @@ mod tests {
                     Material::Scratched(s) => Some((
                         matches!(s.model, ScratchModel::DielectricWalls(_)) || s.has_lean(),
                         s.layers.orientation(),
+                        s.mix,
+                        match &s.model {
+                            ScratchModel::Seed(t) => Some(t.table().params.trace.clone()),
+                            _ => None,
+                        },
                     )),
                     _ => None,
                 })
                 .unwrap()
         };
         for (_, _, name, text, _) in BEYOND_SCENES {
-            let (walls, orientation) = model(text, name);
+            let (walls, orientation, ..) = model(text, name);
             assert!(
                 walls || orientation == crate::layers::Orientation::Random,
                 "{name}"
@@ -607,10 +629,24 @@ mod tests {
                 "walls = \"dielectric\"",
                 "walls = \"dielectric\"\nlobes = \"table\"\nlean = true",
             );
-            for text in [text, &with_lobes[..]] {
-                let (walls, orientation) = model(&seed_variant(text), name);
+            // (A scene of the new defaults spelt out: the variant is the seed's all the same.)
+            let with_defaults = text.replace(
+                "walls = \"dielectric\"",
+                "walls = \"dielectric\"\nmodel = \"default\"\nlayer_mix = \"union\"",
+            );
+            for text in [text, &with_lobes[..], &with_defaults[..]] {
+                let (walls, orientation, mix, trace) = model(&seed_variant(text), name);
                 assert!(
                     !walls && orientation == crate::layers::Orientation::Layer,
+                    "{name}"
+                );
+                // The seed's table (eq. (3), one Fresnel factor, its sizes) and layer choice.
+                assert_eq!(
+                    (mix, trace),
+                    (
+                        crate::render::scratched::LayerMix::Max,
+                        Some(crate::precompute::trace2d::TraceSettings::default())
+                    ),
                     "{name}"
                 );
             }

@@ -20,7 +20,7 @@ use super::fresnel::dielectric;
 use std::f64::consts::PI;
 
 /// Scattering events after which a walk is dropped (energy lost). With `alpha <= 1` the mean
-/// order is below 3 and the fraction of walks past 64 events is below 1e-6 (tested).
+/// order is below 3 (tested), and none of the tests' 1.6 million lossless walks reaches it.
 pub const MAX_ORDER: u32 = 64;
 
 /// An isotropic GGX microsurface of roughness `alpha`, heights uniform on `[-1, 1]`.

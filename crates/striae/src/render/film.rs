@@ -41,7 +41,7 @@ pub enum FilmError {
     /// Finite inputs whose light overflowed 32-bit floats: an error, not an image of `inf`.
     #[error("the render overflowed: pixel ({x}, {y}) is not finite; the scene's emission, irradiance or environment radiance is too large for 32-bit floats")]
     Overflow { x: u32, y: u32 },
-    #[error("exposure {0} stops: must lie within +-{MAX_EXPOSURE}")]
+    #[error("exposure {0:?} stops: must lie within +-{MAX_EXPOSURE}")]
     Exposure(f32),
 }
 

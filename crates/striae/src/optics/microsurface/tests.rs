@@ -120,47 +120,104 @@ fn lossless_facets_make_a_lossless_surface() {
     }
 }
 
-/// `int_cone f(w_from -> w) dw`, the BSDF (`f cos = ` the density of exits) integrated over the
-/// cone of half-angle `CONE` around `w_to`: the walks' exits in the cone weighted `1 / |cos|`.
-fn cone_integral(walk: &mut impl FnMut() -> Option<WalkExit>, to: [f64; 3], n: usize) -> f64 {
-    let cos_cone = CONE.to_radians().cos();
+/// A direction uniform (in solid angle) in the cone of half-angle `half` degrees around `axis`.
+fn in_cone(axis: [f64; 3], half: f64, u0: f64, u1: f64) -> [f64; 3] {
+    let c = 1.0 - u0 * (1.0 - half.to_radians().cos());
+    let s = (1.0 - c * c).sqrt();
+    let (sp, cp) = (2.0 * PI * u1).sin_cos();
+    let t = if axis[2].abs() < 0.9 {
+        [0.0, 0.0, 1.0]
+    } else {
+        [1.0, 0.0, 0.0]
+    };
+    let x = normalize(cross(axis, t));
+    let y = cross(axis, x);
+    normalize([
+        s * cp * x[0] + s * sp * y[0] + c * axis[0],
+        s * cp * x[1] + s * sp * y[1] + c * axis[1],
+        s * cp * x[2] + s * sp * y[2] + c * axis[2],
+    ])
+}
+
+/// The flux from cone `a` (light arriving from its directions, radiance 1) into cone `b`, per
+/// unit solid angle of `a`: the mean of `|cos_i| 1[exit in b] weight` over directions uniform in
+/// `a`. Reciprocity makes `flux(a -> b)` and `flux(b -> a)` equal (scaled by `n_b^2 / n_a^2`
+/// through an interface), whatever the cones' sizes.
+fn flux(
+    walk: &mut impl FnMut([f64; 3]) -> Option<WalkExit>,
+    a: [f64; 3],
+    b: [f64; 3],
+    half: f64,
+    n: usize,
+    u: &mut impl FnMut() -> f64,
+) -> f64 {
+    let cos_half = half.to_radians().cos();
     let mut sum = 0.0;
     for _ in 0..n {
-        if let Some(e) = walk() {
-            if dot(e.w, to) > cos_cone {
-                sum += e.weight / e.w[2].abs();
+        let wi = in_cone(a, half, u(), u());
+        if let Some(e) = walk(wi) {
+            if dot(e.w, b) > cos_half {
+                sum += wi[2].abs() * e.weight;
             }
         }
     }
     sum / n as f64
 }
 
-const CONE: f64 = 6.0;
-
 /// Multiple scattering keeps the Smith model's reciprocity (Heitz16 sec. 6.4), which no event
-/// of the walk states on its own: `f(i -> o) = f(o -> i)` for the conductor (a rough copper
-/// law), and `f(i -> o) / n_o^2 = f(o -> i) / n_i^2` for transmission through glass of index
-/// 1.5, compared over small cones away from the specular peak.
+/// of the walk states on its own: the flux from one cone of directions into another equals the
+/// flux back for the conductor (a rough copper-like Schlick law), and is `n_o^2 / n_i^2 = 2.25`
+/// times it through glass of index 1.5 (generalised reciprocity), for `alpha` 0.3 and 0.8.
 #[test]
 fn multiple_scattering_is_reciprocal() {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(6);
+    let mut rng_dir = rand_pcg::Pcg64::seed_from_u64(7);
     let mut u = || rng.random::<f64>();
+    let mut v = || rng_dir.random::<f64>();
     let n = 1_000_000;
     let copper = |c: f64| crate::optics::fresnel::schlick(8.0, c);
-    let s = Microsurface::new(0.6);
-    let (a, b) = (dir(20.0, 0.0), dir(65.0, 120.0));
-    let ab = cone_integral(&mut || s.walk_conductor(a, copper, &mut u), b, n);
-    let ba = cone_integral(&mut || s.walk_conductor(b, copper, &mut u), a, n);
-    assert!((ab / ba - 1.0).abs() < 0.06, "conductor {ab} {ba}");
     // Air above, glass below: `a` in the air, `c` in the glass. From the glass, the frame is
     // flipped so that the glass is above (index ratio 1 / 1.5).
     let flip = |w: [f64; 3]| [w[0], w[1], -w[2]];
-    let c = dir(150.0, 200.0);
-    let ac = cone_integral(&mut || s.walk_dielectric(a, 1.5, &mut u), c, n);
-    let ca = cone_integral(
-        &mut || s.walk_dielectric(flip(c), 1.0 / 1.5, &mut u),
-        flip(a),
-        n,
-    );
-    assert!((ac / ca / 2.25 - 1.0).abs() < 0.06, "dielectric {ac} {ca}");
+    let (a, b, c) = (dir(20.0, 0.0), dir(65.0, 120.0), dir(150.0, 200.0));
+    for alpha in [0.3, 0.8] {
+        let s = Microsurface::new(alpha);
+        let ab = flux(
+            &mut |w| s.walk_conductor(w, copper, &mut u),
+            a,
+            b,
+            10.0,
+            n,
+            &mut v,
+        );
+        let ba = flux(
+            &mut |w| s.walk_conductor(w, copper, &mut u),
+            b,
+            a,
+            10.0,
+            n,
+            &mut v,
+        );
+        assert!((ab / ba - 1.0).abs() < 0.03, "conductor {alpha}: {ab} {ba}");
+        let ac = flux(
+            &mut |w| s.walk_dielectric(w, 1.5, &mut u),
+            a,
+            c,
+            10.0,
+            n,
+            &mut v,
+        );
+        let ca = flux(
+            &mut |w| s.walk_dielectric(w, 1.0 / 1.5, &mut u),
+            flip(c),
+            flip(a),
+            10.0,
+            n,
+            &mut v,
+        );
+        assert!(
+            (ac / ca / 2.25 - 1.0).abs() < 0.03,
+            "dielectric {alpha}: {ac} {ca}"
+        );
+    }
 }

@@ -9,6 +9,8 @@
 //! base = "glass"                 # or "metal" (with preset = "gold", or eta and k)
 //! ior = 1.5                      # glass only
 //! [materials.glass.scratches]
+//! model = "default"              # the defaults of the keys left out: "default" (striae's,
+//!                                # docs/fidelity.md "The defaults") or "seed" (the seed's)
 //! profile = "v:angle=90"         # the syntax of `striae precompute --profile`
 //! walls = "diffuse"              # "specular" = mirror walls, [Raymond16]'s delta lobe;
 //!                                # "dielectric" = glass walls, reflecting and transmitting
@@ -18,16 +20,17 @@
 //! # lobes = "table"              # smooth dielectric walls: read a precomputed table instead
 //!                                # of tracing the exact groove at every sample (default
 //!                                # "traced"; rough walls always read a table)
-//! fresnel = "seed"               # or "walls"
+//! fresnel = "seed"               # or "walls" (default with groove_slices)
 //! fresnel_law = "schlick"        # dielectric | conductor:ETA,K | none
-//! m = 256                        # table size M, N, N_r (default: the seed's,
-//! n = 10000                      # `TraceSettings::default`)
-//! nr = 100
-//! # groove_slices = 6           # exact-groove theta_i slices instead of eq. (3) (diffuse walls)
+//! m = 64                         # table size M, N, N_r (default with exact-groove slices
+//! n = 50000                      # 64, 50000, 1; else, and under model = "seed", the
+//! nr = 1                         # seed's 256, 10000, 100, `TraceSettings::default`)
+//! groove_slices = 6              # exact-groove theta_i slices instead of eq. (3) (glass with
+//!                                # diffuse walls and Fresnel: default 6; model = "seed": none)
 //! setting = 1                    # the seed's Table 1, or length / width / threshold
 //! layers = 8
 //! seed = 1
-//! layer_mix = "max"              # or "sum" ([Raymond16])
+//! layer_mix = "max"              # or "sum" ([Raymond16]), "union"
 //! # table = "my-table.npz"       # load a table instead of computing one
 //! # explicit = true              # real grooves on planar faces (METHOD.md 8.3)
 //! # stations = 16                # stations along each explicit groove
@@ -42,7 +45,9 @@ use crate::precompute::table::{TableError, TableParams};
 use crate::precompute::trace2d::{FresnelMode, TraceError, TraceSettings, Walls};
 use crate::precompute::wall_table::{WallKind, WallTableParams};
 use crate::render::bsdf::GrooveWall;
-use crate::render::bsdf::{ConductorIor, GlassWalls, ScratchedBase, TracedGroove};
+use crate::render::bsdf::{
+    ConductorIor, DielectricCompensation, GlassWalls, ScratchedBase, TracedGroove,
+};
 use crate::render::geometry::carve::{DEFAULT_STATIONS, STATIONS_RANGE};
 use crate::render::material::Material;
 use crate::render::scratched::{CoverageMode, LayerMix, ScratchModel, ScratchedMaterial};
@@ -64,11 +69,42 @@ pub const DEFAULT_PROFILE: &str = "v:angle=90";
 /// Default layer-set seed.
 pub const DEFAULT_LAYER_SEED: u64 = 1;
 
+/// `model = "default"`: exact-groove slices of a table with diffuse walls and a Fresnel law
+/// (docs/fidelity.md, "The defaults").
+pub const DEFAULT_GROOVE_SLICES: usize = 6;
+/// `model = "default"`: a table with exact-groove slices defaults to `M = 64`, `N = 50000`,
+/// `N_r = 1` (50 000 goniometer paths per slice and `phi_i`, the sizes docs/fidelity.md
+/// validates; the seed's sizes would trace 100 times as many, minutes on 2 cores).
+pub const GROOVE_TABLE_SIZES: (usize, usize, usize) = (64, 50_000, 1);
+
+/// `scratches.model`: which defaults fill the keys a scene leaves out. A key given explicitly
+/// always wins.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum ModelKey {
+    /// striae's defaults: per key the most accurate validated choice that costs under about
+    /// 10 % a sample (docs/fidelity.md, "The defaults"): glass with diffuse walls and a
+    /// Fresnel law takes `groove_slices = 6` (with `fresnel = "walls"`) at
+    /// [`GROOVE_TABLE_SIZES`]; every other key the seed's (`layer_mix = "union"`, closer to
+    /// explicit grooves, costs 1.24-1.59 x the instructions a sample on glass and up to 1.24 x
+    /// on metal, `lean` and dielectric walls 1.2-1.7 x: they stay options).
+    #[default]
+    Default,
+    /// The seed's choices (METHOD.md sections 3-6; a metal base [Raymond16]'s): no
+    /// exact-groove slices (eq. (3)), glass `fresnel = "seed"`, the seed's `M`, `N`, `N_r`,
+    /// and, as under `default`, `layer_mix = "max"`, `coverage = "footprint"`, `orientation =
+    /// "layer"`, no `lean`.
+    Seed,
+}
+
 /// `[materials.NAME.scratches]`. Every key is optional; the defaults depend on the base
 /// (see [`ScratchedDesc::resolve`] and `docs/scratched.md`).
 #[derive(Clone, Debug, Default, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct ScratchSpec {
+    /// Which defaults fill the keys left out ([`ModelKey`]; default `default`).
+    #[serde(default)]
+    pub model: Option<ModelKey>,
     /// Profile spec, as `striae precompute --profile` (`file:` paths are relative to the scene).
     pub profile: Option<String>,
     /// Wall micro-BRDF: glass default `diffuse` (the seed), metal `specular` ([Raymond16]);
@@ -78,7 +114,8 @@ pub struct ScratchSpec {
     /// GGX `alpha` of dielectric walls, or of a metal's specular walls, in `[0, 1]` (default
     /// 0: smooth; the metal's mirror walls then keep the seed's 2D table).
     pub roughness: Option<f64>,
-    /// Where Fresnel is applied: glass default `seed`, metal `walls`.
+    /// Where Fresnel is applied: glass default `seed` (`walls` with exact-groove slices),
+    /// metal `walls`.
     #[serde(default)]
     pub fresnel: Option<FresnelMode>,
     /// `schlick`, `dielectric`, `conductor:ETA,K` or `none`; glass default `schlick`, metal the
@@ -95,7 +132,9 @@ pub struct ScratchSpec {
     /// Seed of the 2D trace (default 0).
     pub trace_seed: Option<u64>,
     /// Exact-groove `theta_i` slices (`crate::precompute::groove_slices`, 1 to 32) evaluated instead of
-    /// eq. (3); diffuse walls, `fresnel` then defaults to (and must be) `walls`.
+    /// eq. (3); diffuse walls, `fresnel` then defaults to (and must be) `walls`. Default
+    /// [`DEFAULT_GROOVE_SLICES`] where they apply (glass, diffuse walls, a Fresnel law other
+    /// than `none`, `fresnel` not `seed`, `albedo` 1), none under `model = "seed"`.
     pub groove_slices: Option<usize>,
     /// The seed's Table 1 (1 or 2); excludes `length`, `width`, `threshold`.
     pub setting: Option<u32>,
@@ -109,6 +148,7 @@ pub struct ScratchSpec {
     /// `layer` (default, the seed: a direction per layer) or `random` (a direction per scratch).
     #[serde(default)]
     pub orientation: Option<Orientation>,
+    /// `max` (default, the seed's section 6), `sum` or `union` ([`LayerMix`]).
     #[serde(default)]
     pub layer_mix: Option<LayerMix>,
     /// `footprint` (default, section 6) or `point` (see [`CoverageMode`]).
@@ -170,6 +210,8 @@ pub enum TableSource {
 /// Everything a scratched material resolves to before its table is built.
 #[derive(Clone, Debug)]
 pub struct Resolved {
+    /// The defaults the keys left out took.
+    pub model: ModelKey,
     pub base: ScratchedBase,
     pub tint: Rgb,
     pub table: TableSource,
@@ -250,13 +292,16 @@ impl ScratchedDesc {
         let table = self.resolve_table(&defaults, base_dir)?;
         let s = &self.scratches;
         Ok(Resolved {
+            model: self.model(),
             base: defaults.base,
             tint: defaults.tint,
             table,
             layers: self.resolve_layers()?,
             layer_seed: s.seed.unwrap_or(DEFAULT_LAYER_SEED),
             orientation: s.orientation.unwrap_or_default(),
-            mix: s.layer_mix.unwrap_or_default(),
+            // `max` under either model: `union` is closer to explicit grooves (docs/fidelity.md)
+            // but costs 1.24-1.59 x the instructions a sample on glass, 1.04-1.24 x on metal.
+            mix: s.layer_mix.unwrap_or(LayerMix::Max),
             coverage: s.coverage.unwrap_or_default(),
             stations: match s.stations {
                 None => DEFAULT_STATIONS,
@@ -283,8 +328,14 @@ impl ScratchedDesc {
         })
     }
 
+    /// The defaults the keys left out take (`scratches.model`).
+    pub fn model(&self) -> ModelKey {
+        self.scratches.model.unwrap_or_default()
+    }
+
     /// The base (`ior`, or a conductor's `preset` / `eta` and `k`) and the table defaults it
-    /// implies: glass takes the seed's model (diffuse walls, Schlick, one Fresnel factor), metal
+    /// implies: glass takes the seed's model (diffuse walls, Schlick, one Fresnel factor; the
+    /// default model adds exact-groove slices, [`Self::default_groove_slices`]), metal
     /// [Raymond16]'s (mirror walls, Fresnel per wall hit).
     fn resolve_base(&self) -> Result<BaseDefaults, MaterialError> {
         match self.base {
@@ -397,31 +448,35 @@ impl ScratchedDesc {
         }
         let law = self.resolve_law(defaults)?;
         let seed = TraceSettings::default();
-        let groove_slices = match s.groove_slices {
-            Some(0) => {
-                return Err(invalid(
-                    "scratches.groove_slices",
-                    0,
-                    "must be in 1..=32 (leave the key out for the seed's eq. (3))",
-                ))
-            }
-            Some(n) => n,
-            None => 0,
-        };
-        let mode = match groove_slices {
-            0 => defaults.mode,
-            _ => FresnelMode::Walls,
-        };
         let walls = match s.walls {
             Some(WallsKey::Specular) => Walls::Specular,
             Some(WallsKey::Diffuse) => Walls::Diffuse,
             Some(WallsKey::Dielectric) | None => defaults.walls,
         };
+        let groove_slices = match s.groove_slices {
+            Some(0) => {
+                return Err(invalid(
+                    "scratches.groove_slices",
+                    0,
+                    "must be in 1..=32 (leave the key out for the default, or give model = \"seed\" for the seed's eq. (3))",
+                ))
+            }
+            Some(n) => n,
+            None => self.default_groove_slices(walls, law),
+        };
+        let mode = match groove_slices {
+            0 => defaults.mode,
+            _ => FresnelMode::Walls,
+        };
+        let (m, n, nr) = match (self.model(), groove_slices) {
+            (ModelKey::Default, 1..) => GROOVE_TABLE_SIZES,
+            _ => (seed.m, seed.n, seed.nr),
+        };
         let trace = TraceSettings {
             walls,
-            m: s.m.unwrap_or(seed.m),
-            n: s.n.unwrap_or(seed.n),
-            nr: s.nr.unwrap_or(seed.nr),
+            m: s.m.unwrap_or(m),
+            n: s.n.unwrap_or(n),
+            nr: s.nr.unwrap_or(nr),
             albedo: s.albedo.unwrap_or(seed.albedo),
             max_bounces: s.max_bounces.unwrap_or(seed.max_bounces),
             seed: s.trace_seed.unwrap_or(seed.seed),
@@ -435,6 +490,31 @@ impl ScratchedDesc {
             invalid(trace_key(key), value, why)
         })?;
         Ok(TableSource::Compute(TableParams::new(profile, trace)))
+    }
+
+    /// `groove_slices` left out: [`DEFAULT_GROOVE_SLICES`] under `model = "default"` on glass
+    /// where the exact groove is what the table stands for and the slices add to it (diffuse
+    /// walls, a Fresnel law other than `none`, which leaves the seed's table exact, `fresnel`
+    /// not given as `seed`, `albedo` 1, `m` at most 1024, `N N_r` at most 2^40); else none. (A
+    /// metal's Lambertian walls keep the seed's table: there the slices bring a near view of
+    /// explicit grooves from 2.1 % to 0.3 % but a far one from 0.1 % to 0.9 %, where `max`'s
+    /// coverage error no longer cancels the seed's Fresnel error; docs/fidelity.md.)
+    fn default_groove_slices(&self, walls: Walls, law: FresnelLaw) -> usize {
+        let s = &self.scratches;
+        let (m, n, nr) = GROOVE_TABLE_SIZES;
+        let applies = self.model() == ModelKey::Default
+            && self.base == BaseKind::Glass
+            && walls == Walls::Diffuse
+            && law != FresnelLaw::None
+            && s.fresnel != Some(FresnelMode::Seed)
+            && s.albedo.is_none_or(|a| a == 1.0)
+            && s.m.unwrap_or(m) <= 1024
+            && (s.n.unwrap_or(n) as u64).saturating_mul(s.nr.unwrap_or(nr) as u64) <= 1 << 40;
+        if applies {
+            DEFAULT_GROOVE_SLICES
+        } else {
+            0
+        }
     }
 
     /// `roughness` with other than dielectric walls: a metal's specular walls only, in
@@ -708,8 +788,8 @@ impl ScratchedDesc {
 
 /// What explicit scratch geometry (METHOD.md 8.3) takes from a scratched material: its layers
 /// and profile, the material of the flat face (the smooth base) and of the groove walls (the
-/// BSDF the table assumes: glass walls smooth glass; metal walls Lambertian or mirror times
-/// the table's Fresnel law and the lobe's tint).
+/// BSDF the table assumes: glass walls the glass, rough ones energy-compensated; metal walls
+/// Lambertian or mirror times the table's Fresnel law and the lobe's tint).
 #[derive(Clone, Debug)]
 pub struct ExplicitSpec {
     pub layers: LayerSet,
@@ -813,9 +893,18 @@ impl ScratchedDesc {
                 eta,
                 roughness: 0.0,
             },
-            wall: Material::Dielectric {
-                eta,
-                roughness: params.roughness as f32,
+            // Rough walls as lossless as the tables' microsurface walk (METHOD.md 9.7): the
+            // energy-compensated rough dielectric (its lobe shape is single scattering's).
+            wall: if params.roughness > 0.0 {
+                Material::CompensatedDielectric(Box::new(DielectricCompensation::new(
+                    eta,
+                    params.roughness as f32,
+                )))
+            } else {
+                Material::Dielectric {
+                    eta,
+                    roughness: 0.0,
+                }
             },
             stations: r.stations,
         })

@@ -211,6 +211,14 @@ fn keys_are_validated() {
             &["`scratches.layer_mix`", "avg"],
         ),
         (
+            "base = \"glass\"\n[scratches]\nmodel = \"exact\"",
+            &["`scratches.model`", "exact", "seed", "default"],
+        ),
+        (
+            "base = \"glass\"\n[scratches]\nmodel = 1",
+            &["`scratches.model`"],
+        ),
+        (
             "base = \"glass\"\n[scratches]\nwalls = \"rough\"",
             &["`scratches.walls`", "rough"],
         ),
@@ -379,4 +387,198 @@ fn specular_wall_table_files_need_a_metal_base() {
         "{e}"
     );
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The resolved settings of a material's text (`[scratches]` body after `base`).
+fn resolved(base: &str, scratches: &str) -> Resolved {
+    parse(&format!(
+        "type = \"scratched\"\n{base}\n[scratches]\n{scratches}"
+    ))
+    .unwrap()
+    .resolve(Path::new("."))
+    .unwrap()
+}
+
+fn trace_of(r: &Resolved) -> &TraceSettings {
+    match &r.table {
+        TableSource::Compute(p) => &p.trace,
+        other => panic!("{other:?}"),
+    }
+}
+
+/// `model = "seed"` is the seed's model, key by key as METHOD.md sections 3-6 state it (not as
+/// the code's defaults say): a 90-degree V groove, Lambertian walls (section 3, the seed's
+/// glass), M 256, N 10000, N_r 100 (section 3), facet albedo 1, one Schlick factor a path
+/// with n 1.50 (eq. 2) on three theta slices blended by eq. (3)-(4) (no exact-groove
+/// slices), Table 1's setting 1 (L 0.3, W 0.001, tau 0.1) in 8 layers of one direction each
+/// (section 5), the largest layer (section 6), the footprint's coverage (section 6) and the
+/// extruded groove (no lean, 8.3). A metal base: [Raymond16]'s mirror walls, Fresnel at every
+/// hit.
+#[test]
+fn model_seed_is_the_seeds_model() {
+    let glass = "base = \"glass\"";
+    for model in [
+        "model = \"seed\"",
+        "model = \"seed\"\nsetting = 1\nlayers = 8",
+    ] {
+        let r = resolved(glass, model);
+        assert_eq!(r.model, ModelKey::Seed);
+        let TableSource::Compute(p) = &r.table else {
+            panic!("{:?}", r.table)
+        };
+        assert_eq!(p.profile.spec, "v:angle=90");
+        let t = &p.trace;
+        assert_eq!(t.walls, Walls::Diffuse);
+        assert_eq!((t.m, t.n, t.nr), (256, 10_000, 100));
+        assert_eq!(t.albedo, 1.0);
+        assert_eq!(t.fresnel_mode, FresnelMode::Seed);
+        assert_eq!(t.fresnel_law, FresnelLaw::Schlick { n: 1.5 });
+        assert_eq!(t.groove_slices, 0);
+        assert_eq!(
+            (
+                r.layers.length,
+                r.layers.width,
+                r.layers.threshold,
+                r.layers.layers
+            ),
+            (0.3, 0.001, 0.1, 8)
+        );
+        assert_eq!(r.orientation, Orientation::Layer);
+        assert_eq!(r.mix, LayerMix::Max);
+        assert_eq!(r.coverage, CoverageMode::Footprint);
+        assert_eq!(r.base, ScratchedBase::Glass { eta: 1.5 });
+        let m = parse(&format!("type = \"scratched\"\n{glass}\n[scratches]\nmodel = \"seed\"\nlayers = 1\nm = 8\nn = 50\nnr = 2"))
+            .unwrap()
+            .prepare(Path::new("."))
+            .unwrap();
+        assert!(!m.has_lean());
+    }
+    // Setting 2 of Table 1: L 0.6, W 0.010, tau 0.1.
+    let r = resolved(glass, "model = \"seed\"\nsetting = 2");
+    assert_eq!(
+        (r.layers.length, r.layers.width, r.layers.threshold),
+        (0.6, 0.010, 0.1)
+    );
+    let r = resolved("base = \"metal\"\npreset = \"gold\"", "model = \"seed\"");
+    let t = trace_of(&r);
+    assert_eq!(
+        (t.walls, t.fresnel_mode, t.groove_slices, t.m, t.n),
+        (Walls::Specular, FresnelMode::Walls, 0, 256, 10_000)
+    );
+    assert_eq!(r.mix, LayerMix::Max);
+    // The seed's model is what a shipped seed scene spells out key by key.
+    let spelt = "profile = \"v:angle=90\"\nwalls = \"diffuse\"\nfresnel = \"seed\"\nfresnel_law = \"schlick\"\nm = 256\nn = 10000\nnr = 100\nsetting = 1\nlayers = 8\nseed = 1\nlayer_mix = \"max\"";
+    let (a, b) = (resolved(glass, "model = \"seed\""), resolved(glass, spelt));
+    assert_eq!(trace_of(&a), trace_of(&b));
+    assert_eq!(
+        (a.mix, a.layers, a.layer_seed),
+        (b.mix, b.layers, b.layer_seed)
+    );
+}
+
+/// The defaults (`model` left out, or `"default"`) are docs/fidelity.md's "The defaults":
+/// glass with diffuse walls and a Fresnel law takes 6 exact-groove slices, `fresnel =
+/// "walls"`, M 64, N 50000, N_r 1; everything else is the seed's (`layer_mix = "max"`, the
+/// footprint, a direction per layer, a metal's mirror walls).
+#[test]
+fn the_defaults_are_the_documented_ones() {
+    let glass = "base = \"glass\"";
+    for model in ["", "model = \"default\""] {
+        let r = resolved(glass, model);
+        assert_eq!(r.model, ModelKey::Default);
+        let t = trace_of(&r);
+        assert_eq!(
+            (t.walls, t.fresnel_mode, t.fresnel_law, t.groove_slices),
+            (
+                Walls::Diffuse,
+                FresnelMode::Walls,
+                FresnelLaw::Schlick { n: 1.5 },
+                6
+            )
+        );
+        assert_eq!((t.m, t.n, t.nr, t.albedo), (64, 50_000, 1, 1.0));
+        assert_eq!(
+            (r.mix, r.coverage, r.orientation),
+            (LayerMix::Max, CoverageMode::Footprint, Orientation::Layer)
+        );
+        assert_eq!(r.layers, LayerParams::setting(1).unwrap());
+        let m = parse(&format!("type = \"scratched\"\n{glass}\n[scratches]\n{model}\nlayers = 1\nm = 8\nn = 50\nnr = 2"))
+            .unwrap()
+            .prepare(Path::new("."))
+            .unwrap();
+        assert!(!m.has_lean());
+    }
+    // Metal: [Raymond16]'s mirror walls (exact with Fresnel at every hit), as the seed's.
+    let gold = "base = \"metal\"\npreset = \"gold\"";
+    let r = resolved(gold, "");
+    let t = trace_of(&r);
+    assert_eq!(
+        (t.walls, t.fresnel_mode, t.groove_slices, t.m, t.n, t.nr),
+        (Walls::Specular, FresnelMode::Walls, 0, 256, 10_000, 100)
+    );
+    assert_eq!(r.mix, LayerMix::Max);
+    // A metal's Lambertian walls keep the seed's table (Fresnel at every hit, eq. (3)).
+    let t = trace_of(&resolved(gold, "walls = \"diffuse\"")).clone();
+    assert_eq!(
+        (t.groove_slices, t.fresnel_mode, t.m, t.n, t.nr),
+        (0, FresnelMode::Walls, 256, 10_000, 100)
+    );
+    assert!(matches!(t.fresnel_law, FresnelLaw::Conductor { .. }));
+    // Glass: lossless walls (the seed's table is exact), mirror walls, a facet albedo: the
+    // seed's table, as under `model = "seed"`.
+    for keys in [
+        "fresnel_law = \"none\"",
+        "walls = \"specular\"",
+        "albedo = 0.5",
+    ] {
+        let a = trace_of(&resolved(glass, keys)).clone();
+        let b = trace_of(&resolved(glass, &format!("{keys}\nmodel = \"seed\""))).clone();
+        assert_eq!(a, b, "{keys}");
+        assert_eq!((a.groove_slices, a.m, a.n, a.nr), (0, 256, 10_000, 100));
+    }
+    // Dielectric walls: no 2D table; the seed's layer choice.
+    let r = resolved(glass, "walls = \"dielectric\"");
+    assert!(matches!(r.table, TableSource::Traced(_)), "{:?}", r.table);
+    assert_eq!(r.mix, LayerMix::Max);
+}
+
+/// A key given explicitly wins over either model's default.
+#[test]
+fn explicit_keys_override_the_model() {
+    let glass = "base = \"glass\"";
+    let r = resolved(glass, "model = \"seed\"\nlayer_mix = \"union\"");
+    assert_eq!(r.mix, LayerMix::Union);
+    assert_eq!(trace_of(&r).groove_slices, 0);
+    let r = resolved(glass, "model = \"default\"\nlayer_mix = \"union\"");
+    assert_eq!(r.mix, LayerMix::Union);
+    assert_eq!(trace_of(&r).groove_slices, 6);
+    // The seed's model with slices asked for: the seed's sizes, Fresnel at every hit.
+    let t = trace_of(&resolved(glass, "model = \"seed\"\ngroove_slices = 6")).clone();
+    assert_eq!(
+        (t.groove_slices, t.fresnel_mode, t.m, t.n, t.nr),
+        (6, FresnelMode::Walls, 256, 10_000, 100)
+    );
+    let t = trace_of(&resolved(glass, "model = \"seed\"\nfresnel = \"walls\"")).clone();
+    assert_eq!((t.groove_slices, t.fresnel_mode), (0, FresnelMode::Walls));
+    // The defaults with the seed's Fresnel: no slices (they need Fresnel at every hit).
+    let t = trace_of(&resolved(glass, "fresnel = \"seed\"")).clone();
+    assert_eq!(
+        (t.groove_slices, t.fresnel_mode, t.m, t.n, t.nr),
+        (0, FresnelMode::Seed, 256, 10_000, 100)
+    );
+    let t = trace_of(&resolved(glass, "groove_slices = 3\nm = 32\nnr = 2")).clone();
+    assert_eq!((t.groove_slices, t.m, t.n, t.nr), (3, 32, 50_000, 2));
+    let t = trace_of(&resolved(glass, "fresnel_law = \"dielectric\"")).clone();
+    assert_eq!(
+        (t.groove_slices, t.fresnel_law),
+        (6, FresnelLaw::Dielectric { n: 1.5 })
+    );
+    // A table file: the model still picks the layer mix.
+    let r = parse(
+        "type = \"scratched\"\nbase = \"glass\"\n[scratches]\nmodel = \"seed\"\ntable = \"t.npz\"",
+    )
+    .unwrap()
+    .resolve(Path::new("."))
+    .unwrap();
+    assert_eq!(r.mix, LayerMix::Max);
 }
