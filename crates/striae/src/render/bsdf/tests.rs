@@ -845,7 +845,8 @@ mod scratched_glass {
     }
 
     /// A lossless groove in lossless glass: the sampled weights, with refraction's radiance
-    /// factor undone, average 1 from either side; rough walls (single scattering) lose some.
+    /// factor undone, average 1 from either side, smooth walls and rough ones (which walk
+    /// their microsurface, METHOD.md 9.7).
     /// And, independent of the sampler, the quadrature of `eval |cos|` over the sphere gives
     /// the groove's share `C (R + s T)` with `R + T` the table's (1 for smooth walls). Leaned
     /// lobes (`lean = true`) lose what their leans put across the surface and gain nothing.
@@ -864,15 +865,14 @@ mod scratched_glass {
                     // Leaned lobes: what the leans put across the surface is lost, nothing
                     // gained.
                     assert!(
-                        a.mean() < 1.0 + 4.0 * a.std_error() && a.mean() > 0.75 - lost as f64,
+                        a.mean() < 1.0 + 4.0 * a.std_error() + 1e-6
+                            && a.mean() > 0.75 - lost as f64,
                         "rough {rough} wo {wo:?}: {a:?}"
                     );
-                } else if rough == 0.0 {
-                    assert!(a.agrees_with(1.0, 4.0, 1e-3), "wo {wo:?}: {a:?}");
                 } else {
                     assert!(
-                        a.mean() < 1.0 + 4.0 * a.std_error() && a.mean() > 0.8,
-                        "{a:?}"
+                        a.agrees_with(1.0, 4.0, 1e-3),
+                        "rough {rough} wo {wo:?}: {a:?}"
                     );
                 }
                 // Quadrature with the radiance factor undone on the far side.
