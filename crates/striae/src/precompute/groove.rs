@@ -363,6 +363,20 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// `-d` in the frame `(x, y = (0, 1, 0), z)`: the direction back along a ray travelling `d`.
+#[inline(always)]
+fn back_in_frame(x: [f64; 3], z: [f64; 3], d: [f64; 3]) -> [f64; 3] {
+    [-dot(d, x), -d[1], -dot(d, z)]
+}
+
+/// [`from_frame`] normalised.
+#[inline(always)]
+fn unit_from_frame(x: [f64; 3], z: [f64; 3], l: [f64; 3]) -> [f64; 3] {
+    let d = from_frame(x, z, l);
+    let len = dot(d, d).sqrt();
+    [d[0] / len, d[1] / len, d[2] / len]
+}
+
 /// `a x + b y + c z` for the frame `(x, y = (0, 1, 0), z)`.
 #[inline(always)]
 fn from_frame(x: [f64; 3], z: [f64; 3], l: [f64; 3]) -> [f64; 3] {
@@ -681,12 +695,15 @@ impl Tracer {
         u: Draws,
     ) -> Scatter {
         let surface = Microsurface::new(self.s.roughness);
-        let wo = [-dot(ray.d, x), -ray.d[1], -dot(ray.d, n)];
-        let key = mix64(u.key ^ mix64(u.base.wrapping_add(WALK_SALT)));
+        let wo = back_in_frame(x, n, ray.d);
+        let stream = Draws {
+            key: mix64(u.key ^ mix64(u.base.wrapping_add(WALK_SALT))),
+            base: 0,
+        };
         let mut k = 0u64;
         let mut rng = || {
             k += 1;
-            unit(mix64(key.wrapping_add(k.wrapping_mul(GOLDEN))))
+            stream.get(k)
         };
         let exit = if walls == GrooveWalls::Dielectric {
             let eta = if from_air {
@@ -704,9 +721,7 @@ impl Tracer {
         };
         ray.in_object ^= exit.w[2] < 0.0;
         ray.w *= exit.weight;
-        let d = from_frame(x, n, exit.w);
-        let len = dot(d, d).sqrt();
-        ray.d = [d[0] / len, d[1] / len, d[2] / len];
+        ray.d = unit_from_frame(x, n, exit.w);
         Scatter::On
     }
 
@@ -723,7 +738,7 @@ impl Tracer {
         from_air: bool,
         u: Draws,
     ) -> Scatter {
-        let wo = [-dot(ray.d, x), -ray.d[1], -dot(ray.d, n)];
+        let wo = back_in_frame(x, n, ray.d);
         let wo32 = Vec3::new(wo[0] as f32, wo[1] as f32, wo[2] as f32);
         let m32 = ggx.sample_visible(wo32, Vec2::new(u.get(0) as f32, u.get(1) as f32));
         let m = [m32.x as f64, m32.y as f64, m32.z as f64];
@@ -763,9 +778,7 @@ impl Tracer {
         ray.in_object ^= refracted;
         let wi32 = Vec3::new(wi[0] as f32, wi[1] as f32, wi[2] as f32);
         ray.w *= weight * ggx.g1(wi32, m32) as f64;
-        let d = from_frame(x, n, wi);
-        let len = dot(d, d).sqrt();
-        ray.d = [d[0] / len, d[1] / len, d[2] / len];
+        ray.d = unit_from_frame(x, n, wi);
         Scatter::On
     }
 }
@@ -873,17 +886,7 @@ mod tests {
     fn profile(spec: &str) -> Profile {
         if spec == "file-w" {
             // A non-convex W: paths refracted into the object meet the groove again.
-            return Profile::from_points(
-                "w",
-                vec![
-                    [-0.5, 0.0],
-                    [-0.25, -0.5],
-                    [0.0, -0.1],
-                    [0.25, -0.5],
-                    [0.5, 0.0],
-                ],
-            )
-            .unwrap();
+            return Profile::w_groove();
         }
         Profile::parse(spec).unwrap()
     }

@@ -209,6 +209,23 @@ impl Profile {
         }
     }
 
+    /// A non-convex W groove (two V's either side of a raised middle), named `w`: rays
+    /// leaving one half meet the other, the case the convex tracers refuse.
+    #[cfg(test)]
+    pub(crate) fn w_groove() -> Self {
+        Profile::from_points(
+            "w",
+            vec![
+                [-0.5, 0.0],
+                [-0.25, -0.5],
+                [0.0, -0.1],
+                [0.25, -0.5],
+                [0.5, 0.0],
+            ],
+        )
+        .unwrap()
+    }
+
     /// Read a polyline file (format in `docs/table-format.md`): one vertex `x z` per line
     /// (whitespace or comma separated), `#` starts a comment, blank lines are skipped. The
     /// endpoints must have `z = 0` and `x0 < x_last`; the polyline is translated and scaled

@@ -483,17 +483,7 @@ mod tests {
             }
         }
         // A non-convex profile takes the generic path.
-        let w = Profile::from_points(
-            "w",
-            vec![
-                [-0.5, 0.0],
-                [-0.25, -0.5],
-                [0.0, -0.1],
-                [0.25, -0.5],
-                [0.5, 0.0],
-            ],
-        )
-        .unwrap();
+        let w = Profile::w_groove();
         assert!(!CrossSection::new(&w).convex);
     }
 

@@ -234,17 +234,7 @@ mod tests {
             let e = trace(&v, &s, &|_| {}).unwrap_err();
             assert!(e.to_string().contains("estimator"), "{e}");
         }
-        let w = Profile::from_points(
-            "w",
-            vec![
-                [-0.5, 0.0],
-                [-0.25, -0.5],
-                [0.0, -0.1],
-                [0.25, -0.5],
-                [0.5, 0.0],
-            ],
-        )
-        .unwrap();
+        let w = Profile::w_groove();
         let e = trace(&w, &k, &|_| {}).unwrap_err();
         assert!(e.to_string().contains("convex"), "{e}");
         assert!(trace(&v, &k, &|_| {}).is_ok());
