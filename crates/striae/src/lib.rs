@@ -9,6 +9,7 @@
 //! precompute  profile -> cross_section -> trace2d -> table                 (METHOD.md 2-4, 6)
 //!             groove (the exact 2.5D groove) -> groove_slices, wall_table   (8.1-8.2)
 //! layers      worley -> layer set, raster, footprint queries               (5)
+//! curves      svg / patterns -> stroke -> curve set, footprint queries      (9.1-9.2)
 //! render      geometry, camera, lights, scene -> material, scratched, bsdf
 //!             -> integrator -> film, parts                                  (6-7)
 //! lab         gonio, fidelity, figures, plot: measuring the model         (7-8)
@@ -49,6 +50,9 @@ pub mod precompute;
 
 // Scratch layers from Worley cell noise (section 5).
 pub mod layers;
+
+// Scratches as curves: SVG strokes, swirls and circles, tapered, dashed and worn (section 9).
+pub mod curves;
 
 // The path tracer (sections 6-7).
 pub mod render;

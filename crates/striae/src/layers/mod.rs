@@ -240,6 +240,23 @@ impl LayerSet {
         })
     }
 
+    /// The set of no layers: a material whose scratches are curves only (`crate::curves`).
+    /// Every query answers "not scratched"; `params()` holds no layers.
+    pub fn none() -> Self {
+        LayerSet {
+            params: LayerParams {
+                layers: 0,
+                ..LayerParams::setting(1).expect("setting 1")
+            },
+            seed: 0,
+            layers: Vec::new(),
+            point: point_lanes::PointLanes::new(&[]),
+            orientation: Orientation::Layer,
+            expected_coverage: 0.0,
+            id: NEXT_SET_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
+        }
+    }
+
     /// A process-unique id (clones share it: they hold the same layers).
     pub fn id(&self) -> u64 {
         self.id

@@ -34,9 +34,22 @@
 //! # table = "my-table.npz"       # load a table instead of computing one
 //! # explicit = true              # real grooves on planar faces (METHOD.md 8.3)
 //! # stations = 16                # stations along each explicit groove
+//! # curves = "marks.svg"         # every stroked path a scratch (METHOD.md 9.1, `crate::curves`)
+//! # pattern = { kind = "swirl", count = 300, radius = [0.05, 0.3], width = 4e-4 }
+//! # taper = 0.01                 # curves: taper length at each end (uv; SVG: canvas units)
+//! # dashes = [0.004, 0.002]      # curves: on, off lengths (as stroke-dasharray)
+//! # depth = 1.0                  # curves: depth ratio over the profile's, (0, 1]
+//! # wear = 0.5                   # curves: the most of the depth wear takes, with
+//! # wear_length = 0.02           # its correlation length along the scratch
 //! ```
+//!
+//! With `curves` or `pattern` and none of the layer keys (`setting`, `length`, `width`,
+//! `threshold`, `layers`), the material has the curves only; with both, both.
 
 use super::materials::{conductor_ior, invalid, MaterialError};
+use crate::curves::patterns::Pattern;
+use crate::curves::stroke::StrokeStyle;
+use crate::curves::{CurveError, CurveSet, Polyline};
 use crate::layers::{LayerError, LayerParams, LayerSet, Orientation, MAX_LAYERS};
 use crate::math::Rgb;
 use crate::optics::fresnel::FresnelLaw;
@@ -171,6 +184,34 @@ pub struct ScratchSpec {
     /// Stations along each explicit groove (default [`DEFAULT_STATIONS`]): its opening is the
     /// polygon through them (`geometry::carve`). The SV-BRDF does not read it.
     pub stations: Option<usize>,
+    /// An SVG drawing (relative to the scene file) whose stroked paths are scratches
+    /// (METHOD.md 9.1, [`crate::curves::svg`]).
+    pub curves: Option<PathBuf>,
+    /// Generated curves: swirls or concentric circles ([`Pattern`]).
+    pub pattern: Option<Pattern>,
+    /// The curves' stroke ([`StrokeStyle`]): taper length at each end, dash pattern and
+    /// offset, depth ratio, wear and its correlation length (drawing units: uv for a
+    /// pattern, canvas units for an SVG).
+    pub taper: Option<f64>,
+    pub dashes: Option<Vec<f64>>,
+    pub dash_offset: Option<f64>,
+    pub depth: Option<f64>,
+    pub wear: Option<f64>,
+    pub wear_length: Option<f64>,
+}
+
+/// Where a material's curves come from (`scratches.curves` or `scratches.pattern`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum CurveSource {
+    Svg(PathBuf),
+    Pattern(Pattern),
+}
+
+/// A material's curves, flattened: polylines in drawing units and the map onto uv.
+#[derive(Clone, Debug)]
+pub struct CurveDrawing {
+    pub polylines: Vec<Polyline>,
+    pub to_uv: glam::DVec2,
 }
 
 /// `scratches.lobes`: how smooth dielectric walls' groove lobes are found (rough walls' are
@@ -222,6 +263,10 @@ pub struct Resolved {
     pub coverage: CoverageMode,
     /// Stations along each explicit groove.
     pub stations: usize,
+    /// Whether the material has cell-noise layers (`false`: curves only).
+    pub with_layers: bool,
+    /// The curves and their stroke, where it has some.
+    pub curves: Option<(CurveSource, StrokeStyle)>,
 }
 
 /// The base's defaults for the scratch table.
@@ -266,6 +311,34 @@ fn trace_key(key: &str) -> &'static str {
     }
 }
 
+/// A curve error as the scene key it comes from.
+fn curve_error(e: CurveError) -> MaterialError {
+    match e {
+        CurveError::Param { key, value, why } => {
+            let key = match key {
+                "taper" => "scratches.taper",
+                "dashes" => "scratches.dashes",
+                "dash_offset" => "scratches.dash_offset",
+                "depth" => "scratches.depth",
+                "wear" => "scratches.wear",
+                "wear_length" => "scratches.wear_length",
+                k if k.starts_with("pattern.") => match k {
+                    "pattern.radius" => "scratches.pattern.radius",
+                    "pattern.arc" => "scratches.pattern.arc",
+                    "pattern.centre" => "scratches.pattern.centre",
+                    "pattern.jitter" => "scratches.pattern.jitter",
+                    "pattern.count" => "scratches.pattern.count",
+                    "pattern.width" => "scratches.pattern.width",
+                    _ => "scratches.pattern",
+                },
+                _ => "scratches",
+            };
+            invalid(key, value, why)
+        }
+        e => invalid("scratches.curves", "", e.to_string()),
+    }
+}
+
 fn layer_error(e: LayerError) -> MaterialError {
     let key = match e {
         LayerError::Length(_) => "scratches.length",
@@ -291,7 +364,15 @@ impl ScratchedDesc {
         let defaults = self.resolve_base()?;
         let table = self.resolve_table(&defaults, base_dir)?;
         let s = &self.scratches;
+        let curves = self.resolve_curves(base_dir)?;
+        let layer_keys = s.setting.is_some()
+            || s.length.is_some()
+            || s.width.is_some()
+            || s.threshold.is_some()
+            || s.layers.is_some();
         Ok(Resolved {
+            with_layers: curves.is_none() || layer_keys,
+            curves,
             model: self.model(),
             base: defaults.base,
             tint: defaults.tint,
@@ -326,6 +407,81 @@ impl ScratchedDesc {
                 }
             },
         })
+    }
+
+    /// The curves (`scratches.curves` or `scratches.pattern`) and their stroke; the stroke
+    /// keys without curves are errors.
+    fn resolve_curves(
+        &self,
+        base_dir: &Path,
+    ) -> Result<Option<(CurveSource, StrokeStyle)>, MaterialError> {
+        let s = &self.scratches;
+        let d = StrokeStyle::default();
+        let style = StrokeStyle {
+            taper: s.taper.unwrap_or(d.taper),
+            dashes: s.dashes.clone().unwrap_or_default(),
+            dash_offset: s.dash_offset.unwrap_or(d.dash_offset),
+            depth: s.depth.unwrap_or(d.depth),
+            wear: s.wear.unwrap_or(d.wear),
+            wear_length: s.wear_length.unwrap_or(d.wear_length),
+            seed: s.seed.unwrap_or(DEFAULT_LAYER_SEED),
+        };
+        let source = match (&s.curves, &s.pattern) {
+            (Some(_), Some(_)) => {
+                return Err(invalid(
+                    "scratches.pattern",
+                    "(given)",
+                    "`scratches.curves` (an SVG) and `scratches.pattern` exclude each other",
+                ))
+            }
+            (Some(path), None) => CurveSource::Svg(base_dir.join(path)),
+            (None, Some(p)) => {
+                p.validate().map_err(curve_error)?;
+                CurveSource::Pattern(p.clone())
+            }
+            (None, None) => {
+                let stroke_keys = [
+                    ("scratches.taper", s.taper.is_some()),
+                    ("scratches.dashes", s.dashes.is_some()),
+                    ("scratches.dash_offset", s.dash_offset.is_some()),
+                    ("scratches.depth", s.depth.is_some()),
+                    ("scratches.wear", s.wear.is_some()),
+                    ("scratches.wear_length", s.wear_length.is_some()),
+                ];
+                if let Some((key, _)) = stroke_keys.iter().find(|(_, given)| *given) {
+                    return Err(invalid(
+                        key,
+                        "(given)",
+                        "applies to curves only (`scratches.curves` or `scratches.pattern`)",
+                    ));
+                }
+                return Ok(None);
+            }
+        };
+        style.validate().map_err(curve_error)?;
+        Ok(Some((source, style)))
+    }
+
+    /// The material's curves flattened (an SVG read, a pattern drawn), or `None`.
+    pub fn curve_drawing(&self, r: &Resolved) -> Result<Option<CurveDrawing>, MaterialError> {
+        let Some((source, style)) = &r.curves else {
+            return Ok(None);
+        };
+        let drawing = match source {
+            CurveSource::Svg(path) => {
+                let d = crate::curves::svg::load(path, style)
+                    .map_err(|e| invalid("scratches.curves", format!("{path:?}"), e.to_string()))?;
+                CurveDrawing {
+                    to_uv: d.to_uv(),
+                    polylines: d.polylines,
+                }
+            }
+            CurveSource::Pattern(p) => CurveDrawing {
+                polylines: p.polylines(style).map_err(curve_error)?,
+                to_uv: glam::DVec2::ONE,
+            },
+        };
+        Ok(Some(drawing))
     }
 
     /// The defaults the keys left out take (`scratches.model`).
@@ -729,11 +885,23 @@ impl ScratchedDesc {
                 model
             }
         };
-        let layers = LayerSet::with_orientation(r.layers, r.layer_seed, r.orientation)
-            .map_err(layer_error)?;
+        let layers = if r.with_layers {
+            LayerSet::with_orientation(r.layers, r.layer_seed, r.orientation)
+                .map_err(layer_error)?
+        } else {
+            LayerSet::none()
+        };
+        let curves = match self.curve_drawing(&r)? {
+            Some(d) => Some(std::sync::Arc::new(
+                CurveSet::new(&d.polylines, d.to_uv)
+                    .map_err(|e| invalid("scratches.curves", "", e.to_string()))?,
+            )),
+            None => None,
+        };
         Ok(
             ScratchedMaterial::with_model(r.base, r.tint, model, layers, r.mix, r.coverage)
-                .with_lean(self.scratches.lean == Some(true)),
+                .with_lean(self.scratches.lean == Some(true))
+                .with_curves(curves),
         )
     }
 
@@ -792,7 +960,10 @@ impl ScratchedDesc {
 /// Lambertian or mirror times the table's Fresnel law and the lobe's tint).
 #[derive(Clone, Debug)]
 pub struct ExplicitSpec {
+    /// The cell-noise layers (none where the material has curves only).
     pub layers: LayerSet,
+    /// The curves, in drawing units, with their map onto uv.
+    pub curves: Option<CurveDrawing>,
     pub profile: Profile,
     pub face: Material,
     pub wall: Material,
@@ -819,7 +990,7 @@ impl ScratchedDesc {
             }
             return self.explicit_glass(&r, params);
         }
-        let TableSource::Compute(params) = r.table else {
+        let TableSource::Compute(params) = r.table.clone() else {
             return Err(invalid(
                 "scratches.explicit",
                 true,
@@ -861,7 +1032,8 @@ impl ScratchedDesc {
             ),
         };
         Ok(ExplicitSpec {
-            layers: LayerSet::new(r.layers, r.layer_seed).map_err(layer_error)?,
+            layers: explicit_layers(&r)?,
+            curves: self.curve_drawing(&r)?,
             profile: params.profile,
             face,
             wall,
@@ -887,7 +1059,8 @@ impl ScratchedDesc {
         }
         let eta = params.ior as f32;
         Ok(ExplicitSpec {
-            layers: LayerSet::new(r.layers, r.layer_seed).map_err(layer_error)?,
+            layers: explicit_layers(r)?,
+            curves: self.curve_drawing(r)?,
             profile: params.profile.clone(),
             face: Material::Dielectric {
                 eta,
@@ -908,6 +1081,15 @@ impl ScratchedDesc {
             },
             stations: r.stations,
         })
+    }
+}
+
+/// The layers explicit grooves carve: none where the material has curves only.
+fn explicit_layers(r: &Resolved) -> Result<LayerSet, MaterialError> {
+    if r.with_layers {
+        LayerSet::new(r.layers, r.layer_seed).map_err(layer_error)
+    } else {
+        Ok(LayerSet::none())
     }
 }
 

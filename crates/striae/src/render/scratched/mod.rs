@@ -12,6 +12,7 @@
 //! Where no layer covers the footprint the BSDF is the base itself, at no extra cost; glass seen
 //! from inside skips the layer queries (its scratches are on the outer side, `bsdf::scratched`).
 
+use crate::curves::{CurveHits, CurveSet};
 use crate::layers::cache::PixelKey;
 use crate::layers::lattice::TileQuery;
 use crate::layers::layer::MAX_FOOTPRINT_CELLS;
@@ -108,6 +109,8 @@ pub struct ScratchedMaterial {
     pub tint: Rgb,
     pub model: ScratchModel,
     pub layers: LayerSet,
+    /// Scratches as curves (METHOD.md 9.1, [`crate::curves`]), beside the layers or alone.
+    pub curves: Option<Arc<CurveSet>>,
     /// Each layer's scratch direction `d_k` in texture space ([`LayerSet::direction`]), as `f32`,
     /// computed once here rather than with a `sin_cos` per hit.
     directions: Vec<[f32; 2]>,
@@ -159,11 +162,21 @@ impl ScratchedMaterial {
             tint,
             model,
             layers,
+            curves: None,
             directions,
             mix,
             coverage,
             lean: 0.0,
         }
+    }
+
+    /// The same material with the scratch curves `curves` beside its layers (METHOD.md 9.1):
+    /// at a hit each curve that covers the footprint is one more candidate lobe, along the
+    /// tangent of one of its segments there, and `layer_mix` combines curves and layers
+    /// alike ([`Self::bsdf`]).
+    pub fn with_curves(mut self, curves: Option<Arc<CurveSet>>) -> Self {
+        self.curves = curves;
+        self
     }
 
     /// Whether its lobes lean ([`Self::with_lean`]).
@@ -245,59 +258,167 @@ impl ScratchedMaterial {
         }
         let k = self.layers.len();
         let mut cov = [0.0f32; MAX_LAYERS];
+        let inside = ctx.wo.dot(ctx.ng) <= 0.0;
         let covered = match (&self.model, self.base) {
-            (ScratchModel::DielectricWalls(walls), ScratchedBase::Glass { eta })
-                if ctx.wo.dot(ctx.ng) <= 0.0 =>
-            {
+            _ if k == 0 => false,
+            (ScratchModel::DielectricWalls(walls), ScratchedBase::Glass { .. }) if inside => {
                 match self.inside_coverage(ctx, walls, &mut cov[..k]) {
                     InsideHit::Covered => true,
-                    InsideHit::Ridge(l) => {
-                        return Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(eta, walls, &[l]))
-                    }
+                    InsideHit::Ridge(l) => return self.with_lobes_at(ctx, &[l]),
                     InsideHit::Plain => false,
                 }
             }
             _ => self.layer_coverage(ctx, cache, &mut cov[..k]),
         };
-        if !covered {
+        let curves = match &self.curves {
+            Some(c) => self.curve_hits(c, ctx, inside),
+            None => CurveHits::new(),
+        };
+        if !covered && curves.is_empty() {
             return self.base_bsdf();
         }
         let mut lobes = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
-        let count = match self.mix {
-            LayerMix::Max => self.largest_lobe(ctx, &cov[..k], &mut lobes),
-            LayerMix::Sum => self.covering_lobes(ctx, &cov[..k], &mut lobes),
-            LayerMix::Union => {
-                let n = self.covering_lobes(ctx, &cov[..k], &mut lobes);
-                let scale = union_scale(&cov[..k]);
-                for l in &mut lobes[..n] {
-                    l.coverage *= scale;
+        let count = if curves.is_empty() {
+            match self.mix {
+                LayerMix::Max => self.largest_lobe(ctx, &cov[..k], &mut lobes),
+                LayerMix::Sum => self.covering_lobes(ctx, &cov[..k], &mut lobes),
+                LayerMix::Union => {
+                    let n = self.covering_lobes(ctx, &cov[..k], &mut lobes);
+                    let scale = union_scale(&cov[..k]);
+                    for l in &mut lobes[..n] {
+                        l.coverage *= scale;
+                    }
+                    n
                 }
-                n
             }
+        } else {
+            self.lobes_with_curves(ctx, &cov[..k], &curves, &mut lobes)
         };
         if count == 0 {
             return self.base_bsdf();
         }
+        self.with_lobes_at(ctx, &lobes[..count])
+    }
+
+    /// The curves at the hit (METHOD.md 9.1): the point test from inside dielectric-walled
+    /// glass and under `coverage = "point"`, else the exact coverage of the sample's own
+    /// footprint ([`CurveSet::footprint`]; no per-pixel or per-tile cache: every hit clips the
+    /// segments near it).
+    #[inline(always)]
+    fn curve_hits(&self, curves: &CurveSet, ctx: &ShadingContext, inside: bool) -> CurveHits {
+        let uv = ctx.uv.as_dvec2();
+        if inside || self.coverage == CoverageMode::Point {
+            return curves.at_point(uv);
+        }
+        let (a, b) = ctx.footprint_uv();
+        curves.footprint(uv, a.as_dvec2(), b.as_dvec2(), ctx.u_layer as f64)
+    }
+
+    /// The lobes of a hit that curves cover, with the layers' coverages `cov`: curves and
+    /// layers are alike to `layer_mix` (METHOD.md 9.1): `max` takes the largest coverage, one
+    /// of the ties at random by `u_layer`; `sum` and `union` a lobe each (the
+    /// [`MAX_SCRATCH_LOBES`] largest), `union` scaled to the union's coverage.
+    fn lobes_with_curves(
+        &self,
+        ctx: &ShadingContext,
+        cov: &[f32],
+        curves: &CurveHits,
+        lobes: &mut [ScratchLobe; MAX_SCRATCH_LOBES],
+    ) -> usize {
+        let curve_lobe = |i: usize, c: f32| {
+            let d = curves[i].direction;
+            lobe_along(ctx, [d.x as f32, d.y as f32], c)
+        };
+        if self.mix == LayerMix::Max {
+            // `curves` come largest first.
+            let best = cov
+                .iter()
+                .copied()
+                .fold(curves[0].coverage as f32, f32::max);
+            let tie = |c: f32| c > 0.0 && c >= best - 1e-6;
+            let layer_ties = cov
+                .iter()
+                .enumerate()
+                .fold(0u64, |m, (i, &c)| m | (tie(c) as u64) << i);
+            let nl = layer_ties.count_ones();
+            let nc = curves.iter().take_while(|h| tie(h.coverage as f32)).count() as u32;
+            let n = nl + nc;
+            let pick = ((ctx.u_layer * n as f32) as u32).min(n - 1);
+            let u = (ctx.u_layer * n as f32 - pick as f32).clamp(0.0, 1.0);
+            lobes[0] = if pick < nl {
+                let mut rest = layer_ties;
+                for _ in 0..pick {
+                    rest &= rest - 1;
+                }
+                let layer = rest.trailing_zeros() as usize;
+                lobe(self, ctx, layer, cov[layer], u)
+            } else {
+                let i = (pick - nl) as usize;
+                curve_lobe(i, curves[i].coverage as f32)
+            };
+            return 1;
+        }
+        // Sum and union: every covering layer and curve, the largest where there are more.
+        let mut all = arrayvec::ArrayVec::<
+            (f32, usize),
+            { MAX_LAYERS + crate::curves::MAX_CURVE_HITS },
+        >::new();
+        all.extend(
+            cov.iter()
+                .enumerate()
+                .filter(|(_, &c)| c > 0.0)
+                .map(|(i, &c)| (c, i)),
+        );
+        all.extend(
+            curves
+                .iter()
+                .enumerate()
+                .map(|(i, h)| (h.coverage as f32, MAX_LAYERS + i)),
+        );
+        let scale = if self.mix == LayerMix::Union {
+            let c: arrayvec::ArrayVec<f32, { MAX_LAYERS + crate::curves::MAX_CURVE_HITS }> =
+                all.iter().map(|x| x.0).collect();
+            union_scale(&c)
+        } else {
+            1.0
+        };
+        if all.len() > MAX_SCRATCH_LOBES {
+            all.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        }
+        let n = all.len().min(MAX_SCRATCH_LOBES);
+        for (l, &(c, i)) in lobes.iter_mut().zip(&all[..n]) {
+            *l = if i < MAX_LAYERS {
+                lobe(self, ctx, i, c * scale, ctx.u_layer)
+            } else {
+                curve_lobe(i - MAX_LAYERS, c * scale)
+            };
+        }
+        n
+    }
+
+    /// The scratched BSDF of the model with `lobes` at the hit `ctx`.
+    #[inline(always)]
+    fn with_lobes_at(&self, ctx: &ShadingContext, lobes: &[ScratchLobe]) -> Bsdf<'_> {
         let table = match &self.model {
             ScratchModel::Seed(table) => table,
             ScratchModel::DielectricWalls(walls) => {
                 let ScratchedBase::Glass { eta } = self.base else {
                     return self.base_bsdf();
                 };
-                return Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(eta, walls, &lobes[..count]));
+                return Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(eta, walls, lobes));
             }
             ScratchModel::SpecularWalls(walls) => {
                 let ScratchedBase::Metal { ior } = self.base else {
                     return self.base_bsdf();
                 };
-                let b = ScratchedMetalBsdf::new(ior, self.tint, walls, &lobes[..count]);
+                let b = ScratchedMetalBsdf::new(ior, self.tint, walls, lobes);
                 return Bsdf::ScratchedMetal(b);
             }
         };
         // The integrator evaluates and samples it with `wo` in this frame: precompute the
         // first lobe's `wo` terms once (`ScratchedBsdf::at_wo`; the same results bit for bit).
         Bsdf::Scratched(
-            ScratchedBsdf::new(self.base, table, self.tint, &lobes[..count])
+            ScratchedBsdf::new(self.base, table, self.tint, lobes)
                 .at_wo(ctx.frame.to_local(ctx.wo)),
         )
     }
