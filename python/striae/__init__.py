@@ -28,6 +28,7 @@ __all__ = [
     "merge",
     "read_exr",
     "write_image",
+    "hologram",
     "__version__",
 ]
 
@@ -261,3 +262,37 @@ def write_image(image: np.ndarray, path: Union[str, "os.PathLike[str]"], exposur
     image = np.ascontiguousarray(image, dtype=np.float32)
     base, ext = os.path.splitext(os.fspath(path))
     _striae.write_image(image, base if ext.lower() in (".exr", ".png") else os.fspath(path), exposure)
+
+
+def hologram(
+    points,
+    plate: Optional[Sequence[float]] = None,
+    view_angle: Optional[float] = None,
+    scale: Optional[float] = None,
+    span: float = 90.0,
+    azimuth: float = 90.0,
+    width: Optional[float] = None,
+) -> dict:
+    """The arcs of a scratch hologram (METHOD.md 9.4, ``docs/hologram.md``), as
+    ``striae hologram``: one arc per row ``(x, y, z)`` of ``points`` ``(N, 3)``, the plate
+    being ``z = 0`` and ``z > 0`` in front of it (toward the viewer).
+
+    ``plate`` is the drawing's rectangle ``(x0, y0, size_x, size_y)`` (default: fitted around
+    the arcs); ``view_angle`` the design angle from the normal in degrees (default 45) or
+    ``scale`` the radius over the distance from the plate instead; ``span`` the view azimuths
+    each arc covers and ``azimuth`` the direction toward the viewer, in degrees from ``+x``
+    toward ``+y``; ``width`` the stroke width in drawing units.
+
+    Returns a dict: ``svg`` (the document), ``centres`` ``(N, 2)``, ``radii``, ``start`` and
+    ``end`` (radians, from ``+x`` toward ``+y``), ``z``, ``plate``, ``width``, ``scale`` and
+    ``outside`` (arcs reaching out of a given plate)."""
+    points = _rows(points, 3)
+    return _striae.hologram(
+        points,
+        None if plate is None else [float(v) for v in plate],
+        view_angle,
+        scale,
+        float(span),
+        float(azimuth),
+        width,
+    )

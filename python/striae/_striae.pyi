@@ -111,3 +111,15 @@ def write_image(image: npt.NDArray[np.float32], path: str, exposure: float) -> N
 
 def read_exr(path: str) -> npt.NDArray[np.float32]:
     """An EXR file's RGB pixels as ``(h, w, 3)`` float32."""
+
+def hologram(
+    points: npt.NDArray[np.float64],
+    plate: Optional[List[float]] = None,
+    view_angle: Optional[float] = None,
+    scale: Optional[float] = None,
+    span: float = 90.0,
+    azimuth: float = 90.0,
+    width: Optional[float] = None,
+) -> dict:
+    """The arcs of a scratch hologram for ``(N, 3)`` points: ``svg``, ``centres``, ``radii``,
+    ``start``, ``end``, ``z``, ``plate``, ``width``, ``scale``, ``outside``."""

@@ -45,6 +45,10 @@ enum Command {
     /// The scratch model's 3D BRDF against the exact groove: L1 and albedo errors, noise,
     /// heat maps (docs/fidelity.md).
     Fidelity(commands::fidelity::Args),
+    /// The arcs of a scratch hologram for the points of an OBJ or CSV file, as an SVG
+    /// (METHOD.md 9.4, docs/hologram.md).
+    #[command(allow_negative_numbers = true)]
+    Hologram(commands::hologram::Args),
 }
 
 fn main() {
@@ -69,6 +73,7 @@ fn main() {
         Command::Figures(a) => commands::figures::run(a),
         Command::Gonio(a) => commands::gonio::run(a),
         Command::Fidelity(a) => commands::fidelity::run(a),
+        Command::Hologram(a) => commands::hologram::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -7,12 +7,12 @@ use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray2};
 use pyo3::exceptions::{PyKeyboardInterrupt, PyMemoryError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyBytes;
+use pyo3::types::{PyBytes, PyDict};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 use striae::layers::{LayerParams, LayerSet as Layers};
-use striae::math::{Rgb, Vec2, Vec3};
+use striae::math::{DVec3, Rgb, Vec2, Vec3};
 use striae::precompute::table::{ScratchBrdf, ScratchTable, TableParams};
 use striae::precompute::trace2d::{TraceSettings, THETA_SLICES};
 use striae::render::integrator::{self, Simd};
@@ -651,6 +651,94 @@ impl LayerSet {
     }
 }
 
+/// The arcs of a scratch hologram for the points `(N, 3)` (`striae::lab::hologram`, METHOD.md
+/// 9.4): a dict with the SVG text (`svg`), the arcs as arrays (`centres` `(N, 2)`, `radii`,
+/// `start`, `end` in radians from `+x` toward `+y`, `z`), the drawing's `plate`
+/// `(x0, y0, size_x, size_y)`, the stroke `width`, the `scale` and the count of arcs reaching
+/// `outside` a given plate. `view_angle` (degrees, default 45) and `scale` exclude each other.
+#[pyfunction]
+#[pyo3(signature = (points, plate=None, view_angle=None, scale=None, span=striae::lab::hologram::DEFAULT_SPAN, azimuth=striae::lab::hologram::DEFAULT_AZIMUTH, width=None))]
+#[allow(clippy::too_many_arguments)]
+fn hologram<'py>(
+    py: Python<'py>,
+    points: PyReadonlyArray2<f64>,
+    plate: Option<Vec<f64>>,
+    view_angle: Option<f64>,
+    scale: Option<f64>,
+    span: f64,
+    azimuth: f64,
+    width: Option<f64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use striae::lab::hologram::{self as holo, HologramParams, Plate};
+    let a = points.as_array();
+    if a.ncols() != 3 {
+        return Err(PyValueError::new_err(format!(
+            "points must have shape (N, 3), not {:?}",
+            a.shape()
+        )));
+    }
+    if view_angle.is_some() && scale.is_some() {
+        return Err(PyValueError::new_err("give view_angle or scale, not both"));
+    }
+    let plate = match plate.as_deref() {
+        None => None,
+        Some(&[x0, y0, size_x, size_y]) => Some(Plate {
+            x0,
+            y0,
+            size_x,
+            size_y,
+        }),
+        Some(p) => {
+            return Err(PyValueError::new_err(format!(
+                "plate must be (x0, y0, size_x, size_y), not {} numbers",
+                p.len()
+            )))
+        }
+    };
+    let params = HologramParams {
+        plate,
+        view_angle: view_angle.unwrap_or(holo::DEFAULT_VIEW_ANGLE),
+        scale,
+        span,
+        azimuth,
+        width,
+    };
+    let pts: Vec<DVec3> = a
+        .rows()
+        .into_iter()
+        .map(|r| DVec3::new(r[0], r[1], r[2]))
+        .collect();
+    let (h, svg) = py
+        .detach(|| {
+            holo::hologram(&pts, &params).map(|h| {
+                let svg = h.to_svg();
+                (h, svg)
+            })
+        })
+        .map_err(err)?;
+    let n = h.arcs.len();
+    let mut centres = Array2::<f64>::zeros((n, 2));
+    for (mut row, arc) in centres.rows_mut().into_iter().zip(&h.arcs) {
+        row[0] = arc.centre.x;
+        row[1] = arc.centre.y;
+    }
+    let column =
+        |f: fn(&holo::HologramArc) -> f64| -> Array1<f64> { h.arcs.iter().map(f).collect() };
+    let out = PyDict::new(py);
+    out.set_item("svg", svg)?;
+    out.set_item("centres", centres.into_pyarray(py))?;
+    out.set_item("radii", column(|a| a.radius).into_pyarray(py))?;
+    out.set_item("start", column(|a| a.start).into_pyarray(py))?;
+    out.set_item("end", column(|a| a.end).into_pyarray(py))?;
+    out.set_item("z", column(|a| a.z).into_pyarray(py))?;
+    let p = h.plate;
+    out.set_item("plate", (p.x0, p.y0, p.size_x, p.size_y))?;
+    out.set_item("width", h.width)?;
+    out.set_item("scale", h.scale)?;
+    out.set_item("outside", h.outside)?;
+    Ok(out)
+}
+
 #[pymodule]
 fn _striae(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("StriaeError", m.py().get_type::<StriaeError>())?;
@@ -662,5 +750,6 @@ fn _striae(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(merge, m)?)?;
     m.add_function(wrap_pyfunction!(write_image, m)?)?;
     m.add_function(wrap_pyfunction!(read_exr, m)?)?;
+    m.add_function(wrap_pyfunction!(hologram, m)?)?;
     Ok(())
 }

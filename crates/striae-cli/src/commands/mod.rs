@@ -1,6 +1,7 @@
 pub mod fidelity;
 pub mod figures;
 pub mod gonio;
+pub mod hologram;
 pub mod layers;
 pub mod merge;
 pub mod plot;
