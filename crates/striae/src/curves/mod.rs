@@ -497,7 +497,11 @@ impl CurveSet {
     }
 }
 
-/// A uniform grid over the segments' bounds, about two cells a segment (at most 2048 a side),
+/// Most grid entries a segment may make on average ([`build_grid`]).
+const MAX_CELL_ENTRIES_PER_SEGMENT: usize = 16;
+
+/// A uniform grid over the segments' bounds, about two cells a segment (at most 2048 a side,
+/// coarser where long segments would list themselves in too many cells),
 /// each cell listing the segments whose bounds reach it (compressed rows).
 #[allow(clippy::type_complexity)]
 fn build_grid(segments: &[Segment]) -> (DVec2, DVec2, [usize; 2], Vec<u32>, Vec<u32>) {
@@ -507,9 +511,25 @@ fn build_grid(segments: &[Segment]) -> (DVec2, DVec2, [usize; 2], Vec<u32>, Vec<
         .fold(DVec2::NEG_INFINITY, |m, s| m.max(s.hi));
     let ext = (hi - lo).max(DVec2::splat(1e-12));
     let target = (2 * segments.len()).max(1) as f64;
-    let side = (ext.x * ext.y / target).sqrt();
-    let dim = |e: f64| ((e / side).ceil() as usize).clamp(1, 2048);
-    let dims = [dim(ext.x), dim(ext.y)];
+    let mut side = (ext.x * ext.y / target).sqrt();
+    let dim = |e: f64, side: f64| ((e / side).ceil() as usize).clamp(1, 2048);
+    // Long segments reach many cells: coarsen until the lists hold at most
+    // [`MAX_CELL_ENTRIES_PER_SEGMENT`] entries a segment (a long straight stroke across a fine
+    // grid would otherwise list itself in every cell of its bounds).
+    let entries = |side: f64| -> usize {
+        let (nx, ny) = (dim(ext.x, side), dim(ext.y, side));
+        let reach = |a: f64, b: f64, e: f64, n: usize| ((b - a) / e * n as f64) as usize + 2;
+        segments
+            .iter()
+            .map(|s| reach(s.lo.x, s.hi.x, ext.x, nx) * reach(s.lo.y, s.hi.y, ext.y, ny))
+            .sum()
+    };
+    while entries(side) > MAX_CELL_ENTRIES_PER_SEGMENT * segments.len()
+        && (dim(ext.x, side) > 1 || dim(ext.y, side) > 1)
+    {
+        side *= 2.0;
+    }
+    let dims = [dim(ext.x, side), dim(ext.y, side)];
     let cell = ext / DVec2::new(dims[0] as f64, dims[1] as f64);
     let cell_of = |x: f64, k: usize| {
         (((x - lo[k]) / cell[k]).floor()).clamp(0.0, (dims[k] - 1) as f64) as usize

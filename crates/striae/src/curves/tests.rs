@@ -318,3 +318,21 @@ fn too_many_segments_are_refused_up_front() {
         "{e}"
     );
 }
+
+#[test]
+fn long_crossing_strokes_keep_the_grid_small_and_the_answers_exact() {
+    // 2000 strokes across the whole square: a fine grid would list each in every cell of its
+    // bounds (millions of entries); the coarsened one stays within 16 entries a segment.
+    let lines: Vec<Polyline> = (0..2000)
+        .map(|i| {
+            let t = i as f64 / 2000.0;
+            Polyline::uniform(vec![DVec2::new(0.0, t), DVec2::new(1.0, 1.0 - t)], 1e-5)
+        })
+        .collect();
+    let s = set(&lines);
+    assert!(s.bytes() < 2000 * 200, "{} bytes", s.bytes());
+    let uv = DVec2::new(0.5, 0.5);
+    let hits = s.at_point(uv);
+    // Every stroke passes through the centre.
+    assert_eq!(hits.len(), MAX_CURVE_HITS);
+}

@@ -582,3 +582,58 @@ fn explicit_keys_override_the_model() {
     .unwrap();
     assert_eq!(r.mix, LayerMix::Max);
 }
+
+#[test]
+fn curves_alone_or_beside_layers() {
+    let dir = std::env::temp_dir().join(format!("striae-curves-keys-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("marks.svg"),
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10"><path d="M1 1 L9 9" stroke="black" stroke-width="0.1"/></svg>"#,
+    )
+    .unwrap();
+    let prepare = |scratches: &str| -> Result<ScratchedMaterial, String> {
+        let text = format!(
+            "type = \"scratched\"\nbase = \"metal\"\npreset = \"gold\"\n[scratches]\nm = 16\nn = 200\n{scratches}"
+        );
+        let m: MaterialDesc = toml::from_str(&text).map_err(|e| e.to_string())?;
+        let MaterialDesc::Scratched(s) = m else {
+            return Err("not scratched".into());
+        };
+        s.prepare(&dir).map_err(|e| e.to_string())
+    };
+    // The SVG, relative to the scene's folder, alone: no layers.
+    let m = prepare("curves = \"marks.svg\"\ntaper = 0.5").unwrap();
+    assert_eq!(m.layers.len(), 0);
+    assert_eq!(m.curves.as_ref().unwrap().len(), 1);
+    // With a layer key: both.
+    let m = prepare("curves = \"marks.svg\"\nsetting = 2\nlayers = 2").unwrap();
+    assert_eq!(m.layers.len(), 2);
+    assert!(m.curves.is_some());
+    // A pattern.
+    let m = prepare(
+        "pattern = { kind = \"circles\", radius = [0.1, 0.4], count = 5, width = 0.01 }",
+    )
+    .unwrap();
+    assert_eq!(m.curves.as_ref().unwrap().len(), 5);
+    // Errors name the key (and the file).
+    let err = |s: &str| prepare(s).unwrap_err();
+    let e = err("curves = \"missing.svg\"");
+    assert!(e.contains("scratches.curves") && e.contains("missing.svg"), "{e}");
+    let e = err("curves = \"marks.svg\"\npattern = { kind = \"swirl\", count = 3, radius = [0.1, 0.2], width = 0.01 }");
+    assert!(e.contains("scratches.pattern") && e.contains("exclude"), "{e}");
+    let e = err("taper = 0.1");
+    assert!(e.contains("scratches.taper") && e.contains("curves only"), "{e}");
+    let e = err("curves = \"marks.svg\"\nwear = 0.5");
+    assert!(e.contains("scratches.wear_length"), "{e}");
+    let e = err("pattern = { kind = \"circles\", radius = [0.4, 0.1], count = 5, width = 0.01 }");
+    assert!(e.contains("scratches.pattern.radius"), "{e}");
+    let e = err("pattern = { kind = \"swirl\", count = 0, radius = [0.1, 0.2], width = 0.01 }");
+    assert!(e.contains("scratches.pattern.count"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+    // Unknown pattern keys and kinds are parse errors naming them.
+    let e = parse("type = \"scratched\"\nbase = \"metal\"\n[scratches]\npattern = { kind = \"swirl\", count = 3, radius = [0.1, 0.2], width = 0.01, colour = 1 }").unwrap_err();
+    assert!(e.contains("colour"), "{e}");
+    let e = parse("type = \"scratched\"\nbase = \"metal\"\n[scratches]\npattern = { kind = \"spiral\" }").unwrap_err();
+    assert!(e.contains("spiral"), "{e}");
+}
