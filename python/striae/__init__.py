@@ -37,11 +37,21 @@ __version__ = _striae.VERSION
 SceneLike = Union[str, "os.PathLike[str]", dict]
 
 
+def _json_value(x):
+    """numpy arrays and numbers in a scene dict (curves as ``polylines``, docs/scenes.md) as
+    JSON lists and numbers."""
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, np.generic):
+        return x.item()
+    raise TypeError(f"scene dict holds a {type(x).__name__}, which is not a scene value")
+
+
 def _scene_source(scene: SceneLike) -> Tuple[str, str]:
     """``(kind, source)`` for the library: a dict goes as JSON, a string holding a newline as
     TOML text, any other string or path-like as the path of a scene file."""
     if isinstance(scene, dict):
-        return "json", json.dumps(scene)
+        return "json", json.dumps(scene, default=_json_value)
     if isinstance(scene, os.PathLike):
         return "path", os.fspath(scene)
     if isinstance(scene, str):

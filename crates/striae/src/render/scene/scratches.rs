@@ -36,6 +36,7 @@
 //! # stations = 16                # stations along each explicit groove
 //! # curves = "marks.svg"         # every stroked path a scratch (METHOD.md 9.1, `crate::curves`)
 //! # pattern = { kind = "swirl", count = 300, radius = [0.05, 0.3], width = 4e-4 }
+//! # polylines = [{ points = [[0.1, 0.2], [0.5, 0.3]], width = 4e-4 }]   # inline, in uv
 //! # taper = 0.01                 # curves: taper length at each end (uv; SVG: canvas units)
 //! # dashes = [0.004, 0.002]      # curves: on, off lengths (as stroke-dasharray)
 //! # depth = 1.0                  # curves: depth ratio over the profile's, (0, 1]
@@ -43,7 +44,7 @@
 //! # wear_length = 0.02           # its correlation length along the scratch
 //! ```
 //!
-//! With `curves` or `pattern` and none of the layer keys (`setting`, `length`, `width`,
+//! With `curves`, `pattern` or `polylines` and none of the layer keys (`setting`, `length`, `width`,
 //! `threshold`, `layers`), the material has the curves only; with both, both.
 
 use super::materials::{conductor_ior, invalid, MaterialError};
@@ -189,6 +190,9 @@ pub struct ScratchSpec {
     pub curves: Option<PathBuf>,
     /// Generated curves: swirls or concentric circles ([`Pattern`]).
     pub pattern: Option<Pattern>,
+    /// Curves given inline, in uv: `[{ points = [[u, v], ...], width = W }]` (the stroke keys
+    /// apply), or with `widths` (and `depths`) at each point (the stroke keys do not).
+    pub polylines: Option<Vec<PolylineSpec>>,
     /// The curves' stroke ([`StrokeStyle`]): taper length at each end, dash pattern and
     /// offset, depth ratio, wear and its correlation length (drawing units: uv for a
     /// pattern, canvas units for an SVG).
@@ -200,11 +204,56 @@ pub struct ScratchSpec {
     pub wear_length: Option<f64>,
 }
 
-/// Where a material's curves come from (`scratches.curves` or `scratches.pattern`).
+/// One inline curve (`scratches.polylines`), in uv: a constant `width` or a width at each
+/// point (`widths`, with optional depth ratios `depths`).
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PolylineSpec {
+    pub points: Vec<[f64; 2]>,
+    pub width: Option<f64>,
+    pub widths: Option<Vec<f64>>,
+    pub depths: Option<Vec<f64>>,
+}
+
+/// Where a material's curves come from (`scratches.curves`, `scratches.pattern` or
+/// `scratches.polylines`).
 #[derive(Clone, Debug, PartialEq)]
 pub enum CurveSource {
     Svg(PathBuf),
     Pattern(Pattern),
+    Polylines(Vec<PolylineSpec>),
+}
+
+impl PolylineSpec {
+    /// Its scratches through `style` (a constant width) or as given (widths at its points);
+    /// `i` names it in errors.
+    fn polylines(&self, i: usize, style: &StrokeStyle) -> Result<Vec<Polyline>, MaterialError> {
+        let bad = |why: String| invalid("scratches.polylines", i, why);
+        let points: Vec<glam::DVec2> = self.points.iter().map(|&p| p.into()).collect();
+        let line = match (self.width, &self.widths) {
+            (Some(w), None) => {
+                if self.depths.is_some() {
+                    return Err(bad("`depths` go with `widths` (a constant `width` takes the stroke keys `depth` and `wear`)".into()));
+                }
+                if !(w.is_finite() && w > 0.0) {
+                    return Err(bad(format!("width {w:?}: must be finite and > 0")));
+                }
+                if points.len() < 2 {
+                    return Err(bad(format!("needs at least 2 points, has {}", points.len())));
+                }
+                return Ok(style.apply(&points, 0.5 * w, i as u64));
+            }
+            (None, Some(ws)) => Polyline {
+                half_widths: ws.iter().map(|w| 0.5 * w).collect(),
+                depths: self.depths.clone().unwrap_or_else(|| vec![1.0; points.len()]),
+                points,
+            },
+            _ => return Err(bad("give `width` (constant) or `widths` (one a point)".into())),
+        };
+        line.validate(&format!("{i}"))
+            .map_err(|e| bad(e.to_string()))?;
+        Ok(line.deduplicated().into_iter().collect())
+    }
 }
 
 /// A material's curves, flattened: polylines in drawing units and the map onto uv.
@@ -426,20 +475,39 @@ impl ScratchedDesc {
             wear_length: s.wear_length.unwrap_or(d.wear_length),
             seed: s.seed.unwrap_or(DEFAULT_LAYER_SEED),
         };
-        let source = match (&s.curves, &s.pattern) {
-            (Some(_), Some(_)) => {
-                return Err(invalid(
-                    "scratches.pattern",
-                    "(given)",
-                    "`scratches.curves` (an SVG) and `scratches.pattern` exclude each other",
-                ))
-            }
-            (Some(path), None) => CurveSource::Svg(base_dir.join(path)),
-            (None, Some(p)) => {
+        let given = [s.curves.is_some(), s.pattern.is_some(), s.polylines.is_some()];
+        if given.iter().filter(|g| **g).count() > 1 {
+            return Err(invalid(
+                "scratches.curves",
+                "(given)",
+                "`scratches.curves` (an SVG), `scratches.pattern` and `scratches.polylines` exclude each other",
+            ));
+        }
+        let source = match (&s.curves, &s.pattern, &s.polylines) {
+            (Some(path), ..) => CurveSource::Svg(base_dir.join(path)),
+            (_, Some(p), _) => {
                 p.validate().map_err(curve_error)?;
                 CurveSource::Pattern(p.clone())
             }
-            (None, None) => {
+            (.., Some(lines)) => {
+                if lines.is_empty() {
+                    return Err(invalid("scratches.polylines", "[]", "holds no curve"));
+                }
+                let per_point = lines.iter().any(|l| l.widths.is_some());
+                let style_keys = s.taper.is_some()
+                    || s.dashes.is_some()
+                    || s.wear.is_some()
+                    || s.depth.is_some();
+                if per_point && style_keys {
+                    return Err(invalid(
+                        "scratches.polylines",
+                        "(widths)",
+                        "curves with `widths` at their points take no stroke keys (`taper`, `dashes`, `depth`, `wear`)",
+                    ));
+                }
+                CurveSource::Polylines(lines.clone())
+            }
+            (None, None, None) => {
                 let stroke_keys = [
                     ("scratches.taper", s.taper.is_some()),
                     ("scratches.dashes", s.dashes.is_some()),
@@ -480,6 +548,16 @@ impl ScratchedDesc {
                 polylines: p.polylines(style).map_err(curve_error)?,
                 to_uv: glam::DVec2::ONE,
             },
+            CurveSource::Polylines(lines) => {
+                let mut polylines = Vec::new();
+                for (i, l) in lines.iter().enumerate() {
+                    polylines.extend(l.polylines(i, style)?);
+                }
+                CurveDrawing {
+                    polylines,
+                    to_uv: glam::DVec2::ONE,
+                }
+            }
         };
         Ok(Some(drawing))
     }

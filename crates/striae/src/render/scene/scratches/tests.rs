@@ -611,19 +611,27 @@ fn curves_alone_or_beside_layers() {
     assert_eq!(m.layers.len(), 2);
     assert!(m.curves.is_some());
     // A pattern.
-    let m = prepare(
-        "pattern = { kind = \"circles\", radius = [0.1, 0.4], count = 5, width = 0.01 }",
-    )
-    .unwrap();
+    let m =
+        prepare("pattern = { kind = \"circles\", radius = [0.1, 0.4], count = 5, width = 0.01 }")
+            .unwrap();
     assert_eq!(m.curves.as_ref().unwrap().len(), 5);
     // Errors name the key (and the file).
     let err = |s: &str| prepare(s).unwrap_err();
     let e = err("curves = \"missing.svg\"");
-    assert!(e.contains("scratches.curves") && e.contains("missing.svg"), "{e}");
+    assert!(
+        e.contains("scratches.curves") && e.contains("missing.svg"),
+        "{e}"
+    );
     let e = err("curves = \"marks.svg\"\npattern = { kind = \"swirl\", count = 3, radius = [0.1, 0.2], width = 0.01 }");
-    assert!(e.contains("scratches.pattern") && e.contains("exclude"), "{e}");
+    assert!(
+        e.contains("scratches.pattern") && e.contains("exclude"),
+        "{e}"
+    );
     let e = err("taper = 0.1");
-    assert!(e.contains("scratches.taper") && e.contains("curves only"), "{e}");
+    assert!(
+        e.contains("scratches.taper") && e.contains("curves only"),
+        "{e}"
+    );
     let e = err("curves = \"marks.svg\"\nwear = 0.5");
     assert!(e.contains("scratches.wear_length"), "{e}");
     let e = err("pattern = { kind = \"circles\", radius = [0.4, 0.1], count = 5, width = 0.01 }");
@@ -634,6 +642,9 @@ fn curves_alone_or_beside_layers() {
     // Unknown pattern keys and kinds are parse errors naming them.
     let e = parse("type = \"scratched\"\nbase = \"metal\"\n[scratches]\npattern = { kind = \"swirl\", count = 3, radius = [0.1, 0.2], width = 0.01, colour = 1 }").unwrap_err();
     assert!(e.contains("colour"), "{e}");
-    let e = parse("type = \"scratched\"\nbase = \"metal\"\n[scratches]\npattern = { kind = \"spiral\" }").unwrap_err();
+    let e = parse(
+        "type = \"scratched\"\nbase = \"metal\"\n[scratches]\npattern = { kind = \"spiral\" }",
+    )
+    .unwrap_err();
     assert!(e.contains("spiral"), "{e}");
 }
