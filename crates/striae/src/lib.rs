@@ -8,8 +8,8 @@
 //! optics      Fresnel (eq. 2, exact dielectric and conductor), GGX          (below every stage)
 //! precompute  profile -> cross_section -> trace2d -> table                 (METHOD.md 2-4, 6)
 //!             groove (the exact 2.5D groove) -> groove_slices, wall_table   (8.1-8.2)
-//! layers      worley -> layer set, raster, footprint queries               (5)
 //! curves      svg / patterns -> stroke -> curve set, footprint queries      (9.1-9.2)
+//! layers      worley -> layer set, raster, footprint queries, caches       (5)
 //! render      geometry, camera, lights, scene -> material, scratched, bsdf
 //!             -> integrator -> film, parts                                  (6-7)
 //! lab         gonio, fidelity, figures, plot: measuring the model         (7-8)
@@ -48,11 +48,11 @@ pub mod optics;
 // The scratch BRDF and the exact groove (METHOD.md sections 2-4, 8.1-8.2).
 pub mod precompute;
 
-// Scratch layers from Worley cell noise (section 5).
-pub mod layers;
-
 // Scratches as curves: SVG strokes, swirls and circles, tapered, dashed and worn (section 9).
 pub mod curves;
+
+// Scratch layers from Worley cell noise (section 5), and the render workers' coverage caches.
+pub mod layers;
 
 // The path tracer (sections 6-7).
 pub mod render;

@@ -180,3 +180,76 @@ fn concentric_circles_glint_where_l_plus_v_is_normal_to_the_tangent() {
     let b = check_stripe([1.3, -1.9, 2.6]);
     assert!(a > 10 && b > 10, "lit pixels: {a}, {b}");
 }
+
+/// The pixel footprint shared by a pixel's samples (`curves::cache`) renders what each
+/// sample's own footprint renders (`coverage = "sample"`), within noise, image mean and
+/// blocks of pixels alike.
+#[test]
+fn the_curves_pixel_cache_renders_what_each_samples_footprint_renders() {
+    let text = |coverage: &str| {
+        format!(
+            r#"
+[render]
+width = 96
+height = 72
+spp = 32
+max_depth = 3
+seed = 2
+[camera]
+position = [0.0, -2.4, 2.4]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 0.0, 1.0]
+fov = 40.0
+[materials.al]
+type = "scratched"
+base = "metal"
+preset = "aluminium"
+[materials.al.scratches]
+profile = "v:angle=90"
+walls = "diffuse"
+m = 32
+n = 2000
+coverage = "{coverage}"
+pattern = {{ kind = "swirl", count = 600, radius = [0.1, 0.4], arc = [20.0, 90.0], width = 0.004, seed = 5 }}
+[[shapes]]
+type = "rectangle"
+material = "al"
+[environment]
+type = "constant"
+radiance = 1.0
+"#
+        )
+    };
+    let (a, _) = common::render_with_threads(&common::scene(&text("footprint")), 2);
+    let (b, _) = common::render_with_threads(&common::scene(&text("sample")), 2);
+    let mean = |img: &striae::render::film::Image| {
+        img.pixels
+            .iter()
+            .map(|p| striae::math::luminance(*p) as f64)
+            .sum::<f64>()
+            / img.pixels.len() as f64
+    };
+    let (ma, mb) = (mean(&a), mean(&b));
+    // The scratches darken the plate where they lie (diffuse walls): the mean differs from
+    // the plain base's, and agrees between the two coverage modes within 0.5 %.
+    assert!((ma - mb).abs() < 5e-3 * mb, "{ma} vs {mb}");
+    // 12 x 12-pixel blocks agree within 3 %.
+    let block = |img: &striae::render::film::Image, bx: usize, by: usize| {
+        let w = img.width as usize;
+        (0..12)
+            .flat_map(|y| (0..12).map(move |x| (x, y)))
+            .map(|(x, y)| {
+                striae::math::luminance(img.pixels[(by * 12 + y) * w + bx * 12 + x]) as f64
+            })
+            .sum::<f64>()
+    };
+    for by in 0..6 {
+        for bx in 0..8 {
+            let (x, y) = (block(&a, bx, by), block(&b, bx, by));
+            assert!(
+                (x - y).abs() <= 0.03 * y.max(1.0),
+                "block ({bx}, {by}): {x} vs {y}"
+            );
+        }
+    }
+}

@@ -14,6 +14,7 @@
 //! is its segment's unit tangent in texture space, carried to 3D through `dP/du`, `dP/dv` as a
 //! layer's direction is (METHOD.md 9.1). Queries take `f32` texture coordinates and work in `f64`.
 
+pub mod cache;
 pub mod clip;
 pub mod patterns;
 pub mod stroke;
@@ -222,7 +223,12 @@ pub struct CurveSet {
     dims: [usize; 2],
     cell_start: Vec<u32>,
     cell_segments: Vec<u32>,
+    /// Names the set in per-worker caches ([`cache`]); unique per process, from 1.
+    id: u64,
 }
+
+/// The next [`CurveSet`] id.
+static NEXT_SET_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
 impl CurveSet {
     /// Build the set from polylines in drawing units (each checked with
@@ -294,7 +300,28 @@ impl CurveSet {
             dims,
             cell_start,
             cell_segments,
+            id: NEXT_SET_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         })
+    }
+
+    /// A process-unique id (clones share it).
+    pub fn id(&self) -> u64 {
+        self.id
+    }
+
+    /// `hits` with each curve that holds `uv` taking the direction (and depth) of its segment
+    /// there ([`cache`]).
+    pub fn directed_at(&self, mut hits: CurveHits, uv: DVec2) -> CurveHits {
+        if hits.is_empty() {
+            return hits;
+        }
+        for p in self.at_point(uv) {
+            if let Some(h) = hits.iter_mut().find(|h| h.curve == p.curve) {
+                h.direction = p.direction;
+                h.depth = p.depth;
+            }
+        }
+        hits
     }
 
     /// Number of curves (polylines with at least one segment).

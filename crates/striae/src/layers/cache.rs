@@ -77,6 +77,8 @@ pub struct CoverageCache {
     pixel: Vec<PixelEntry>,
     pixel_next: usize,
     pixel_count: usize,
+    /// The curves' pixel footprint (`curves::cache`).
+    pub curves: crate::curves::cache::PixelCache,
 }
 
 impl Default for CoverageCache {
@@ -93,6 +95,7 @@ impl CoverageCache {
             pixel: Vec::new(),
             pixel_next: 0,
             pixel_count: 0,
+            curves: Default::default(),
         }
     }
 
@@ -100,6 +103,7 @@ impl CoverageCache {
     #[inline]
     pub fn start_pixel(&mut self) {
         self.pixel_count = 0;
+        self.curves.start_pixel();
     }
 
     /// The per-layer coverage of the current pixel's whole footprint, for a hit at texture

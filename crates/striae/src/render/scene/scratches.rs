@@ -239,16 +239,26 @@ impl PolylineSpec {
                     return Err(bad(format!("width {w:?}: must be finite and > 0")));
                 }
                 if points.len() < 2 {
-                    return Err(bad(format!("needs at least 2 points, has {}", points.len())));
+                    return Err(bad(format!(
+                        "needs at least 2 points, has {}",
+                        points.len()
+                    )));
                 }
                 return Ok(style.apply(&points, 0.5 * w, i as u64));
             }
             (None, Some(ws)) => Polyline {
                 half_widths: ws.iter().map(|w| 0.5 * w).collect(),
-                depths: self.depths.clone().unwrap_or_else(|| vec![1.0; points.len()]),
+                depths: self
+                    .depths
+                    .clone()
+                    .unwrap_or_else(|| vec![1.0; points.len()]),
                 points,
             },
-            _ => return Err(bad("give `width` (constant) or `widths` (one a point)".into())),
+            _ => {
+                return Err(bad(
+                    "give `width` (constant) or `widths` (one a point)".into()
+                ))
+            }
         };
         line.validate(&format!("{i}"))
             .map_err(|e| bad(e.to_string()))?;
@@ -475,7 +485,11 @@ impl ScratchedDesc {
             wear_length: s.wear_length.unwrap_or(d.wear_length),
             seed: s.seed.unwrap_or(DEFAULT_LAYER_SEED),
         };
-        let given = [s.curves.is_some(), s.pattern.is_some(), s.polylines.is_some()];
+        let given = [
+            s.curves.is_some(),
+            s.pattern.is_some(),
+            s.polylines.is_some(),
+        ];
         if given.iter().filter(|g| **g).count() > 1 {
             return Err(invalid(
                 "scratches.curves",

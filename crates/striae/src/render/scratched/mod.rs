@@ -271,7 +271,7 @@ impl ScratchedMaterial {
             _ => self.layer_coverage(ctx, cache, &mut cov[..k]),
         };
         let curves = match &self.curves {
-            Some(c) => self.curve_hits(c, ctx, inside),
+            Some(c) => self.curve_hits(c, ctx, cache, inside),
             None => CurveHits::new(),
         };
         if !covered && curves.is_empty() {
@@ -301,17 +301,39 @@ impl ScratchedMaterial {
     }
 
     /// The curves at the hit (METHOD.md 9.1): the point test from inside dielectric-walled
-    /// glass and under `coverage = "point"`, else the exact coverage of the sample's own
-    /// footprint ([`CurveSet::footprint`]; no per-pixel or per-tile cache: every hit clips the
+    /// glass and under `coverage = "point"`; else the exact coverage of the pixel's footprint
+    /// where the hit is reached from the camera by delta bounces (`coverage = "footprint"`,
+    /// shared by the pixel's samples, [`crate::curves::cache`]), of the sample's own
+    /// footprint elsewhere ([`CurveSet::footprint`]; no tiles: every such hit clips the
     /// segments near it).
     #[inline(always)]
-    fn curve_hits(&self, curves: &CurveSet, ctx: &ShadingContext, inside: bool) -> CurveHits {
+    fn curve_hits(
+        &self,
+        curves: &CurveSet,
+        ctx: &ShadingContext,
+        cache: &mut CoverageCache,
+        inside: bool,
+    ) -> CurveHits {
         let uv = ctx.uv.as_dvec2();
         if inside || self.coverage == CoverageMode::Point {
             return curves.at_point(uv);
         }
-        let (a, b) = ctx.footprint_uv();
-        curves.footprint(uv, a.as_dvec2(), b.as_dvec2(), ctx.u_layer as f64)
+        let u = ctx.u_layer as f64;
+        match ctx.pixel {
+            Some(hit) if self.coverage == CoverageMode::Footprint => cache.curves.hits(
+                curves,
+                ctx.uv,
+                || ctx.footprint_uv(),
+                hit.shape,
+                hit.chain,
+                hit.offset,
+                u,
+            ),
+            _ => {
+                let (a, b) = ctx.footprint_uv();
+                curves.footprint(uv, a.as_dvec2(), b.as_dvec2(), u)
+            }
+        }
     }
 
     /// The lobes of a hit that curves cover, with the layers' coverages `cov`: curves and
