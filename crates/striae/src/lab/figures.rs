@@ -55,10 +55,10 @@ pub const FIGURE_SCENES: [(&str, &str, &str, &str); 5] = [
     ),
 ];
 
-/// The "beyond the seed" figures (METHOD.md 8.2, 8.4): `(id, caption, file name, text, what
-/// differs)`, each rendered as written (dielectric walls, or a direction per scratch) and
-/// under the seed's model ([`seed_variant`]), side by side.
-pub const BEYOND_SCENES: [(&str, &str, &str, &str, &str); 3] = [
+/// The "beyond the seed" figures (METHOD.md 8.2, 8.4, 9.1-9.4): `(id, caption, file name,
+/// text, what differs)`, each rendered as written (dielectric walls, a direction per scratch,
+/// or curves) and under the seed's model ([`seed_variant`]), side by side.
+pub const BEYOND_SCENES: [(&str, &str, &str, &str, &str); 6] = [
     (
         "halo-t",
         "Halos in transmission: a small light behind a scratched pane",
@@ -80,13 +80,41 @@ pub const BEYOND_SCENES: [(&str, &str, &str, &str, &str); 3] = [
         include_str!("../../scenes/backlit-window.toml"),
         "Below the sky's edge, against the dark, the scratches glow with sky light carried through them (dielectric walls); the seed's model transmits nothing at a scratch but the smooth refraction, so they stay dark.",
     ),
+    (
+        "stripe",
+        "The floating stripe: concentric scratches under a small lamp",
+        "stripe.toml",
+        include_str!("../../scenes/stripe.toml"),
+        "Each circle glints where its tangent is perpendicular to l + v projected on the plate: the glints line up on a stripe through the centre. The seed's cell-noise layers (setting 2 in its place) make only straight scratches, which glint where their one direction allows.",
+    ),
+    (
+        "swirl",
+        "Polishing swirls around a lamp's reflection",
+        "swirl.toml",
+        include_str!("../../scenes/swirl.toml"),
+        "Random tapered arcs glint on circles around the lamp's reflection. The seed's straight layers (setting 2 in their place) glint along a few lines.",
+    ),
+    (
+        "hologram",
+        "A scratch hologram: a wire-frame cube floating off a steel plate",
+        "hologram.toml",
+        include_str!("../../scenes/hologram.toml"),
+        "One arc per point of the cube, each glinting where that point is seen from the eye (`striae hologram`). The seed's layers (setting 2) glint with no shape.",
+    ),
 ];
+
+/// Files the "beyond the seed" scenes read beside them, written next to the figures:
+/// `(file name, contents)`.
+pub const BEYOND_FILES: [(&str, &str); 1] =
+    [("hologram.svg", include_str!("../../scenes/hologram.svg"))];
 
 /// The seed's model of a scene written for dielectric walls: `model = "seed"` in each
 /// `[materials.NAME.scratches]` table (the seed's defaults: `layer_mix = "max"`, no
 /// exact-groove slices, one Fresnel factor a path), the walls back to the default (`diffuse`,
 /// the seed's glass scratches), their `roughness` and `lobes` dropped, one direction per layer,
-/// no `lean`; any `model`, `layer_mix`, `fresnel` or `groove_slices` of the scene dropped.
+/// no `lean`; any `model`, `layer_mix`, `fresnel` or `groove_slices` of the scene dropped;
+/// curves (`curves`, `pattern`, `polylines` and their stroke keys) replaced by the seed's
+/// straight layers of setting 2.
 pub fn seed_variant(text: &str) -> String {
     let mut out = Vec::new();
     for l in text.lines() {
@@ -100,10 +128,23 @@ pub fn seed_variant(text: &str) -> String {
             "layer_mix =",
             "fresnel =",
             "groove_slices =",
+            "taper =",
+            "dashes =",
+            "dash_offset =",
+            "depth =",
+            "wear =",
+            "wear_length =",
         ]
         .iter()
         .any(|k| key.starts_with(k));
         if dropped {
+            continue;
+        }
+        if ["curves =", "pattern =", "polylines ="]
+            .iter()
+            .any(|k| key.starts_with(k))
+        {
+            out.push("setting = 2".to_string());
             continue;
         }
         out.push(l.replace("orientation = \"random\"", "orientation = \"layer\""));
@@ -208,13 +249,19 @@ fn scratch_params(scene: &Scene, name: &str) -> Result<Vec<(String, String)>, Fi
         })
         .ok_or_else(|| FigureError::NoScratches(name.to_string()))?;
     let l = m.layers.params();
-    let mut params = vec![
-        ("base".into(), format!("{:?}", m.base)),
-        (
+    let mut params = vec![("base".into(), format!("{:?}", m.base))];
+    if !m.layers.is_empty() {
+        params.push((
             "scratch length L / width W / threshold tau".into(),
             format!("{} / {} / {}", l.length, l.width, l.threshold),
-        ),
-    ];
+        ));
+    }
+    if let Some(c) = &m.curves {
+        params.push((
+            "curves".into(),
+            format!("{} curves, {} segments", c.len(), c.segments()),
+        ));
+    }
     match &m.model {
         ScratchModel::Seed(table) => {
             let t = &table.table().params;
@@ -442,10 +489,19 @@ fn render_figures(
             text.into(),
         ));
     }
+    for (file, contents) in BEYOND_FILES {
+        let path = dir.join(file);
+        crate::io::write_atomically(&path, |tmp| std::fs::write(tmp, contents)).map_err(
+            |source| FigureError::Io {
+                path: path.clone(),
+                source,
+            },
+        )?;
+    }
     let mut figures = Vec::new();
     for (id, caption, name, text) in jobs {
         let start = Instant::now();
-        let scene = Scene::parse(&text, Path::new(name), Path::new("."), &overrides)?;
+        let scene = Scene::parse(&text, Path::new(name), dir, &overrides)?;
         let mut params = scratch_params(&scene, name)?;
         let load = start.elapsed().as_secs_f64();
         let (image, stats) = crate::render::integrator::render(&scene, &|_| {});
@@ -587,9 +643,9 @@ mod tests {
         }
     }
 
-    /// Each "beyond the seed" scene goes past the seed (dielectric walls or a direction per
-    /// scratch), and its seed variant is the seed's table model with one direction per layer
-    /// and no lean.
+    /// Each "beyond the seed" scene goes past the seed (dielectric walls, a direction per
+    /// scratch or curves), and its seed variant is the seed's table model with one direction
+    /// per layer, no lean and no curves.
     #[test]
     fn beyond_the_seed_scenes_and_their_seed_variants() {
         let o = Overrides {
@@ -598,7 +654,8 @@ mod tests {
             ..Overrides::default()
         };
         let model = |text: &str, name: &str| {
-            let scene = Scene::parse(text, Path::new(name), Path::new("."), &o)
+            let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+            let scene = Scene::parse(text, Path::new(name), &scenes, &o)
                 .unwrap_or_else(|e| panic!("{name}: {e}"));
             scratch_params(&scene, name).unwrap();
             scene
@@ -606,7 +663,9 @@ mod tests {
                 .iter()
                 .find_map(|m| match m {
                     Material::Scratched(s) => Some((
-                        matches!(s.model, ScratchModel::DielectricWalls(_)) || s.has_lean(),
+                        matches!(s.model, ScratchModel::DielectricWalls(_))
+                            || s.has_lean()
+                            || s.curves.is_some(),
                         s.layers.orientation(),
                         s.mix,
                         match &s.model {
@@ -640,15 +699,20 @@ mod tests {
                     !walls && orientation == crate::layers::Orientation::Layer,
                     "{name}"
                 );
-                // The seed's table (eq. (3), one Fresnel factor, its sizes) and layer choice.
-                assert_eq!(
-                    (mix, trace),
-                    (
-                        crate::render::scratched::LayerMix::Max,
-                        Some(crate::precompute::trace2d::TraceSettings::default())
-                    ),
-                    "{name}"
-                );
+                // The seed's table (eq. (3), its sizes; on glass one Fresnel factor and
+                // diffuse walls, on metal [Raymond16]'s mirror walls) and layer choice.
+                let seed = crate::precompute::trace2d::TraceSettings::default();
+                let trace = trace.expect("the seed's 2D table");
+                assert_eq!(mix, crate::render::scratched::LayerMix::Max, "{name}");
+                if text.contains("base = \"metal\"") {
+                    assert_eq!(
+                        (trace.m, trace.n, trace.nr, trace.groove_slices),
+                        (seed.m, seed.n, seed.nr, 0),
+                        "{name}"
+                    );
+                } else {
+                    assert_eq!(trace, seed, "{name}");
+                }
             }
         }
     }
