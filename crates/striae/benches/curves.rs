@@ -19,7 +19,15 @@ pub fn big_svg() -> String {
         s.push_str(&format!(r#"<path d="M{x} {y}"#));
         for k in 0..10 {
             let x0 = x + k as f64 * 0.9;
-            s.push_str(&format!(" C{} {} {} {} {} {}", x0 + 0.3, y + 0.001, x0 + 0.6, y + 0.001, x0 + 0.9, y));
+            s.push_str(&format!(
+                " C{} {} {} {} {} {}",
+                x0 + 0.3,
+                y + 0.001,
+                x0 + 0.6,
+                y + 0.001,
+                x0 + 0.9,
+                y
+            ));
         }
         s.push_str(r#"" fill="none" stroke="black" stroke-width="0.2"/>"#);
     }
@@ -72,7 +80,10 @@ fn queries(c: &mut Criterion) {
         })
     });
     // One pixel of a 1024-pixel-wide view of the texture, rotated (as the layers' bench).
-    let (dx, dy) = (DVec2::new(0.8, 0.3) / 1024.0, DVec2::new(-0.3, 0.9) / 1024.0);
+    let (dx, dy) = (
+        DVec2::new(0.8, 0.3) / 1024.0,
+        DVec2::new(-0.3, 0.9) / 1024.0,
+    );
     g.bench_function("footprint_query", |b| {
         b.iter(|| {
             i = (i + 1) & 1023;

@@ -116,6 +116,13 @@ impl Profile {
         Ok(Profile { spec, points })
     }
 
+    /// The profile worn to the depth ratio `d` in `(0, 1]` (METHOD.md 9.2): every depth times
+    /// `d`, the width kept.
+    pub fn worn(&self, d: f64) -> Result<Self, ProfileError> {
+        let points = self.points.iter().map(|&[x, z]| [x, z * d]).collect();
+        Self::from_points(format!("{} worn to {d}", self.spec), points)
+    }
+
     /// V-groove of depth `d` (bottom at `(0, -d)`).
     pub fn v_depth(depth: f64) -> Result<Self, ProfileError> {
         let spec = format!("v:depth={depth}");

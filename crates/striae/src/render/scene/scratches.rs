@@ -83,6 +83,10 @@ pub const DEFAULT_PROFILE: &str = "v:angle=90";
 /// Default layer-set seed.
 pub const DEFAULT_LAYER_SEED: u64 = 1;
 
+/// Depth ratios of the worn tables a material with worn curves computes besides its own (1):
+/// a lobe between two reads both, interpolated; below the first, the first (METHOD.md 9.2).
+pub const WEAR_LEVELS: [f64; 3] = [0.25, 0.5, 0.75];
+
 /// `model = "default"`: exact-groove slices of a table with diffuse walls and a Fresnel law
 /// (docs/fidelity.md, "The defaults").
 pub const DEFAULT_GROOVE_SLICES: usize = 6;
@@ -948,6 +952,41 @@ impl ScratchedDesc {
     /// layer set.
     pub fn prepare(&self, base_dir: &Path) -> Result<ScratchedMaterial, MaterialError> {
         let r = self.resolve(base_dir)?;
+        let model = self.model_of(&r, &r.table)?;
+        let layers = if r.with_layers {
+            LayerSet::with_orientation(r.layers, r.layer_seed, r.orientation)
+                .map_err(layer_error)?
+        } else {
+            LayerSet::none()
+        };
+        let drawing = self.curve_drawing(&r)?;
+        let worn = match &drawing {
+            Some(d)
+                if d.polylines
+                    .iter()
+                    .any(|l| l.depths.iter().any(|&x| x < 1.0)) =>
+            {
+                self.worn_models(&r)?
+            }
+            _ => Vec::new(),
+        };
+        let curves = match drawing {
+            Some(d) => Some(std::sync::Arc::new(
+                CurveSet::new(&d.polylines, d.to_uv)
+                    .map_err(|e| invalid("scratches.curves", "", e.to_string()))?,
+            )),
+            None => None,
+        };
+        Ok(
+            ScratchedMaterial::with_model(r.base, r.tint, model, layers, r.mix, r.coverage)
+                .with_lean(self.scratches.lean == Some(true))
+                .with_curves(curves)
+                .with_worn(worn),
+        )
+    }
+
+    /// The scratch model of `table` (memory, disk cache, file or computation).
+    fn model_of(&self, r: &Resolved, table: &TableSource) -> Result<ScratchModel, MaterialError> {
         let key = if self.scratches.table.is_some() {
             "scratches.table"
         } else {
@@ -957,7 +996,7 @@ impl ScratchedDesc {
             key,
             source: Box::new(e),
         };
-        let model = match &r.table {
+        Ok(match table {
             TableSource::Compute(params) => {
                 ScratchModel::Seed(crate::render::cache::obtain_table(params).map_err(table_error)?)
             }
@@ -976,25 +1015,42 @@ impl ScratchedDesc {
                 self.check_wall_table_base(&r.base, &model)?;
                 model
             }
-        };
-        let layers = if r.with_layers {
-            LayerSet::with_orientation(r.layers, r.layer_seed, r.orientation)
-                .map_err(layer_error)?
-        } else {
-            LayerSet::none()
-        };
-        let curves = match self.curve_drawing(&r)? {
-            Some(d) => Some(std::sync::Arc::new(
-                CurveSet::new(&d.polylines, d.to_uv)
-                    .map_err(|e| invalid("scratches.curves", "", e.to_string()))?,
-            )),
-            None => None,
-        };
-        Ok(
-            ScratchedMaterial::with_model(r.base, r.tint, model, layers, r.mix, r.coverage)
-                .with_lean(self.scratches.lean == Some(true))
-                .with_curves(curves),
-        )
+        })
+    }
+
+    /// The models of the profile worn to [`WEAR_LEVELS`], for worn curves (METHOD.md 9.2):
+    /// each table computed (or found in the cache) from the worn profile with the material's
+    /// other parameters. A table file cannot be worn: an error naming the key.
+    fn worn_models(&self, r: &Resolved) -> Result<Vec<(f32, ScratchModel)>, MaterialError> {
+        let mut out = Vec::new();
+        for d in WEAR_LEVELS {
+            let wear = |p: &Profile| {
+                p.worn(d)
+                    .map_err(|e| invalid("scratches.profile", d, e.to_string()))
+            };
+            let source = match &r.table {
+                TableSource::Compute(p) => {
+                    TableSource::Compute(TableParams::new(wear(&p.profile)?, p.trace.clone()))
+                }
+                TableSource::Walls(p) => TableSource::Walls(WallTableParams {
+                    profile: wear(&p.profile)?,
+                    ..p.clone()
+                }),
+                TableSource::Traced(p) => TableSource::Traced(WallTableParams {
+                    profile: wear(&p.profile)?,
+                    ..p.clone()
+                }),
+                TableSource::File(path) => {
+                    return Err(invalid(
+                        "scratches.table",
+                        format!("{path:?}"),
+                        "worn curves (a depth ratio below 1: `depth`, `wear`, `depths` or an SVG's stroke-opacity) read tables of the worn profile, which a table file cannot give: give the table's parameters instead",
+                    ))
+                }
+            };
+            out.push((d as f32, self.model_of(r, &source)?));
+        }
+        Ok(out)
     }
 
     /// A dielectric-wall table file fits a glass base of its own index only, a specular-wall

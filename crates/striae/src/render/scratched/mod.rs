@@ -111,6 +111,8 @@ pub struct ScratchedMaterial {
     pub layers: LayerSet,
     /// Scratches as curves (METHOD.md 9.1, [`crate::curves`]), beside the layers or alone.
     pub curves: Option<Arc<CurveSet>>,
+    /// The model at depth ratios below 1, ascending, for worn curves ([`Self::with_worn`]).
+    worn: Vec<(f32, ScratchModel)>,
     /// Each layer's scratch direction `d_k` in texture space ([`LayerSet::direction`]), as `f32`,
     /// computed once here rather than with a `sin_cos` per hit.
     directions: Vec<[f32; 2]>,
@@ -163,6 +165,7 @@ impl ScratchedMaterial {
             model,
             layers,
             curves: None,
+            worn: Vec::new(),
             directions,
             mix,
             coverage,
@@ -176,6 +179,16 @@ impl ScratchedMaterial {
     /// alike ([`Self::bsdf`]).
     pub fn with_curves(mut self, curves: Option<Arc<CurveSet>>) -> Self {
         self.curves = curves;
+        self
+    }
+
+    /// The same material with the models of its profile worn to the depth ratios `worn`
+    /// (`(d, model)`, `0 < d < 1`, any order): a curve's lobe of depth ratio `d` reads the
+    /// tables around `d`, stochastically interpolated ([`Self::model_at_depth`], METHOD.md
+    /// 9.2).
+    pub fn with_worn(mut self, mut worn: Vec<(f32, ScratchModel)>) -> Self {
+        worn.sort_by(|a, b| a.0.total_cmp(&b.0));
+        self.worn = worn;
         self
     }
 
@@ -264,7 +277,7 @@ impl ScratchedMaterial {
             (ScratchModel::DielectricWalls(walls), ScratchedBase::Glass { .. }) if inside => {
                 match self.inside_coverage(ctx, walls, &mut cov[..k]) {
                     InsideHit::Covered => true,
-                    InsideHit::Ridge(l) => return self.with_lobes_at(ctx, &[l]),
+                    InsideHit::Ridge(l) => return self.with_lobes_at(ctx, &self.model, &[l]),
                     InsideHit::Plain => false,
                 }
             }
@@ -278,6 +291,7 @@ impl ScratchedMaterial {
             return self.base_bsdf();
         }
         let mut lobes = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
+        let mut depth = 1.0;
         let count = if curves.is_empty() {
             match self.mix {
                 LayerMix::Max => self.largest_lobe(ctx, &cov[..k], &mut lobes),
@@ -292,12 +306,18 @@ impl ScratchedMaterial {
                 }
             }
         } else {
-            self.lobes_with_curves(ctx, &cov[..k], &curves, &mut lobes)
+            let (n, d) = self.lobes_with_curves(ctx, &cov[..k], &curves, &mut lobes);
+            depth = d;
+            n
         };
         if count == 0 {
             return self.base_bsdf();
         }
-        self.with_lobes_at(ctx, &lobes[..count])
+        self.with_lobes_at(
+            ctx,
+            self.model_at_depth(depth, ctx.u_layer),
+            &lobes[..count],
+        )
     }
 
     /// The curves at the hit (METHOD.md 9.1): the point test from inside dielectric-walled
@@ -339,14 +359,16 @@ impl ScratchedMaterial {
     /// The lobes of a hit that curves cover, with the layers' coverages `cov`: curves and
     /// layers are alike to `layer_mix` (METHOD.md 9.1): `max` takes the largest coverage, one
     /// of the ties at random by `u_layer`; `sum` and `union` a lobe each (the
-    /// [`MAX_SCRATCH_LOBES`] largest), `union` scaled to the union's coverage.
+    /// [`MAX_SCRATCH_LOBES`] largest), `union` scaled to the union's coverage. Returns the
+    /// lobes' count and the depth ratio their BSDF reads (METHOD.md 9.2): the chosen curve's
+    /// in `max`, the largest covering curve's in `sum` and `union` (1 for a layer).
     fn lobes_with_curves(
         &self,
         ctx: &ShadingContext,
         cov: &[f32],
         curves: &CurveHits,
         lobes: &mut [ScratchLobe; MAX_SCRATCH_LOBES],
-    ) -> usize {
+    ) -> (usize, f32) {
         let curve_lobe = |i: usize, c: f32| {
             let d = curves[i].direction;
             lobe_along(ctx, [d.x as f32, d.y as f32], c)
@@ -367,18 +389,18 @@ impl ScratchedMaterial {
             let n = nl + nc;
             let pick = ((ctx.u_layer * n as f32) as u32).min(n - 1);
             let u = (ctx.u_layer * n as f32 - pick as f32).clamp(0.0, 1.0);
-            lobes[0] = if pick < nl {
+            if pick < nl {
                 let mut rest = layer_ties;
                 for _ in 0..pick {
                     rest &= rest - 1;
                 }
                 let layer = rest.trailing_zeros() as usize;
-                lobe(self, ctx, layer, cov[layer], u)
-            } else {
-                let i = (pick - nl) as usize;
-                curve_lobe(i, curves[i].coverage as f32)
-            };
-            return 1;
+                lobes[0] = lobe(self, ctx, layer, cov[layer], u);
+                return (1, 1.0);
+            }
+            let i = (pick - nl) as usize;
+            lobes[0] = curve_lobe(i, curves[i].coverage as f32);
+            return (1, curves[i].depth);
         }
         // Sum and union: every covering layer and curve, the largest where there are more.
         let mut all = arrayvec::ArrayVec::<
@@ -415,13 +437,52 @@ impl ScratchedMaterial {
                 curve_lobe(i - MAX_LAYERS, c * scale)
             };
         }
-        n
+        // (`curves` come largest first.)
+        let depth = all[..n]
+            .iter()
+            .find(|x| x.1 >= MAX_LAYERS)
+            .map_or(1.0, |x| curves[x.1 - MAX_LAYERS].depth);
+        (n, depth)
     }
 
-    /// The scratched BSDF of the model with `lobes` at the hit `ctx`.
+    /// The model a lobe of depth ratio `depth` reads (METHOD.md 9.2, wear): between the two
+    /// tables of depth ratios around it ([`Self::with_worn`]), the deeper with probability
+    /// in proportion to how close `depth` lies to it (so that over samples the lobe is the
+    /// linear interpolation of the two), drawn by a hash of `u`'s bits; below the shallowest
+    /// table, that table.
     #[inline(always)]
-    fn with_lobes_at(&self, ctx: &ShadingContext, lobes: &[ScratchLobe]) -> Bsdf<'_> {
-        let table = match &self.model {
+    fn model_at_depth(&self, depth: f32, u: f32) -> &ScratchModel {
+        if depth >= 1.0 || self.worn.is_empty() {
+            return &self.model;
+        }
+        let level = |i: usize| match self.worn.get(i) {
+            Some((d, m)) => (*d, m),
+            None => (1.0, &self.model),
+        };
+        let i = self.worn.iter().take_while(|(d, _)| *d <= depth).count();
+        if i == 0 {
+            return &self.worn[0].1;
+        }
+        let ((d0, m0), (d1, m1)) = (level(i - 1), level(i));
+        // A second uniform from `u`'s bits, hashed: independent of what `u` stratifies.
+        let v = (crate::hash::mix64(u.to_bits() as u64) >> 40) as f32 * (1.0 / (1u64 << 24) as f32);
+        if v * (d1 - d0) < depth - d0 {
+            m1
+        } else {
+            m0
+        }
+    }
+
+    /// The scratched BSDF of `model` (the material's, or a worn one) with `lobes` at the hit
+    /// `ctx`.
+    #[inline(always)]
+    fn with_lobes_at<'a>(
+        &'a self,
+        ctx: &ShadingContext,
+        model: &'a ScratchModel,
+        lobes: &[ScratchLobe],
+    ) -> Bsdf<'a> {
+        let table = match model {
             ScratchModel::Seed(table) => table,
             ScratchModel::DielectricWalls(walls) => {
                 let ScratchedBase::Glass { eta } = self.base else {

@@ -1105,3 +1105,64 @@ fn inside_hits_read_no_footprint() {
         assert!(!point.reads_footprint_at(Vec3::Z, Vec3::Z));
     }
 }
+
+/// Worn curves (METHOD.md 9.2): a curve of depth ratio 1/2 reads the table of its profile
+/// worn to 1/2, which is the table of the half-deep profile (a V 0.5 deep worn to 1/2 is the V
+/// 0.25 deep, the same table by its hash); between two tables, the lobe is their linear
+/// interpolation over `u_layer`.
+#[test]
+fn worn_curves_read_the_worn_profiles_table() {
+    use crate::render::scene::materials::MaterialDesc;
+    let material = |profile: &str, depth: &str| {
+        let text = format!(
+            "type = \"scratched\"\nbase = \"metal\"\npreset = \"gold\"\n[scratches]\nprofile = \"{profile}\"\nwalls = \"diffuse\"\nm = 32\nn = 400\npolylines = [{{ points = [[0.0, 0.5], [1.0, 0.5]], widths = [0.2, 0.2], depths = [{depth}, {depth}] }}]"
+        );
+        let MaterialDesc::Scratched(s) = toml::from_str::<MaterialDesc>(&text).unwrap() else {
+            panic!()
+        };
+        s.prepare(std::path::Path::new(".")).unwrap()
+    };
+    assert_eq!(
+        Profile::parse("v:depth=0.5")
+            .unwrap()
+            .worn(0.5)
+            .unwrap()
+            .points,
+        Profile::parse("v:depth=0.25").unwrap().points
+    );
+    let worn = material("v:depth=0.5", "0.5");
+    let shallow = material("v:depth=0.25", "1.0");
+    let full = material("v:depth=0.5", "1.0");
+    let eval = |m: &ScratchedMaterial, u: f32, wo: Vec3, wi: Vec3| {
+        let ctx = flat_ctx(Vec2::new(0.5, 0.5), 1e-4, wo, u);
+        bsdf_of(m, &ctx).eval(wo, wi)
+    };
+    let wo = dir(40.0, 20.0);
+    let mut differs = false;
+    for wi in [dir(30.0, 200.0), dir(60.0, 160.0), dir(10.0, 90.0)] {
+        for u in [0.1, 0.6] {
+            let (a, b) = (eval(&worn, u, wo, wi), eval(&shallow, u, wo, wi));
+            assert_eq!(a.to_array(), b.to_array(), "worn to 1/2 vs the half-deep V");
+            differs |= (eval(&full, u, wo, wi) - a).abs().max_element() > 1e-4;
+        }
+    }
+    assert!(differs, "the worn lobe differs from the unworn one");
+    // Depth 0.6, between the tables of 0.5 and 0.75: the mean over u_layer is the linear
+    // interpolation, 0.4 of the way from 0.5 to 0.75.
+    let mid = material("v:depth=0.5", "0.6");
+    let (lo, hi) = (
+        material("v:depth=0.5", "0.5"),
+        material("v:depth=0.5", "0.75"),
+    );
+    let wi = dir(30.0, 200.0);
+    let n = 4096;
+    let mean = (0..n)
+        .map(|k| eval(&mid, (k as f32 + 0.5) / n as f32, wo, wi))
+        .fold(Vec3::ZERO, |s, x| s + x)
+        / n as f32;
+    let want = eval(&lo, 0.3, wo, wi) * 0.6 + eval(&hi, 0.3, wo, wi) * 0.4;
+    assert!(
+        (mean - want).abs().max_element() <= 2e-3 * want.max_element(),
+        "{mean} vs {want}"
+    );
+}
