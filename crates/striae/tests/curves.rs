@@ -253,3 +253,153 @@ radiance = 1.0
         }
     }
 }
+
+/// The floating stripe in transmission (METHOD.md 9.3): concentric circles on a glass surface
+/// with smooth glass walls (`walls = "dielectric"`), a small lamp behind it, seen through it.
+/// A smooth-walled groove conserves `beta = n w . t` (8.1): light going from the lamp through
+/// the glass (index 1.5) at `d` leaves toward the eye at `v` where `1.5 d . t = v . t`. The
+/// surface is one rectangle, the boundary of the glass behind it, so the lamp lies in the
+/// glass and its light runs straight to the surface.
+#[test]
+fn backlit_circles_glint_on_the_refracted_cone() {
+    let eye = Vec3::new(0.0, -2.0, 2.6);
+    let lamp = Vec3::new(0.0, 1.2, -2.0);
+    let lamp_radius = 0.2f32;
+    let text = format!(
+        r#"
+[render]
+width = 160
+height = 120
+spp = 256
+max_depth = 4
+seed = 3
+[camera]
+position = [{}, {}, {}]
+look_at = [0.0, 0.2, 0.0]
+up = [0.0, 0.0, 1.0]
+fov = 45.0
+[materials.pane]
+type = "scratched"
+base = "glass"
+ior = 1.5
+[materials.pane.scratches]
+profile = "round:depth=0.3"
+walls = "dielectric"
+pattern = {{ kind = "circles", centre = [0.5, 0.5], radius = [0.1, 0.45], count = 8, width = 0.004 }}
+[[shapes]]
+type = "rectangle"
+material = "pane"
+[[shapes]]
+type = "sphere"
+center = [{}, {}, {}]
+radius = {lamp_radius}
+emission = [3000.0, 3000.0, 3000.0]
+[environment]
+type = "constant"
+radiance = [0.0, 0.0, 0.0]
+"#,
+        eye.x, eye.y, eye.z, lamp.x, lamp.y, lamp.z
+    );
+    let scene = common::scene(&text);
+    let (img, _) = common::render_with_threads(&scene, 2);
+    let (w, h) = (img.width as usize, img.height as usize);
+    // Where each circle can glint: the point P whose groove sends some light of the lamp to
+    // the eye, i.e. `v . t / 1.5` lies in the range of `d . t` over the directions `d` from the
+    // lamp's sphere to P (a cone of half-angle asin(R / |P - L|) about P - L); and where the
+    // lamp's centre alone glints (the sign changes of `1.5 d . t - v . t`).
+    let mut predicted = Vec::new();
+    let mut centre = Vec::new();
+    for &r in &RADII {
+        let n = 7200;
+        let mut last = None;
+        for k in 0..=n {
+            let a = std::f64::consts::TAU * k as f64 / n as f64;
+            let (u, v) = (0.5 + r * a.cos(), 0.5 + r * a.sin());
+            let p = Vec3::new((2.0 * u - 1.0) as f32, (2.0 * v - 1.0) as f32, 0.0);
+            let t = Vec3::new(-a.sin() as f32, a.cos() as f32, 0.0);
+            let axis = (p - lamp).normalize();
+            let vt = (eye - p).normalize().dot(t) / 1.5;
+            let theta = axis.dot(t).clamp(-1.0, 1.0).acos();
+            let rho = (lamp_radius / (p - lamp).length()).asin();
+            let (lo, hi) = (
+                (theta + rho).min(std::f32::consts::PI).cos(),
+                (theta - rho).max(0.0).cos(),
+            );
+            let Some(px) = scene.camera.project(p - eye) else {
+                continue;
+            };
+            if (lo..=hi).contains(&vt) {
+                predicted.push(px);
+            }
+            let f = axis.dot(t) - vt;
+            if let Some(prev) = last {
+                if f32::signum(prev) != f32::signum(f) {
+                    centre.push(px);
+                }
+            }
+            last = Some(f);
+        }
+    }
+    // The lamp seen through the flat glass (the camera ray refracted into the glass meets
+    // its sphere, grown by 2 pixels' worth): not a glint, left out.
+    let lamp_image = |x: usize, y: usize| {
+        let ray = scene.camera.generate_ray_only(
+            striae::math::Vec2::new(x as f32 + 0.5, y as f32 + 0.5),
+            striae::math::Vec2::splat(0.5),
+        );
+        let t = -ray.o.z / ray.d.z;
+        let p = ray.o + ray.d * t;
+        let (cos_i, eta) = (-ray.d.z, 1.0 / 1.5f32);
+        let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+        let d = ray.d * eta + Vec3::Z * (eta * cos_i - k.sqrt());
+        let oc = p - lamp;
+        let b = oc.dot(d);
+        let grown = lamp_radius * 1.2;
+        b * b - (oc.length_squared() - grown * grown) >= 0.0
+    };
+    let lum: Vec<f32> = img
+        .pixels
+        .iter()
+        .map(|c| striae::math::luminance(*c))
+        .collect();
+    let max = lum.iter().copied().fold(0.0f32, f32::max);
+    assert!(max > 0.0, "nothing is lit");
+    let lit: Vec<(f32, f32)> = (0..w * h)
+        .filter(|&i| lum[i] > 1e-4 * max && !lamp_image(i % w, i / w))
+        .map(|i| ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5))
+        .collect();
+    let near = |p: (f32, f32), q: striae::math::Vec2, tol: f32| {
+        (p.0 - q.x).abs() <= tol && (p.1 - q.y).abs() <= tol
+    };
+    let stray = lit
+        .iter()
+        .filter(|p| !predicted.iter().any(|q| near(**p, *q, 2.0)))
+        .count();
+    eprintln!(
+        "{} lit, {stray} stray, {} lamp-centre glints",
+        lit.len(),
+        centre.len()
+    );
+    assert!(
+        stray * 50 <= lit.len(),
+        "{stray} of {} lit pixels away from every glint",
+        lit.len()
+    );
+    let inside = |q: &&striae::math::Vec2| {
+        q.x >= 0.0
+            && q.y >= 0.0
+            && q.x < w as f32
+            && q.y < h as f32
+            && !lamp_image(q.x as usize, q.y as usize)
+    };
+    let visible: Vec<_> = centre.iter().filter(inside).collect();
+    let found = visible
+        .iter()
+        .filter(|q| lit.iter().any(|p| near(*p, ***q, 2.0)))
+        .count();
+    assert!(
+        found * 10 >= visible.len() * 8 && visible.len() >= 8,
+        "{found} of {} predicted glints lit",
+        visible.len()
+    );
+}
