@@ -28,6 +28,10 @@ pub const MAX_SEGMENTS: usize = 1 << 20;
 /// The largest mitre a joint may take, in half-widths: a joint that turns by more than about
 /// 151 degrees is clipped to it (its quads then overlap or leave a notch at the outer corner).
 pub const MITRE_LIMIT: f64 = 4.0;
+/// The smallest radius of curvature over width at which a curve is the extruded groove the
+/// table describes, locally (METHOD.md 9.1): tighter turns are rendered all the same, with a
+/// warning naming the curves ([`CurveSet::tight_turns`]).
+pub const MIN_RADIUS_OVER_WIDTH: f64 = 2.0;
 /// Most curves one footprint query reports ([`CurveHits`]); the smallest are dropped beyond.
 pub const MAX_CURVE_HITS: usize = 8;
 /// Most grid cells a footprint query visits; a larger footprint takes the point test at the
@@ -110,6 +114,28 @@ impl Polyline {
             return Err(bad(format!("depth ratios must lie in (0, 1], got {d:?}")));
         }
         Ok(())
+    }
+
+    /// The smallest radius of curvature over the local width along the polyline: at each
+    /// joint, the radius of the circle through a chord of the mean length of its two segments
+    /// turning by the joint's angle, `c / (2 sin(turn / 2))`, over the joint's width (infinite
+    /// for a straight line).
+    pub fn min_radius_over_width(&self) -> f64 {
+        let p = &self.points;
+        let mut out = f64::INFINITY;
+        for i in 1..p.len().saturating_sub(1) {
+            let (a, b) = (p[i] - p[i - 1], p[i + 1] - p[i]);
+            let (la, lb) = (a.length(), b.length());
+            if la == 0.0 || lb == 0.0 {
+                continue;
+            }
+            let turn = (a.dot(b) / (la * lb)).clamp(-1.0, 1.0).acos();
+            let w = 2.0 * self.half_widths[i];
+            if turn > 0.0 && w > 0.0 {
+                out = out.min(0.5 * (la + lb) / (2.0 * (0.5 * turn).sin()) / w);
+            }
+        }
+        out
     }
 
     /// Arc length along the polyline at each vertex (0 at the first).
@@ -322,6 +348,21 @@ impl CurveSet {
             }
         }
         hits
+    }
+
+    /// The indices of `polylines` that turn tighter than [`MIN_RADIUS_OVER_WIDTH`], and the
+    /// smallest radius over width among them.
+    pub fn tight_turns(polylines: &[Polyline]) -> (Vec<usize>, f64) {
+        let mut tight = Vec::new();
+        let mut min = f64::INFINITY;
+        for (i, l) in polylines.iter().enumerate() {
+            let r = l.min_radius_over_width();
+            if r < MIN_RADIUS_OVER_WIDTH {
+                tight.push(i);
+                min = min.min(r);
+            }
+        }
+        (tight, min)
     }
 
     /// Number of curves (polylines with at least one segment).

@@ -336,3 +336,21 @@ fn long_crossing_strokes_keep_the_grid_small_and_the_answers_exact() {
     // Every stroke passes through the centre.
     assert_eq!(hits.len(), MAX_CURVE_HITS);
 }
+
+#[test]
+fn tight_turns_are_found_by_radius_over_width() {
+    // A circle of radius 0.1 flattened finely: R / w = 0.1 / w.
+    let ring = |w: f64| {
+        Polyline::uniform(
+            stroke::arc_points(DVec2::splat(0.5), 0.1, 0.0, 3.0, 1e-5),
+            0.5 * w,
+        )
+    };
+    assert!((ring(0.01).min_radius_over_width() - 10.0).abs() < 0.01);
+    let (tight, min) = CurveSet::tight_turns(&[ring(0.01), ring(0.1), ring(0.02)]);
+    assert_eq!(tight, vec![1]);
+    assert!((min - 1.0).abs() < 1e-3, "{min}");
+    // A straight line never turns.
+    let line = Polyline::uniform(vec![DVec2::ZERO, DVec2::X, DVec2::new(2.0, 0.0)], 0.1);
+    assert_eq!(line.min_radius_over_width(), f64::INFINITY);
+}

@@ -1,15 +1,19 @@
-//! Explicit scratch geometry in a scene (METHOD.md 8.3): `scratches.explicit = true` turns a
-//! scratched material's scratches on every rectangle and box that uses it into grooves
+//! Explicit scratch geometry in a scene (METHOD.md 8.3, 9.6): `scratches.explicit = true`
+//! turns a scratched material's scratches (its layers' and its curves', `scratches.curves` or
+//! `scratches.pattern`) on every rectangle and box that uses it into grooves
 //! ([`crate::render::geometry::carve`]): each face gets its [`Carving`], the walls become one more mesh
 //! shape with the wall material, and the face keeps the smooth base. Everything is checked
-//! before anything is built: the shape must be planar, the grooves must fit in a box's
-//! thickness, and the estimated memory must stay under [`MAX_EXPLICIT_BYTES`].
+//! before the walls are built: the shape must be planar, the curves valid, the estimated
+//! memory under [`MAX_EXPLICIT_BYTES`], and the grooves must fit in a box's thickness.
 
 use super::file::{ShapeSection, ShapeType};
 use super::scratches::ExplicitSpec;
 use super::{invalid, SceneError};
+use crate::curves::CurveSet;
 use crate::layers::Scratch;
-use crate::render::geometry::carve::{triangles_per_groove, Carve, CarveRole, Carving, Face};
+use crate::render::geometry::carve::{
+    triangles_per_curve, triangles_per_groove, Carve, CarveRole, Carving, Face,
+};
 use crate::render::geometry::{Shape, ShapeGeometry, TriangleMesh};
 use crate::render::material::Material;
 use std::path::Path;
@@ -83,16 +87,36 @@ pub(super) fn carve(
             return Err(not_planar(file, &key, i, s.kind));
         }
         let faces = faces(mesh);
+        let (curves, to_uv) = match &spec.curves {
+            Some(d) => {
+                // The SV-BRDF's checks (each polyline valid, the segments within bounds).
+                CurveSet::new(&d.polylines, d.to_uv).map_err(|e| {
+                    invalid(
+                        file,
+                        format!("materials.{}.scratches.curves", names[m as usize]),
+                        "",
+                        e,
+                    )
+                })?;
+                (d.polylines.as_slice(), d.to_uv)
+            }
+            None => (&[][..], glam::DVec2::ONE),
+        };
         // Up front, before anything is enumerated: a layer has about one scratch per noise cell,
         // `1 / (L W)` cells per face (the texture square), plus a rim of cells the ellipses
-        // reach in from outside.
+        // reach in from outside; every face holds every curve at most.
         let p = spec.layers.params();
         let per_face = p.layers as f64 * (1.0 + 2.0 * p.threshold).powi(2) / (p.length * p.width);
         let segments = spec.profile.points.len() - 1;
+        let curve_triangles: usize = curves
+            .iter()
+            .map(|l| triangles_per_curve(segments, l.points.len()))
+            .sum();
         bytes = bytes.saturating_add(
             (faces.len() as f64
-                * per_face
-                * (triangles_per_groove(segments, spec.stations) * BYTES_PER_TRIANGLE) as f64)
+                * (per_face * triangles_per_groove(segments, spec.stations) as f64
+                    + curve_triangles as f64)
+                * BYTES_PER_TRIANGLE as f64)
                 .min(usize::MAX as f64) as usize,
         );
         if bytes > MAX_EXPLICIT_BYTES {
@@ -101,7 +125,7 @@ pub(super) fn carve(
                 key,
                 true,
                 format!(
-                    "the grooves would take about {:.1} GiB (over the {} GiB allowed): use fewer layers, wider scratches or fewer explicit shapes",
+                    "the grooves would take about {:.1} GiB (over the {} GiB allowed): use fewer layers or curves, wider scratches or fewer explicit shapes",
                     bytes as f64 / (1u64 << 30) as f64,
                     MAX_EXPLICIT_BYTES >> 30
                 ),
@@ -112,19 +136,22 @@ pub(super) fn carve(
         crate::memory::check("the explicit grooves and their BVH", bytes as u64, None)
             .map_err(|e| invalid(file, key.as_str(), true, e))?;
         let scratches: Vec<Scratch> = Face::scratches(&spec.layers);
-        let z_min = spec.profile.points.iter().map(|p| p[1]).fold(0.0, f64::min) as f32;
         let wall_material = materials.len() as u32;
         materials.push(spec.wall.clone());
         let first = carve.carvings.len() as u32;
         for (f, face) in faces.iter().enumerate() {
-            let (depth, room) = (
-                face.max_depth(&scratches, z_min),
-                thickness(s.kind, &faces, f),
+            let mut carving = Carving::new(
+                face,
+                &scratches,
+                curves,
+                to_uv,
+                &spec.profile.points,
+                spec.stations,
             );
+            let (depth, room) = (carving.max_depth(), thickness(s.kind, &faces, f));
             if !(depth < room) {
                 return Err(invalid(file, key, true, format!("grooves up to {depth} deep do not fit in shapes[{i}], {room} thick: make it thicker or the scratches narrower or shallower")));
             }
-            let mut carving = Carving::new(face, &scratches, &spec.profile.points, spec.stations);
             if carving.is_empty() {
                 carve.carvings.push(carving);
                 continue;
@@ -253,6 +280,86 @@ mod tests {
         assert!(e.contains("planar"), "{e}");
         let e = error_of(scene("type = \"teapot\"\nsubdivisions = 2", "setting = 2"));
         assert!(e.contains("materials.plate.scratches.explicit"), "{e}");
+        // Curves (METHOD.md 9.6), alone or beside layers: the same error.
+        for scratches in [CIRCLES.to_string(), format!("setting = 2\n{CIRCLES}")] {
+            let e = error_of(scene("type = \"sphere\"", &scratches));
+            assert!(
+                e.contains("materials.plate.scratches.explicit") && e.contains("planar"),
+                "{e}"
+            );
+        }
+    }
+
+    /// Four concentric circles about the face's centre (uv), 0.01 wide.
+    const CIRCLES: &str =
+        "pattern = { kind = \"circles\", radius = [0.1, 0.4], count = 4, width = 0.01 }";
+
+    /// A render of `s` at its settings: every pixel finite.
+    fn renders(s: &crate::render::scene::Scene) {
+        let (image, _) = crate::render::integrator::render(s, &|_| {});
+        assert!(image.pixels.iter().all(|p| p.is_finite()));
+    }
+
+    #[test]
+    fn explicit_curves_are_carved_alone_or_beside_layers_and_render() {
+        // Curves only (no layer keys: no layers): a groove a circle, one wall shape.
+        let s = scene("type = \"rectangle\"", CIRCLES).unwrap();
+        assert_eq!(s.geometry.carve().expect("carved").grooves(), 4);
+        assert_eq!(s.geometry.shapes().len(), 2);
+        renders(&s);
+        // Beside layers: both, in one wall shape.
+        let grooves = |s: &crate::render::scene::Scene| s.geometry.carve().unwrap().grooves();
+        let layers = grooves(&scene("type = \"rectangle\"", "setting = 2\nlayers = 1").unwrap());
+        let both = scene(
+            "type = \"rectangle\"",
+            &format!("setting = 2\nlayers = 1\n{CIRCLES}"),
+        )
+        .unwrap();
+        assert_eq!(grooves(&both), layers + 4);
+        assert_eq!(both.geometry.shapes().len(), 2);
+        renders(&both);
+        // A box: every face carved with the whole drawing (its uv square).
+        let b = scene("type = \"box\"", CIRCLES).unwrap();
+        assert_eq!(grooves(&b), 6 * 4);
+        renders(&b);
+        // A worn, dashed pattern on glass: caps at every dash's ends.
+        let glass = "[render]\nwidth = 8\nheight = 8\nspp = 2\n\
+             [camera]\nposition = [0, 0, 3]\nlook_at = [0, 0, 0]\nfov = 30\n\
+             [materials.pane]\ntype = \"scratched\"\nbase = \"glass\"\n\
+             [materials.pane.scratches]\nexplicit = true\nwalls = \"dielectric\"\n\
+             pattern = { kind = \"swirl\", count = 20, radius = [0.05, 0.2], width = 0.004 }\n\
+             dashes = [0.02, 0.01]\nwear = 0.5\nwear_length = 0.05\n\
+             [[shapes]]\ntype = \"rectangle\"\nmaterial = \"pane\"\n\
+             [environment]\ntype = \"constant\"\nradiance = [1, 1, 1]\n";
+        let s = Scene::parse(
+            glass,
+            Path::new("t.toml"),
+            Path::new("."),
+            &Overrides::default(),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert!(grooves(&s) > 20, "{}", grooves(&s));
+        renders(&s);
+    }
+
+    #[test]
+    fn curves_count_against_the_memory_and_the_thickness() {
+        // 200 circles 1e-4 wide (about 160 000 segments) with a 32-segment round profile on
+        // the six faces of a box: about 28 GB of walls.
+        let many = "profile = \"round:depth=0.3,segments=32\"\n\
+             pattern = { kind = \"circles\", radius = [0.1, 0.45], count = 200, width = 1e-4 }";
+        let e = error_of(scene("type = \"box\"", many));
+        assert!(
+            e.contains("materials.plate.scratches.explicit") && e.contains("GiB"),
+            "{e}"
+        );
+        // Grooves 5e-3 deep in a box 1e-4 thick.
+        let thin = "type = \"box\"\ntransform = [{ scale = [1, 1, 0.00005] }]";
+        let e = error_of(scene(thin, CIRCLES));
+        assert!(
+            e.contains("materials.plate.scratches.explicit") && e.contains("thick"),
+            "{e}"
+        );
     }
 
     /// A render's check counts the grooves the loaded scene holds against `--max-memory`.
@@ -289,5 +396,72 @@ mod tests {
         );
         let e = error_of(scene("type = \"rectangle\"", "table = \"t.npz\""));
         assert!(e.contains("scratches.explicit"), "{e}");
+    }
+
+    /// An asymmetric groove faces the same way cut and modelled on curves too (METHOD.md
+    /// section 1, 9.6: the profile's `x` along `b = t x n`, `t` the curve's tangent): a
+    /// mirror-walled metal plate with arcs of a sawtooth groove (large circles, nearly parallel
+    /// across the view), lit from one side, renders the same mean either way, far from the
+    /// mirrored sawtooth's.
+    #[test]
+    fn asymmetric_curved_grooves_face_the_same_way_cut_and_modelled() {
+        let dir = std::env::temp_dir().join(format!("striae-curved-saw-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("saw.txt"), "-0.5 0\n0.3 -0.4\n0.5 0\n").unwrap();
+        std::fs::write(dir.join("mirrored.txt"), "-0.5 0\n-0.3 -0.4\n0.5 0\n").unwrap();
+        let mean = |profile: &str, explicit: bool| {
+            let text = format!(
+                r#"
+[render]
+width = 48
+height = 48
+spp = 16
+max_depth = 8
+[camera]
+position = [-0.36, 0.12, 0.76]
+look_at = [-0.4, 0.0, 0.6]
+fov = 40
+[materials.plate]
+type = "scratched"
+base = "metal"
+preset = "mirror"
+[materials.plate.scratches]
+profile = "file:{profile}.txt"
+walls = "specular"
+fresnel_law = "none"
+pattern = {{ kind = "circles", centre = [0.3, -1.5], radius = [1.6, 2.0], count = 100, width = 0.002 }}
+explicit = {explicit}
+[[shapes]]
+type = "rectangle"
+material = "plate"
+transform = [{{ rotate = {{ axis = [1, 0, 0], angle = -90 }} }}]
+[[shapes]]
+type = "rectangle"
+emission = [12.0, 12.0, 12.0]
+transform = [{{ look_at = {{ origin = [-2.0, 1.5, 1.0], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }} }}]
+[environment]
+type = "constant"
+radiance = [0.02, 0.02, 0.02]
+"#
+            );
+            let s = Scene::parse(&text, &dir.join("saw.toml"), &dir, &Overrides::default())
+                .unwrap_or_else(|e| panic!("{e}"));
+            let (image, _) = crate::render::integrator::render(&s, &|_| {});
+            image.pixels.iter().map(|p| p.y as f64).sum::<f64>() / image.pixels.len() as f64
+        };
+        let (cut, modelled) = (mean("saw", true), mean("saw", false));
+        let (cut_mirrored, modelled_mirrored) = (mean("mirrored", true), mean("mirrored", false));
+        std::fs::remove_dir_all(&dir).ok();
+        eprintln!("saw: cut {cut}, modelled {modelled}; mirrored: cut {cut_mirrored}, modelled {modelled_mirrored}");
+        // Lit from one side, one facing reflects the light away (mean 0.05), the other toward
+        // the eye (0.92): cut and modelled agree within 0.005 either way (a wrong side would
+        // swap them).
+        for (c, m) in [(cut, modelled), (cut_mirrored, modelled_mirrored)] {
+            assert!((m - c).abs() < 0.01, "cut {c}, modelled {m}");
+        }
+        assert!(
+            cut_mirrored > 5.0 * cut,
+            "{cut} against {cut_mirrored} mirrored"
+        );
     }
 }

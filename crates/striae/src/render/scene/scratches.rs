@@ -970,6 +970,18 @@ impl ScratchedDesc {
             }
             _ => Vec::new(),
         };
+        if let Some(d) = &drawing {
+            let (tight, min) = CurveSet::tight_turns(&d.polylines);
+            if !tight.is_empty() {
+                crate::log::warn(&format!(
+                    "scratches.curves: {} of {} curves (the first: curve {}) turn tighter than {} times their width (down to {min:.2}); there the SV-BRDF's extruded groove is an approximation (docs/scratched.md, \"Curves\")",
+                    tight.len(),
+                    d.polylines.len(),
+                    tight[0],
+                    crate::curves::MIN_RADIUS_OVER_WIDTH
+                ));
+            }
+        }
         let curves = match drawing {
             Some(d) => Some(std::sync::Arc::new(
                 CurveSet::new(&d.polylines, d.to_uv)
