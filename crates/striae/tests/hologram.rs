@@ -4,10 +4,9 @@
 
 mod common;
 
-use glam::{DVec2, DVec3, Vec2};
+use glam::{DVec3, Vec2};
 use std::path::Path;
 use striae::lab::hologram::{hologram, read_points, HologramParams, Plate};
-use striae::math::Vec3;
 use striae::render::scene::{Overrides, Scene};
 
 const SCENES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes");

@@ -28,10 +28,11 @@ pub const MAX_SEGMENTS: usize = 1 << 20;
 /// The largest mitre a joint may take, in half-widths: a joint that turns by more than about
 /// 151 degrees is clipped to it (its quads then overlap or leave a notch at the outer corner).
 pub const MITRE_LIMIT: f64 = 4.0;
-/// The smallest radius of curvature over width at which a curve is the extruded groove the
-/// table describes, locally (METHOD.md 9.1): tighter turns are rendered all the same, with a
-/// warning naming the curves ([`CurveSet::tight_turns`]).
-pub const MIN_RADIUS_OVER_WIDTH: f64 = 2.0;
+/// The smallest radius of curvature over width measured against explicit curved grooves
+/// (METHOD.md 9.1, 9.6; docs/scratched.md, "Curves": full circles of `R / w` 1.5 to 20 on a
+/// plate with diffuse walls render within 0.4-0.7 % of their carved grooves): tighter turns
+/// are rendered all the same, with a warning naming the curves ([`CurveSet::tight_turns`]).
+pub const MIN_RADIUS_OVER_WIDTH: f64 = 1.5;
 /// Most curves one footprint query reports ([`CurveHits`]); the smallest are dropped beyond.
 pub const MAX_CURVE_HITS: usize = 8;
 /// Most grid cells a footprint query visits; a larger footprint takes the point test at the

@@ -347,7 +347,7 @@ fn tight_turns_are_found_by_radius_over_width() {
         )
     };
     assert!((ring(0.01).min_radius_over_width() - 10.0).abs() < 0.01);
-    let (tight, min) = CurveSet::tight_turns(&[ring(0.01), ring(0.1), ring(0.02)]);
+    let (tight, min) = CurveSet::tight_turns(&[ring(0.01), ring(0.1), ring(0.05)]);
     assert_eq!(tight, vec![1]);
     assert!((min - 1.0).abs() < 1e-3, "{min}");
     // A straight line never turns.

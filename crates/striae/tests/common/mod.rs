@@ -1,4 +1,6 @@
 //! Helpers shared by the scene tests.
+// (Each test binary uses some of these helpers.)
+#![allow(dead_code)]
 
 use std::path::Path;
 use striae::render::film::Image;
