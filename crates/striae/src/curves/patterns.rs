@@ -137,10 +137,40 @@ impl Pattern {
         Ok(())
     }
 
-    /// The pattern's scratches in uv, each through `style` (taper, dashes, wear).
+    /// About how many segments the pattern flattens to (before taper and dashes add theirs):
+    /// its arcs' spans over the chord angle that keeps them within the flattening tolerance.
+    pub fn segments(&self) -> f64 {
+        let per_radian = |r: f64, width: f64| {
+            let tol = FLATTEN_TOLERANCE * width;
+            1.0 / (2.0 * (1.0 - (tol / r).min(1.0)).acos()).max(1e-9)
+        };
+        match *self {
+            Pattern::Swirl {
+                count,
+                radius,
+                arc,
+                width,
+                ..
+            } => count as f64 * arc[1].to_radians() * per_radian(radius[1], width),
+            Pattern::Circles {
+                count,
+                radius,
+                width,
+                ..
+            } => count as f64 * TAU * per_radian(radius[1], width),
+        }
+    }
+
+    /// The pattern's scratches in uv, each through `style` (taper, dashes, wear); a pattern
+    /// that would flatten to more than [`super::MAX_SEGMENTS`] is refused up front, with the
+    /// figure.
     pub fn polylines(&self, style: &StrokeStyle) -> Result<Vec<Polyline>, CurveError> {
         self.validate()?;
         style.validate()?;
+        let segments = self.segments();
+        if segments > super::MAX_SEGMENTS as f64 {
+            return Err(CurveError::TooManySegments(segments as usize));
+        }
         let mut out = Vec::new();
         match *self {
             Pattern::Swirl {

@@ -120,8 +120,30 @@ fn walk(
                         ),
                     ));
                 };
-                add_path(p, stroke, style, *count, out);
+                if !add_path(p, stroke, style, *count, out) {
+                    return Err(file_error(
+                        name,
+                        format!(
+                            "{} alone flattens to more than {} segments: thinner strokes flatten finer; widen it",
+                            path_name(p, *count),
+                            super::MAX_SEGMENTS
+                        ),
+                    ));
+                }
                 out.paths += 1;
+                // Refused as soon as the budget is passed, before the rest is flattened.
+                let segments: usize = out.polylines.iter().map(|l| l.points.len() - 1).sum();
+                if segments > super::MAX_SEGMENTS {
+                    return Err(file_error(
+                        name,
+                        format!(
+                            "flattens to more than {} segments by {} (of {} paths read): thinner strokes flatten finer; widen them or split the drawing",
+                            super::MAX_SEGMENTS,
+                            path_name(p, *count),
+                            out.paths
+                        ),
+                    ));
+                }
             }
             usvg::Node::Image(_) | usvg::Node::Text(_) => {}
         }
@@ -129,14 +151,16 @@ fn walk(
     Ok(())
 }
 
-/// Flatten one stroked path into `out`.
+/// Flatten one stroked path into `out`; `false` (and `out` unchanged) where its polyline
+/// alone passes [`super::MAX_SEGMENTS`].
 fn add_path(
     p: &usvg::Path,
     s: &usvg::Stroke,
     style: &StrokeStyle,
     index: usize,
     out: &mut Drawing,
-) {
+) -> bool {
+    let before = out.polylines.len();
     let t = p.abs_transform();
     let scale = ((t.sx * t.sy - t.kx * t.ky).abs() as f64).sqrt();
     let map = |q: usvg::tiny_skia_path::Point| {
@@ -163,6 +187,10 @@ fn add_path(
         line.clear();
     };
     for seg in p.data().segments() {
+        if line.len() > super::MAX_SEGMENTS {
+            out.polylines.truncate(before);
+            return false;
+        }
         use usvg::tiny_skia_path::PathSegment as S;
         let last = line.last().copied().unwrap_or(start);
         match seg {
@@ -201,7 +229,12 @@ fn add_path(
             }
         }
     }
+    if line.len() > super::MAX_SEGMENTS {
+        out.polylines.truncate(before);
+        return false;
+    }
     flush(&mut line, out);
+    true
 }
 
 /// A `stroke-width` of zero or below (an attribute or a `style` declaration), which usvg drops

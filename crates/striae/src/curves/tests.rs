@@ -354,3 +354,37 @@ fn tight_turns_are_found_by_radius_over_width() {
     let line = Polyline::uniform(vec![DVec2::ZERO, DVec2::X, DVec2::new(2.0, 0.0)], 0.1);
     assert_eq!(line.min_radius_over_width(), f64::INFINITY);
 }
+
+#[test]
+fn patterns_and_drawings_past_the_segment_limit_are_refused_up_front() {
+    // 10^6 circles of radius 0.4 and width 1e-4: about 10^9 segments, refused before drawing.
+    let p = patterns::Pattern::Circles {
+        centre: [0.5, 0.5],
+        radius: [0.1, 0.4],
+        count: 1_000_000,
+        width: 1e-4,
+        jitter: 0.0,
+        seed: 0,
+    };
+    let e = p
+        .polylines(&StrokeStyle::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("segments"), "{e}");
+    // An SVG of fine circles: refused at the path that passes the limit.
+    let mut svg =
+        String::from(r#"<svg xmlns="http://www.w3.org/2000/svg" width="1000" height="1000">"#);
+    for i in 0..400 {
+        svg.push_str(&format!(
+            r#"<circle id="c{i}" cx="500" cy="500" r="400" fill="none" stroke="black" stroke-width="0.0001"/>"#
+        ));
+    }
+    svg.push_str("</svg>");
+    let e = svg::parse(svg.as_bytes(), "fine.svg", &StrokeStyle::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("fine.svg") && e.contains("segments") && e.contains("id=\"c"),
+        "{e}"
+    );
+}
