@@ -605,10 +605,16 @@ fn curves_alone_or_beside_layers() {
     // The SVG, relative to the scene's folder, alone: no layers.
     let m = prepare("curves = \"marks.svg\"\ntaper = 0.5").unwrap();
     assert_eq!(m.layers.len(), 0);
+    // Curves alone default to `union` (closest to explicit grooves), under the seed's model
+    // and beside layers to `max`.
+    assert_eq!(m.mix, LayerMix::Union);
+    let seed = prepare("curves = \"marks.svg\"\nmodel = \"seed\"").unwrap();
+    assert_eq!(seed.mix, LayerMix::Max);
     assert_eq!(m.curves.as_ref().unwrap().len(), 1);
     // With a layer key: both.
     let m = prepare("curves = \"marks.svg\"\nsetting = 2\nlayers = 2").unwrap();
     assert_eq!(m.layers.len(), 2);
+    assert_eq!(m.mix, LayerMix::Max);
     assert!(m.curves.is_some());
     // A pattern.
     let m =
