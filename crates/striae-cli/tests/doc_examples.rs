@@ -10,8 +10,8 @@
 //!   `[camera]` and `[environment]` give way to the fragment's; every material the fragment
 //!   defines is put on a rectangle of its own, so that it is used; every material its shapes
 //!   name without defining it is added as a plain diffuse one; and every file it names
-//!   (`path = "..."`, outside comments) is created beside the scene (OBJ meshes only: a
-//!   tetrahedron). A fragment with neither materials nor shapes gets a grey rectangle.
+//!   (`path = "..."` or `curves = "..."`, outside comments) is created beside the scene (an
+//!   OBJ mesh: a tetrahedron; an SVG drawing: one stroke). A fragment with neither materials nor shapes gets a grey rectangle.
 //! * `<!-- example: transforms -->`: each non-empty line is one `transform = ...` alternative,
 //!   given in turn to a rectangle of [`BASE`].
 //!
@@ -48,6 +48,9 @@ const BASE_MATERIAL: &str = "[materials.doc_example_base]\ntype = \"diffuse\"\nr
 /// The mesh written for an OBJ file a fragment names.
 const TETRAHEDRON_OBJ: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n\
     f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+
+/// The drawing written for an SVG file a fragment names (`curves = "..."`): one stroke.
+const STROKE_SVG: &str = r#"<svg xmlns="http://www.w3.org/2000/svg" width="100" height="100"><path d="M 10 80 C 30 60, 60 70, 90 20" fill="none" stroke="black" stroke-width="1"/></svg>"#;
 
 #[derive(Debug, PartialEq)]
 enum Kind {
@@ -169,7 +172,7 @@ fn splice(fragment: &str) -> (String, Vec<String>) {
     named.sort_unstable();
     named.dedup();
     let files: Vec<String> = code_lines(fragment)
-        .filter_map(|l| quoted_value(l, "path"))
+        .filter_map(|l| quoted_value(l, "path").or_else(|| quoted_value(l, "curves")))
         .map(str::to_owned)
         .collect();
 
@@ -223,13 +226,18 @@ fn render(dir: &Path, label: &str, scene: &str, files: &[String]) -> Result<(), 
     std::fs::create_dir_all(&folder).unwrap();
     for f in files {
         let path = folder.join(f);
-        assert!(
-            f.ends_with(".obj"),
-            "{label}: names `{f}`; only OBJ files are made for examples \
-             (add the file type to crates/striae-cli/tests/doc_examples.rs)"
-        );
+        let contents = if f.ends_with(".obj") {
+            TETRAHEDRON_OBJ
+        } else if f.ends_with(".svg") {
+            STROKE_SVG
+        } else {
+            panic!(
+                "{label}: names `{f}`; only OBJ and SVG files are made for examples \
+                 (add the file type to crates/striae-cli/tests/doc_examples.rs)"
+            )
+        };
         std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-        std::fs::write(&path, TETRAHEDRON_OBJ).unwrap();
+        std::fs::write(&path, contents).unwrap();
     }
     let file = folder.join("scene.toml");
     std::fs::write(&file, scene).unwrap();
