@@ -71,27 +71,10 @@ fn glints(r: f64, lamp: Vec3, eye: Vec3) -> Vec<Vec3> {
         let t = Vec3::new(-a.sin() as f32, a.cos() as f32, 0.0);
         ((lamp - p).normalize() + (eye - p).normalize()).dot(t) as f64
     };
-    let n = 3600;
-    let mut out = Vec::new();
-    for k in 0..n {
-        let (mut a0, mut a1) = (
-            std::f64::consts::TAU * k as f64 / n as f64,
-            std::f64::consts::TAU * (k + 1) as f64 / n as f64,
-        );
-        if f(a0).signum() == f(a1).signum() {
-            continue;
-        }
-        for _ in 0..50 {
-            let m = 0.5 * (a0 + a1);
-            if f(a0).signum() == f(m).signum() {
-                a0 = m;
-            } else {
-                a1 = m;
-            }
-        }
-        out.push(point(0.5 * (a0 + a1)));
-    }
-    out
+    common::roots(f, 0.0, std::f64::consts::TAU, 3600)
+        .into_iter()
+        .map(point)
+        .collect()
 }
 
 /// Render the stripe from `eye` and compare its lit pixels with the predicted glints: every

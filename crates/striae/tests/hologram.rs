@@ -42,25 +42,10 @@ fn arc_glints(arc: &striae::lab::hologram::HologramArc, eye: DVec3) -> Vec<DVec3
         let t = DVec3::new(-a.sin(), a.cos(), 0.0);
         ((LAMP - p(a)).normalize() + (eye - p(a)).normalize()).dot(t)
     };
-    let n = 2000;
-    let mut out = Vec::new();
-    let a = |k: usize| arc.start + (arc.end - arc.start) * k as f64 / n as f64;
-    for k in 0..n {
-        let (mut a0, mut a1) = (a(k), a(k + 1));
-        if f(a0).signum() == f(a1).signum() {
-            continue;
-        }
-        for _ in 0..60 {
-            let m = 0.5 * (a0 + a1);
-            if f(a0).signum() == f(m).signum() {
-                a0 = m;
-            } else {
-                a1 = m;
-            }
-        }
-        out.push(p(0.5 * (a0 + a1)));
-    }
-    out
+    common::roots(f, arc.start, arc.end, 2000)
+        .into_iter()
+        .map(p)
+        .collect()
 }
 
 /// Render from `eye`; per arc the luminance-weighted centroid of the lit pixels within 3 pixels

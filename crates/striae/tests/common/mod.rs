@@ -41,3 +41,26 @@ pub fn assert_bit_identical_across_thread_counts(scene: &Scene) -> Image {
     assert_eq!(sa.rays, sb.rays);
     a
 }
+
+/// The roots of `f` on `[a, b]`: each sign change between `n` equal steps, refined by 60
+/// bisections.
+pub fn roots(f: impl Fn(f64) -> f64, a: f64, b: f64, n: usize) -> Vec<f64> {
+    let x = |k: usize| a + (b - a) * k as f64 / n as f64;
+    let mut out = Vec::new();
+    for k in 0..n {
+        let (mut x0, mut x1) = (x(k), x(k + 1));
+        if f(x0).signum() == f(x1).signum() {
+            continue;
+        }
+        for _ in 0..60 {
+            let m = 0.5 * (x0 + x1);
+            if f(x0).signum() == f(m).signum() {
+                x0 = m;
+            } else {
+                x1 = m;
+            }
+        }
+        out.push(0.5 * (x0 + x1));
+    }
+    out
+}
