@@ -631,3 +631,59 @@ fn merge_refuses_to_overwrite_its_parts() {
     assert!(!dir.join("m.png").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A scene whose curves are a bad SVG (not SVG, a path with no stroke, a zero stroke width)
+/// fails naming the file and the element, and writes nothing.
+#[test]
+fn bad_curve_drawings_name_the_file_and_the_element_and_write_nothing() {
+    let dir = std::env::temp_dir().join(format!("striae-cli-curves-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = dir.join("s.toml");
+    std::fs::write(
+        &scene,
+        r#"
+[render]
+width = 8
+height = 8
+spp = 1
+[camera]
+position = [0.0, 0.0, 3.0]
+look_at = [0.0, 0.0, 0.0]
+fov = 40.0
+[materials.m]
+type = "scratched"
+base = "metal"
+preset = "gold"
+[materials.m.scratches]
+m = 16
+n = 200
+curves = "marks.svg"
+[[shapes]]
+type = "rectangle"
+material = "m"
+"#,
+    )
+    .unwrap();
+    let out = dir.join("out");
+    for (svg, expect) in [
+        ("this is not a drawing", "not a valid SVG"),
+        (
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10"><rect id="fill" width="5" height="5" fill="red"/></svg>"#,
+            "id=\"fill\"",
+        ),
+        (
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10"><line id="zero" x2="9" y2="9" stroke="black" stroke-width="0"/></svg>"#,
+            "id=\"zero\"",
+        ),
+    ] {
+        std::fs::write(dir.join("marks.svg"), svg).unwrap();
+        let (ok, err) = striae(&["render", scene.to_str().unwrap()], &out);
+        assert!(!ok, "{svg}");
+        assert!(
+            err.contains("marks.svg") && err.contains("scratches.curves") && err.contains(expect),
+            "{err}"
+        );
+        assert!(!out.with_extension("exr").exists() && !out.with_extension("png").exists());
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
