@@ -5,8 +5,10 @@
 //!   delta bounces only (a camera ray's first hit, a surface seen through glass or in a mirror),
 //!   the exact coverage of the whole pixel's footprint, computed once per pixel, shape and chain
 //!   of bounces, and shared by the pixel's samples.
-//! * **Footprint tiles** ([`CoverageCache::tiled`]): at other hits, the coverage of the
-//!   footprint snapped to its tile ([`FootprintTile`]), computed once per tile.
+//! * **Footprint tiles** ([`CoverageCache::tiled`], [`CoverageCache::curves_tiled`]): at other
+//!   hits, the coverage of the footprint snapped to its tile ([`FootprintTile`]), computed once
+//!   per tile.
+//! * The curves' pixel footprints live in [`crate::curves::cache`].
 //!
 //! Determinism: a tile's value depends only on its key, and a pixel's footprints only on the
 //! pixel's own earlier samples (the render loop calls [`CoverageCache::start_pixel`] before each
@@ -16,6 +18,7 @@
 use super::lattice::{FootprintTile, TileQuery, CACHED_LAYERS, TILE_MAX_CELLS};
 use super::layer::MAX_FOOTPRINT_CELLS;
 use super::LayerSet;
+use crate::curves::CurveSet;
 use crate::math::Vec2;
 
 /// Entries of the direct-mapped tile cache (a power of two). A 16 x 16 pixel tile of the
@@ -79,6 +82,19 @@ pub struct CoverageCache {
     pixel_count: usize,
     /// The curves' pixel footprint (`curves::cache`).
     pub curves: crate::curves::cache::PixelCache,
+    /// The curves' footprint tiles ([`Self::curves_tiled`]), direct-mapped; allocated at the
+    /// first query.
+    curve_tiles: Vec<CurveTileEntry>,
+}
+
+/// Entries of the curves' direct-mapped tile cache (a power of two).
+const CURVE_TILE_ENTRIES: usize = 1024;
+
+/// A footprint tile's curves: set id and tile key (all zero when empty), and the hits.
+#[derive(Clone)]
+struct CurveTileEntry {
+    key: [u64; 5],
+    hits: crate::curves::CurveHits,
 }
 
 impl Default for CoverageCache {
@@ -96,6 +112,7 @@ impl CoverageCache {
             pixel_next: 0,
             pixel_count: 0,
             curves: Default::default(),
+            curve_tiles: Vec::new(),
         }
     }
 
@@ -190,6 +207,44 @@ impl CoverageCache {
             return;
         }
         self.tiled(set, uv, duvdx, duvdy, query, out);
+    }
+
+    /// The curves covering the footprint tile that holds `uv` ([`FootprintTile`], as the
+    /// layers' [`Self::tiled`]): the exact coverage of the tile's footprint, cached, with each
+    /// curve's direction drawn once per tile by a number hashed from the tile's key (so a
+    /// tile's value depends only on its key, whatever the thread count), then taken from the
+    /// segment under `uv` where `uv` lies in that curve ([`CurveSet::directed_at`]). Without a
+    /// tile, the footprint itself, uncached, its directions drawn by `u`.
+    pub fn curves_tiled(
+        &mut self,
+        set: &CurveSet,
+        uv: Vec2,
+        duvdx: Vec2,
+        duvdy: Vec2,
+        u: f64,
+    ) -> crate::curves::CurveHits {
+        let (p, a, b) = (uv.as_dvec2(), duvdx.as_dvec2(), duvdy.as_dvec2());
+        let Some(tile) = FootprintTile::containing(uv, duvdx, duvdy) else {
+            return set.footprint(p, a, b, u);
+        };
+        let key = [set.id(), tile.key[0], tile.key[1], tile.key[2], tile.key[3]];
+        let hash = key.iter().fold(0u64, |h, &k| crate::hash::mix64(h ^ k));
+        if self.curve_tiles.is_empty() {
+            self.curve_tiles.resize(
+                CURVE_TILE_ENTRIES,
+                CurveTileEntry {
+                    key: [0; 5],
+                    hits: Default::default(),
+                },
+            );
+        }
+        let entry = &mut self.curve_tiles[hash as usize & (CURVE_TILE_ENTRIES - 1)];
+        if entry.key != key {
+            let u_tile = (crate::hash::mix64(hash) >> 11) as f64 * (1.0 / (1u64 << 53) as f64);
+            entry.hits = set.footprint(tile.centre, tile.a, tile.b, u_tile);
+            entry.key = key;
+        }
+        set.directed_at(entry.hits.clone(), p)
     }
 
     /// The per-layer coverage of the footprint tile containing `uv` ([`FootprintTile`]), into

@@ -1112,3 +1112,55 @@ fn capsule_mask_finds_the_scratches_a_segment_reaches() {
         (1 << random.len()) - 1
     );
 }
+
+/// The curves' footprint tiles (`CoverageCache::curves_tiled`): each curve's coverage is the
+/// exact coverage of the hit's tile, and a tile's value does not depend on which query came
+/// first or the query's own random number (so renders stay bit-identical across thread counts).
+#[test]
+fn curve_tiles_are_their_tiles_exact_coverage_whatever_the_query_order() {
+    use crate::curves::patterns::Pattern;
+    use crate::curves::stroke::StrokeStyle;
+    use crate::curves::CurveSet;
+    let swirl = Pattern::Swirl {
+        count: 200,
+        radius: [0.05, 0.3],
+        arc: [30.0, 120.0],
+        width: 0.004,
+        seed: 2,
+    };
+    let set = CurveSet::new(
+        &swirl.polylines(&StrokeStyle::default()).unwrap(),
+        glam::DVec2::ONE,
+    )
+    .unwrap();
+    let (dx, dy) = (Vec2::new(0.006, 0.001), Vec2::new(-0.002, 0.007));
+    let pts: Vec<Vec2> = (0..400)
+        .map(|i| {
+            let (a1, a2) = (0.754_877_7f32, 0.569_840_3f32);
+            Vec2::new((0.5 + a1 * i as f32) % 1.0, (0.5 + a2 * i as f32) % 1.0)
+        })
+        .collect();
+    let (mut c1, mut c2) = (CoverageCache::new(), CoverageCache::new());
+    let a: Vec<_> = pts
+        .iter()
+        .map(|&p| c1.curves_tiled(&set, p, dx, dy, 0.3))
+        .collect();
+    let mut b: Vec<_> = pts
+        .iter()
+        .rev()
+        .map(|&p| c2.curves_tiled(&set, p, dx, dy, 0.9))
+        .collect();
+    b.reverse();
+    assert_eq!(a, b);
+    let mut covered = 0;
+    for (p, hits) in pts.iter().zip(&a) {
+        let tile = super::lattice::FootprintTile::containing(*p, dx, dy).unwrap();
+        let exact = set.footprint(tile.centre, tile.a, tile.b, 0.5);
+        let cov = |h: &crate::curves::CurveHits| {
+            h.iter().map(|x| (x.curve, x.coverage)).collect::<Vec<_>>()
+        };
+        assert_eq!(cov(hits), cov(&exact));
+        covered += !hits.is_empty() as usize;
+    }
+    assert!(covered > 20, "{covered} of 400 tiles hold a curve");
+}

@@ -323,9 +323,9 @@ impl ScratchedMaterial {
     /// The curves at the hit (METHOD.md 9.1): the point test from inside dielectric-walled
     /// glass and under `coverage = "point"`; else the exact coverage of the pixel's footprint
     /// where the hit is reached from the camera by delta bounces (`coverage = "footprint"`,
-    /// shared by the pixel's samples, [`crate::curves::cache`]), of the sample's own
-    /// footprint elsewhere ([`CurveSet::footprint`]; no tiles: every such hit clips the
-    /// segments near it).
+    /// shared by the pixel's samples, [`crate::curves::cache`]), of the footprint's tile at
+    /// other hits (cached per tile, [`CoverageCache::curves_tiled`]), of the sample's own
+    /// footprint under `coverage = "sample"` ([`CurveSet::footprint`]).
     #[inline(always)]
     fn curve_hits(
         &self,
@@ -351,7 +351,11 @@ impl ScratchedMaterial {
             ),
             _ => {
                 let (a, b) = ctx.footprint_uv();
-                curves.footprint(uv, a.as_dvec2(), b.as_dvec2(), u)
+                if self.coverage == CoverageMode::Footprint {
+                    cache.curves_tiled(curves, ctx.uv, a, b, u)
+                } else {
+                    curves.footprint(uv, a.as_dvec2(), b.as_dvec2(), u)
+                }
             }
         }
     }
