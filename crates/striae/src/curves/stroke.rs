@@ -151,13 +151,14 @@ impl StrokeStyle {
             }
         };
         let piece = |a: f64, b: f64| -> Option<Polyline> {
-            let idx: Vec<usize> = (0..s.len())
-                .filter(|&i| s[i] >= a - 1e-12 * total && s[i] <= b + 1e-12 * total)
-                .collect();
+            // The vertices of `[a, b]`: `s` is sorted, so a range found by bisection.
+            let lo = s.partition_point(|&x| x < a - 1e-12 * total);
+            let hi = s.partition_point(|&x| x <= b + 1e-12 * total);
+            let idx = lo..hi.max(lo);
             let line = Polyline {
-                points: idx.iter().map(|&i| p[i]).collect(),
-                half_widths: idx.iter().map(|&i| width(s[i])).collect(),
-                depths: idx.iter().map(|&i| depth(s[i])).collect(),
+                points: p[idx.clone()].to_vec(),
+                half_widths: s[idx.clone()].iter().map(|&x| width(x)).collect(),
+                depths: s[idx].iter().map(|&x| depth(x)).collect(),
             };
             line.deduplicated()
                 .filter(|l| l.half_widths.iter().any(|&w| w > 0.0))

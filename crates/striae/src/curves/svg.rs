@@ -29,6 +29,8 @@ pub struct Drawing {
     pub size: DVec2,
     /// Stroked paths read.
     pub paths: usize,
+    /// Segments of `polylines` in all.
+    pub segments: usize,
 }
 
 impl Drawing {
@@ -75,6 +77,7 @@ pub fn parse(data: &[u8], name: &str, style: &StrokeStyle) -> Result<Drawing, Cu
         polylines: Vec::new(),
         size,
         paths: 0,
+        segments: 0,
     };
     let mut count = 0usize;
     walk(tree.root(), name, style, &mut out, &mut count)?;
@@ -132,8 +135,7 @@ fn walk(
                 }
                 out.paths += 1;
                 // Refused as soon as the budget is passed, before the rest is flattened.
-                let segments: usize = out.polylines.iter().map(|l| l.points.len() - 1).sum();
-                if segments > super::MAX_SEGMENTS {
+                if out.segments > super::MAX_SEGMENTS {
                     return Err(file_error(
                         name,
                         format!(
@@ -160,7 +162,7 @@ fn add_path(
     index: usize,
     out: &mut Drawing,
 ) -> bool {
-    let before = out.polylines.len();
+    let before = (out.polylines.len(), out.segments);
     let t = p.abs_transform();
     let scale = ((t.sx * t.sy - t.kx * t.ky).abs() as f64).sqrt();
     let map = |q: usvg::tiny_skia_path::Point| {
@@ -182,13 +184,17 @@ fn add_path(
     let flush = |line: &mut Vec<DVec2>, out: &mut Drawing| {
         if line.len() >= 2 {
             let id = (index as u64) << 20 | out.polylines.len() as u64 & 0xfffff;
-            out.polylines.extend(own.apply(line, hw, id));
+            for l in own.apply(line, hw, id) {
+                out.segments += l.points.len() - 1;
+                out.polylines.push(l);
+            }
         }
         line.clear();
     };
     for seg in p.data().segments() {
         if line.len() > super::MAX_SEGMENTS {
-            out.polylines.truncate(before);
+            out.polylines.truncate(before.0);
+            out.segments = before.1;
             return false;
         }
         use usvg::tiny_skia_path::PathSegment as S;
@@ -230,7 +236,8 @@ fn add_path(
         }
     }
     if line.len() > super::MAX_SEGMENTS {
-        out.polylines.truncate(before);
+        out.polylines.truncate(before.0);
+        out.segments = before.1;
         return false;
     }
     flush(&mut line, out);

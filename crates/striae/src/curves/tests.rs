@@ -199,6 +199,10 @@ fn a_drawing_maps_its_canvas_onto_uv() {
     </svg>"#;
     let d = svg::parse(svg, "test.svg", &StrokeStyle::default()).unwrap();
     assert_eq!(d.paths, 2);
+    assert_eq!(
+        d.segments,
+        d.polylines.iter().map(|l| l.points.len() - 1).sum::<usize>()
+    );
     assert_eq!(d.size, DVec2::new(200.0, 100.0));
     let s = CurveSet::new(&d.polylines, d.to_uv()).unwrap();
     // The line runs from x 20 to 100 at y 25: u 0.1..0.5, v 0.25, 4 units wide (0.04 in v).
