@@ -291,25 +291,7 @@ impl ScratchedMaterial {
             return self.base_bsdf();
         }
         let mut lobes = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
-        let mut depth = 1.0;
-        let count = if curves.is_empty() {
-            match self.mix {
-                LayerMix::Max => self.largest_lobe(ctx, &cov[..k], &mut lobes),
-                LayerMix::Sum => self.covering_lobes(ctx, &cov[..k], &mut lobes),
-                LayerMix::Union => {
-                    let n = self.covering_lobes(ctx, &cov[..k], &mut lobes);
-                    let scale = union_scale(&cov[..k]);
-                    for l in &mut lobes[..n] {
-                        l.coverage *= scale;
-                    }
-                    n
-                }
-            }
-        } else {
-            let (n, d) = self.lobes_with_curves(ctx, &cov[..k], &curves, &mut lobes);
-            depth = d;
-            n
-        };
+        let (count, depth) = self.choose_lobes(ctx, &cov[..k], &curves, &mut lobes);
         if count == 0 {
             return self.base_bsdf();
         }
@@ -360,13 +342,16 @@ impl ScratchedMaterial {
         }
     }
 
-    /// The lobes of a hit that curves cover, with the layers' coverages `cov`: curves and
-    /// layers are alike to `layer_mix` (METHOD.md 9.1): `max` takes the largest coverage, one
-    /// of the ties at random by `u_layer`; `sum` and `union` a lobe each (the
-    /// [`MAX_SCRATCH_LOBES`] largest), `union` scaled to the union's coverage. Returns the
-    /// lobes' count and the depth ratio their BSDF reads (METHOD.md 9.2): the chosen curve's
-    /// in `max`, the largest covering curve's in `sum` and `union` (1 for a layer).
-    fn lobes_with_curves(
+    /// The lobes of a hit, from the layers' coverages `cov` and the curves `curves` covering
+    /// it, which `layer_mix` treats alike (METHOD.md sections 6, 9.1): `max` takes the largest
+    /// coverage, one of the ties chosen by `ctx.u_layer` (several scratches crossing the
+    /// footprint equally); `sum` ([Raymond16]) a lobe for each, the [`MAX_SCRATCH_LOBES`]
+    /// largest where more cover the hit; `union` the same, scaled to the union's coverage
+    /// ([`union_scale`]). Returns the lobes' count (0 where nothing covers the hit) and the
+    /// depth ratio their BSDF reads (METHOD.md 9.2): the chosen curve's in `max`, the largest
+    /// covering curve's in `sum` and `union`, 1 for layers.
+    #[inline(always)]
+    fn choose_lobes(
         &self,
         ctx: &ShadingContext,
         cov: &[f32],
@@ -378,12 +363,18 @@ impl ScratchedMaterial {
             lobe_along(ctx, [d.x as f32, d.y as f32], c)
         };
         if self.mix == LayerMix::Max {
-            // `curves` come largest first.
-            let best = cov
-                .iter()
-                .copied()
-                .fold(curves[0].coverage as f32, f32::max);
-            let tie = |c: f32| c > 0.0 && c >= best - 1e-6;
+            // (`curves` come largest first.)
+            let first = curves.first().map_or(0.0, |h| h.coverage as f32);
+            let best = cov.iter().copied().fold(first, f32::max);
+            if best <= 0.0 {
+                // (`best` is never NaN: `f32::max` drops NaN.)
+                return (0, 1.0);
+            }
+            // `c > 0`: with a tiny best (a disc grazing the footprint) an uncovered layer must
+            // not count as a tie. The layers' ties as a bit mask (one pass, no branch per
+            // layer), the pick as its `pick`-th set bit.
+            const _: () = assert!(MAX_LAYERS <= 64);
+            let tie = |c: f32| (c > 0.0) & (c >= best - 1e-6);
             let layer_ties = cov
                 .iter()
                 .enumerate()
@@ -392,6 +383,7 @@ impl ScratchedMaterial {
             let nc = curves.iter().take_while(|h| tie(h.coverage as f32)).count() as u32;
             let n = nl + nc;
             let pick = ((ctx.u_layer * n as f32) as u32).min(n - 1);
+            // `u_layer`'s place within the pick's share, for the lean.
             let u = (ctx.u_layer * n as f32 - pick as f32).clamp(0.0, 1.0);
             if pick < nl {
                 let mut rest = layer_ties;
@@ -406,11 +398,9 @@ impl ScratchedMaterial {
             lobes[0] = curve_lobe(i, curves[i].coverage as f32);
             return (1, curves[i].depth);
         }
-        // Sum and union: every covering layer and curve, the largest where there are more.
-        let mut all = arrayvec::ArrayVec::<
-            (f32, usize),
-            { MAX_LAYERS + crate::curves::MAX_CURVE_HITS },
-        >::new();
+        // Sum and union: every covering layer and curve (a curve as `MAX_LAYERS + i`).
+        const ALL: usize = MAX_LAYERS + crate::curves::MAX_CURVE_HITS;
+        let mut all = arrayvec::ArrayVec::<(f32, usize), ALL>::new();
         all.extend(
             cov.iter()
                 .enumerate()
@@ -424,8 +414,7 @@ impl ScratchedMaterial {
                 .map(|(i, h)| (h.coverage as f32, MAX_LAYERS + i)),
         );
         let scale = if self.mix == LayerMix::Union {
-            let c: arrayvec::ArrayVec<f32, { MAX_LAYERS + crate::curves::MAX_CURVE_HITS }> =
-                all.iter().map(|x| x.0).collect();
+            let c: arrayvec::ArrayVec<f32, ALL> = all.iter().map(|x| x.0).collect();
             union_scale(&c)
         } else {
             1.0
@@ -441,7 +430,6 @@ impl ScratchedMaterial {
                 curve_lobe(i - MAX_LAYERS, c * scale)
             };
         }
-        // (`curves` come largest first.)
         let depth = all[..n]
             .iter()
             .find(|x| x.1 >= MAX_LAYERS)
@@ -668,72 +656,6 @@ impl ScratchedMaterial {
             *c = ((mask >> i) & 1) as f32;
         }
         true
-    }
-
-    /// `layer_mix = "max"` (METHOD.md section 6): the lobe of the layer with the largest
-    /// coverage, one chosen by `ctx.u_layer` among ties; 0 lobes where no layer covers the hit.
-    #[inline(always)]
-    fn largest_lobe(
-        &self,
-        ctx: &ShadingContext,
-        cov: &[f32],
-        lobes: &mut [ScratchLobe; MAX_SCRATCH_LOBES],
-    ) -> usize {
-        let best = cov.iter().copied().fold(0.0f32, f32::max);
-        if best <= 0.0 {
-            // (`best` is never NaN: `f32::max` drops NaN.)
-            return 0;
-        }
-        // Ties (several scratches crossing the footprint equally): one at random. `c > 0`: with
-        // a tiny best (a disc grazing the footprint) an uncovered layer must not count as a
-        // tie. The ties as a bit mask (one pass, no branch per layer), the pick as its
-        // `pick`-th set bit.
-        const _: () = assert!(MAX_LAYERS <= 64);
-        let ties = cov.iter().enumerate().fold(0u64, |mask, (i, &c)| {
-            mask | (((c > 0.0) & (c >= best - 1e-6)) as u64) << i
-        });
-        let count = ties.count_ones();
-        let (layer, u) = if count == 1 {
-            (ties.trailing_zeros() as usize, ctx.u_layer)
-        } else {
-            let pick = ((ctx.u_layer * count as f32) as u32).min(count - 1);
-            let mut rest = ties;
-            for _ in 0..pick {
-                rest &= rest - 1;
-            }
-            // `u_layer`'s place within the pick's share, for the lean.
-            let u = (ctx.u_layer * count as f32 - pick as f32).clamp(0.0, 1.0);
-            (rest.trailing_zeros() as usize, u)
-        };
-        lobes[0] = lobe(self, ctx, layer, cov[layer], u);
-        1
-    }
-
-    /// `layer_mix = "sum"` ([Raymond16]): a lobe for every covering layer, the
-    /// [`MAX_SCRATCH_LOBES`] largest where more cover the hit.
-    #[inline(always)]
-    fn covering_lobes(
-        &self,
-        ctx: &ShadingContext,
-        cov: &[f32],
-        lobes: &mut [ScratchLobe; MAX_SCRATCH_LOBES],
-    ) -> usize {
-        let mut order: [usize; MAX_LAYERS] = std::array::from_fn(|i| i);
-        let mut covered = 0;
-        for (i, &c) in cov.iter().enumerate() {
-            if c > 0.0 {
-                order[covered] = i;
-                covered += 1;
-            }
-        }
-        if covered > MAX_SCRATCH_LOBES {
-            order[..covered].sort_by(|&a, &b| cov[b].total_cmp(&cov[a]).then(a.cmp(&b)));
-        }
-        let n = covered.min(MAX_SCRATCH_LOBES);
-        for j in 0..n {
-            lobes[j] = lobe(self, ctx, order[j], cov[order[j]], ctx.u_layer);
-        }
-        n
     }
 }
 
