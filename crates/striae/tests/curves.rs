@@ -164,7 +164,7 @@ fn concentric_circles_glint_where_l_plus_v_is_normal_to_the_tangent() {
     assert!(a > 10 && b > 10, "lit pixels: {a}, {b}");
 }
 
-/// The pixel footprint shared by a pixel's samples (`curves::cache`) renders what each
+/// The pixel footprint shared by a pixel's samples (`CoverageCache::curves_of_pixel`) renders what each
 /// sample's own footprint renders (`coverage = "sample"`), within noise, image mean and
 /// blocks of pixels alike.
 #[test]

@@ -14,7 +14,6 @@
 //! is its segment's unit tangent in texture space, carried to 3D through `dP/du`, `dP/dv` as a
 //! layer's direction is (METHOD.md 9.1). Queries take `f32` texture coordinates and work in `f64`.
 
-pub mod cache;
 pub mod clip;
 pub mod patterns;
 pub mod stroke;
@@ -250,7 +249,8 @@ pub struct CurveSet {
     dims: [usize; 2],
     cell_start: Vec<u32>,
     cell_segments: Vec<u32>,
-    /// Names the set in per-worker caches ([`cache`]); unique per process, from 1.
+    /// Names the set in the render workers' caches (`layers::CoverageCache`); unique per
+    /// process, from 1.
     id: u64,
 }
 
@@ -337,7 +337,7 @@ impl CurveSet {
     }
 
     /// `hits` with each curve that holds `uv` taking the direction (and depth) of its segment
-    /// there ([`cache`]).
+    /// there (the render workers' caches, `layers::CoverageCache`).
     pub fn directed_at(&self, mut hits: CurveHits, uv: DVec2) -> CurveHits {
         if hits.is_empty() {
             return hits;

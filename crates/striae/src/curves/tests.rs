@@ -201,7 +201,10 @@ fn a_drawing_maps_its_canvas_onto_uv() {
     assert_eq!(d.paths, 2);
     assert_eq!(
         d.segments,
-        d.polylines.iter().map(|l| l.points.len() - 1).sum::<usize>()
+        d.polylines
+            .iter()
+            .map(|l| l.points.len() - 1)
+            .sum::<usize>()
     );
     assert_eq!(d.size, DVec2::new(200.0, 100.0));
     let s = CurveSet::new(&d.polylines, d.to_uv()).unwrap();

@@ -1,14 +1,14 @@
 //! The coverage caches of one worker of the render loop, owned by it and passed down to the
 //! material ([`CoverageCache`]); the queries they answer are [`LayerSet`]'s pure ones.
 //!
-//! * **Pixel footprints** ([`CoverageCache::of_pixel`]): for hits reached from the camera by
+//! * **Pixel footprints** ([`CoverageCache::of_pixel`], [`CoverageCache::curves_of_pixel`]):
+//!   for hits reached from the camera by
 //!   delta bounces only (a camera ray's first hit, a surface seen through glass or in a mirror),
 //!   the exact coverage of the whole pixel's footprint, computed once per pixel, shape and chain
 //!   of bounces, and shared by the pixel's samples.
 //! * **Footprint tiles** ([`CoverageCache::tiled`], [`CoverageCache::curves_tiled`]): at other
 //!   hits, the coverage of the footprint snapped to its tile ([`FootprintTile`]), computed once
 //!   per tile.
-//! * The curves' pixel footprints live in [`crate::curves::cache`].
 //!
 //! Determinism: a tile's value depends only on its key, and a pixel's footprints only on the
 //! pixel's own earlier samples (the render loop calls [`CoverageCache::start_pixel`] before each
@@ -18,7 +18,7 @@
 use super::lattice::{FootprintTile, TileQuery, CACHED_LAYERS, TILE_MAX_CELLS};
 use super::layer::MAX_FOOTPRINT_CELLS;
 use super::LayerSet;
-use crate::curves::CurveSet;
+use crate::curves::{CurveHits, CurveSet};
 use crate::math::Vec2;
 
 /// Entries of the direct-mapped tile cache (a power of two). A 16 x 16 pixel tile of the
@@ -50,16 +50,57 @@ struct TileEntry {
     values: [f32; CACHED_LAYERS],
 }
 
-/// A pixel's footprint coverage: set id, query, shape and chain; the footprint's centre and
-/// edges, and `1 / (a x b)`; the values.
-#[derive(Clone, Copy)]
-struct PixelEntry {
-    key: [u64; 4],
+/// A pixel's footprint: its centre's texture point and edges, and `1 / (a x b)`.
+#[derive(Clone, Copy, Debug)]
+struct PixelFootprint {
     centre: Vec2,
     a: Vec2,
     b: Vec2,
     inv_det: f32,
+}
+
+impl PixelFootprint {
+    /// The footprint of edges `a`, `b` centred on the pixel centre's texture point as a hit at
+    /// `uv`, `offset` pixels from the pixel's centre, estimates it, `uv - offset.x a - offset.y
+    /// b`; `None` where it is degenerate or not finite.
+    fn new(uv: Vec2, offset: Vec2, a: Vec2, b: Vec2) -> Option<Self> {
+        let centre = uv - offset.x * a - offset.y * b;
+        let det = a.perp_dot(b);
+        (det.abs() > 0.0 && det.is_finite() && centre.is_finite()).then(|| PixelFootprint {
+            centre,
+            a,
+            b,
+            inv_det: 1.0 / det,
+        })
+    }
+
+    /// Whether a hit at `uv`, `offset` pixels from the pixel's centre, estimates the centre
+    /// within [`PIXEL_TOLERANCE`] of the edges from this footprint's.
+    #[inline]
+    fn holds(&self, uv: Vec2, offset: Vec2) -> bool {
+        let d = uv - offset.x * self.a - offset.y * self.b - self.centre;
+        let (s, t) = (
+            d.perp_dot(self.b) * self.inv_det,
+            self.a.perp_dot(d) * self.inv_det,
+        );
+        s.abs() <= PIXEL_TOLERANCE && t.abs() <= PIXEL_TOLERANCE
+    }
+}
+
+/// A pixel's footprint coverage: set id, query, shape and chain; the footprint; the values.
+#[derive(Clone, Copy)]
+struct PixelEntry {
+    key: [u64; 4],
+    footprint: PixelFootprint,
     values: [f32; CACHED_LAYERS],
+}
+
+/// The curves covering a pixel's footprint: set id, shape and chain; the footprint; the hits.
+#[derive(Clone, Debug)]
+struct CurvePixelEntry {
+    key: [u64; 3],
+    footprint: PixelFootprint,
+    hits: CurveHits,
 }
 
 /// Which surface of the current pixel a hit is on, and through which chain of delta bounces
@@ -80,8 +121,8 @@ pub struct CoverageCache {
     pixel: Vec<PixelEntry>,
     pixel_next: usize,
     pixel_count: usize,
-    /// The curves' pixel footprint (`curves::cache`).
-    pub curves: crate::curves::cache::PixelCache,
+    /// The curves covering the current pixel's first footprint ([`Self::curves_of_pixel`]).
+    curve_pixel: Option<CurvePixelEntry>,
     /// The curves' footprint tiles ([`Self::curves_tiled`]), direct-mapped; allocated at the
     /// first query.
     curve_tiles: Vec<CurveTileEntry>,
@@ -94,7 +135,7 @@ const CURVE_TILE_ENTRIES: usize = 1024;
 #[derive(Clone)]
 struct CurveTileEntry {
     key: [u64; 5],
-    hits: crate::curves::CurveHits,
+    hits: CurveHits,
 }
 
 impl Default for CoverageCache {
@@ -111,7 +152,7 @@ impl CoverageCache {
             pixel: Vec::new(),
             pixel_next: 0,
             pixel_count: 0,
-            curves: Default::default(),
+            curve_pixel: None,
             curve_tiles: Vec::new(),
         }
     }
@@ -120,7 +161,7 @@ impl CoverageCache {
     #[inline]
     pub fn start_pixel(&mut self) {
         self.pixel_count = 0;
-        self.curves.start_pixel();
+        self.curve_pixel = None;
     }
 
     /// The per-layer coverage of the current pixel's whole footprint, for a hit at texture
@@ -172,10 +213,7 @@ impl CoverageCache {
             if e.key != key {
                 continue; // another shape or chain (or set, or query)
             }
-            // This sample's estimate of the centre in the stored footprint's edge coordinates.
-            let d = uv - offset.x * e.a - offset.y * e.b - e.centre;
-            let (s, t) = (d.perp_dot(e.b) * e.inv_det, e.a.perp_dot(d) * e.inv_det);
-            if s.abs() <= PIXEL_TOLERANCE && t.abs() <= PIXEL_TOLERANCE {
+            if e.footprint.holds(uv, offset) {
                 out[..n].copy_from_slice(&e.values[..n]);
                 return;
             }
@@ -184,18 +222,15 @@ impl CoverageCache {
         let (duvdx, duvdy) = footprint();
         // A new footprint of the pixel, centred on this sample's estimate of the pixel centre
         // (up to `PIXEL_CLUSTERS`; then, and where it is degenerate, the tile).
-        let centre = uv - offset.x * duvdx - offset.y * duvdy;
-        let det = duvdx.perp_dot(duvdy);
-        if same < PIXEL_CLUSTERS && det.abs() > 0.0 && det.is_finite() && centre.is_finite() {
+        let new = PixelFootprint::new(uv, offset, duvdx, duvdy);
+        if let Some(footprint) = new.filter(|_| same < PIXEL_CLUSTERS) {
             let mut values = [0.0f32; CACHED_LAYERS];
-            set.coverage_query(query, centre, duvdx, duvdy, TILE_MAX_CELLS, &mut values);
+            let c = footprint.centre;
+            set.coverage_query(query, c, duvdx, duvdy, TILE_MAX_CELLS, &mut values);
             out[..n].copy_from_slice(&values[..n]);
             let entry = PixelEntry {
                 key,
-                centre,
-                a: duvdx,
-                b: duvdy,
-                inv_det: 1.0 / det,
+                footprint,
                 values,
             };
             if self.pixel.len() < PIXEL_ENTRIES {
@@ -207,6 +242,47 @@ impl CoverageCache {
             return;
         }
         self.tiled(set, uv, duvdx, duvdy, query, out);
+    }
+
+    /// The curves covering the current pixel's footprint (METHOD.md 9.1), for a hit at `uv`
+    /// reached from the camera by delta bounces (on `key`'s shape, along its chain), `offset`
+    /// pixels from the pixel's centre, with the footprint `footprint() = (duvdx, duvdy)`, as
+    /// [`Self::of_pixel`] does for layers: the exact coverage of the footprint centred on the
+    /// pixel centre's texture point, computed at the pixel's first such hit (its directions
+    /// drawn by `u`) and shared by its later samples on the same shape and chain whose estimate
+    /// of the centre lies within [`PIXEL_TOLERANCE`]; other samples query their own footprint,
+    /// uncached. Each sample then takes the direction of the segment under its own hit
+    /// ([`CurveSet::directed_at`]), so that over a pixel's samples each segment is chosen in
+    /// proportion to its share of the footprint.
+    pub fn curves_of_pixel(
+        &mut self,
+        set: &CurveSet,
+        uv: Vec2,
+        footprint: impl FnOnce() -> (Vec2, Vec2),
+        key: PixelKey,
+        offset: Vec2,
+        u: f64,
+    ) -> CurveHits {
+        let key = [set.id(), key.shape as u64, key.chain];
+        if let Some(e) = &self.curve_pixel {
+            if e.key == key && e.footprint.holds(uv, offset) {
+                return set.directed_at(e.hits.clone(), uv.as_dvec2());
+            }
+        }
+        let (a, b) = footprint();
+        let new = PixelFootprint::new(uv, offset, a, b);
+        let Some(footprint) = new.filter(|_| self.curve_pixel.is_none()) else {
+            // Degenerate, or a second footprint of the pixel: this sample's own.
+            return set.footprint(uv.as_dvec2(), a.as_dvec2(), b.as_dvec2(), u);
+        };
+        let c = footprint.centre.as_dvec2();
+        let hits = set.footprint(c, a.as_dvec2(), b.as_dvec2(), u);
+        self.curve_pixel = Some(CurvePixelEntry {
+            key,
+            footprint,
+            hits: hits.clone(),
+        });
+        set.directed_at(hits, uv.as_dvec2())
     }
 
     /// The curves covering the footprint tile that holds `uv` ([`FootprintTile`], as the
@@ -222,7 +298,7 @@ impl CoverageCache {
         duvdx: Vec2,
         duvdy: Vec2,
         u: f64,
-    ) -> crate::curves::CurveHits {
+    ) -> CurveHits {
         let (p, a, b) = (uv.as_dvec2(), duvdx.as_dvec2(), duvdy.as_dvec2());
         let Some(tile) = FootprintTile::containing(uv, duvdx, duvdy) else {
             return set.footprint(p, a, b, u);

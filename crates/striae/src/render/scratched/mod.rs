@@ -305,7 +305,7 @@ impl ScratchedMaterial {
     /// The curves at the hit (METHOD.md 9.1): the point test from inside dielectric-walled
     /// glass and under `coverage = "point"`; else the exact coverage of the pixel's footprint
     /// where the hit is reached from the camera by delta bounces (`coverage = "footprint"`,
-    /// shared by the pixel's samples, [`crate::curves::cache`]), of the footprint's tile at
+    /// shared by the pixel's samples, [`CoverageCache::curves_of_pixel`]), of the footprint's tile at
     /// other hits (cached per tile, [`CoverageCache::curves_tiled`]), of the sample's own
     /// footprint under `coverage = "sample"` ([`CurveSet::footprint`]).
     #[inline(always)]
@@ -322,12 +322,14 @@ impl ScratchedMaterial {
         }
         let u = ctx.u_layer as f64;
         match ctx.pixel {
-            Some(hit) if self.coverage == CoverageMode::Footprint => cache.curves.hits(
+            Some(hit) if self.coverage == CoverageMode::Footprint => cache.curves_of_pixel(
                 curves,
                 ctx.uv,
                 || ctx.footprint_uv(),
-                hit.shape,
-                hit.chain,
+                PixelKey {
+                    shape: hit.shape,
+                    chain: hit.chain,
+                },
                 hit.offset,
                 u,
             ),
