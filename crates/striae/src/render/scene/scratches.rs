@@ -447,7 +447,7 @@ impl ScratchedDesc {
             // Layers: `max` under either model (`union` is closer to explicit grooves,
             // docs/fidelity.md, but costs 1.24-1.59 x the instructions a sample on glass, 1.04-
             // 1.24 x on metal). Curves alone, under `model = "default"`: `union`, within 0.2 % of
-            // explicit grooves where `max` is 1-1.7 % off, for 1.05 x a sample
+            // explicit grooves where `max` is 1-1.7 % off, at `max`'s cost within noise
             // (docs/scratched.md, "Curves").
             mix: s.layer_mix.unwrap_or(
                 if curves_only && self.model() == ModelKey::Default {
