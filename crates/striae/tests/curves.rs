@@ -148,7 +148,11 @@ fn check_stripe(eye: [f32; 3]) -> usize {
         .iter()
         .filter(|q| lit.iter().any(|p| near(*p, ***q, 2.0)))
         .count();
-    eprintln!("{} lit, {found} of {} predicted glints lit", lit.len(), visible.len());
+    eprintln!(
+        "{} lit, {found} of {} predicted glints lit",
+        lit.len(),
+        visible.len()
+    );
     assert!(
         found as f64 >= 0.8 * visible.len() as f64,
         "{found} of {} predicted glints lit",
