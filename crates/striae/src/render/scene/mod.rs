@@ -12,6 +12,7 @@
 
 pub mod explicit;
 pub mod file;
+pub mod gltf;
 pub mod materials;
 pub mod scratches;
 
