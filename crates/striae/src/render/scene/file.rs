@@ -16,7 +16,8 @@ pub use crate::render::texture::Colour;
 pub struct SceneFile {
     #[serde(default)]
     pub render: RenderSection,
-    pub camera: CameraSection,
+    /// Required unless a `gltf` shape brings a camera (the TOML's wins over the glTF's).
+    pub camera: Option<CameraSection>,
     #[serde(default, deserialize_with = "super::materials::by_name")]
     pub materials: BTreeMap<String, MaterialDesc>,
     #[serde(default)]
@@ -121,6 +122,9 @@ pub enum ShapeType {
     Box,
     /// An analytic sphere (`center`, `radius`).
     Sphere,
+    /// A glTF 2.0 file (`path`, `.gltf` or `.glb`): its meshes, materials, lights and camera
+    /// (`scene::gltf`); `transform` applies to all of it.
+    Gltf,
 }
 
 /// `[[shapes]]`: one shape. `type` picks the kind; every kind takes `material` (a name from
@@ -138,7 +142,7 @@ pub struct ShapeSection {
     pub emission: Option<Colour>,
     #[serde(default)]
     pub transform: Transform,
-    /// `mesh`: the OBJ file.
+    /// `mesh`: the OBJ file; `gltf`: the glTF file.
     pub path: Option<String>,
     /// `teapot`: segments per patch side (default 8).
     pub subdivisions: Option<u32>,
@@ -152,8 +156,17 @@ impl ShapeSection {
     /// The keys given that do not belong to this kind of shape.
     pub fn foreign_keys(&self) -> Vec<&'static str> {
         let mut out = Vec::new();
-        if self.path.is_some() && self.kind != ShapeType::Mesh {
+        if self.path.is_some() && !matches!(self.kind, ShapeType::Mesh | ShapeType::Gltf) {
             out.push("path");
+        }
+        if self.kind == ShapeType::Gltf {
+            // A glTF's materials and emission are its own (a TOML material overrides one by name).
+            if self.material.is_some() {
+                out.push("material");
+            }
+            if self.emission.is_some() {
+                out.push("emission");
+            }
         }
         if self.subdivisions.is_some() && self.kind != ShapeType::Teapot {
             out.push("subdivisions");

@@ -161,12 +161,53 @@ impl Scene {
         path: &Path,
         overrides: &Overrides,
     ) -> Result<(Scene, String), SceneError> {
+        if gltf::is_gltf_path(path) {
+            // Named by its bytes: a `.glb` is not text.
+            let bytes = crate::io::read_bounded(path, crate::io::MAX_BINARY_BYTES).map_err(|e| {
+                SceneError::Read {
+                    file: path.to_path_buf(),
+                    message: e.to_string(),
+                }
+            })?;
+            use sha2::Digest;
+            let digest = sha2::Sha256::digest(&bytes);
+            let hex: String = digest.iter().map(|b| format!("{b:02x}")).collect();
+            let name = path.file_name().unwrap_or_default().to_string_lossy();
+            let id = format!("glTF {name}\nsha256 {hex}\n");
+            return Ok((Scene::from_gltf(path, overrides)?, id));
+        }
         let text = crate::io::read_text(path).map_err(|e| SceneError::Read {
             file: path.to_path_buf(),
             message: e.to_string(),
         })?;
         let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
         Ok((Scene::parse(&text, path, &base, overrides)?, text))
+    }
+
+    /// A glTF file (`.gltf` or `.glb`) on its own, as a TOML scene holding only
+    /// `[[shapes]] type = "gltf"` would render with the glTF's camera (an error without one):
+    /// the default `[render]` settings with `overrides`, and no environment (black).
+    pub fn from_gltf(path: &Path, overrides: &Overrides) -> Result<Scene, SceneError> {
+        let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        let name = path.file_name().map(PathBuf::from).unwrap_or_default();
+        let f = SceneFile {
+            render: Default::default(),
+            camera: None,
+            materials: Default::default(),
+            shapes: vec![ShapeSection {
+                kind: ShapeType::Gltf,
+                material: None,
+                emission: None,
+                transform: Default::default(),
+                path: Some(name.to_string_lossy().into_owned()),
+                subdivisions: None,
+                center: None,
+                radius: None,
+            }],
+            lights: Vec::new(),
+            environment: None,
+        };
+        build(f, path, &base, overrides)
     }
 
     /// The built-in default scene.
@@ -357,14 +398,19 @@ fn with_causes(e: &dyn std::error::Error) -> String {
 
 fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene, SceneError> {
     let settings = render_settings(&f, file, o)?;
-    let camera = camera(&f, file, &settings)?;
-    let (names, mut materials, explicit) = materials(&f, file, base)?;
-    // Area lights first (in shape order), then the environment, then suns.
-    let (mut shapes, mut lights) = shapes(&f, file, base, &names)?;
+    let gltfs = import_gltfs(&f, file, base)?;
+    let camera = camera(&f, &gltfs, file, &settings)?;
+    let m = materials(&f, &gltfs, file, base)?;
+    let (names, mut materials, explicit) = (m.names, m.materials, m.explicit);
+    // Area lights first (in shape order), then the environment, then suns, then the glTFs'
+    // punctual lights.
+    let (plain, mut shapes, mut lights) = shapes(&f, file, base, &names)?;
+    gltf_shapes(&gltfs, &m.gltf_slots, file, &mut shapes, &mut lights)?;
+    let name_refs: Vec<&String> = names.iter().collect();
     let carve = explicit::carve(
-        &f.shapes,
+        &plain,
         file,
-        &names,
+        &name_refs,
         &explicit,
         &mut materials,
         &mut shapes,
@@ -375,6 +421,9 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
         environment = Some(lights.len() - 1);
     }
     lights.extend(suns(&f, file)?);
+    for (_, g) in &gltfs {
+        lights.extend(gltf_lights(g));
+    }
     Ok(Scene {
         camera,
         geometry: match carve {
@@ -395,6 +444,106 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
         environment,
         settings,
     })
+}
+
+/// Every `[[shapes]] type = "gltf"` imported, with its index among the shapes.
+fn import_gltfs(
+    f: &SceneFile,
+    file: &Path,
+    base: &Path,
+) -> Result<Vec<(usize, gltf::GltfScene)>, SceneError> {
+    let mut out = Vec::new();
+    for (i, s) in f.shapes.iter().enumerate() {
+        if s.kind != ShapeType::Gltf {
+            continue;
+        }
+        let key = format!("shapes[{i}].path");
+        let Some(path) = &s.path else {
+            return Err(invalid(
+                file,
+                key,
+                "(missing)",
+                "a gltf shape needs the path of a .gltf or .glb file",
+            ));
+        };
+        let full = base.join(path);
+        let scene = gltf::import(&full, &s.transform).map_err(|e| {
+            if gltf::is_gltf_path(file) {
+                // The glTF is the scene file itself: its own element is the key.
+                SceneError::Key {
+                    file: file.to_path_buf(),
+                    key: e.element.clone().unwrap_or_else(|| "(file)".into()),
+                    message: e.message,
+                }
+            } else {
+                invalid(file, key, path, e)
+            }
+        })?;
+        out.push((i, scene));
+    }
+    Ok(out)
+}
+
+/// The glTFs' meshes as shapes (after the TOML's), an area light for each emissive one.
+fn gltf_shapes(
+    gltfs: &[(usize, gltf::GltfScene)],
+    slots: &[Vec<Option<u32>>],
+    file: &Path,
+    shapes: &mut Vec<Shape>,
+    lights: &mut Vec<Light>,
+) -> Result<(), SceneError> {
+    for ((i, g), slots) in gltfs.iter().zip(slots) {
+        for m in &g.meshes {
+            let material = slots[m.material].expect("a used material has a slot");
+            let area_light = match g.materials[m.material].emission {
+                Some(radiance) if m.mesh.area() > 0.0 => {
+                    lights.push(Light::Area {
+                        shape: shapes.len() as u32,
+                        radiance,
+                    });
+                    Some(lights.len() as u32 - 1)
+                }
+                Some(_) => {
+                    crate::log::warn(&format!(
+                        "scene file {}: shapes[{i}]: {}: an emissive mesh of zero area emits nothing",
+                        file.display(),
+                        m.element
+                    ));
+                    None
+                }
+                None => None,
+            };
+            shapes.push(Shape {
+                geometry: ShapeGeometry::Mesh(m.mesh.clone()),
+                material,
+                area_light,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// A glTF's punctual lights as striae's.
+fn gltf_lights(g: &gltf::GltfScene) -> Vec<Light> {
+    let mut out = Vec::new();
+    for l in &g.lights {
+        match *l {
+            gltf::GltfLight::Sun {
+                direction,
+                irradiance,
+            } => out.push(Light::Sun {
+                direction,
+                irradiance,
+            }),
+            gltf::GltfLight::Point { .. } | gltf::GltfLight::Spot { .. } => {
+                crate::log::warn(&format!(
+                    "glTF file {}: a point or spot light is skipped: this build of striae has no punctual lights",
+                    g.file.display()
+                ));
+            }
+        }
+    }
+    out
 }
 
 /// The render settings: the file's `[render]` table with the command line's overrides.
@@ -457,14 +606,44 @@ fn render_settings(
     Ok(settings)
 }
 
-/// The camera (`[camera]`) at the render's resolution.
+/// The camera (`[camera]`, else the first glTF shape's camera) at the render's resolution.
 fn camera(
     f: &SceneFile,
+    gltfs: &[(usize, gltf::GltfScene)],
     file: &Path,
     settings: &RenderSettings,
 ) -> Result<PerspectiveCamera, SceneError> {
     let (width, height) = (settings.width, settings.height);
-    let c = &f.camera;
+    let Some(c) = &f.camera else {
+        let Some((i, g, cam)) = gltfs
+            .iter()
+            .find_map(|(i, g)| g.camera.map(|c| (i, g, c)))
+        else {
+            let reason = match gltf::is_gltf_path(file) {
+                true => "the glTF file has no camera (a node with a perspective camera)",
+                false => "a scene needs [camera] unless a glTF shape brings one",
+            };
+            return Err(invalid(file, "camera", "(missing)", reason));
+        };
+        return PerspectiveCamera::new(
+            cam.position,
+            cam.position + cam.forward,
+            cam.up,
+            cam.fov_deg,
+            width,
+            height,
+            0.0,
+            1.0,
+        )
+        .map_err(|e| {
+            invalid(
+                file,
+                format!("shapes[{i}].path"),
+                g.file.display().to_string(),
+                format!("its camera: {e}"),
+            )
+        });
+    };
     let position = coordinates(file, "camera.position", c.position)?;
     let look_at = coordinates(file, "camera.look_at", c.look_at)?;
     coordinates(file, "camera.up", c.up)?;
@@ -482,13 +661,26 @@ fn camera(
     .map_err(|e| camera_error(file, c, (width, height), e))
 }
 
-/// The materials, prepared, in the order of their names (sorted: the file's table is a
-/// `BTreeMap`), the names, and per material what explicit scratch geometry needs of it (for a
-/// scratched material with `scratches.explicit = true`, whose prepared material is then its
-/// smooth base: the grooves replace the SV-BRDF).
-type Materials<'a> = (Vec<&'a String>, Vec<Material>, Vec<Option<ExplicitSpec>>);
-fn materials<'a>(f: &'a SceneFile, file: &Path, base: &Path) -> Result<Materials<'a>, SceneError> {
-    let names: Vec<&String> = f.materials.keys().collect();
+/// The scene's materials, prepared: the TOML's in the order of their names (sorted: the
+/// file's table is a `BTreeMap`), then the glTFs' that meshes use and no TOML material of the
+/// same name overrides. `explicit`: per material what explicit scratch geometry needs of it
+/// (for a scratched material with `scratches.explicit = true`, whose prepared material is
+/// then its smooth base: the grooves replace the SV-BRDF). `gltf_slots[g][m]`: the scene's
+/// material for glTF `g`'s material `m`.
+struct Materials {
+    names: Vec<String>,
+    materials: Vec<Material>,
+    explicit: Vec<Option<ExplicitSpec>>,
+    gltf_slots: Vec<Vec<Option<u32>>>,
+}
+
+fn materials(
+    f: &SceneFile,
+    gltfs: &[(usize, gltf::GltfScene)],
+    file: &Path,
+    base: &Path,
+) -> Result<Materials, SceneError> {
+    let mut names: Vec<String> = f.materials.keys().cloned().collect();
     let mut materials: Vec<Material> = Vec::with_capacity(names.len());
     let mut explicit = Vec::with_capacity(names.len());
     for (name, m) in &f.materials {
@@ -505,17 +697,59 @@ fn materials<'a>(f: &'a SceneFile, file: &Path, base: &Path) -> Result<Materials
             }
         }
     }
-    Ok((names, materials, explicit))
+    // glTF materials: names unique across the scene (`name#2` for a second glTF's `name`).
+    let mut taken: std::collections::HashSet<String> = std::collections::HashSet::new();
+    let mut gltf_slots = Vec::with_capacity(gltfs.len());
+    for (_, g) in gltfs {
+        let gltf_base = g.file.parent().map(Path::to_path_buf).unwrap_or_default();
+        let mut slots = Vec::with_capacity(g.materials.len());
+        for m in &g.materials {
+            let mut name = m.name.clone();
+            let mut k = 1;
+            while taken.contains(&name) {
+                k += 1;
+                name = format!("{}#{k}", m.name);
+            }
+            taken.insert(name.clone());
+            if let Some(at) = f.materials.keys().position(|n| *n == name) {
+                slots.push(Some(at as u32));
+                continue;
+            }
+            let desc = m.to_desc(&g.file).map_err(|e| SceneError::Key {
+                file: e.file.clone(),
+                key: e.element.clone().unwrap_or_default(),
+                message: e.message,
+            })?;
+            let material = desc
+                .prepare(&gltf_base)
+                .map_err(|e| material_error(&g.file, &name, e))?;
+            names.push(name);
+            materials.push(material);
+            explicit.push(None);
+            slots.push(Some(materials.len() as u32 - 1));
+        }
+        gltf_slots.push(slots);
+    }
+    Ok(Materials {
+        names,
+        materials,
+        explicit,
+        gltf_slots,
+    })
 }
 
 /// The shapes (`[[shapes]]`), and an area light for each that emits.
-fn shapes(
-    f: &SceneFile,
+/// `plain[k]` is the TOML shape (and its index in the file) that made `shapes[k]`; `gltf`
+/// shapes make none here ([`gltf_shapes`]).
+type Shapes<'a> = (Vec<(usize, &'a ShapeSection)>, Vec<Shape>, Vec<Light>);
+fn shapes<'a>(
+    f: &'a SceneFile,
     file: &Path,
     base: &Path,
-    names: &[&String],
-) -> Result<(Vec<Shape>, Vec<Light>), SceneError> {
+    names: &[String],
+) -> Result<Shapes<'a>, SceneError> {
     let mut shapes = Vec::with_capacity(f.shapes.len());
+    let mut plain = Vec::with_capacity(f.shapes.len());
     let mut lights = Vec::new();
     for (i, s) in f.shapes.iter().enumerate() {
         if let Some(key) = s.foreign_keys().first() {
@@ -526,8 +760,11 @@ fn shapes(
                 format!("`{key}` does not apply to this type of shape"),
             ));
         }
+        if s.kind == ShapeType::Gltf {
+            continue;
+        }
         let material = match &s.material {
-            Some(name) => names.iter().position(|n| *n == name).ok_or_else(|| {
+            Some(name) => names.iter().position(|n| n == name).ok_or_else(|| {
                 invalid(
                     file,
                     format!("shapes[{i}].material"),
@@ -565,7 +802,7 @@ fn shapes(
                     ));
                 }
                 lights.push(Light::Area {
-                    shape: i as u32,
+                    shape: shapes.len() as u32,
                     radiance,
                 });
                 Some(lights.len() as u32 - 1)
@@ -586,8 +823,9 @@ fn shapes(
             ));
         }
         shapes.push(shape);
+        plain.push((i, s));
     }
-    Ok((shapes, lights))
+    Ok((plain, shapes, lights))
 }
 
 /// The environment light (`[environment]`), if any.
@@ -758,6 +996,7 @@ fn shape_geometry(
                     .expect("a rotation keeps the built-in teapot finite"),
             )
         }
+        ShapeType::Gltf => unreachable!("gltf shapes are imported by `import_gltfs`"),
         ShapeType::Rectangle => ShapeGeometry::Mesh(TriangleMesh::rectangle()),
         ShapeType::Box => ShapeGeometry::Mesh(TriangleMesh::cuboid()),
         ShapeType::Sphere => {
