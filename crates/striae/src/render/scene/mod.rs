@@ -163,12 +163,13 @@ impl Scene {
     ) -> Result<(Scene, String), SceneError> {
         if gltf::is_gltf_path(path) {
             // Named by its bytes: a `.glb` is not text.
-            let bytes = crate::io::read_bounded(path, crate::io::MAX_BINARY_BYTES).map_err(|e| {
-                SceneError::Read {
-                    file: path.to_path_buf(),
-                    message: e.to_string(),
-                }
-            })?;
+            let bytes =
+                crate::io::read_bounded(path, crate::io::MAX_BINARY_BYTES).map_err(|e| {
+                    SceneError::Read {
+                        file: path.to_path_buf(),
+                        message: e.to_string(),
+                    }
+                })?;
             use sha2::Digest;
             let digest = sha2::Sha256::digest(&bytes);
             let hex: String = digest.iter().map(|b| format!("{b:02x}")).collect();
@@ -615,10 +616,7 @@ fn camera(
 ) -> Result<PerspectiveCamera, SceneError> {
     let (width, height) = (settings.width, settings.height);
     let Some(c) = &f.camera else {
-        let Some((i, g, cam)) = gltfs
-            .iter()
-            .find_map(|(i, g)| g.camera.map(|c| (i, g, c)))
-        else {
+        let Some((i, g, cam)) = gltfs.iter().find_map(|(i, g)| g.camera.map(|c| (i, g, c))) else {
             let reason = match gltf::is_gltf_path(file) {
                 true => "the glTF file has no camera (a node with a perspective camera)",
                 false => "a scene needs [camera] unless a glTF shape brings one",
