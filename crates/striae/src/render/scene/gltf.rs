@@ -18,7 +18,7 @@
 // `!(x > 0.0)` is meant: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-use super::materials::MaterialDesc;
+use super::materials::{MaterialDesc, PbrDesc};
 use super::scratches::{BaseKind, ScratchSpec, ScratchedDesc};
 use crate::math::{Rgb, Vec2, Vec3};
 use crate::render::geometry::{Transform, TriangleMesh};
@@ -1186,9 +1186,8 @@ impl ImportedMaterial {
     ///
     /// With `STRIAE_materials_scratches`: `type = "scratched"`, on glass with the glTF's `ior`
     /// where `transmission > 0`, else on metal where `metallic > 0`, its `eta` and `k` from the
-    /// base colour ([`metal_ior_from_color`]); the base is smooth. Without it: a smooth or rough
-    /// dielectric where `transmission > 0`, a conductor where `metallic >= 0.5` (its IOR from
-    /// the base colour), else Lambertian with the base colour; GGX `alpha = roughness^2`.
+    /// base colour ([`metal_ior_from_color`]); the base is smooth. Without it: `type = "pbr"`
+    /// ([`PbrDesc`]), field for field.
     pub fn to_desc(&self, file: &Path) -> Result<MaterialDesc, GltfError> {
         let element = match self.index {
             Some(i) => format!("materials[{i}]"),
@@ -1204,7 +1203,6 @@ impl ImportedMaterial {
             }
             _ => Rgb::splat(0.5),
         };
-        let alpha = self.roughness * self.roughness;
         if let Some(spec) = &self.scratches {
             if spec.explicit == Some(true) {
                 return Err(GltfError {
@@ -1248,27 +1246,23 @@ impl ImportedMaterial {
                 scratches: spec.clone(),
             }));
         }
-        Ok(if self.transmission > 0.0 {
-            MaterialDesc::Dielectric {
-                ior: self.ior,
-                ext_ior: 1.0,
-                roughness: alpha,
-                multiscatter: false,
-            }
-        } else if self.metallic >= 0.5 {
-            let (eta, k) = metal_ior_from_color(constant_color());
-            MaterialDesc::Conductor {
-                preset: None,
-                eta: Some(eta.to_array()),
-                k: Some(k.to_array()),
-                roughness: alpha,
-                multiscatter: false,
-            }
-        } else {
-            MaterialDesc::Diffuse {
-                reflectance: self.base_color.clone(),
-            }
-        })
+        if self.base_color.range().is_some_and(|(_, hi)| hi > 1.0) {
+            warn(file, &format!("{element}: base colour above 1 clamped"));
+        }
+        Ok(MaterialDesc::Pbr(PbrDesc {
+            base_color: clamp_unit(&self.base_color),
+            metallic: self.metallic,
+            roughness: self.roughness,
+            metallic_roughness: self.metallic_roughness.clone(),
+            normal_map: self.normal_map.clone(),
+            normal_scale: self.normal_scale,
+            ior: self.ior,
+            transmission: self.transmission,
+            attenuation_color: self.attenuation_color,
+            attenuation_distance: self.attenuation_distance,
+            anisotropy: self.anisotropy,
+            anisotropy_rotation: self.anisotropy_rotation,
+        }))
     }
 }
 
@@ -1286,6 +1280,32 @@ pub fn metal_ior_from_color(color: Rgb) -> (Rgb, Rgb) {
     };
     let [(n0, k0), (n1, k1), (n2, k2)] = [channel(color.x), channel(color.y), channel(color.z)];
     (Rgb::new(n0, n1, n2), Rgb::new(k0, k1, k2))
+}
+
+/// A colour texture with its channels clamped to `[0, 1]` (a base colour factor above 1).
+fn clamp_unit(t: &Texture) -> Texture {
+    match t {
+        Texture::Constant(c) => Texture::Constant(c.clamp(Rgb::ZERO, Rgb::ONE)),
+        Texture::Image {
+            path,
+            srgb,
+            scale,
+            image: Some(img),
+        } if img.pixels.iter().any(|p| p.max_element() > 1.0) => {
+            let pixels = img
+                .pixels
+                .iter()
+                .map(|p| p.clamp(Rgb::ZERO, Rgb::ONE))
+                .collect();
+            Texture::Image {
+                path: path.clone(),
+                srgb: *srgb,
+                scale: *scale,
+                image: Some(Arc::new(RgbImage::new(img.width, img.height, pixels))),
+            }
+        }
+        t => t.clone(),
+    }
 }
 
 /// Standard base64 (RFC 4648, with or without padding); `None` on any other character.

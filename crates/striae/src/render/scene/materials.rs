@@ -35,7 +35,7 @@
 use super::scratches::ScratchedDesc;
 use crate::math::Rgb;
 use crate::render::bsdf::{ConductorCompensation, ConductorIor, DielectricCompensation};
-use crate::render::material::Material;
+use crate::render::material::{Material, PbrMaterial};
 use crate::render::texture::{Texture, TextureError};
 use serde::Deserialize;
 use std::path::Path;
@@ -133,6 +133,222 @@ pub enum MaterialDesc {
     },
     /// A smooth glass or metal base with scratches ([`ScratchedDesc`]).
     Scratched(ScratchedDesc),
+    /// glTF 2.0's metallic-roughness material with its transmission, IOR, volume and
+    /// anisotropy extensions ([`PbrDesc`]).
+    Pbr(PbrDesc),
+}
+
+fn white() -> Texture {
+    Texture::Constant(Rgb::ONE)
+}
+fn one_rgb() -> [f32; 3] {
+    [1.0, 1.0, 1.0]
+}
+
+/// `type = "pbr"`: glTF 2.0's metallic-roughness material (glTF 2.0 section 3.9.2 and
+/// Appendix B) with KHR_materials_transmission, KHR_materials_ior, KHR_materials_volume's
+/// absorption and KHR_materials_anisotropy. Every default is glTF's. The BSDF is
+/// [`crate::render::bsdf::Pbr`]; the prepared material [`crate::render::material::PbrMaterial`].
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PbrDesc {
+    /// `baseColorFactor` times `baseColorTexture` (images decoded sRGB to linear), in `[0, 1]`
+    /// (default white).
+    #[serde(default = "white")]
+    pub base_color: Texture,
+    /// `metallicFactor` in `[0, 1]` (default 1).
+    #[serde(default = "one")]
+    pub metallic: f32,
+    /// `roughnessFactor`, glTF's perceptual roughness in `[0, 1]` (default 1); GGX
+    /// `alpha = roughness^2`.
+    #[serde(default = "one")]
+    pub roughness: f32,
+    /// `metallicRoughnessTexture` (linear): its green channel multiplies `roughness`, its blue
+    /// channel `metallic`.
+    #[serde(default)]
+    pub metallic_roughness: Option<Texture>,
+    /// `normalTexture` (linear, tangent space, glTF's convention: red along `dP/du`, green
+    /// toward decreasing `v`, the image's up).
+    #[serde(default)]
+    pub normal_map: Option<Texture>,
+    /// `normalTexture.scale` (default 1): scales the map's tangent components.
+    #[serde(default = "one")]
+    pub normal_scale: f32,
+    /// KHR_materials_ior's `ior` (default 1.5, >= 1); the outside is taken as vacuum.
+    #[serde(default = "default_ior")]
+    pub ior: f32,
+    /// KHR_materials_transmission's `transmissionFactor` in `[0, 1]` (default 0).
+    #[serde(default)]
+    pub transmission: f32,
+    /// KHR_materials_volume's `attenuationColor`, each channel in `(0, 1]` (default white).
+    #[serde(default = "one_rgb", deserialize_with = "crate::strict_array::exact")]
+    pub attenuation_color: [f32; 3],
+    /// KHR_materials_volume's `attenuationDistance` (> 0; default none: no absorption).
+    #[serde(default)]
+    pub attenuation_distance: Option<f32>,
+    /// KHR_materials_anisotropy's `anisotropyStrength` in `[0, 1]` (default 0).
+    #[serde(default)]
+    pub anisotropy: f32,
+    /// KHR_materials_anisotropy's `anisotropyRotation`, in degrees here (default 0):
+    /// the anisotropy direction turned from `dP/du` toward the bitangent.
+    #[serde(default)]
+    pub anisotropy_rotation: f32,
+}
+
+impl Default for PbrDesc {
+    /// glTF's default material (white, metallic 1, roughness 1).
+    fn default() -> Self {
+        PbrDesc {
+            base_color: white(),
+            metallic: 1.0,
+            roughness: 1.0,
+            metallic_roughness: None,
+            normal_map: None,
+            normal_scale: 1.0,
+            ior: 1.5,
+            transmission: 0.0,
+            attenuation_color: one_rgb(),
+            attenuation_distance: None,
+            anisotropy: 0.0,
+            anisotropy_rotation: 0.0,
+        }
+    }
+}
+
+/// The scale check and the `[0, 1]` range check of a texture (images only once loaded).
+fn check_unit_texture(
+    key: &'static str,
+    scale_key: &'static str,
+    texture: &Texture,
+) -> Result<(), MaterialError> {
+    if let Texture::Checkerboard { scale, .. } | Texture::Image { scale, .. } = texture {
+        if !(scale.is_finite() && *scale != 0.0) {
+            return Err(invalid(scale_key, scale, "must be finite and non-zero"));
+        }
+    }
+    if let Some((lo, hi)) = texture.range() {
+        if !(lo >= 0.0 && hi <= 1.0) {
+            let value = match texture {
+                Texture::Constant(c) => fmt3(c.to_array()),
+                Texture::Checkerboard { color0, color1, .. } => {
+                    format!("{} / {}", fmt3(color0.to_array()), fmt3(color1.to_array()))
+                }
+                Texture::Image { path, .. } => {
+                    format!("image `{}` (values {lo} .. {hi})", path.display())
+                }
+            };
+            return Err(invalid(key, value, "must lie in [0, 1]"));
+        }
+    }
+    Ok(())
+}
+
+impl PbrDesc {
+    /// Every key's range (textures' values once loaded): factors in `[0, 1]`, `ior >= 1`,
+    /// `attenuation_color` in `(0, 1]`, `attenuation_distance > 0`, `normal_scale` finite.
+    pub fn validate(&self) -> Result<(), MaterialError> {
+        check_unit_texture("base_color", "base_color.scale", &self.base_color)?;
+        if let Some(t) = &self.metallic_roughness {
+            check_unit_texture("metallic_roughness", "metallic_roughness.scale", t)?;
+        }
+        if let Some(t) = &self.normal_map {
+            check_unit_texture("normal_map", "normal_map.scale", t)?;
+        }
+        for (key, v) in [
+            ("metallic", self.metallic),
+            ("roughness", self.roughness),
+            ("transmission", self.transmission),
+            ("anisotropy", self.anisotropy),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(invalid(key, v, "must lie in [0, 1]"));
+            }
+        }
+        if !(self.ior.is_finite() && self.ior >= 1.0) {
+            return Err(invalid(
+                "ior",
+                self.ior,
+                "an index of refraction must be finite and >= 1",
+            ));
+        }
+        if !self.normal_scale.is_finite() {
+            return Err(invalid("normal_scale", self.normal_scale, "must be finite"));
+        }
+        if !self.anisotropy_rotation.is_finite() {
+            return Err(invalid(
+                "anisotropy_rotation",
+                self.anisotropy_rotation,
+                "must be a finite angle in degrees",
+            ));
+        }
+        let c = self.attenuation_color;
+        if !c.iter().all(|&x| x > 0.0 && x <= 1.0) {
+            return Err(invalid(
+                "attenuation_color",
+                fmt3(c),
+                "each channel must lie in (0, 1]",
+            ));
+        }
+        if let Some(d) = self.attenuation_distance {
+            if !(d.is_finite() && d > 0.0) {
+                return Err(invalid(
+                    "attenuation_distance",
+                    d,
+                    "must be finite and > 0 (leave it out for no absorption)",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The absorption coefficient KHR_materials_volume defines, `sigma_a = -ln(attenuation_color)
+    /// / attenuation_distance` per unit length of the scene; `None` without a distance.
+    pub fn sigma_a(&self) -> Option<Rgb> {
+        let d = self.attenuation_distance?;
+        Some(Rgb::from(self.attenuation_color.map(|c| -c.ln() / d)))
+    }
+
+    /// Validate, load the image textures not yet loaded (already loaded ones, as the glTF
+    /// importer gives them, are kept) and build the runtime material.
+    pub fn prepare(&self, base_dir: &Path) -> Result<PbrMaterial, MaterialError> {
+        self.validate()?;
+        let load = |key: &'static str, t: &Texture| -> Result<Texture, MaterialError> {
+            let mut t = t.clone();
+            t.load_images(base_dir)
+                .map_err(|source| MaterialError::Texture { key, source })?;
+            Ok(t)
+        };
+        let base_color = load("base_color", &self.base_color)?;
+        let metallic_roughness = match &self.metallic_roughness {
+            Some(t) => Some(load("metallic_roughness", t)?),
+            None => None,
+        };
+        let normal_map = match &self.normal_map {
+            Some(t) => Some(load("normal_map", t)?),
+            None => None,
+        };
+        let loaded = PbrDesc {
+            base_color,
+            metallic_roughness,
+            normal_map,
+            ..self.clone()
+        };
+        loaded.validate()?;
+        let angle = loaded.anisotropy_rotation.to_radians();
+        Ok(PbrMaterial {
+            sigma_a: loaded.sigma_a(),
+            base_color: loaded.base_color,
+            metallic: loaded.metallic,
+            roughness: loaded.roughness,
+            metallic_roughness: loaded.metallic_roughness,
+            normal_map: loaded.normal_map,
+            normal_scale: loaded.normal_scale,
+            ior: loaded.ior,
+            transmission: loaded.transmission,
+            anisotropy: loaded.anisotropy,
+            anisotropy_direction: (angle.cos(), angle.sin()),
+        })
+    }
 }
 
 impl MaterialDesc {
@@ -360,6 +576,7 @@ impl MaterialDesc {
                 check_roughness(*roughness)
             }
             MaterialDesc::Scratched(m) => m.resolve(base_dir).map(|_| ()),
+            MaterialDesc::Pbr(m) => m.validate(),
         }
     }
 
@@ -374,6 +591,7 @@ impl MaterialDesc {
         }
         Ok(match self {
             MaterialDesc::Scratched(m) => Material::Scratched(Box::new(m.prepare(base_dir)?)),
+            MaterialDesc::Pbr(m) => Material::Pbr(Box::new(m.prepare(base_dir)?)),
             MaterialDesc::Diffuse { reflectance } => {
                 let mut reflectance = reflectance.clone();
                 reflectance

@@ -134,13 +134,23 @@ pub struct Scene {
     pub camera: PerspectiveCamera,
     pub geometry: Geometry,
     pub materials: Vec<Material>,
-    /// Area lights first (in shape order), then the environment, then suns.
+    /// Area lights first (in shape order), then the environment, then `[[lights]]`.
     pub lights: Vec<Light>,
     environment: Option<usize>,
     pub settings: RenderSettings,
+    /// Whether a material absorbs ([`Material::absorption`]), worked out when the scene is
+    /// built: without one the integrator skips the absorption test altogether.
+    absorbing: bool,
 }
 
 impl Scene {
+    /// Whether any material of the scene absorbs inside ([`Material::absorption`]), as the
+    /// scene was built.
+    #[inline(always)]
+    pub fn has_absorption(&self) -> bool {
+        self.absorbing
+    }
+
     /// The environment light, if any.
     #[inline]
     pub fn environment(&self) -> Option<&Environment> {
@@ -403,8 +413,8 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
     let camera = camera(&f, &gltfs, file, &settings)?;
     let m = materials(&f, &gltfs, file, base)?;
     let (names, mut materials, explicit) = (m.names, m.materials, m.explicit);
-    // Area lights first (in shape order), then the environment, then suns, then the glTFs'
-    // punctual lights.
+    // Area lights first (in shape order), then the environment, then `[[lights]]`, then the
+    // glTFs' punctual lights.
     let (plain, mut shapes, mut lights) = shapes(&f, file, base, &names)?;
     gltf_shapes(&gltfs, &m.gltf_slots, file, &mut shapes, &mut lights)?;
     let name_refs: Vec<&String> = names.iter().collect();
@@ -421,7 +431,7 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
         lights.push(env);
         environment = Some(lights.len() - 1);
     }
-    lights.extend(suns(&f, file)?);
+    lights.extend(punctual_lights(&f, file)?);
     for (_, g) in &gltfs {
         lights.extend(gltf_lights(g));
     }
@@ -440,6 +450,7 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
             }
             None => Geometry::new(shapes),
         },
+        absorbing: materials.iter().any(|m| m.absorption().is_some()),
         materials,
         lights,
         environment,
@@ -536,12 +547,26 @@ fn gltf_lights(g: &gltf::GltfScene) -> Vec<Light> {
                 direction,
                 irradiance,
             }),
-            gltf::GltfLight::Point { .. } | gltf::GltfLight::Spot { .. } => {
-                crate::log::warn(&format!(
-                    "glTF file {}: a point or spot light is skipped: this build of striae has no punctual lights",
-                    g.file.display()
-                ));
-            }
+            gltf::GltfLight::Point {
+                position,
+                intensity,
+            } => out.push(Light::Point {
+                position,
+                intensity,
+            }),
+            gltf::GltfLight::Spot {
+                position,
+                direction,
+                intensity,
+                cos_inner,
+                cos_outer,
+            } => out.push(Light::Spot {
+                position,
+                direction,
+                intensity,
+                cos_inner,
+                cos_outer,
+            }),
         }
     }
     out
@@ -904,36 +929,92 @@ fn environment(f: &SceneFile, file: &Path, base: &Path) -> Result<Option<Light>,
     Ok(Some(Light::Environment(e)))
 }
 
-/// The directional lights (`[[lights]]`).
-fn suns(f: &SceneFile, file: &Path) -> Result<Vec<Light>, SceneError> {
+/// The lights of `[[lights]]`, in file order: suns, point and spot lights (all delta lights).
+fn punctual_lights(f: &SceneFile, file: &Path) -> Result<Vec<Light>, SceneError> {
     let mut lights = Vec::new();
     for (i, l) in f.lights.iter().enumerate() {
-        match l.kind {
-            LightType::Sun => {
-                let d = Vec3::from_array(l.direction);
-                if !(d.length_squared() > 0.0 && d.is_finite()) {
-                    return Err(invalid(
-                        file,
-                        format!("lights[{i}].direction"),
-                        l.direction,
-                        "must be a non-zero vector",
-                    ));
-                }
-                let e = l.irradiance.rgb();
-                if !(e.is_finite() && e.min_element() >= 0.0) {
-                    return Err(invalid(
-                        file,
-                        format!("lights[{i}].irradiance"),
-                        l.irradiance,
-                        "must be finite and >= 0",
-                    ));
-                }
-                lights.push(Light::Sun {
-                    direction: d.normalize(),
-                    irradiance: e,
-                });
-            }
+        if let Some(key) = l.foreign_keys().first() {
+            return Err(invalid(
+                file,
+                format!("lights[{i}].{key}"),
+                l.kind,
+                format!("`{key}` does not apply to this type of light"),
+            ));
         }
+        let missing = |key: &str| SceneError::Key {
+            file: file.to_path_buf(),
+            key: format!("lights[{i}].{key}"),
+            message: format!("missing: a {:?} light needs `{key}`", l.kind).to_lowercase(),
+        };
+        let direction = || -> Result<Vec3, SceneError> {
+            let v = l.direction.ok_or_else(|| missing("direction"))?;
+            let d = Vec3::from_array(v);
+            if !(d.length_squared() > 0.0 && d.is_finite() && d.normalize().is_finite()) {
+                return Err(invalid(
+                    file,
+                    format!("lights[{i}].direction"),
+                    v,
+                    "must be a finite non-zero vector",
+                ));
+            }
+            Ok(d.normalize())
+        };
+        let colour = |key: &str, c: Option<file::Colour>| -> Result<crate::math::Rgb, SceneError> {
+            let c = c.ok_or_else(|| missing(key))?;
+            let e = c.rgb();
+            if !(e.is_finite() && e.min_element() >= 0.0) {
+                return Err(invalid(
+                    file,
+                    format!("lights[{i}].{key}"),
+                    c,
+                    "must be finite and >= 0",
+                ));
+            }
+            Ok(e)
+        };
+        let position = || -> Result<Vec3, SceneError> {
+            let p = l.position.ok_or_else(|| missing("position"))?;
+            coordinates(file, format!("lights[{i}].position"), p)
+        };
+        lights.push(match l.kind {
+            LightType::Sun => Light::Sun {
+                direction: direction()?,
+                irradiance: colour("irradiance", l.irradiance)?,
+            },
+            LightType::Point => Light::Point {
+                position: position()?,
+                intensity: colour("intensity", l.intensity)?,
+            },
+            LightType::Spot => {
+                let inner = l.inner_angle.unwrap_or(0.0);
+                let outer = l.outer_angle.unwrap_or(45.0);
+                if !(inner.is_finite() && (0.0..90.0).contains(&inner)) {
+                    return Err(invalid(
+                        file,
+                        format!("lights[{i}].inner_angle"),
+                        inner,
+                        "must be a half-angle in degrees, 0 <= inner_angle < 90",
+                    ));
+                }
+                if !(outer.is_finite() && outer > inner && outer <= 90.0) {
+                    return Err(invalid(
+                        file,
+                        format!("lights[{i}].outer_angle"),
+                        outer,
+                        format!(
+                            "must be a half-angle in degrees, inner_angle ({inner}) < outer_angle <= 90"
+                        ),
+                    ));
+                }
+                Light::spot(
+                    position()?,
+                    direction()?,
+                    colour("intensity", l.intensity)?,
+                    inner.to_radians(),
+                    outer.to_radians(),
+                )
+            }
+        });
     }
     Ok(lights)
 }

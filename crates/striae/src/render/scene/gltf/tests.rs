@@ -186,7 +186,7 @@ fn node_chain_of_trs_and_matrix_places_the_mesh() {
     assert_eq!(g.materials.len(), 1);
     assert_eq!(g.materials[0].name, "gltf-default");
     assert!(
-        matches!(g.materials[0].to_desc(Path::new("t")).unwrap(), MaterialDesc::Conductor { roughness, .. } if roughness == 1.0)
+        matches!(g.materials[0].to_desc(Path::new("t")).unwrap(), MaterialDesc::Pbr(p) if p == PbrDesc::default())
     );
 }
 
@@ -375,28 +375,15 @@ fn materials_map_factors_textures_and_extensions() {
         img.pixels,
         vec![Rgb::new(0.5, 0.0, 0.0), Rgb::new(0.5, 1.0, 1.0)]
     );
-    assert!(matches!(
-        g.materials[0].to_desc(Path::new("t")).unwrap(),
-        MaterialDesc::Diffuse { .. }
-    ));
-    let MaterialDesc::Conductor {
-        eta: Some(eta),
-        k: Some(k),
-        roughness,
-        ..
-    } = g.materials[1].to_desc(Path::new("t")).unwrap()
-    else {
+    assert!(
+        matches!(g.materials[0].to_desc(Path::new("t")).unwrap(), MaterialDesc::Pbr(p) if p.metallic == 0.0 && p.base_color == g.materials[0].base_color)
+    );
+    let MaterialDesc::Pbr(gold) = g.materials[1].to_desc(Path::new("t")).unwrap() else {
         panic!()
     };
-    assert!((roughness - 0.25).abs() < 1e-6);
-    let f0 = crate::render::bsdf::ConductorIor {
-        eta: Rgb::from(eta),
-        k: Rgb::from(k),
-    }
-    .fresnel(1.0);
-    assert!(
-        (f0 - Rgb::new(1.0, 0.78, 0.34)).abs().max_element() < 2e-3,
-        "{f0}"
+    assert_eq!(
+        (gold.metallic, gold.roughness, gold.base_color),
+        (1.0, 0.5, Texture::Constant(Rgb::new(1.0, 0.78, 0.34)))
     );
     let glass = &g.materials[2];
     assert_eq!((glass.ior, glass.transmission), (1.7, 1.0));
@@ -407,8 +394,16 @@ fn materials_map_factors_textures_and_extensions() {
     assert!(
         (glass.anisotropy - 0.6).abs() < 1e-6 && (glass.anisotropy_rotation - 90.0).abs() < 1e-3
     );
-    assert!(
-        matches!(glass.to_desc(Path::new("t")).unwrap(), MaterialDesc::Dielectric { ior, roughness, .. } if ior == 1.7 && roughness == 0.0)
+    let MaterialDesc::Pbr(p) = glass.to_desc(Path::new("t")).unwrap() else {
+        panic!()
+    };
+    assert_eq!(
+        (p.ior, p.transmission, p.roughness, p.attenuation_distance),
+        (1.7, 1.0, 0.0, Some(2.0))
+    );
+    assert_eq!(
+        (p.anisotropy, p.attenuation_color),
+        (glass.anisotropy, [0.9, 0.8, 0.7])
     );
     assert_eq!(g.materials[3].emission, Some(Rgb::new(4.0, 2.0, 1.0)));
     assert_eq!(g.materials[0].emission, None);
@@ -554,7 +549,7 @@ fn toml_material_overrides_a_gltf_material_by_name_and_transform_applies() {
     );
     assert!(matches!(
         &scene.materials[1],
-        crate::render::material::Material::Diffuse { .. }
+        crate::render::material::Material::Pbr(_)
     ));
     let crate::render::geometry::ShapeGeometry::Mesh(m) = &shapes[0].geometry else {
         panic!()
