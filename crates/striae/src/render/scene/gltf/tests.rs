@@ -721,3 +721,109 @@ impl Builder {
         self.accessors[i].clone()
     }
 }
+
+/// The rectangle `[-1, 1]^2` (normal +z) exactly as `TriangleMesh::rectangle` builds it.
+fn rectangle(b: &mut Builder, material: usize) -> Value {
+    let positions = [
+        -1.0, -1.0, 0.0, 1.0, -1.0, 0.0, 1.0, 1.0, 0.0, -1.0, 1.0, 0.0,
+    ];
+    let uvs = [0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.0, 1.0];
+    let mut p = b.primitive(&positions, Some(&[0, 1, 2, 0, 2, 3]), Some(&uvs));
+    p["material"] = json!(material);
+    p
+}
+
+/// A floor lit by an emissive quad and a point light, rendered from a glTF and from the same
+/// scene written in TOML: the same image within float rounding of the transforms.
+#[test]
+fn gltf_renders_as_the_same_scene_in_toml() {
+    let dir = TempDir::new("render");
+    let mut b = Builder::default();
+    let floor = rectangle(&mut b, 0);
+    let lamp = rectangle(&mut b, 1);
+    let (s, c) = (
+        std::f32::consts::FRAC_PI_4.sin(),
+        std::f32::consts::FRAC_PI_4.cos(),
+    );
+    let doc = json!({
+        "extensionsUsed": ["KHR_lights_punctual", "KHR_materials_emissive_strength"],
+        "scenes": [{ "nodes": [0, 1, 2, 3] }],
+        "nodes": [
+            { "mesh": 0, "scale": [2, 2, 2], "rotation": [-s, 0, 0, c] },
+            { "mesh": 1, "scale": [0.5, 0.5, 0.5], "rotation": [s, 0, 0, c], "translation": [0, 2, 0] },
+            { "camera": 0, "translation": [0, 1, 4] },
+            { "translation": [0.5, 1.5, 0.5], "extensions": { "KHR_lights_punctual": { "light": 0 } } }
+        ],
+        "meshes": [{ "primitives": [floor] }, { "primitives": [lamp] }],
+        "cameras": [{ "type": "perspective", "perspective": { "yfov": 0.9, "znear": 0.1 } }],
+        "materials": [
+            { "name": "floor", "pbrMetallicRoughness": { "baseColorFactor": [0.8, 0.6, 0.4, 1], "metallicFactor": 0, "roughnessFactor": 0.7 } },
+            { "name": "lamp", "pbrMetallicRoughness": { "baseColorFactor": [0, 0, 0, 1], "metallicFactor": 0 },
+              "emissiveFactor": [1, 1, 1], "extensions": { "KHR_materials_emissive_strength": { "emissiveStrength": 5 } } }
+        ],
+        "extensions": { "KHR_lights_punctual": { "lights": [{ "type": "point", "intensity": 1366, "color": [1, 0.9, 0.8] }] } }
+    });
+    let glb = dir.0.join("room.glb");
+    std::fs::write(&glb, b.glb(doc)).unwrap();
+    let fov = 0.9f32.to_degrees();
+    let toml = format!(
+        r#"
+[render]
+width = 24
+height = 18
+spp = 16
+[camera]
+position = [0, 1, 4]
+look_at = [0, 1, 3]
+fov = {fov}
+[materials.floor]
+type = "pbr"
+base_color = [0.8, 0.6, 0.4]
+metallic = 0
+roughness = 0.7
+[materials.lamp]
+type = "pbr"
+base_color = [0, 0, 0]
+metallic = 0
+[[shapes]]
+type = "rectangle"
+material = "floor"
+transform = [{{ scale = 2 }}, {{ rotate = {{ axis = [1, 0, 0], angle = -90 }} }}]
+[[shapes]]
+type = "rectangle"
+material = "lamp"
+emission = 5
+transform = [{{ scale = 0.5 }}, {{ rotate = {{ axis = [1, 0, 0], angle = 90 }} }}, {{ translate = [0, 2, 0] }}]
+[[lights]]
+type = "point"
+position = [0.5, 1.5, 0.5]
+intensity = [2, 1.8, 1.6]
+"#
+    );
+    let o = Overrides {
+        resolution: Some((24, 18)),
+        spp: Some(16),
+        ..Default::default()
+    };
+    let from_toml = Scene::parse(&toml, &dir.0.join("room.toml"), &dir.0, &o).unwrap();
+    let from_gltf = Scene::load(&glb, &o).unwrap();
+    assert_eq!(from_gltf.lights.len(), from_toml.lights.len());
+    let (a, _) = crate::render::integrator::render(&from_toml, &|_| {});
+    let (g, _) = crate::render::integrator::render(&from_gltf, &|_| {});
+    let mean = |img: &crate::render::film::Image| {
+        img.pixels.iter().copied().sum::<Rgb>() / img.pixels.len() as f32
+    };
+    let (ma, mg) = (mean(&a), mean(&g));
+    assert!(ma.min_element() > 0.01, "the scene is lit: {ma}");
+    assert!(
+        ((ma - mg) / ma).abs().max_element() < 1e-3,
+        "TOML {ma} vs glTF {mg}"
+    );
+    let differ = a
+        .pixels
+        .iter()
+        .zip(&g.pixels)
+        .filter(|(x, y)| (**x - **y).abs().max_element() > 1e-3 * (1.0 + x.max_element()))
+        .count();
+    assert!(differ <= a.pixels.len() / 50, "{differ} pixels differ");
+}
