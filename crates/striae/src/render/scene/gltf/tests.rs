@@ -827,3 +827,29 @@ intensity = [2, 1.8, 1.6]
         .count();
     assert!(differ <= a.pixels.len() / 50, "{differ} pixels differ");
 }
+
+/// The Blender-exported scene (`scenes/blender/blender-scene.glb`, `docs/blender.md`), where
+/// the tree has it: a floor, a glass sphere, a copper cube, a point light, an emissive panel
+/// and a camera.
+#[test]
+fn blender_export_imports() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/blender/blender-scene.glb");
+    if !path.exists() {
+        eprintln!("skipped: {} is not in this tree", path.display());
+        return;
+    }
+    let g = import(&path, &Transform::IDENTITY).unwrap();
+    assert!(g.meshes.len() >= 4, "{}", g.meshes.len());
+    assert!(g.camera.is_some());
+    assert!(g.lights.iter().any(|l| matches!(l, GltfLight::Point { .. })));
+    assert!(g.materials.iter().any(|m| m.transmission == 1.0));
+    assert!(g.materials.iter().any(|m| m.metallic == 1.0));
+    assert!(g.materials.iter().any(|m| m.emission.is_some()));
+    let o = Overrides {
+        resolution: Some((16, 12)),
+        spp: Some(1),
+        ..Default::default()
+    };
+    let scene = Scene::load(&path, &o).unwrap();
+    assert!(scene.lights.len() >= 2);
+}
