@@ -39,19 +39,21 @@ transform = [{{ scale = 50 }}, {{ rotate = {{ axis = [1, 0, 0], angle = -90 }} }
     ))
 }
 
-/// Per pixel: the plane point the pixel centre sees and the rendered value (red channel).
-fn plane_points(s: &Scene, img: &Image) -> Vec<(Vec3, f32)> {
+/// Per pixel: the plane point the pixel centre sees, the points an 8 x 8 grid over the pixel
+/// sees, and the rendered value (red channel).
+fn plane_points(s: &Scene, img: &Image) -> Vec<(Vec3, Vec<Vec3>, f32)> {
+    let see = |film: Vec2| {
+        let ray = s.camera.generate_ray_only(film, Vec2::splat(0.5));
+        s.geometry.intersect(&ray).expect("the plane fills the view").p
+    };
     let mut out = Vec::new();
     for y in 0..img.height {
         for x in 0..img.width {
-            let ray = s
-                .camera
-                .generate_ray_only(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), Vec2::splat(0.5));
-            let hit = s
-                .geometry
-                .intersect(&ray)
-                .expect("the plane fills the view");
-            out.push((hit.p, img.get(x, y).x));
+            let corner = Vec2::new(x as f32, y as f32);
+            let grid = (0..64)
+                .map(|k| see(corner + (Vec2::new((k % 8) as f32, (k / 8) as f32) + 0.5) / 8.0))
+                .collect();
+            out.push((see(corner + 0.5), grid, img.get(x, y).x));
         }
     }
     out
@@ -71,7 +73,7 @@ fn diffuse_plane_under_a_point_light_is_rho_over_pi_i_cos_over_d2() {
     let s = lit_plane("type = \"point\"\nposition = [0.3, 1.0, -0.2]\nintensity = [4, 2, 1]");
     let (img, _) = render_with_threads(&s, 2);
     let mut ratio = MeanEstimate::default();
-    for (p, v) in plane_points(&s, &img) {
+    for (p, _, v) in plane_points(&s, &img) {
         let e = point_expected(light, 4.0, p);
         // Each pixel averages its area; its centre's value is within 1 % of that.
         assert!((v - e).abs() < 0.01 * e, "at {p}: {v} vs {e}");
@@ -85,28 +87,33 @@ fn diffuse_plane_under_a_point_light_is_rho_over_pi_i_cos_over_d2() {
 
 #[test]
 fn spot_light_falls_off_between_its_cones_and_is_dark_outside() {
-    // Straight down from 1 above the origin; inner 15, outer 30 degrees: the lit disc has a
-    // radius tan(30) = 0.58, the plane seen spans about +-1.1.
+    // Straight down from 1 above the origin; inner 20, outer 35 degrees: the lit disc has a
+    // radius tan(35) = 0.7, the plane seen spans about +-1.1.
     let light = Vec3::new(0.0, 1.0, 0.0);
     let s = lit_plane(
-        "type = \"spot\"\nposition = [0, 1, 0]\ndirection = [0, -2, 0]\nintensity = 3\ninner_angle = 15\nouter_angle = 30",
+        "type = \"spot\"\nposition = [0, 1, 0]\ndirection = [0, -2, 0]\nintensity = 3\ninner_angle = 20\nouter_angle = 35",
     );
     let (img, _) = render_with_threads(&s, 2);
-    let (cos_inner, cos_outer) = (15f32.to_radians().cos(), 30f32.to_radians().cos());
+    let (cos_inner, cos_outer) = (20f32.to_radians().cos(), 35f32.to_radians().cos());
     let (mut full, mut fading, mut dark) = (0, 0, 0);
-    for (p, v) in plane_points(&s, &img) {
+    let spot = |p: Vec3| {
         let cos = (light - p).normalize().y;
-        let e = point_expected(light, 3.0, p) * spot_falloff(cos, cos_inner, cos_outer);
+        point_expected(light, 3.0, p) * spot_falloff(cos, cos_inner, cos_outer)
+    };
+    for (p, grid, v) in plane_points(&s, &img) {
+        let cos = (light - p).normalize().y;
+        // The pixel's mean over its area (the falloff bends within a pixel).
+        let e = grid.iter().map(|&q| spot(q)).sum::<f32>() / grid.len() as f32;
         if cos < cos_outer - 0.03 {
             // Every sample of the pixel outside the outer cone.
             assert_eq!(v, 0.0, "at {p} (cos {cos})");
             dark += 1;
-        } else if cos > cos_inner + 0.03 {
+        } else if cos > cos_inner + 0.015 {
             assert!((v - e).abs() < 0.01 * e, "at {p}: {v} vs {e}");
             full += 1;
         } else if cos > cos_outer + 0.01 && cos < cos_inner - 0.01 {
-            // Between the cones the falloff changes quickly across a pixel.
-            assert!((v - e).abs() < 0.05 * e + 1e-4, "at {p}: {v} vs {e}");
+            // Between the cones: 16 samples against the falloff's curve over the pixel.
+            assert!((v - e).abs() < 0.03 * e + 1e-4, "at {p}: {v} vs {e}");
             fading += 1;
         }
     }
