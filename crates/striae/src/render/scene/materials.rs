@@ -19,7 +19,32 @@
 //!
 //! type = "scratched"                     # glass or metal with scratches: see
 //! base = "glass"                         # `scene::scratches` and docs/scratched.md
+//!
+//! type = "pbr"                           # glTF 2.0 metallic-roughness (PbrDesc); defaults glTF's
+//! base_color = [0.8, 0.8, 0.8]           # [0, 1], a texture as reflectance (default 1)
+//! metallic = 0.0                         # [0, 1] (default 1)
+//! roughness = 0.5                        # perceptual, [0, 1]: alpha = roughness^2 (default 1)
+//! metallic_roughness = { type = "image", path = "mr.png", srgb = false } # G: roughness, B: metallic
+//! normal_map = { type = "image", path = "n.png", srgb = false }          # tangent space, +y green
+//! normal_scale = 1.0                     # (default 1)
+//! ior = 1.5                              # >= 1 (default 1.5)
+//! transmission = 0.0                     # [0, 1] (default 0)
+//! attenuation_color = [1, 1, 1]          # (0, 1] per channel (default white)
+//! attenuation_distance = 1.0             # > 0; left out: no absorption (the default)
+//! anisotropy = 0.0                       # KHR_materials_anisotropy strength, [0, 1] (default 0)
+//! anisotropy_rotation = 0.0              # degrees from dP/du (default 0)
 //! ```
+//!
+//! `type = "pbr"` is glTF 2.0's material (section 3.9.2, Appendix B) with the transmission,
+//! IOR, volume and anisotropy extensions ([`PbrDesc`]; the BSDF and its departures from
+//! Appendix B in [`crate::render::bsdf::pbr`]). Its `roughness` is glTF's perceptual roughness
+//! (GGX `alpha = roughness^2`), unlike the other materials' `roughness`, which is `alpha`.
+//! `attenuation_distance` makes the object's inside absorb, `sigma_a =
+//! -ln(attenuation_color) / attenuation_distance` (KHR_materials_volume), applied by the
+//! integrator to path segments that end on the back side of the surface
+//! ([`Material::absorption`]). Image textures the glTF importer has already decoded
+//! (`Texture::Image` with `image: Some(..)`) are kept as they are by
+//! [`PbrDesc::prepare`].
 //!
 //! `roughness` is the GGX `alpha` (Mitsuba's `alpha`, not squared). Mitsuba's dielectric
 //! defaults differ from ours (`int_ior` 1.5046, `ext_ior` 1.000277): set both explicitly in
