@@ -19,7 +19,32 @@
 //!
 //! type = "scratched"                     # glass or metal with scratches: see
 //! base = "glass"                         # `scene::scratches` and docs/scratched.md
+//!
+//! type = "pbr"                           # glTF 2.0 metallic-roughness (PbrDesc); defaults glTF's
+//! base_color = [0.8, 0.8, 0.8]           # [0, 1], a texture as reflectance (default 1)
+//! metallic = 0.0                         # [0, 1] (default 1)
+//! roughness = 0.5                        # perceptual, [0, 1]: alpha = roughness^2 (default 1)
+//! metallic_roughness = { type = "image", path = "mr.png", srgb = false } # G: roughness, B: metallic
+//! normal_map = { type = "image", path = "n.png", srgb = false }          # tangent space, +y green
+//! normal_scale = 1.0                     # (default 1)
+//! ior = 1.5                              # >= 1 (default 1.5)
+//! transmission = 0.0                     # [0, 1] (default 0)
+//! attenuation_color = [1, 1, 1]          # (0, 1] per channel (default white)
+//! attenuation_distance = 1.0             # > 0; left out: no absorption (the default)
+//! anisotropy = 0.0                       # KHR_materials_anisotropy strength, [0, 1] (default 0)
+//! anisotropy_rotation = 0.0              # degrees from dP/du (default 0)
 //! ```
+//!
+//! `type = "pbr"` is glTF 2.0's material (section 3.9.2, Appendix B) with the transmission,
+//! IOR, volume and anisotropy extensions ([`PbrDesc`]; the BSDF and its departures from
+//! Appendix B in [`crate::render::bsdf::pbr`]). Its `roughness` is glTF's perceptual roughness
+//! (GGX `alpha = roughness^2`), unlike the other materials' `roughness`, which is `alpha`.
+//! `attenuation_distance` makes the object's inside absorb, `sigma_a =
+//! -ln(attenuation_color) / attenuation_distance` (KHR_materials_volume), applied by the
+//! integrator to path segments that end on the back side of the surface
+//! ([`Material::absorption`]). Image textures the glTF importer has already decoded
+//! (`Texture::Image` with `image: Some(..)`) are kept as they are by
+//! [`PbrDesc::prepare`].
 //!
 //! `roughness` is the GGX `alpha` (Mitsuba's `alpha`, not squared). Mitsuba's dielectric
 //! defaults differ from ours (`int_ior` 1.5046, `ext_ior` 1.000277): set both explicitly in
@@ -853,5 +878,83 @@ mod tests {
             matches!(bsdf_at(&m, Vec2::splat(0.3)), Bsdf::Diffuse(d) if d.reflectance == Rgb::ONE)
         );
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// `type = "pbr"`: glTF's defaults, every key read, and the BSDF at a hit.
+    #[test]
+    fn pbr_parses_with_gltf_defaults_and_keys() {
+        let m: MaterialDesc = toml::from_str("type = \"pbr\"").unwrap();
+        assert_eq!(m, MaterialDesc::Pbr(PbrDesc::default()));
+        let m = prepared(
+            "type = \"pbr\"\nbase_color = [0.5, 0.25, 1]\nmetallic = 0.25\nroughness = 0.5\nmetallic_roughness = [0, 0.5, 1]\nior = 1.33\ntransmission = 0.5\nattenuation_color = [0.5, 1, 1]\nattenuation_distance = 2\nanisotropy = 0.5\nanisotropy_rotation = 90\nnormal_scale = 0.5",
+        );
+        let sigma = m.absorption().unwrap();
+        assert!((sigma.x - 2f32.ln() / 2.0).abs() < 1e-6 && sigma.y == 0.0 && sigma.z == 0.0);
+        assert!(m.has_transmission());
+        let Bsdf::Pbr(b) = bsdf_at(&m, Vec2::splat(0.5)) else {
+            panic!()
+        };
+        assert_eq!(b.base_color, Rgb::new(0.5, 0.25, 1.0));
+        assert_eq!((b.metallic, b.transmission, b.eta), (0.25, 0.5, 1.33));
+        // Roughness 0.5 x 0.5 (green) = 0.25: alpha_b = 0.0625, alpha_t = mix(alpha, 1, 0.25).
+        assert_eq!(b.distribution.alpha_y, 0.0625);
+        assert!((b.distribution.alpha_x - (0.0625 + 0.9375 * 0.25)).abs() < 1e-6);
+        // No attenuation distance: no absorption; metallic 1: opaque.
+        let m = prepared("type = \"pbr\"\nattenuation_color = [0.5, 1, 1]");
+        assert!(m.absorption().is_none() && !m.has_transmission());
+    }
+
+    /// The normal map tilts the shading normal as glTF says: red along `dP/du`, green toward
+    /// decreasing `v`; a flat (0.5, 0.5, 1) map leaves the frame exactly as without a map;
+    /// the anisotropy rotation turns the frame's `s` toward the bitangent.
+    #[test]
+    fn pbr_normal_map_and_anisotropy_turn_the_frame() {
+        use crate::render::geometry::SurfaceHit;
+        let hit = SurfaceHit::flat(Vec2::splat(0.5));
+        let frame_of = |extra: &str| {
+            let m = prepared(&format!("type = \"pbr\"\nroughness = 0.5\n{extra}"));
+            let Material::Pbr(p) = &m else { panic!() };
+            p.shade(&hit, Vec3::new(0.1, 0.2, 1.0).normalize()).0
+        };
+        let plain = frame_of("");
+        let flat = frame_of("normal_map = [0.5, 0.5, 1.0]");
+        assert_eq!((plain.s, plain.t, plain.n), (flat.s, flat.t, flat.n));
+        let (s, c) = 0.3f32.sin_cos();
+        let tilted = frame_of(&format!(
+            "normal_map = [{}, 0.5, {}]",
+            0.5 + 0.5 * s,
+            0.5 + 0.5 * c
+        ));
+        assert!(
+            (tilted.n - Vec3::new(s, 0.0, c)).length() < 1e-5,
+            "{:?}",
+            tilted.n
+        );
+        // SurfaceHit::flat has dP/dv = +y: the green channel points to -y.
+        let green = frame_of(&format!(
+            "normal_map = [0.5, {}, {}]",
+            0.5 + 0.5 * s,
+            0.5 + 0.5 * c
+        ));
+        assert!(
+            (green.n - Vec3::new(0.0, -s, c)).length() < 1e-5,
+            "{:?}",
+            green.n
+        );
+        // normal_scale scales the tangent part before normalising.
+        let scaled = frame_of(&format!(
+            "normal_map = [{}, 0.5, {}]\nnormal_scale = 2",
+            0.5 + 0.5 * s,
+            0.5 + 0.5 * c
+        ));
+        assert!((scaled.n - Vec3::new(2.0 * s, 0.0, c).normalize()).length() < 1e-5);
+        // Anisotropy rotated by 90 degrees: s along the bitangent (-y here).
+        let aniso = frame_of("anisotropy = 0.5\nanisotropy_rotation = 90");
+        assert!(
+            (aniso.s - Vec3::new(0.0, -1.0, 0.0)).length() < 1e-5,
+            "{:?}",
+            aniso.s
+        );
+        assert!((aniso.t - aniso.n.cross(aniso.s)).length() < 1e-6);
     }
 }
