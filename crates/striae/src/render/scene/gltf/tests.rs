@@ -32,7 +32,7 @@ pub(crate) struct Builder {
 
 impl Builder {
     fn push(&mut self, bytes: &[u8], accessor: Value) -> usize {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         self.views
@@ -106,11 +106,11 @@ impl Builder {
         doc["bufferViews"] = json!(self.views);
         doc["accessors"] = json!(self.accessors);
         let mut text = serde_json::to_vec(&doc).unwrap();
-        while text.len() % 4 != 0 {
+        while !text.len().is_multiple_of(4) {
             text.push(b' ');
         }
         let mut bin = self.bin.clone();
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         let total = 12 + 8 + text.len() + 8 + bin.len();
@@ -269,14 +269,16 @@ fn camera_looks_down_its_local_minus_z() {
 
 #[test]
 fn punctual_lights_are_converted_to_radiometric_units() {
+    // A quarter turn about x: (-sin 45, 0, 0, cos 45).
+    let h = std::f32::consts::FRAC_1_SQRT_2;
     let doc = json!({
         "asset": { "version": "2.0" },
         "extensionsUsed": ["KHR_lights_punctual"],
         "scenes": [{ "nodes": [0, 1, 2] }],
         "nodes": [
             { "translation": [1, 2, 3], "extensions": { "KHR_lights_punctual": { "light": 0 } } },
-            { "rotation": [-0.7071068, 0, 0, 0.7071068], "extensions": { "KHR_lights_punctual": { "light": 1 } } },
-            { "translation": [0, 4, 0], "rotation": [-0.7071068, 0, 0, 0.7071068], "extensions": { "KHR_lights_punctual": { "light": 2 } } }
+            { "rotation": [-h, 0, 0, h], "extensions": { "KHR_lights_punctual": { "light": 1 } } },
+            { "translation": [0, 4, 0], "rotation": [-h, 0, 0, h], "extensions": { "KHR_lights_punctual": { "light": 2 } } }
         ],
         "extensions": { "KHR_lights_punctual": { "lights": [
             { "type": "point", "color": [1, 0.5, 0.25], "intensity": 683 },
@@ -841,7 +843,10 @@ fn blender_export_imports() {
     let g = import(&path, &Transform::IDENTITY).unwrap();
     assert!(g.meshes.len() >= 4, "{}", g.meshes.len());
     assert!(g.camera.is_some());
-    assert!(g.lights.iter().any(|l| matches!(l, GltfLight::Point { .. })));
+    assert!(g
+        .lights
+        .iter()
+        .any(|l| matches!(l, GltfLight::Point { .. })));
     assert!(g.materials.iter().any(|m| m.transmission == 1.0));
     assert!(g.materials.iter().any(|m| m.metallic == 1.0));
     assert!(g.materials.iter().any(|m| m.emission.is_some()));
