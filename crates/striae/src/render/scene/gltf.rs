@@ -450,8 +450,10 @@ impl Importer {
         })
     }
 
-    /// The scene's nodes with their world matrices (`transform` applied first... last: it maps
-    /// the glTF's world into the scene's), depth first.
+    /// The default scene's nodes, depth first, each with its world matrix (`transform` last:
+    /// it maps the glTF's world into the scene's), and what they hold: the first camera, the
+    /// lights, and each mesh primitive once per node that instances it, its material imported
+    /// on first use.
     fn walk(mut self, transform: &Transform) -> Result<GltfScene, GltfError> {
         let roots: Vec<usize> = match self.root.scene.map(|s| s.value()).or((!self
             .root
