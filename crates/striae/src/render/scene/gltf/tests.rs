@@ -684,6 +684,11 @@ fn bad_gltfs_are_errors_naming_the_element() {
         &serde_json::to_vec(&text).unwrap(),
         &["buffers[0]", "byteLength"],
     );
+    text["buffers"][0].as_object_mut().unwrap().remove("uri");
+    check(
+        &serde_json::to_vec(&text).unwrap(),
+        &["buffers[0]", "no uri"],
+    );
     text["buffers"][0]["uri"] = json!("missing.bin");
     check(
         &serde_json::to_vec(&text).unwrap(),
