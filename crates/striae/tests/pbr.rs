@@ -44,7 +44,10 @@ transform = [{{ scale = 50 }}, {{ rotate = {{ axis = [1, 0, 0], angle = -90 }} }
 fn plane_points(s: &Scene, img: &Image) -> Vec<(Vec3, Vec<Vec3>, f32)> {
     let see = |film: Vec2| {
         let ray = s.camera.generate_ray_only(film, Vec2::splat(0.5));
-        s.geometry.intersect(&ray).expect("the plane fills the view").p
+        s.geometry
+            .intersect(&ray)
+            .expect("the plane fills the view")
+            .p
     };
     let mut out = Vec::new();
     for y in 0..img.height {

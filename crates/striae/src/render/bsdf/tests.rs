@@ -1278,8 +1278,14 @@ mod pbr {
             let p = pbr(Rgb::ONE, 1.0, 0.0, alpha);
             let c = RoughConductor::new(Rgb::ZERO, Rgb::ONE, alpha);
             for _ in 0..2000 {
-                let wo = dir(rng.random::<f32>() * 1.5, rng.random::<f32>() * 6.28);
-                let wi = dir(rng.random::<f32>() * 1.5, rng.random::<f32>() * 6.28);
+                let wo = dir(
+                    rng.random::<f32>() * 1.5,
+                    rng.random::<f32>() * std::f32::consts::TAU,
+                );
+                let wi = dir(
+                    rng.random::<f32>() * 1.5,
+                    rng.random::<f32>() * std::f32::consts::TAU,
+                );
                 let (fp, pp) = p.eval_pdf(wo, wi);
                 let (fc, pc) = c.eval_pdf(wo, wi);
                 assert!(rel_close(pp, pc, 1e-5), "{pp} vs {pc}");
@@ -1312,8 +1318,14 @@ mod pbr {
             let d = RoughDielectric::new(1.5, alpha);
             let mut compared = 0;
             for _ in 0..4000 {
-                let wo = dir(rng.random::<f32>() * 3.14, rng.random::<f32>() * 6.28);
-                let wi = dir(rng.random::<f32>() * 3.14, rng.random::<f32>() * 6.28);
+                let wo = dir(
+                    rng.random::<f32>() * std::f32::consts::PI,
+                    rng.random::<f32>() * std::f32::consts::TAU,
+                );
+                let wi = dir(
+                    rng.random::<f32>() * std::f32::consts::PI,
+                    rng.random::<f32>() * std::f32::consts::TAU,
+                );
                 let (fp, pp) = p.eval_pdf(wo, wi);
                 let (fd, pd) = d.eval_pdf(wo, wi);
                 assert!(rel_close(pp, pd, 1e-6), "pdf {pp} vs {pd}");
