@@ -359,3 +359,59 @@ fn bad_pbr_materials_and_lights_name_the_key() {
         assert!(msg.contains(key), "{body}: {msg}");
     }
 }
+
+/// White furnace: a unit sphere in a white environment renders 1 wherever the material is
+/// lossless: smooth white `pbr` glass (`metallic = 0, transmission = 1`) and smooth white
+/// metal; rough white metal loses what single-scattering GGX loses (below 1, above 0.8).
+#[test]
+fn white_furnace_pbr_glass_and_metal_spheres() {
+    let furnace = |material: &str| {
+        scene(&format!(
+            r#"
+[render]
+width = 16
+height = 16
+spp = 64
+max_depth = 0
+[camera]
+position = [0, 0, 4]
+look_at = [0, 0, 0]
+fov = 20
+[materials.m]
+type = "pbr"
+{material}
+[[shapes]]
+type = "sphere"
+material = "m"
+[environment]
+type = "constant"
+radiance = 1
+"#
+        ))
+    };
+    for (material, lossless) in [
+        ("metallic = 0\nroughness = 0\ntransmission = 1", true),
+        ("metallic = 1\nroughness = 0", true),
+        ("metallic = 1\nroughness = 0.6", false),
+    ] {
+        let (img, _) = render_with_threads(&furnace(material), 2);
+        let mut m = MeanEstimate::default();
+        for p in &img.pixels {
+            m.push(p.x as f64);
+        }
+        if lossless {
+            assert!(
+                m.agrees_with(1.0, 4.0, 1e-3),
+                "{material}: {} +- {}",
+                m.mean(),
+                m.std_error()
+            );
+        } else {
+            assert!(
+                m.mean() < 0.99 && m.mean() > 0.8,
+                "{material}: {}",
+                m.mean()
+            );
+        }
+    }
+}

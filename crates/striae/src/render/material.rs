@@ -86,9 +86,8 @@ impl PbrMaterial {
             1.0
         };
         let n = (tangent.s * x + tangent.t * (w * y) + tangent.n * z).normalize_or_zero();
-        // `!(x > 0.0)` is meant: it also rejects NaN.
-        #[allow(clippy::neg_cmp_op_on_partial_ord)]
-        if !(n.dot(hit.ng) * hit.ns.dot(hit.ng) > 0.0) {
+        // `n` is finite (`normalize_or_zero`): zero fails the test too.
+        if n.dot(hit.ng) * hit.ns.dot(hit.ng) <= 0.0 {
             return None;
         }
         Some(n)

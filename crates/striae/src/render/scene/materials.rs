@@ -188,12 +188,12 @@ pub struct PbrDesc {
     /// `alpha = roughness^2`.
     #[serde(default = "one")]
     pub roughness: f32,
-    /// `metallicRoughnessTexture` (linear): its green channel multiplies `roughness`, its blue
-    /// channel `metallic`.
+    /// `metallicRoughnessTexture`: its green channel multiplies `roughness`, its blue channel
+    /// `metallic`. An image without `srgb` is read as linear data.
     #[serde(default)]
     pub metallic_roughness: Option<Texture>,
-    /// `normalTexture` (linear, tangent space, glTF's convention: red along `dP/du`, green
-    /// toward decreasing `v`, the image's up).
+    /// `normalTexture` (tangent space, glTF's convention: red along `dP/du`, green toward
+    /// decreasing `v`, the image's up). An image without `srgb` is read as linear data.
     #[serde(default)]
     pub normal_map: Option<Texture>,
     /// `normalTexture.scale` (default 1): scales the map's tangent components.
@@ -337,19 +337,26 @@ impl PbrDesc {
     /// importer gives them, are kept) and build the runtime material.
     pub fn prepare(&self, base_dir: &Path) -> Result<PbrMaterial, MaterialError> {
         self.validate()?;
-        let load = |key: &'static str, t: &Texture| -> Result<Texture, MaterialError> {
+        // `linear`: data, not colour (glTF's metallic-roughness and normal textures): an image
+        // whose `srgb` is not given is read without the sRGB decoding.
+        let load = |key: &'static str, t: &Texture, linear: bool| {
             let mut t = t.clone();
+            if let Texture::Image { srgb, image, .. } = &mut t {
+                if linear && srgb.is_none() && image.is_none() {
+                    *srgb = Some(false);
+                }
+            }
             t.load_images(base_dir)
                 .map_err(|source| MaterialError::Texture { key, source })?;
-            Ok(t)
+            Ok::<Texture, MaterialError>(t)
         };
-        let base_color = load("base_color", &self.base_color)?;
+        let base_color = load("base_color", &self.base_color, false)?;
         let metallic_roughness = match &self.metallic_roughness {
-            Some(t) => Some(load("metallic_roughness", t)?),
+            Some(t) => Some(load("metallic_roughness", t, true)?),
             None => None,
         };
         let normal_map = match &self.normal_map {
-            Some(t) => Some(load("normal_map", t)?),
+            Some(t) => Some(load("normal_map", t, true)?),
             None => None,
         };
         let loaded = PbrDesc {

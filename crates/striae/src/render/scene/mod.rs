@@ -949,7 +949,13 @@ fn punctual_lights(f: &SceneFile, file: &Path) -> Result<Vec<Light>, SceneError>
         let direction = || -> Result<Vec3, SceneError> {
             let v = l.direction.ok_or_else(|| missing("direction"))?;
             let d = Vec3::from_array(v);
-            if !(d.length_squared() > 0.0 && d.is_finite() && d.normalize().is_finite()) {
+            let n = d.normalize();
+            if n.is_finite() && n.length_squared() > 0.5 {
+                return Ok(n);
+            }
+            // Scaled by its largest component first, so that no length overflows.
+            let d = d / d.abs().max_element();
+            if !(d.is_finite() && d.length_squared() > 0.0) {
                 return Err(invalid(
                     file,
                     format!("lights[{i}].direction"),
