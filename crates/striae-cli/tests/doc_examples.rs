@@ -11,7 +11,8 @@
 //!   defines is put on a rectangle of its own, so that it is used; every material its shapes
 //!   name without defining it is added as a plain diffuse one; and every file it names
 //!   (`path = "..."` or `curves = "..."`, outside comments) is created beside the scene (an
-//!   OBJ mesh: a tetrahedron; an SVG drawing: one stroke). A fragment with neither materials nor shapes gets a grey rectangle.
+//!   OBJ mesh: a tetrahedron; an SVG drawing: one stroke; a glTF: one triangle). A fragment
+//!   with neither materials nor shapes gets a grey rectangle.
 //! * `<!-- example: transforms -->`: each non-empty line is one `transform = ...` alternative,
 //!   given in turn to a rectangle of [`BASE`].
 //!
@@ -49,6 +50,9 @@ const BASE_MATERIAL: &str = "[materials.doc_example_base]\ntype = \"diffuse\"\nr
 const TETRAHEDRON_OBJ: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n\
     f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
 
+/// The glTF written for a glTF file a fragment names (`.gltf` or `.glb`; the importer tells a
+/// GLB by its magic bytes, so JSON serves both): one triangle, its buffer a data URI.
+const TRIANGLE_GLTF: &str = r#"{"asset":{"version":"2.0"},"scenes":[{"nodes":[0]}],"nodes":[{"mesh":0}],"meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}],"accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}],"bufferViews":[{"buffer":0,"byteLength":36}],"buffers":[{"byteLength":36,"uri":"data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"}]}"#;
 /// The drawing written for an SVG file a fragment names (`curves = "..."`): one stroke.
 const STROKE_SVG: &str = r#"<svg xmlns="http://www.w3.org/2000/svg" width="100" height="100"><path d="M 10 80 C 30 60, 60 70, 90 20" fill="none" stroke="black" stroke-width="1"/></svg>"#;
 
@@ -230,9 +234,11 @@ fn render(dir: &Path, label: &str, scene: &str, files: &[String]) -> Result<(), 
             TETRAHEDRON_OBJ
         } else if f.ends_with(".svg") {
             STROKE_SVG
+        } else if f.ends_with(".gltf") || f.ends_with(".glb") {
+            TRIANGLE_GLTF
         } else {
             panic!(
-                "{label}: names `{f}`; only OBJ and SVG files are made for examples \
+                "{label}: names `{f}`; only OBJ, SVG and glTF files are made for examples \
                  (add the file type to crates/striae-cli/tests/doc_examples.rs)"
             )
         };

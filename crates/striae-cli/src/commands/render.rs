@@ -1,5 +1,7 @@
-//! `striae render [SCENE.toml]`: render a scene file, or the built-in default scene (the glass
-//! teapot with the seed's setting-1 scratches, `scenes/glass-teapot-setting1.toml`), to a
+//! `striae render [SCENE.toml|SCENE.gltf|SCENE.glb]`: render a scene file (a glTF 2.0 file on
+//! its own, chosen by its extension: `docs/scenes.md`, "glTF"), or the built-in default scene
+//! (the glass teapot with the seed's setting-1 scratches,
+//! `scenes/glass-teapot-setting1.toml`), to a
 //! linear EXR and an sRGB PNG preview, with a progress bar (samples/s, time left) and a
 //! summary (wall time, samples/s, rays/s).
 
@@ -12,7 +14,9 @@ use striae::render::scene::{Overrides, Scene};
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Scene file (TOML, see docs/scenes.md). Without it the built-in default scene renders.
+    /// Scene file: TOML (docs/scenes.md), or glTF 2.0 (`.gltf`, `.glb`: its camera, meshes,
+    /// materials and lights, black background, the default render settings). Without it the
+    /// built-in default scene renders.
     pub scene: Option<PathBuf>,
     /// Samples per pixel (overrides `render.spp`).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=striae::render::sampler::MAX_SPP as i64))]

@@ -885,6 +885,11 @@ fn radiance<const DIFFERENTIALS: bool>(
             CameraHit::Traced(hit) if depth == 0 => hit,
             _ => scene.geometry.intersect(&ray),
         };
+        if scene.has_absorption() {
+            if let Some(h) = hit.as_ref() {
+                path.absorb(scene, &ray, h);
+            }
+        }
         if let Some(c) = path.found_emission(scene, &ray, hit.as_ref(), light_select_pdf) {
             l += c;
         }
@@ -1023,6 +1028,24 @@ impl PathState {
             light_select_pdf * light.area_pdf(shapes, ray.o, hit.t, ray.d, hit.ng)
         });
         Some(self.beta * le * w)
+    }
+
+    /// Beer-Lambert absorption along the segment `ray` travelled to `hit`: where it ends on the
+    /// back side (w.r.t. `ng`) of a surface whose material absorbs
+    /// ([`crate::render::material::Material::absorption`]), it ran inside that object, and the
+    /// throughput is multiplied by `exp(-sigma_a t)`, `t` the segment's length. Nested media are
+    /// not tracked: a segment inside an absorbing object that ends on another object's front
+    /// side is not attenuated.
+    #[inline(never)]
+    fn absorb(&mut self, scene: &Scene, ray: &Ray, hit: &SurfaceHit) {
+        let material = scene.geometry.shapes()[hit.shape as usize].material;
+        if material == NO_MATERIAL || !(ray.d.dot(hit.ng) > 0.0) {
+            return;
+        }
+        if let Some(sigma_a) = scene.materials[material as usize].absorption() {
+            let t = hit.t * ray.d.length();
+            self.beta *= (-sigma_a * t).exp();
+        }
     }
 
     /// Continue through the sampled bounce `bs`, from a BSDF that skipped light sampling

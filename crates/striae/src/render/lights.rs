@@ -15,6 +15,11 @@
 //!   scenes this gives the same noise or less in less time (setting-1 teapot 2-8 %, gold
 //!   teapot 14 %; `BENCHMARKS.md`, "Design findings").
 //! * [`Light::Sun`]: a directional (delta) light given by its irradiance on a surface facing it.
+//! * [`Light::Point`] and [`Light::Spot`]: KHR_lights_punctual's point and spot lights, delta
+//!   lights given by their radiant intensity `I` (W/sr): a surface facing the light at distance
+//!   `d` receives the irradiance `I / d^2`. A spot's intensity falls off between its inner and
+//!   outer cone as KHR_lights_punctual's reference implementation does (`t^2`, `t` linear in
+//!   the cosine, [`spot_falloff`]).
 //!
 //! The integrator picks one light uniformly per shading point (probability `1 / n_lights`).
 
@@ -72,6 +77,45 @@ pub enum Light {
         direction: Vec3,
         irradiance: Rgb,
     },
+    /// A point light at `position` of radiant intensity `intensity` (W/sr) in every direction.
+    Point {
+        position: Vec3,
+        intensity: Rgb,
+    },
+    /// A spot light at `position` shining along `direction` (unit, the direction the light
+    /// travels): radiant intensity `intensity` within the inner cone (`cos >= cos_inner`), 0
+    /// outside the outer cone (`cos <= cos_outer`), [`spot_falloff`] between. Built by
+    /// [`Light::spot`].
+    Spot {
+        position: Vec3,
+        direction: Vec3,
+        intensity: Rgb,
+        cos_inner: f32,
+        cos_outer: f32,
+    },
+}
+
+/// KHR_lights_punctual's spot attenuation: `t = clamp((cos - cos_outer) / (cos_inner -
+/// cos_outer), 0, 1)`, returned squared; `cos` is the cosine between the spot's direction and
+/// the direction toward the lit point.
+#[inline]
+pub fn spot_falloff(cos: f32, cos_inner: f32, cos_outer: f32) -> f32 {
+    let t = ((cos - cos_outer) / (cos_inner - cos_outer).max(1e-4)).clamp(0.0, 1.0);
+    t * t
+}
+
+impl Light {
+    /// A spot light from its cone half-angles in radians (`0 <= inner < outer <= pi/2`, checked
+    /// by the scene loader) and a `direction` of any non-zero length (normalised here).
+    pub fn spot(position: Vec3, direction: Vec3, intensity: Rgb, inner: f32, outer: f32) -> Self {
+        Light::Spot {
+            position,
+            direction: direction.normalize(),
+            intensity,
+            cos_inner: inner.cos(),
+            cos_outer: outer.cos(),
+        }
+    }
 }
 
 /// A light sample seen from a shading point.
@@ -81,9 +125,9 @@ pub struct LightSample {
     pub wi: Vec3,
     /// Distance to the sampled point (`f32::INFINITY` for environment and sun).
     pub dist: f32,
-    /// Radiance arriving (for the sun: irradiance).
+    /// Radiance arriving (for delta lights: the irradiance on a surface facing the light).
     pub radiance: Rgb,
-    /// Solid-angle density (1 for the sun, a delta light).
+    /// Solid-angle density (1 for the delta lights: sun, point, spot).
     pub pdf: f32,
     pub delta: bool,
 }
@@ -158,6 +202,25 @@ impl Light {
                 pdf: 1.0,
                 delta: true,
             }),
+            Light::Point {
+                position,
+                intensity,
+            } => point_sample(p, *position, *intensity),
+            Light::Spot {
+                position,
+                direction,
+                intensity,
+                cos_inner,
+                cos_outer,
+            } => {
+                let mut ls = point_sample(p, *position, *intensity)?;
+                let falloff = spot_falloff(-ls.wi.dot(*direction), *cos_inner, *cos_outer);
+                if !(falloff > 0.0) {
+                    return None;
+                }
+                ls.radiance *= falloff;
+                Some(ls)
+            }
         }
     }
 
@@ -192,6 +255,25 @@ impl Light {
             _ => 0.0,
         }
     }
+}
+
+/// The sample of a point light of intensity `intensity` at `position` seen from `p`: the
+/// irradiance `intensity / d^2` from the direction toward it. `None` at the light itself.
+#[inline(always)]
+fn point_sample(p: Vec3, position: Vec3, intensity: Rgb) -> Option<LightSample> {
+    let d = position - p;
+    let dist2 = d.length_squared();
+    if !(dist2 > 0.0 && dist2.is_finite()) {
+        return None;
+    }
+    let dist = dist2.sqrt();
+    Some(LightSample {
+        wi: d / dist,
+        dist,
+        radiance: intensity / dist2,
+        pdf: 1.0,
+        delta: true,
+    })
 }
 
 /// The cone of directions under which a sphere is seen from a point outside it; sampled

@@ -4,10 +4,10 @@
 //! at a hit, [`Material::shade`].
 
 use crate::layers::CoverageCache;
-use crate::math::{Frame, RayDifferential, Vec2, Vec3};
+use crate::math::{Frame, RayDifferential, Rgb, Vec2, Vec3};
 use crate::render::bsdf::{Bsdf, Conductor, ConductorIor, Dielectric, Diffuse};
 use crate::render::bsdf::{ConductorCompensation, DielectricCompensation};
-use crate::render::bsdf::{GrooveWall, RoughConductor, RoughDielectric};
+use crate::render::bsdf::{GrooveWall, Pbr, RoughConductor, RoughDielectric};
 use crate::render::geometry::SurfaceHit;
 use crate::render::scratched::ScratchedMaterial;
 use crate::render::shading::{hit_context, shading_frame, PixelHit};
@@ -32,6 +32,119 @@ pub enum Material {
     Scratched(Box<ScratchedMaterial>),
     /// The opaque wall of an explicit scratch groove (METHOD.md 8.3).
     GrooveWall(GrooveWall),
+    /// glTF 2.0's metallic-roughness material ([`PbrMaterial`], BSDF [`Pbr`]).
+    Pbr(Box<PbrMaterial>),
+}
+
+/// glTF 2.0's metallic-roughness material, prepared (textures loaded), built by
+/// `scene::materials::PbrDesc::prepare`: the factors and textures of the description (same
+/// names and meanings, checked there), its absorption coefficient and its anisotropy direction.
+#[derive(Clone, Debug)]
+pub struct PbrMaterial {
+    pub base_color: Texture,
+    pub metallic: f32,
+    /// Perceptual roughness (GGX `alpha = roughness^2`).
+    pub roughness: f32,
+    /// Green: roughness factor, blue: metallic factor.
+    pub metallic_roughness: Option<Texture>,
+    pub normal_map: Option<Texture>,
+    pub normal_scale: f32,
+    pub ior: f32,
+    pub transmission: f32,
+    /// KHR_materials_volume's absorption coefficient (per unit length), `None`: none.
+    pub sigma_a: Option<Rgb>,
+    /// KHR_materials_anisotropy's strength in `[0, 1]`.
+    pub anisotropy: f32,
+    /// `(cos, sin)` of the anisotropy direction's angle from `dP/du` toward the bitangent.
+    pub anisotropy_direction: (f32, f32),
+}
+
+impl PbrMaterial {
+    /// Whether light passes through anywhere on the surface (transmission and not all metal).
+    #[inline]
+    pub fn has_transmission(&self) -> bool {
+        self.transmission > 0.0 && self.metallic < 1.0
+    }
+
+    /// The shading normal at `hit` with the normal map applied (glTF 2.0 section 3.9.3:
+    /// `n = normalize(T x + B y + N z)` with `(x, y, z) = (2 c - 1) (scale, scale, 1)`), `T`
+    /// along `dP/du` about the interpolated normal, `B = N x T` turned toward decreasing `v`
+    /// (the image's up, glTF's green). `None` where the map leaves the normal as it is
+    /// (`x = y = 0`), or gives a normal not on the geometric normal's side.
+    #[inline]
+    pub fn mapped_normal(&self, hit: &SurfaceHit) -> Option<Vec3> {
+        let map = self.normal_map.as_ref()?;
+        let c = map.eval(hit.uv) * 2.0 - Vec3::ONE;
+        let (x, y, z) = (c.x * self.normal_scale, c.y * self.normal_scale, c.z);
+        if x == 0.0 && y == 0.0 {
+            return None;
+        }
+        let tangent = Frame::from_normal_tangent(hit.ns, hit.dpdu);
+        let w = if tangent.t.dot(hit.dpdv) > 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        let n = (tangent.s * x + tangent.t * (w * y) + tangent.n * z).normalize_or_zero();
+        // `n` is finite (`normalize_or_zero`): zero fails the test too.
+        if n.dot(hit.ng) * hit.ns.dot(hit.ng) <= 0.0 {
+            return None;
+        }
+        Some(n)
+    }
+
+    /// The shading frame (normal map applied, then [`shading_frame`]'s side and guard; `s`
+    /// turned to the anisotropy direction where there is anisotropy) and the BSDF at `hit`.
+    #[inline]
+    pub fn shade(&self, hit: &SurfaceHit, wo: Vec3) -> (Frame, Bsdf<'_>) {
+        let transmits = self.has_transmission();
+        let mut frame = match self.mapped_normal(hit) {
+            Some(ns) => shading_frame(&SurfaceHit { ns, ..*hit }, wo, transmits),
+            None => shading_frame(hit, wo, transmits),
+        };
+        let bsdf = self.bsdf_at(hit.uv, transmits);
+        if self.anisotropy > 0.0 {
+            let (cos, sin) = self.anisotropy_direction;
+            // The bitangent toward decreasing v, as the normal map's.
+            let w = if frame.t.dot(hit.dpdv) > 0.0 {
+                -1.0
+            } else {
+                1.0
+            };
+            let s = (frame.s * cos + frame.t * (w * sin)).normalize_or(frame.s);
+            frame = Frame {
+                s,
+                t: frame.n.cross(s),
+                n: frame.n,
+            };
+        }
+        (frame, Bsdf::Pbr(bsdf))
+    }
+
+    /// The BSDF at texture coordinates `uv` (`transmits`: [`Self::has_transmission`]), its
+    /// GGX `alpha_x` the anisotropic `alpha_t` (along the anisotropy direction, the frame's `s`
+    /// as [`Self::shade`] turns it).
+    #[inline]
+    pub fn bsdf_at(&self, uv: Vec2, transmits: bool) -> Pbr {
+        let base = self.base_color.eval(uv);
+        let (mut metallic, mut roughness) = (self.metallic, self.roughness);
+        if let Some(t) = &self.metallic_roughness {
+            let c = t.eval(uv);
+            roughness *= c.y;
+            metallic *= c.z;
+        }
+        let alpha = roughness * roughness;
+        let alpha_t = alpha + (1.0 - alpha) * self.anisotropy * self.anisotropy;
+        Pbr::new(
+            base,
+            metallic,
+            self.transmission,
+            self.ior,
+            alpha_t,
+            alpha,
+            transmits,
+        )
+    }
 }
 
 /// How a hit is seen, for [`Material::shade`].
@@ -61,6 +174,19 @@ impl Material {
             | Material::CompensatedConductor(_)
             | Material::GrooveWall(_) => false,
             Material::Scratched(m) => m.has_transmission(),
+            Material::Pbr(m) => m.has_transmission(),
+        }
+    }
+
+    /// The absorption coefficient `sigma_a` (per unit length) inside the object the material
+    /// bounds (KHR_materials_volume): a path segment that ends on the back side of such a
+    /// surface (w.r.t. `SurfaceHit::ng`) is attenuated by `exp(-sigma_a t)` (the integrator).
+    /// `None` for materials without absorption.
+    #[inline]
+    pub fn absorption(&self) -> Option<Rgb> {
+        match self {
+            Material::Pbr(m) => m.sigma_a,
+            _ => None,
         }
     }
 
@@ -122,6 +248,7 @@ impl Material {
                 };
                 (frame, bsdf)
             }
+            Material::Pbr(m) => m.shade(hit, view.wo),
             // The other materials' BSDFs do not depend on the frame, so it is worked out after
             // them, from the BSDF: taking `self.has_transmission()` first makes the smooth
             // close-up 3.4 % slower (code layout).
@@ -156,6 +283,7 @@ impl Material {
             Material::CompensatedConductor(c) => Bsdf::CompensatedConductor(c.bsdf()),
             Material::Scratched(m) => m.base_bsdf(),
             Material::GrooveWall(w) => Bsdf::Wall(*w),
+            Material::Pbr(m) => Bsdf::Pbr(m.bsdf_at(uv, m.has_transmission())),
         }
     }
 }

@@ -128,6 +128,12 @@ impl RgbImage {
                     source,
                 }
             })?;
+        Self::from_png_bytes(&bytes, path, srgb)
+    }
+
+    /// Decode a PNG held in memory (an image inside a glTF), from sRGB to linear where `srgb`;
+    /// `path` names it in errors. The header's size is checked before the pixels are decoded.
+    pub fn from_png_bytes(bytes: &[u8], path: &Path, srgb: bool) -> Result<Self, TextureError> {
         let decode_error = |e: image::ImageError| TextureError::Decode {
             path: path.to_path_buf(),
             message: e.to_string(),

@@ -15,7 +15,7 @@ use crate::optics::microfacet::Ggx;
 /// direction `cos_t` (sign opposite to `wo . m`) and `eta_ti = n(wo side) / n(wi side)`
 /// (Mitsuba 3's `refract`). Both directions point away from the surface.
 #[inline]
-fn refract(wo: Vec3, m: Vec3, cos_t: f32, eta_ti: f32) -> Vec3 {
+pub(super) fn refract(wo: Vec3, m: Vec3, cos_t: f32, eta_ti: f32) -> Vec3 {
     m * (wo.dot(m) * eta_ti + cos_t) - wo * eta_ti
 }
 
@@ -82,7 +82,7 @@ pub struct RoughDielectric {
 /// `eta_p = n(wi side) / n(wo side)` (1 for reflection). `None` for degenerate pairs and for
 /// pairs whose half vector is back-facing to either direction (no microfacet connects them).
 #[inline]
-fn half_vector(eta: f32, wo: Vec3, wi: Vec3) -> Option<(Vec3, f32, bool)> {
+pub(super) fn half_vector(eta: f32, wo: Vec3, wi: Vec3) -> Option<(Vec3, f32, bool)> {
     if wo.z == 0.0 || wi.z == 0.0 {
         return None;
     }

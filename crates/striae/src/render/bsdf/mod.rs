@@ -15,6 +15,9 @@
 //! * [`CompensatedConductor`] and [`CompensatedDielectric`], the two rough models with the
 //!   energy their single scattering loses restored (`multiscatter = true`; Kulla and Conty
 //!   2017, Turquin 2019; module [`multiscatter`]).
+//! * [`Pbr`], glTF 2.0's metallic-roughness BSDF (its Appendix B) with transmission, IOR and
+//!   anisotropy: a metal, dielectric-over-diffuse and rough or smooth glass mixture that
+//!   reuses the dielectric's lobes (module [`pbr`]).
 //!
 //! ## Conventions
 //!
@@ -40,6 +43,7 @@ mod conductor;
 mod dielectric;
 mod diffuse;
 pub mod multiscatter;
+pub mod pbr;
 pub mod scratched;
 pub mod scratched_glass;
 pub mod scratched_metal;
@@ -51,6 +55,7 @@ pub use diffuse::Diffuse;
 pub use multiscatter::{
     CompensatedConductor, CompensatedDielectric, ConductorCompensation, DielectricCompensation,
 };
+pub use pbr::Pbr;
 pub use scratched::{ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf};
 pub use scratched_glass::{GlassWalls, ScratchedGlassBsdf, TracedGroove, WallLobeTable};
 pub use scratched_metal::ScratchedMetalBsdf;
@@ -108,6 +113,8 @@ pub enum Bsdf<'a> {
     ScratchedMetal(ScratchedMetalBsdf<'a>),
     /// The wall of an explicit scratch groove (METHOD.md 8.3).
     Wall(GrooveWall),
+    /// glTF 2.0's metallic-roughness BSDF.
+    Pbr(Pbr),
 }
 
 impl Bsdf<'_> {
@@ -125,6 +132,7 @@ impl Bsdf<'_> {
             Bsdf::ScratchedGlass(b) => b.eval(wo, wi),
             Bsdf::ScratchedMetal(b) => b.eval_pdf(wo, wi).0,
             Bsdf::Wall(b) => b.eval(wo, wi),
+            Bsdf::Pbr(b) => b.eval(wo, wi),
         }
     }
 
@@ -142,6 +150,7 @@ impl Bsdf<'_> {
             Bsdf::ScratchedGlass(b) => b.pdf(wo, wi),
             Bsdf::ScratchedMetal(b) => b.eval_pdf(wo, wi).1,
             Bsdf::Wall(b) => b.pdf(wo, wi),
+            Bsdf::Pbr(b) => b.pdf(wo, wi),
         }
     }
 
@@ -161,6 +170,7 @@ impl Bsdf<'_> {
             Bsdf::ScratchedGlass(b) => b.eval_pdf(wo, wi),
             Bsdf::ScratchedMetal(b) => b.eval_pdf(wo, wi),
             Bsdf::Wall(b) => (b.eval(wo, wi), b.pdf(wo, wi)),
+            Bsdf::Pbr(b) => b.eval_pdf(wo, wi),
         }
     }
 
@@ -204,6 +214,7 @@ impl Bsdf<'_> {
             Bsdf::ScratchedGlass(b) => b.sample(wo, u_lobe, u),
             Bsdf::ScratchedMetal(b) => b.sample(wo, u_lobe, u),
             Bsdf::Wall(b) => b.sample(wo, u),
+            Bsdf::Pbr(b) => b.sample(wo, u_lobe, u),
         }
     }
 
@@ -217,6 +228,7 @@ impl Bsdf<'_> {
             | Bsdf::CompensatedDielectric(_)
             | Bsdf::ScratchedGlass(_) => true,
             Bsdf::Scratched(b) => b.has_transmission(),
+            Bsdf::Pbr(b) => b.transmits,
             _ => false,
         }
     }
@@ -231,6 +243,7 @@ impl Bsdf<'_> {
             Bsdf::Scratched(b) => b.is_delta(),
             Bsdf::ScratchedGlass(b) => b.walls.smooth(),
             Bsdf::Wall(b) => b.specular,
+            Bsdf::Pbr(b) => b.is_delta(),
             _ => false,
         }
     }

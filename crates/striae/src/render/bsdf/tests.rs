@@ -1101,3 +1101,252 @@ mod scratched_metal {
         }
     }
 }
+
+/// glTF's metallic-roughness BSDF ([`Pbr`]): chi-square of the mixture sampler, sampled pdf
+/// and weight against `pdf` and `eval`, energy over its parameters, and the two limits that
+/// must be existing models exactly (all-transmission: the dielectric; white metal: the
+/// perfect rough mirror).
+mod pbr {
+    use super::*;
+    use crate::optics::fresnel_f32;
+
+    fn pbr(base: Rgb, metallic: f32, transmission: f32, alpha: f32) -> Pbr {
+        Pbr::new(
+            base,
+            metallic,
+            transmission,
+            1.5,
+            alpha,
+            alpha,
+            transmission > 0.0 && metallic < 1.0,
+        )
+    }
+
+    #[test]
+    fn sampler_matches_pdf_for_rough_parameter_sets() {
+        let sets = [
+            ("metal rough", pbr(Rgb::new(0.9, 0.6, 0.3), 1.0, 0.0, 0.3)),
+            ("plastic rough", pbr(Rgb::new(0.8, 0.2, 0.1), 0.0, 0.0, 0.2)),
+            ("half metal", pbr(Rgb::new(0.5, 0.7, 0.9), 0.5, 0.0, 0.5)),
+            ("glass rough", pbr(Rgb::new(1.0, 0.8, 0.5), 0.0, 1.0, 0.3)),
+            ("mixed", pbr(Rgb::new(0.7, 0.7, 0.4), 0.3, 0.5, 0.4)),
+            (
+                "anisotropic metal",
+                Pbr::new(Rgb::splat(0.9), 1.0, 0.0, 1.5, 0.5, 0.15, false),
+            ),
+            (
+                "anisotropic glass",
+                Pbr::new(Rgb::ONE, 0.0, 1.0, 1.5, 0.4, 0.15, true),
+            ),
+        ];
+        let mut seed = 9000;
+        for (name, b) in sets {
+            let bsdf = Bsdf::Pbr(b);
+            assert_eq!(bsdf.has_transmission(), b.transmits);
+            assert!(!bsdf.is_delta());
+            let inside = if b.transmits { wos_inside() } else { vec![] };
+            for wo in wos_outside().into_iter().chain(inside) {
+                seed += 1;
+                // The anisotropic lobes are narrow across: a finer quadrature.
+                let sub = if name.starts_with("anisotropic") {
+                    24
+                } else {
+                    0
+                };
+                check_non_delta_sub(name, &bsdf, wo, 200_000, seed, sub);
+            }
+        }
+    }
+
+    /// Smooth (`alpha = 0`) with a diffuse lobe: the delta reflection and refraction are
+    /// chosen with their discrete probabilities, weight times probability is the lobe's
+    /// reflectance, and the diffuse samples follow `pdf` (which integrates to their share).
+    #[test]
+    fn smooth_mixture_delta_lobes_and_diffuse_sampler() {
+        let b = pbr(Rgb::new(0.8, 0.5, 0.2), 0.2, 0.4, 0.0);
+        let bsdf = Bsdf::Pbr(b);
+        assert!(!bsdf.is_delta() && bsdf.has_transmission());
+        assert!(Bsdf::Pbr(pbr(Rgb::ONE, 0.0, 1.0, 0.0)).is_delta());
+        assert!(Bsdf::Pbr(pbr(Rgb::ONE, 1.0, 0.0, 0.0)).is_delta());
+        for (k, wo) in wos_outside().into_iter().enumerate() {
+            let mut rng = Pcg64::seed_from_u64(300 + k as u64);
+            let fd = fresnel_f32::dielectric(wo.z, 1.5).0;
+            let r = ((1.0f32 - wo.z) * 1.0).powi(5);
+            let metal = Rgb::new(0.8, 0.5, 0.2) + (Rgb::ONE - Rgb::new(0.8, 0.5, 0.2)) * r;
+            let refl = metal * 0.2 + Rgb::splat(0.8 * fd);
+            let trans = Rgb::new(0.8, 0.5, 0.2) * (0.8 * 0.4 * (1.0 - fd));
+            let mut counts = [0u64; 3];
+            let n = 100_000;
+            let r = chi2_tilted(
+                n,
+                8,
+                || {
+                    let s = bsdf.sample(wo, rng.random(), Vec2::new(rng.random(), rng.random()))?;
+                    if s.delta {
+                        if s.wi.z > 0.0 {
+                            counts[0] += 1;
+                            assert!((s.wi - Vec3::new(-wo.x, -wo.y, wo.z)).length() < 1e-5);
+                            assert!((s.weight * s.pdf - refl).abs().max_element() < 1e-5);
+                        } else {
+                            counts[1] += 1;
+                            let eta2 = 1.0 / (1.5f32 * 1.5);
+                            assert!((s.weight * s.pdf - trans * eta2).abs().max_element() < 1e-5);
+                        }
+                        return None;
+                    }
+                    counts[2] += 1;
+                    assert!(rel_close(s.pdf, bsdf.pdf(wo, s.wi), 1e-4));
+                    let w = bsdf.eval(wo, s.wi) * s.wi.z / s.pdf;
+                    assert!((w - s.weight).abs().max_element() < 1e-4);
+                    Some(s.wi)
+                },
+                |wi| bsdf.pdf(wo, wi) as f64,
+            );
+            assert!(r.p_value > 1e-3, "wo {wo:?}: {r:?}");
+            // The lobes are chosen in proportion to their weights at wo.
+            let mean = |c: Rgb| (c.x + c.y + c.z) / 3.0;
+            let w_d = 0.8 * 0.6 * (1.0 - fd) * mean(Rgb::new(0.8, 0.5, 0.2));
+            let w_m = 0.2 * mean(metal) + 0.8 * (fd + 0.4 * (1.0 - fd));
+            let p_d = (w_d / (w_d + w_m)) as f64;
+            let rho = (mean(metal) * 0.2 + 0.8 * fd)
+                / (mean(metal) * 0.2 + 0.8 * fd + 0.8 * 0.4 * (1.0 - fd));
+            let expected = [
+                (1.0 - p_d) * rho as f64 * n as f64,
+                (1.0 - p_d) * (1.0 - rho as f64) * n as f64,
+                p_d * n as f64,
+            ];
+            let d = chi2_discrete(&counts, &expected);
+            assert!(d.p_value > 1e-3, "wo {wo:?}: {counts:?} vs {expected:?}");
+        }
+    }
+
+    /// Energy: the directional albedo (radiance factor undone) is at most 1 over metallic,
+    /// transmission and roughness, for white and coloured bases and two IORs; all-metal white
+    /// and all-glass white smooth surfaces are lossless (white furnace), rough ones lose only
+    /// what single scattering loses.
+    #[test]
+    fn albedo_is_at_most_one_for_all_parameters() {
+        let mut seed = 12_000;
+        for ior in [1.5f32, 2.4] {
+            for metallic in [0.0f32, 0.5, 1.0] {
+                for transmission in [0.0f32, 0.5, 1.0] {
+                    for roughness in [0.0f32, 0.3, 0.7, 1.0] {
+                        let alpha = roughness * roughness;
+                        let b = Pbr::new(
+                            Rgb::ONE,
+                            metallic,
+                            transmission,
+                            ior,
+                            alpha,
+                            alpha,
+                            transmission > 0.0 && metallic < 1.0,
+                        );
+                        let bsdf = Bsdf::Pbr(b);
+                        let inside = if b.transmits { wos_inside() } else { vec![] };
+                        for wo in wos_outside().into_iter().chain(inside) {
+                            seed += 1;
+                            let a = albedo(&bsdf, wo, 20_000, seed, true);
+                            let m = a[0].mean();
+                            let what = format!(
+                                "ior {ior} metallic {metallic} transmission {transmission} roughness {roughness} wo {wo:?}"
+                            );
+                            assert!(m <= 1.0 + 4.0 * a[0].std_error() + 1e-4, "{what}: {m}");
+                            let lossless = roughness == 0.0
+                                && (metallic == 1.0 || (transmission == 1.0 && metallic == 0.0));
+                            if lossless {
+                                assert!((m - 1.0).abs() < 1e-4, "{what}: {m}");
+                            }
+                            // White plastic of IOR 1.5 seen above 45 degrees keeps most of the
+                            // light (at IOR 2.4 its Fresnel reflection inside loses more).
+                            if ior == 1.5 && metallic == 0.0 && transmission == 0.0 && wo.z > 0.7 {
+                                assert!(m > 0.8, "{what}: {m}");
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// `metallic = 1`, white base: Schlick's Fresnel is 1, so the BSDF is the rough perfect
+    /// mirror (`RoughConductor` with `eta = 0, k = 1`), its values and its single-scattering
+    /// albedo.
+    #[test]
+    fn white_metal_is_the_rough_perfect_mirror() {
+        let mut rng = Pcg64::seed_from_u64(77);
+        for alpha in [0.05f32, 0.3, 0.8] {
+            let p = pbr(Rgb::ONE, 1.0, 0.0, alpha);
+            let c = RoughConductor::new(Rgb::ZERO, Rgb::ONE, alpha);
+            for _ in 0..2000 {
+                let wo = dir(
+                    rng.random::<f32>() * 1.5,
+                    rng.random::<f32>() * std::f32::consts::TAU,
+                );
+                let wi = dir(
+                    rng.random::<f32>() * 1.5,
+                    rng.random::<f32>() * std::f32::consts::TAU,
+                );
+                let (fp, pp) = p.eval_pdf(wo, wi);
+                let (fc, pc) = c.eval_pdf(wo, wi);
+                assert!(rel_close(pp, pc, 1e-5), "{pp} vs {pc}");
+                for k in 0..3 {
+                    assert!(rel_close(fp[k], fc[k], 1e-5), "{fp} vs {fc}");
+                }
+            }
+            for wo in wos_outside() {
+                let a = albedo(&Bsdf::Pbr(p), wo, 50_000, 5, false)[0];
+                let b = albedo(&Bsdf::RoughConductor(c), wo, 50_000, 5, false)[0];
+                assert!(
+                    (a.mean() - b.mean()).abs() < 1e-4,
+                    "{} vs {}",
+                    a.mean(),
+                    b.mean()
+                );
+            }
+        }
+    }
+
+    /// `metallic = 0, transmission = 1`: the dielectric, its refracted part tinted by the base
+    /// colour; `eval` and `pdf` equal [`RoughDielectric`]'s within 1e-6 (relative) from both
+    /// sides, and the smooth one samples as [`Dielectric`] does.
+    #[test]
+    fn all_transmission_is_the_dielectric_tinted() {
+        let base = Rgb::new(1.0, 0.6, 0.3);
+        let mut rng = Pcg64::seed_from_u64(78);
+        for alpha in [0.05f32, 0.3, 0.9] {
+            let p = pbr(base, 0.0, 1.0, alpha);
+            let d = RoughDielectric::new(1.5, alpha);
+            let mut compared = 0;
+            for _ in 0..4000 {
+                let wo = dir(
+                    rng.random::<f32>() * std::f32::consts::PI,
+                    rng.random::<f32>() * std::f32::consts::TAU,
+                );
+                let wi = dir(
+                    rng.random::<f32>() * std::f32::consts::PI,
+                    rng.random::<f32>() * std::f32::consts::TAU,
+                );
+                let (fp, pp) = p.eval_pdf(wo, wi);
+                let (fd, pd) = d.eval_pdf(wo, wi);
+                assert!(rel_close(pp, pd, 1e-6), "pdf {pp} vs {pd}");
+                let tint = if wo.z * wi.z < 0.0 { base } else { Rgb::ONE };
+                for k in 0..3 {
+                    assert!(rel_close(fp[k], fd[k] * tint[k], 1e-6), "{fp} vs {fd}");
+                }
+                compared += (pd > 0.0) as u32;
+            }
+            assert!(compared > 1000);
+        }
+        let p = Bsdf::Pbr(pbr(base, 0.0, 1.0, 0.0));
+        let d = Bsdf::Dielectric(Dielectric::new(1.5));
+        for wo in wos_outside().into_iter().chain(wos_inside()) {
+            for u in [0.01f32, 0.03, 0.2, 0.5, 0.99] {
+                let (a, b) = (p.sample(wo, u, Vec2::ZERO), d.sample(wo, u, Vec2::ZERO));
+                let (a, b) = (a.unwrap(), b.unwrap());
+                assert_eq!((a.wi, a.pdf, a.delta, a.eta), (b.wi, b.pdf, b.delta, b.eta));
+                let tint = if a.wi.z * wo.z < 0.0 { base } else { Rgb::ONE };
+                assert!((a.weight - b.weight * tint).abs().max_element() < 1e-6);
+            }
+        }
+    }
+}

@@ -57,10 +57,11 @@ fn thickness(kind: ShapeType, faces: &[Face], f: usize) -> f32 {
     }
 }
 
-/// Carves the shapes whose material is explicit (`specs[material]`), appending the wall
+/// Carves the shapes whose material is explicit (`specs[material]`), `sections[i]` the TOML
+/// shape (with its index in the file) that made `shapes[i]`, appending the wall
 /// shapes and their materials; `None` when no material is explicit.
 pub(super) fn carve(
-    sections: &[ShapeSection],
+    sections: &[(usize, &ShapeSection)],
     file: &Path,
     names: &[&String],
     specs: &[Option<ExplicitSpec>],
@@ -74,17 +75,17 @@ pub(super) fn carve(
     let mut carve = Carve::default();
     let mut walls = Vec::new();
     let mut bytes = 0usize;
-    for (i, s) in sections.iter().enumerate() {
+    for (i, &(at, s)) in sections.iter().enumerate() {
         let m = shapes[i].material;
         let Some(spec) = specs.get(m as usize).and_then(Option::as_ref) else {
             continue;
         };
         let key = format!("materials.{}.scratches.explicit", names[m as usize]);
         let ShapeGeometry::Mesh(mesh) = &shapes[i].geometry else {
-            return Err(not_planar(file, &key, i, s.kind));
+            return Err(not_planar(file, &key, at, s.kind));
         };
         if !matches!(s.kind, ShapeType::Rectangle | ShapeType::Box) {
-            return Err(not_planar(file, &key, i, s.kind));
+            return Err(not_planar(file, &key, at, s.kind));
         }
         let faces = faces(mesh);
         let (curves, to_uv) = match &spec.curves {
@@ -150,7 +151,7 @@ pub(super) fn carve(
             );
             let (depth, room) = (carving.max_depth(), thickness(s.kind, &faces, f));
             if !(depth < room) {
-                return Err(invalid(file, key, true, format!("grooves up to {depth} deep do not fit in shapes[{i}], {room} thick: make it thicker or the scratches narrower or shallower")));
+                return Err(invalid(file, key, true, format!("grooves up to {depth} deep do not fit in shapes[{at}], {room} thick: make it thicker or the scratches narrower or shallower")));
             }
             if carving.is_empty() {
                 carve.carvings.push(carving);
@@ -158,7 +159,7 @@ pub(super) fn carve(
             }
             let (positions, indices) = carving.walls();
             let mesh = TriangleMesh::new(positions, indices, None, None, None)
-                .map_err(|e| invalid(file, format!("shapes[{i}]"), s.kind, e))?;
+                .map_err(|e| invalid(file, format!("shapes[{at}]"), s.kind, e))?;
             walls.push((carve.carvings.len() as u32, wall_material, mesh));
             carve.carvings.push(carving);
         }

@@ -16,7 +16,8 @@ pub use crate::render::texture::Colour;
 pub struct SceneFile {
     #[serde(default)]
     pub render: RenderSection,
-    pub camera: CameraSection,
+    /// Required unless a `gltf` shape brings a camera (the TOML's wins over the glTF's).
+    pub camera: Option<CameraSection>,
     #[serde(default, deserialize_with = "super::materials::by_name")]
     pub materials: BTreeMap<String, MaterialDesc>,
     #[serde(default)]
@@ -121,6 +122,9 @@ pub enum ShapeType {
     Box,
     /// An analytic sphere (`center`, `radius`).
     Sphere,
+    /// A glTF 2.0 file (`path`, `.gltf` or `.glb`): its meshes, materials, lights and camera
+    /// (`scene::gltf`); `transform` applies to all of it.
+    Gltf,
 }
 
 /// `[[shapes]]`: one shape. `type` picks the kind; every kind takes `material` (a name from
@@ -138,7 +142,7 @@ pub struct ShapeSection {
     pub emission: Option<Colour>,
     #[serde(default)]
     pub transform: Transform,
-    /// `mesh`: the OBJ file.
+    /// `mesh`: the OBJ file; `gltf`: the glTF file.
     pub path: Option<String>,
     /// `teapot`: segments per patch side (default 8).
     pub subdivisions: Option<u32>,
@@ -152,8 +156,17 @@ impl ShapeSection {
     /// The keys given that do not belong to this kind of shape.
     pub fn foreign_keys(&self) -> Vec<&'static str> {
         let mut out = Vec::new();
-        if self.path.is_some() && self.kind != ShapeType::Mesh {
+        if self.path.is_some() && !matches!(self.kind, ShapeType::Mesh | ShapeType::Gltf) {
             out.push("path");
+        }
+        if self.kind == ShapeType::Gltf {
+            // A glTF's materials and emission are its own (a TOML material overrides one by name).
+            if self.material.is_some() {
+                out.push("material");
+            }
+            if self.emission.is_some() {
+                out.push("emission");
+            }
         }
         if self.subdivisions.is_some() && self.kind != ShapeType::Teapot {
             out.push("subdivisions");
@@ -172,20 +185,69 @@ impl ShapeSection {
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum LightType {
-    /// A directional light.
+    /// A directional light (`direction`, `irradiance`).
     Sun,
+    /// A point light (`position`, `intensity`; KHR_lights_punctual's `point`).
+    Point,
+    /// A spot light (`position`, `direction`, `intensity`, `inner_angle`, `outer_angle`;
+    /// KHR_lights_punctual's `spot`).
+    Spot,
 }
 
-/// `[[lights]]`: lights that are not shapes. For `sun`: `direction` points from the scene
-/// **toward** the sun; `irradiance` is measured on a surface facing the sun.
+/// `[[lights]]`: lights that are not shapes. `type` picks the kind; the other keys belong to
+/// some kinds only ([`LightSection::foreign_keys`]).
+///
+/// * `sun`: `direction` points from the scene **toward** the sun; `irradiance` is measured on
+///   a surface facing the sun.
+/// * `point`: `position`, and `intensity`, the radiant intensity in W/sr (a surface facing the
+///   light at distance `d` receives the irradiance `intensity / d^2`).
+/// * `spot`: a point light that shines along `direction` (the direction the light travels),
+///   full within `inner_angle` of it and fading to 0 at `outer_angle` (half-angles in degrees,
+///   `0 <= inner_angle < outer_angle <= 90`; defaults 0 and 45, glTF's).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LightSection {
     #[serde(rename = "type")]
     pub kind: LightType,
-    #[serde(deserialize_with = "crate::strict_array::exact")]
-    pub direction: [f32; 3],
-    pub irradiance: Colour,
+    #[serde(default, deserialize_with = "crate::strict_array::optional")]
+    pub direction: Option<[f32; 3]>,
+    pub irradiance: Option<Colour>,
+    #[serde(default, deserialize_with = "crate::strict_array::optional")]
+    pub position: Option<[f32; 3]>,
+    pub intensity: Option<Colour>,
+    pub inner_angle: Option<f32>,
+    pub outer_angle: Option<f32>,
+}
+
+impl LightSection {
+    /// The keys given that do not belong to this kind of light.
+    pub fn foreign_keys(&self) -> Vec<&'static str> {
+        let (sun, point, spot) = (
+            self.kind == LightType::Sun,
+            self.kind == LightType::Point,
+            self.kind == LightType::Spot,
+        );
+        let mut out = Vec::new();
+        if self.direction.is_some() && point {
+            out.push("direction");
+        }
+        if self.irradiance.is_some() && !sun {
+            out.push("irradiance");
+        }
+        if self.position.is_some() && sun {
+            out.push("position");
+        }
+        if self.intensity.is_some() && sun {
+            out.push("intensity");
+        }
+        if self.inner_angle.is_some() && !spot {
+            out.push("inner_angle");
+        }
+        if self.outer_angle.is_some() && !spot {
+            out.push("outer_angle");
+        }
+        out
+    }
 }
 
 /// The kinds of environment.

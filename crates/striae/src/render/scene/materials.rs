@@ -19,7 +19,32 @@
 //!
 //! type = "scratched"                     # glass or metal with scratches: see
 //! base = "glass"                         # `scene::scratches` and docs/scratched.md
+//!
+//! type = "pbr"                           # glTF 2.0 metallic-roughness (PbrDesc); defaults glTF's
+//! base_color = [0.8, 0.8, 0.8]           # [0, 1], a texture as reflectance (default 1)
+//! metallic = 0.0                         # [0, 1] (default 1)
+//! roughness = 0.5                        # perceptual, [0, 1]: alpha = roughness^2 (default 1)
+//! metallic_roughness = { type = "image", path = "mr.png", srgb = false } # G: roughness, B: metallic
+//! normal_map = { type = "image", path = "n.png", srgb = false }          # tangent space, +y green
+//! normal_scale = 1.0                     # (default 1)
+//! ior = 1.5                              # >= 1 (default 1.5)
+//! transmission = 0.0                     # [0, 1] (default 0)
+//! attenuation_color = [1, 1, 1]          # (0, 1] per channel (default white)
+//! attenuation_distance = 1.0             # > 0; left out: no absorption (the default)
+//! anisotropy = 0.0                       # KHR_materials_anisotropy strength, [0, 1] (default 0)
+//! anisotropy_rotation = 0.0              # degrees from dP/du (default 0)
 //! ```
+//!
+//! `type = "pbr"` is glTF 2.0's material (section 3.9.2, Appendix B) with the transmission,
+//! IOR, volume and anisotropy extensions ([`PbrDesc`]; the BSDF and its departures from
+//! Appendix B in [`crate::render::bsdf::pbr`]). Its `roughness` is glTF's perceptual roughness
+//! (GGX `alpha = roughness^2`), unlike the other materials' `roughness`, which is `alpha`.
+//! `attenuation_distance` makes the object's inside absorb, `sigma_a =
+//! -ln(attenuation_color) / attenuation_distance` (KHR_materials_volume), applied by the
+//! integrator to path segments that end on the back side of the surface
+//! ([`Material::absorption`]). Image textures the glTF importer has already decoded
+//! (`Texture::Image` with `image: Some(..)`) are kept as they are by
+//! [`PbrDesc::prepare`].
 //!
 //! `roughness` is the GGX `alpha` (Mitsuba's `alpha`, not squared). Mitsuba's dielectric
 //! defaults differ from ours (`int_ior` 1.5046, `ext_ior` 1.000277): set both explicitly in
@@ -35,7 +60,7 @@
 use super::scratches::ScratchedDesc;
 use crate::math::Rgb;
 use crate::render::bsdf::{ConductorCompensation, ConductorIor, DielectricCompensation};
-use crate::render::material::Material;
+use crate::render::material::{Material, PbrMaterial};
 use crate::render::texture::{Texture, TextureError};
 use serde::Deserialize;
 use std::path::Path;
@@ -133,6 +158,229 @@ pub enum MaterialDesc {
     },
     /// A smooth glass or metal base with scratches ([`ScratchedDesc`]).
     Scratched(ScratchedDesc),
+    /// glTF 2.0's metallic-roughness material with its transmission, IOR, volume and
+    /// anisotropy extensions ([`PbrDesc`]).
+    Pbr(PbrDesc),
+}
+
+fn white() -> Texture {
+    Texture::Constant(Rgb::ONE)
+}
+fn one_rgb() -> [f32; 3] {
+    [1.0, 1.0, 1.0]
+}
+
+/// `type = "pbr"`: glTF 2.0's metallic-roughness material (glTF 2.0 section 3.9.2 and
+/// Appendix B) with KHR_materials_transmission, KHR_materials_ior, KHR_materials_volume's
+/// absorption and KHR_materials_anisotropy. Every default is glTF's. The BSDF is
+/// [`crate::render::bsdf::Pbr`]; the prepared material [`crate::render::material::PbrMaterial`].
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PbrDesc {
+    /// `baseColorFactor` times `baseColorTexture` (images decoded sRGB to linear), in `[0, 1]`
+    /// (default white).
+    #[serde(default = "white")]
+    pub base_color: Texture,
+    /// `metallicFactor` in `[0, 1]` (default 1).
+    #[serde(default = "one")]
+    pub metallic: f32,
+    /// `roughnessFactor`, glTF's perceptual roughness in `[0, 1]` (default 1); GGX
+    /// `alpha = roughness^2`.
+    #[serde(default = "one")]
+    pub roughness: f32,
+    /// `metallicRoughnessTexture`: its green channel multiplies `roughness`, its blue channel
+    /// `metallic`. An image without `srgb` is read as linear data.
+    #[serde(default)]
+    pub metallic_roughness: Option<Texture>,
+    /// `normalTexture` (tangent space, glTF's convention: red along `dP/du`, green toward
+    /// decreasing `v`, the image's up). An image without `srgb` is read as linear data.
+    #[serde(default)]
+    pub normal_map: Option<Texture>,
+    /// `normalTexture.scale` (default 1): scales the map's tangent components.
+    #[serde(default = "one")]
+    pub normal_scale: f32,
+    /// KHR_materials_ior's `ior` (default 1.5, >= 1); the outside is taken as vacuum.
+    #[serde(default = "default_ior")]
+    pub ior: f32,
+    /// KHR_materials_transmission's `transmissionFactor` in `[0, 1]` (default 0).
+    #[serde(default)]
+    pub transmission: f32,
+    /// KHR_materials_volume's `attenuationColor`, each channel in `(0, 1]` (default white).
+    #[serde(default = "one_rgb", deserialize_with = "crate::strict_array::exact")]
+    pub attenuation_color: [f32; 3],
+    /// KHR_materials_volume's `attenuationDistance` (> 0; default none: no absorption).
+    #[serde(default)]
+    pub attenuation_distance: Option<f32>,
+    /// KHR_materials_anisotropy's `anisotropyStrength` in `[0, 1]` (default 0).
+    #[serde(default)]
+    pub anisotropy: f32,
+    /// KHR_materials_anisotropy's `anisotropyRotation`, in degrees here (default 0):
+    /// the anisotropy direction turned from `dP/du` toward the bitangent.
+    #[serde(default)]
+    pub anisotropy_rotation: f32,
+}
+
+impl Default for PbrDesc {
+    /// glTF's default material (white, metallic 1, roughness 1).
+    fn default() -> Self {
+        PbrDesc {
+            base_color: white(),
+            metallic: 1.0,
+            roughness: 1.0,
+            metallic_roughness: None,
+            normal_map: None,
+            normal_scale: 1.0,
+            ior: 1.5,
+            transmission: 0.0,
+            attenuation_color: one_rgb(),
+            attenuation_distance: None,
+            anisotropy: 0.0,
+            anisotropy_rotation: 0.0,
+        }
+    }
+}
+
+/// The scale check and the `[0, 1]` range check of a texture (images only once loaded).
+fn check_unit_texture(
+    key: &'static str,
+    scale_key: &'static str,
+    texture: &Texture,
+) -> Result<(), MaterialError> {
+    if let Texture::Checkerboard { scale, .. } | Texture::Image { scale, .. } = texture {
+        if !(scale.is_finite() && *scale != 0.0) {
+            return Err(invalid(scale_key, scale, "must be finite and non-zero"));
+        }
+    }
+    if let Some((lo, hi)) = texture.range() {
+        if !(lo >= 0.0 && hi <= 1.0) {
+            let value = match texture {
+                Texture::Constant(c) => fmt3(c.to_array()),
+                Texture::Checkerboard { color0, color1, .. } => {
+                    format!("{} / {}", fmt3(color0.to_array()), fmt3(color1.to_array()))
+                }
+                Texture::Image { path, .. } => {
+                    format!("image `{}` (values {lo} .. {hi})", path.display())
+                }
+            };
+            return Err(invalid(key, value, "must lie in [0, 1]"));
+        }
+    }
+    Ok(())
+}
+
+impl PbrDesc {
+    /// Every key's range (textures' values once loaded): factors in `[0, 1]`, `ior >= 1`,
+    /// `attenuation_color` in `(0, 1]`, `attenuation_distance > 0`, `normal_scale` finite.
+    pub fn validate(&self) -> Result<(), MaterialError> {
+        check_unit_texture("base_color", "base_color.scale", &self.base_color)?;
+        if let Some(t) = &self.metallic_roughness {
+            check_unit_texture("metallic_roughness", "metallic_roughness.scale", t)?;
+        }
+        if let Some(t) = &self.normal_map {
+            check_unit_texture("normal_map", "normal_map.scale", t)?;
+        }
+        for (key, v) in [
+            ("metallic", self.metallic),
+            ("roughness", self.roughness),
+            ("transmission", self.transmission),
+            ("anisotropy", self.anisotropy),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(invalid(key, v, "must lie in [0, 1]"));
+            }
+        }
+        if !(self.ior.is_finite() && self.ior >= 1.0) {
+            return Err(invalid(
+                "ior",
+                self.ior,
+                "an index of refraction must be finite and >= 1",
+            ));
+        }
+        if !self.normal_scale.is_finite() {
+            return Err(invalid("normal_scale", self.normal_scale, "must be finite"));
+        }
+        if !self.anisotropy_rotation.is_finite() {
+            return Err(invalid(
+                "anisotropy_rotation",
+                self.anisotropy_rotation,
+                "must be a finite angle in degrees",
+            ));
+        }
+        let c = self.attenuation_color;
+        if !c.iter().all(|&x| x > 0.0 && x <= 1.0) {
+            return Err(invalid(
+                "attenuation_color",
+                fmt3(c),
+                "each channel must lie in (0, 1]",
+            ));
+        }
+        if let Some(d) = self.attenuation_distance {
+            if !(d.is_finite() && d > 0.0) {
+                return Err(invalid(
+                    "attenuation_distance",
+                    d,
+                    "must be finite and > 0 (leave it out for no absorption)",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The absorption coefficient KHR_materials_volume defines, `sigma_a = -ln(attenuation_color)
+    /// / attenuation_distance` per unit length of the scene; `None` without a distance.
+    pub fn sigma_a(&self) -> Option<Rgb> {
+        let d = self.attenuation_distance?;
+        Some(Rgb::from(self.attenuation_color.map(|c| -c.ln() / d)))
+    }
+
+    /// Validate, load the image textures not yet loaded (already loaded ones, as the glTF
+    /// importer gives them, are kept) and build the runtime material.
+    pub fn prepare(&self, base_dir: &Path) -> Result<PbrMaterial, MaterialError> {
+        self.validate()?;
+        // `linear`: data, not colour (glTF's metallic-roughness and normal textures): an image
+        // whose `srgb` is not given is read without the sRGB decoding.
+        let load = |key: &'static str, t: &Texture, linear: bool| {
+            let mut t = t.clone();
+            if let Texture::Image { srgb, image, .. } = &mut t {
+                if linear && srgb.is_none() && image.is_none() {
+                    *srgb = Some(false);
+                }
+            }
+            t.load_images(base_dir)
+                .map_err(|source| MaterialError::Texture { key, source })?;
+            Ok::<Texture, MaterialError>(t)
+        };
+        let base_color = load("base_color", &self.base_color, false)?;
+        let metallic_roughness = match &self.metallic_roughness {
+            Some(t) => Some(load("metallic_roughness", t, true)?),
+            None => None,
+        };
+        let normal_map = match &self.normal_map {
+            Some(t) => Some(load("normal_map", t, true)?),
+            None => None,
+        };
+        let loaded = PbrDesc {
+            base_color,
+            metallic_roughness,
+            normal_map,
+            ..self.clone()
+        };
+        loaded.validate()?;
+        let angle = loaded.anisotropy_rotation.to_radians();
+        Ok(PbrMaterial {
+            sigma_a: loaded.sigma_a(),
+            base_color: loaded.base_color,
+            metallic: loaded.metallic,
+            roughness: loaded.roughness,
+            metallic_roughness: loaded.metallic_roughness,
+            normal_map: loaded.normal_map,
+            normal_scale: loaded.normal_scale,
+            ior: loaded.ior,
+            transmission: loaded.transmission,
+            anisotropy: loaded.anisotropy,
+            anisotropy_direction: (angle.cos(), angle.sin()),
+        })
+    }
 }
 
 impl MaterialDesc {
@@ -360,6 +608,7 @@ impl MaterialDesc {
                 check_roughness(*roughness)
             }
             MaterialDesc::Scratched(m) => m.resolve(base_dir).map(|_| ()),
+            MaterialDesc::Pbr(m) => m.validate(),
         }
     }
 
@@ -374,6 +623,7 @@ impl MaterialDesc {
         }
         Ok(match self {
             MaterialDesc::Scratched(m) => Material::Scratched(Box::new(m.prepare(base_dir)?)),
+            MaterialDesc::Pbr(m) => Material::Pbr(Box::new(m.prepare(base_dir)?)),
             MaterialDesc::Diffuse { reflectance } => {
                 let mut reflectance = reflectance.clone();
                 reflectance
@@ -635,5 +885,83 @@ mod tests {
             matches!(bsdf_at(&m, Vec2::splat(0.3)), Bsdf::Diffuse(d) if d.reflectance == Rgb::ONE)
         );
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// `type = "pbr"`: glTF's defaults, every key read, and the BSDF at a hit.
+    #[test]
+    fn pbr_parses_with_gltf_defaults_and_keys() {
+        let m: MaterialDesc = toml::from_str("type = \"pbr\"").unwrap();
+        assert_eq!(m, MaterialDesc::Pbr(PbrDesc::default()));
+        let m = prepared(
+            "type = \"pbr\"\nbase_color = [0.5, 0.25, 1]\nmetallic = 0.25\nroughness = 0.5\nmetallic_roughness = [0, 0.5, 1]\nior = 1.33\ntransmission = 0.5\nattenuation_color = [0.5, 1, 1]\nattenuation_distance = 2\nanisotropy = 0.5\nanisotropy_rotation = 90\nnormal_scale = 0.5",
+        );
+        let sigma = m.absorption().unwrap();
+        assert!((sigma.x - 2f32.ln() / 2.0).abs() < 1e-6 && sigma.y == 0.0 && sigma.z == 0.0);
+        assert!(m.has_transmission());
+        let Bsdf::Pbr(b) = bsdf_at(&m, Vec2::splat(0.5)) else {
+            panic!()
+        };
+        assert_eq!(b.base_color, Rgb::new(0.5, 0.25, 1.0));
+        assert_eq!((b.metallic, b.transmission, b.eta), (0.25, 0.5, 1.33));
+        // Roughness 0.5 x 0.5 (green) = 0.25: alpha_b = 0.0625, alpha_t = mix(alpha, 1, 0.25).
+        assert_eq!(b.distribution.alpha_y, 0.0625);
+        assert!((b.distribution.alpha_x - (0.0625 + 0.9375 * 0.25)).abs() < 1e-6);
+        // No attenuation distance: no absorption; metallic 1: opaque.
+        let m = prepared("type = \"pbr\"\nattenuation_color = [0.5, 1, 1]");
+        assert!(m.absorption().is_none() && !m.has_transmission());
+    }
+
+    /// The normal map tilts the shading normal as glTF says: red along `dP/du`, green toward
+    /// decreasing `v`; a flat (0.5, 0.5, 1) map leaves the frame exactly as without a map;
+    /// the anisotropy rotation turns the frame's `s` toward the bitangent.
+    #[test]
+    fn pbr_normal_map_and_anisotropy_turn_the_frame() {
+        use crate::render::geometry::SurfaceHit;
+        let hit = SurfaceHit::flat(Vec2::splat(0.5));
+        let frame_of = |extra: &str| {
+            let m = prepared(&format!("type = \"pbr\"\nroughness = 0.5\n{extra}"));
+            let Material::Pbr(p) = &m else { panic!() };
+            p.shade(&hit, Vec3::new(0.1, 0.2, 1.0).normalize()).0
+        };
+        let plain = frame_of("");
+        let flat = frame_of("normal_map = [0.5, 0.5, 1.0]");
+        assert_eq!((plain.s, plain.t, plain.n), (flat.s, flat.t, flat.n));
+        let (s, c) = 0.3f32.sin_cos();
+        let tilted = frame_of(&format!(
+            "normal_map = [{}, 0.5, {}]",
+            0.5 + 0.5 * s,
+            0.5 + 0.5 * c
+        ));
+        assert!(
+            (tilted.n - Vec3::new(s, 0.0, c)).length() < 1e-5,
+            "{:?}",
+            tilted.n
+        );
+        // SurfaceHit::flat has dP/dv = +y: the green channel points to -y.
+        let green = frame_of(&format!(
+            "normal_map = [0.5, {}, {}]",
+            0.5 + 0.5 * s,
+            0.5 + 0.5 * c
+        ));
+        assert!(
+            (green.n - Vec3::new(0.0, -s, c)).length() < 1e-5,
+            "{:?}",
+            green.n
+        );
+        // normal_scale scales the tangent part before normalising.
+        let scaled = frame_of(&format!(
+            "normal_map = [{}, 0.5, {}]\nnormal_scale = 2",
+            0.5 + 0.5 * s,
+            0.5 + 0.5 * c
+        ));
+        assert!((scaled.n - Vec3::new(2.0 * s, 0.0, c).normalize()).length() < 1e-5);
+        // Anisotropy rotated by 90 degrees: s along the bitangent (-y here).
+        let aniso = frame_of("anisotropy = 0.5\nanisotropy_rotation = 90");
+        assert!(
+            (aniso.s - Vec3::new(0.0, -1.0, 0.0)).length() < 1e-5,
+            "{:?}",
+            aniso.s
+        );
+        assert!((aniso.t - aniso.n.cross(aniso.s)).length() < 1e-6);
     }
 }

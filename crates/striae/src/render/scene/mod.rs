@@ -12,6 +12,7 @@
 
 pub mod explicit;
 pub mod file;
+pub mod gltf;
 pub mod materials;
 pub mod scratches;
 
@@ -133,13 +134,23 @@ pub struct Scene {
     pub camera: PerspectiveCamera,
     pub geometry: Geometry,
     pub materials: Vec<Material>,
-    /// Area lights first (in shape order), then the environment, then suns.
+    /// Area lights first (in shape order), then the environment, then `[[lights]]`.
     pub lights: Vec<Light>,
     environment: Option<usize>,
     pub settings: RenderSettings,
+    /// Whether a material absorbs ([`Material::absorption`]), worked out when the scene is
+    /// built: without one the integrator skips the absorption test altogether.
+    absorbing: bool,
 }
 
 impl Scene {
+    /// Whether any material of the scene absorbs inside ([`Material::absorption`]), as the
+    /// scene was built.
+    #[inline(always)]
+    pub fn has_absorption(&self) -> bool {
+        self.absorbing
+    }
+
     /// The environment light, if any.
     #[inline]
     pub fn environment(&self) -> Option<&Environment> {
@@ -160,12 +171,54 @@ impl Scene {
         path: &Path,
         overrides: &Overrides,
     ) -> Result<(Scene, String), SceneError> {
+        if gltf::is_gltf_path(path) {
+            // Named by its bytes: a `.glb` is not text.
+            let bytes =
+                crate::io::read_bounded(path, crate::io::MAX_BINARY_BYTES).map_err(|e| {
+                    SceneError::Read {
+                        file: path.to_path_buf(),
+                        message: e.to_string(),
+                    }
+                })?;
+            use sha2::Digest;
+            let digest = sha2::Sha256::digest(&bytes);
+            let hex: String = digest.iter().map(|b| format!("{b:02x}")).collect();
+            let name = path.file_name().unwrap_or_default().to_string_lossy();
+            let id = format!("glTF {name}\nsha256 {hex}\n");
+            return Ok((Scene::from_gltf(path, overrides)?, id));
+        }
         let text = crate::io::read_text(path).map_err(|e| SceneError::Read {
             file: path.to_path_buf(),
             message: e.to_string(),
         })?;
         let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
         Ok((Scene::parse(&text, path, &base, overrides)?, text))
+    }
+
+    /// A glTF file (`.gltf` or `.glb`) on its own, as a TOML scene holding only
+    /// `[[shapes]] type = "gltf"` would render with the glTF's camera (an error without one):
+    /// the default `[render]` settings with `overrides`, and no environment (black).
+    pub fn from_gltf(path: &Path, overrides: &Overrides) -> Result<Scene, SceneError> {
+        let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        let name = path.file_name().map(PathBuf::from).unwrap_or_default();
+        let f = SceneFile {
+            render: Default::default(),
+            camera: None,
+            materials: Default::default(),
+            shapes: vec![ShapeSection {
+                kind: ShapeType::Gltf,
+                material: None,
+                emission: None,
+                transform: Default::default(),
+                path: Some(name.to_string_lossy().into_owned()),
+                subdivisions: None,
+                center: None,
+                radius: None,
+            }],
+            lights: Vec::new(),
+            environment: None,
+        };
+        build(f, path, &base, overrides)
     }
 
     /// The built-in default scene.
@@ -356,14 +409,19 @@ fn with_causes(e: &dyn std::error::Error) -> String {
 
 fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene, SceneError> {
     let settings = render_settings(&f, file, o)?;
-    let camera = camera(&f, file, &settings)?;
-    let (names, mut materials, explicit) = materials(&f, file, base)?;
-    // Area lights first (in shape order), then the environment, then suns.
-    let (mut shapes, mut lights) = shapes(&f, file, base, &names)?;
+    let gltfs = import_gltfs(&f, file, base)?;
+    let camera = camera(&f, &gltfs, file, &settings)?;
+    let m = materials(&f, &gltfs, file, base)?;
+    let (names, mut materials, explicit) = (m.names, m.materials, m.explicit);
+    // Area lights first (in shape order), then the environment, then `[[lights]]`, then the
+    // glTFs' punctual lights.
+    let (plain, mut shapes, mut lights) = shapes(&f, file, base, &names)?;
+    gltf_shapes(&gltfs, &m.gltf_slots, file, &mut shapes, &mut lights)?;
+    let name_refs: Vec<&String> = names.iter().collect();
     let carve = explicit::carve(
-        &f.shapes,
+        &plain,
         file,
-        &names,
+        &name_refs,
         &explicit,
         &mut materials,
         &mut shapes,
@@ -373,7 +431,10 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
         lights.push(env);
         environment = Some(lights.len() - 1);
     }
-    lights.extend(suns(&f, file)?);
+    lights.extend(punctual_lights(&f, file)?);
+    for (_, g) in &gltfs {
+        lights.extend(gltf_lights(g));
+    }
     Ok(Scene {
         camera,
         geometry: match carve {
@@ -389,11 +450,126 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
             }
             None => Geometry::new(shapes),
         },
+        absorbing: materials.iter().any(|m| m.absorption().is_some()),
         materials,
         lights,
         environment,
         settings,
     })
+}
+
+/// Every `[[shapes]] type = "gltf"` imported, with its index among the shapes.
+fn import_gltfs(
+    f: &SceneFile,
+    file: &Path,
+    base: &Path,
+) -> Result<Vec<(usize, gltf::GltfScene)>, SceneError> {
+    let mut out = Vec::new();
+    for (i, s) in f.shapes.iter().enumerate() {
+        if s.kind != ShapeType::Gltf {
+            continue;
+        }
+        let key = format!("shapes[{i}].path");
+        let Some(path) = &s.path else {
+            return Err(invalid(
+                file,
+                key,
+                "(missing)",
+                "a gltf shape needs the path of a .gltf or .glb file",
+            ));
+        };
+        let full = base.join(path);
+        let scene = gltf::import(&full, &s.transform).map_err(|e| {
+            if gltf::is_gltf_path(file) {
+                // The glTF is the scene file itself: its own element is the key.
+                SceneError::Key {
+                    file: file.to_path_buf(),
+                    key: e.element.clone().unwrap_or_else(|| "(file)".into()),
+                    message: e.message,
+                }
+            } else {
+                invalid(file, key, path, e)
+            }
+        })?;
+        out.push((i, scene));
+    }
+    Ok(out)
+}
+
+/// The glTFs' meshes as shapes (after the TOML's), an area light for each emissive one.
+fn gltf_shapes(
+    gltfs: &[(usize, gltf::GltfScene)],
+    slots: &[Vec<Option<u32>>],
+    file: &Path,
+    shapes: &mut Vec<Shape>,
+    lights: &mut Vec<Light>,
+) -> Result<(), SceneError> {
+    for ((i, g), slots) in gltfs.iter().zip(slots) {
+        for m in &g.meshes {
+            let material = slots[m.material].expect("a used material has a slot");
+            let area_light = match g.materials[m.material].emission {
+                Some(radiance) if m.mesh.area() > 0.0 => {
+                    lights.push(Light::Area {
+                        shape: shapes.len() as u32,
+                        radiance,
+                    });
+                    Some(lights.len() as u32 - 1)
+                }
+                Some(_) => {
+                    crate::log::warn(&format!(
+                        "scene file {}: shapes[{i}]: {}: an emissive mesh of zero area emits nothing",
+                        file.display(),
+                        m.element
+                    ));
+                    None
+                }
+                None => None,
+            };
+            shapes.push(Shape {
+                geometry: ShapeGeometry::Mesh(m.mesh.clone()),
+                material,
+                area_light,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// A glTF's punctual lights as striae's.
+fn gltf_lights(g: &gltf::GltfScene) -> Vec<Light> {
+    let mut out = Vec::new();
+    for l in &g.lights {
+        match *l {
+            gltf::GltfLight::Sun {
+                direction,
+                irradiance,
+            } => out.push(Light::Sun {
+                direction,
+                irradiance,
+            }),
+            gltf::GltfLight::Point {
+                position,
+                intensity,
+            } => out.push(Light::Point {
+                position,
+                intensity,
+            }),
+            gltf::GltfLight::Spot {
+                position,
+                direction,
+                intensity,
+                cos_inner,
+                cos_outer,
+            } => out.push(Light::Spot {
+                position,
+                direction,
+                intensity,
+                cos_inner,
+                cos_outer,
+            }),
+        }
+    }
+    out
 }
 
 /// The render settings: the file's `[render]` table with the command line's overrides.
@@ -456,14 +632,41 @@ fn render_settings(
     Ok(settings)
 }
 
-/// The camera (`[camera]`) at the render's resolution.
+/// The camera (`[camera]`, else the first glTF shape's camera) at the render's resolution.
 fn camera(
     f: &SceneFile,
+    gltfs: &[(usize, gltf::GltfScene)],
     file: &Path,
     settings: &RenderSettings,
 ) -> Result<PerspectiveCamera, SceneError> {
     let (width, height) = (settings.width, settings.height);
-    let c = &f.camera;
+    let Some(c) = &f.camera else {
+        let Some((i, g, cam)) = gltfs.iter().find_map(|(i, g)| g.camera.map(|c| (i, g, c))) else {
+            let reason = match gltf::is_gltf_path(file) {
+                true => "the glTF file has no camera (a node with a perspective camera)",
+                false => "a scene needs [camera] unless a glTF shape brings one",
+            };
+            return Err(invalid(file, "camera", "(missing)", reason));
+        };
+        return PerspectiveCamera::new(
+            cam.position,
+            cam.position + cam.forward,
+            cam.up,
+            cam.fov_deg,
+            width,
+            height,
+            0.0,
+            1.0,
+        )
+        .map_err(|e| {
+            invalid(
+                file,
+                format!("shapes[{i}].path"),
+                g.file.display().to_string(),
+                format!("its camera: {e}"),
+            )
+        });
+    };
     let position = coordinates(file, "camera.position", c.position)?;
     let look_at = coordinates(file, "camera.look_at", c.look_at)?;
     coordinates(file, "camera.up", c.up)?;
@@ -481,13 +684,26 @@ fn camera(
     .map_err(|e| camera_error(file, c, (width, height), e))
 }
 
-/// The materials, prepared, in the order of their names (sorted: the file's table is a
-/// `BTreeMap`), the names, and per material what explicit scratch geometry needs of it (for a
-/// scratched material with `scratches.explicit = true`, whose prepared material is then its
-/// smooth base: the grooves replace the SV-BRDF).
-type Materials<'a> = (Vec<&'a String>, Vec<Material>, Vec<Option<ExplicitSpec>>);
-fn materials<'a>(f: &'a SceneFile, file: &Path, base: &Path) -> Result<Materials<'a>, SceneError> {
-    let names: Vec<&String> = f.materials.keys().collect();
+/// The scene's materials, prepared: the TOML's in the order of their names (sorted: the
+/// file's table is a `BTreeMap`), then the glTFs' that meshes use and no TOML material of the
+/// same name overrides. `explicit`: per material what explicit scratch geometry needs of it
+/// (for a scratched material with `scratches.explicit = true`, whose prepared material is
+/// then its smooth base: the grooves replace the SV-BRDF). `gltf_slots[g][m]`: the scene's
+/// material for glTF `g`'s material `m`.
+struct Materials {
+    names: Vec<String>,
+    materials: Vec<Material>,
+    explicit: Vec<Option<ExplicitSpec>>,
+    gltf_slots: Vec<Vec<Option<u32>>>,
+}
+
+fn materials(
+    f: &SceneFile,
+    gltfs: &[(usize, gltf::GltfScene)],
+    file: &Path,
+    base: &Path,
+) -> Result<Materials, SceneError> {
+    let mut names: Vec<String> = f.materials.keys().cloned().collect();
     let mut materials: Vec<Material> = Vec::with_capacity(names.len());
     let mut explicit = Vec::with_capacity(names.len());
     for (name, m) in &f.materials {
@@ -504,17 +720,59 @@ fn materials<'a>(f: &'a SceneFile, file: &Path, base: &Path) -> Result<Materials
             }
         }
     }
-    Ok((names, materials, explicit))
+    // glTF materials: names unique across the scene (`name#2` for a second glTF's `name`).
+    let mut taken: std::collections::HashSet<String> = std::collections::HashSet::new();
+    let mut gltf_slots = Vec::with_capacity(gltfs.len());
+    for (_, g) in gltfs {
+        let gltf_base = g.file.parent().map(Path::to_path_buf).unwrap_or_default();
+        let mut slots = Vec::with_capacity(g.materials.len());
+        for m in &g.materials {
+            let mut name = m.name.clone();
+            let mut k = 1;
+            while taken.contains(&name) {
+                k += 1;
+                name = format!("{}#{k}", m.name);
+            }
+            taken.insert(name.clone());
+            if let Some(at) = f.materials.keys().position(|n| *n == name) {
+                slots.push(Some(at as u32));
+                continue;
+            }
+            let desc = m.to_desc(&g.file).map_err(|e| SceneError::Key {
+                file: e.file.clone(),
+                key: e.element.clone().unwrap_or_default(),
+                message: e.message,
+            })?;
+            let material = desc
+                .prepare(&gltf_base)
+                .map_err(|e| material_error(&g.file, &name, e))?;
+            names.push(name);
+            materials.push(material);
+            explicit.push(None);
+            slots.push(Some(materials.len() as u32 - 1));
+        }
+        gltf_slots.push(slots);
+    }
+    Ok(Materials {
+        names,
+        materials,
+        explicit,
+        gltf_slots,
+    })
 }
 
 /// The shapes (`[[shapes]]`), and an area light for each that emits.
-fn shapes(
-    f: &SceneFile,
+/// `plain[k]` is the TOML shape (and its index in the file) that made `shapes[k]`; `gltf`
+/// shapes make none here ([`gltf_shapes`]).
+type Shapes<'a> = (Vec<(usize, &'a ShapeSection)>, Vec<Shape>, Vec<Light>);
+fn shapes<'a>(
+    f: &'a SceneFile,
     file: &Path,
     base: &Path,
-    names: &[&String],
-) -> Result<(Vec<Shape>, Vec<Light>), SceneError> {
+    names: &[String],
+) -> Result<Shapes<'a>, SceneError> {
     let mut shapes = Vec::with_capacity(f.shapes.len());
+    let mut plain = Vec::with_capacity(f.shapes.len());
     let mut lights = Vec::new();
     for (i, s) in f.shapes.iter().enumerate() {
         if let Some(key) = s.foreign_keys().first() {
@@ -525,8 +783,11 @@ fn shapes(
                 format!("`{key}` does not apply to this type of shape"),
             ));
         }
+        if s.kind == ShapeType::Gltf {
+            continue;
+        }
         let material = match &s.material {
-            Some(name) => names.iter().position(|n| *n == name).ok_or_else(|| {
+            Some(name) => names.iter().position(|n| n == name).ok_or_else(|| {
                 invalid(
                     file,
                     format!("shapes[{i}].material"),
@@ -564,7 +825,7 @@ fn shapes(
                     ));
                 }
                 lights.push(Light::Area {
-                    shape: i as u32,
+                    shape: shapes.len() as u32,
                     radiance,
                 });
                 Some(lights.len() as u32 - 1)
@@ -585,8 +846,9 @@ fn shapes(
             ));
         }
         shapes.push(shape);
+        plain.push((i, s));
     }
-    Ok((shapes, lights))
+    Ok((plain, shapes, lights))
 }
 
 /// The environment light (`[environment]`), if any.
@@ -667,36 +929,98 @@ fn environment(f: &SceneFile, file: &Path, base: &Path) -> Result<Option<Light>,
     Ok(Some(Light::Environment(e)))
 }
 
-/// The directional lights (`[[lights]]`).
-fn suns(f: &SceneFile, file: &Path) -> Result<Vec<Light>, SceneError> {
+/// The lights of `[[lights]]`, in file order: suns, point and spot lights (all delta lights).
+fn punctual_lights(f: &SceneFile, file: &Path) -> Result<Vec<Light>, SceneError> {
     let mut lights = Vec::new();
     for (i, l) in f.lights.iter().enumerate() {
-        match l.kind {
-            LightType::Sun => {
-                let d = Vec3::from_array(l.direction);
-                if !(d.length_squared() > 0.0 && d.is_finite()) {
-                    return Err(invalid(
-                        file,
-                        format!("lights[{i}].direction"),
-                        l.direction,
-                        "must be a non-zero vector",
-                    ));
-                }
-                let e = l.irradiance.rgb();
-                if !(e.is_finite() && e.min_element() >= 0.0) {
-                    return Err(invalid(
-                        file,
-                        format!("lights[{i}].irradiance"),
-                        l.irradiance,
-                        "must be finite and >= 0",
-                    ));
-                }
-                lights.push(Light::Sun {
-                    direction: d.normalize(),
-                    irradiance: e,
-                });
-            }
+        if let Some(key) = l.foreign_keys().first() {
+            return Err(invalid(
+                file,
+                format!("lights[{i}].{key}"),
+                l.kind,
+                format!("`{key}` does not apply to this type of light"),
+            ));
         }
+        let missing = |key: &str| SceneError::Key {
+            file: file.to_path_buf(),
+            key: format!("lights[{i}].{key}"),
+            message: format!("missing: a {:?} light needs `{key}`", l.kind).to_lowercase(),
+        };
+        let direction = || -> Result<Vec3, SceneError> {
+            let v = l.direction.ok_or_else(|| missing("direction"))?;
+            let d = Vec3::from_array(v);
+            let n = d.normalize();
+            if n.is_finite() && n.length_squared() > 0.5 {
+                return Ok(n);
+            }
+            // Scaled by its largest component first, so that no length overflows.
+            let d = d / d.abs().max_element();
+            if !(d.is_finite() && d.length_squared() > 0.0) {
+                return Err(invalid(
+                    file,
+                    format!("lights[{i}].direction"),
+                    v,
+                    "must be a finite non-zero vector",
+                ));
+            }
+            Ok(d.normalize())
+        };
+        let colour = |key: &str, c: Option<file::Colour>| -> Result<crate::math::Rgb, SceneError> {
+            let c = c.ok_or_else(|| missing(key))?;
+            let e = c.rgb();
+            if !(e.is_finite() && e.min_element() >= 0.0) {
+                return Err(invalid(
+                    file,
+                    format!("lights[{i}].{key}"),
+                    c,
+                    "must be finite and >= 0",
+                ));
+            }
+            Ok(e)
+        };
+        let position = || -> Result<Vec3, SceneError> {
+            let p = l.position.ok_or_else(|| missing("position"))?;
+            coordinates(file, format!("lights[{i}].position"), p)
+        };
+        lights.push(match l.kind {
+            LightType::Sun => Light::Sun {
+                direction: direction()?,
+                irradiance: colour("irradiance", l.irradiance)?,
+            },
+            LightType::Point => Light::Point {
+                position: position()?,
+                intensity: colour("intensity", l.intensity)?,
+            },
+            LightType::Spot => {
+                let inner = l.inner_angle.unwrap_or(0.0);
+                let outer = l.outer_angle.unwrap_or(45.0);
+                if !(inner.is_finite() && (0.0..90.0).contains(&inner)) {
+                    return Err(invalid(
+                        file,
+                        format!("lights[{i}].inner_angle"),
+                        inner,
+                        "must be a half-angle in degrees, 0 <= inner_angle < 90",
+                    ));
+                }
+                if !(outer.is_finite() && outer > inner && outer <= 90.0) {
+                    return Err(invalid(
+                        file,
+                        format!("lights[{i}].outer_angle"),
+                        outer,
+                        format!(
+                            "must be a half-angle in degrees, inner_angle ({inner}) < outer_angle <= 90"
+                        ),
+                    ));
+                }
+                Light::spot(
+                    position()?,
+                    direction()?,
+                    colour("intensity", l.intensity)?,
+                    inner.to_radians(),
+                    outer.to_radians(),
+                )
+            }
+        });
     }
     Ok(lights)
 }
@@ -757,6 +1081,7 @@ fn shape_geometry(
                     .expect("a rotation keeps the built-in teapot finite"),
             )
         }
+        ShapeType::Gltf => unreachable!("gltf shapes are imported by `import_gltfs`"),
         ShapeType::Rectangle => ShapeGeometry::Mesh(TriangleMesh::rectangle()),
         ShapeType::Box => ShapeGeometry::Mesh(TriangleMesh::cuboid()),
         ShapeType::Sphere => {
