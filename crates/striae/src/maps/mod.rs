@@ -17,6 +17,9 @@
 //! This module takes decoded pixels; `render::scene::scratches` reads the files (8- and 16-bit
 //! PNG read linear, not sRGB-decoded, or EXR) and names them in errors.
 
+// `!(x > 0.0)` is meant: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::math::Vec2;
 
 /// The structure tensor's smoothing at the finest level: a Gaussian of this standard deviation

@@ -387,7 +387,8 @@ impl ScratchedMaterial {
             let (a, b) = ctx.footprint_uv();
             map.filtered(ctx.uv, a, b)
         };
-        if !(s.coverage > 0.0) {
+        // (`MapSample::coverage` is never NaN.)
+        if s.coverage <= 0.0 {
             return None;
         }
         // A second uniform from `u_layer`'s bits, hashed: independent of the layers' pick.

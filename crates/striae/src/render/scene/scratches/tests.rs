@@ -693,23 +693,37 @@ fn maps_alone_or_beside_layers_and_their_errors() {
     assert_eq!(m.layers.len(), 0);
     assert_eq!(m.mix, LayerMix::Union);
     // Read linear: 128 / 255, not sRGB-decoded (0.216).
-    let s = m.map.as_ref().unwrap().at_point(crate::math::Vec2::splat(0.5));
+    let s = m
+        .map
+        .as_ref()
+        .unwrap()
+        .at_point(crate::math::Vec2::splat(0.5));
     assert!((s.coverage - 128.0 / 255.0).abs() < 1e-6, "{}", s.coverage);
-    let m = prepare("map = \"wear.png\"\ndirection = \"flow.png\"\nsetting = 2\nlayers = 2").unwrap();
+    let m =
+        prepare("map = \"wear.png\"\ndirection = \"flow.png\"\nsetting = 2\nlayers = 2").unwrap();
     assert_eq!((m.layers.len(), m.mix), (2, LayerMix::Max));
     assert!(m.curves.is_none() && m.map.is_some());
     let err = |s: &str| prepare(s).unwrap_err();
     let e = err("map = \"missing.png\"");
-    assert!(e.contains("scratches.map") && e.contains("missing.png"), "{e}");
+    assert!(
+        e.contains("scratches.map") && e.contains("missing.png"),
+        "{e}"
+    );
     let e = err("map = \"over.exr\"");
     assert!(
         e.contains("scratches.map") && e.contains("over.exr") && e.contains("(2, 1)"),
         "{e}"
     );
     let e = err("direction = \"flow.png\"");
-    assert!(e.contains("scratches.direction") && e.contains("scratches.map"), "{e}");
+    assert!(
+        e.contains("scratches.direction") && e.contains("scratches.map"),
+        "{e}"
+    );
     let e = err("map = \"wear.png\"\ndirection = \"small.png\"");
-    assert!(e.contains("scratches.direction") && e.contains("map's size"), "{e}");
+    assert!(
+        e.contains("scratches.direction") && e.contains("map's size"),
+        "{e}"
+    );
     let e = err("map = \"wear.png\"\nmap_scale = 0.0");
     assert!(e.contains("scratches.map_scale"), "{e}");
     let e = err("map_scale = 2.0");
