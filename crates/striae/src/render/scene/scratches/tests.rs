@@ -732,5 +732,12 @@ fn maps_alone_or_beside_layers_and_their_errors() {
     assert!(e.contains("scratches.depth"), "{e}");
     let e = err("map = \"wear.png\"\ntaper = 0.1");
     assert!(e.contains("scratches.taper"), "{e}");
+    // A map cannot be carved.
+    let text = "type = \"scratched\"\nbase = \"metal\"\npreset = \"gold\"\n[scratches]\nmap = \"wear.png\"\nexplicit = true";
+    let MaterialDesc::Scratched(s) = toml::from_str::<MaterialDesc>(text).unwrap() else {
+        panic!("not scratched")
+    };
+    let e = s.explicit(&dir).unwrap_err().to_string();
+    assert!(e.contains("scratches.map") && e.contains("carved"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
