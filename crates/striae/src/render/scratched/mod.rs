@@ -309,7 +309,7 @@ impl ScratchedMaterial {
             None => CurveHits::new(),
         };
         let map = match &self.map {
-            Some(m) => self.map_hit(m, ctx, inside),
+            Some(m) => self.map_hit(m, ctx, cache, inside),
             None => None,
         };
         if !covered && curves.is_empty() && map.is_none() {
@@ -370,8 +370,10 @@ impl ScratchedMaterial {
     }
 
     /// The painted map at the hit (METHOD.md 9.5): its prefiltered value over the sample's own
-    /// footprint (`ShadingContext::footprint_uv`) centred on the hit, trilinear
-    /// ([`ScratchMap::filtered`]); at the hit point (the finest level) from inside
+    /// footprint centred on the hit, trilinear ([`ScratchMap::filtered`]), its edges the
+    /// pixel's first sample's at hits reached from the camera by delta bounces under
+    /// `coverage = "footprint"` ([`CoverageCache::map_footprint`]), else the sample's own
+    /// (`ShadingContext::footprint_uv`); at the hit point (the finest level) from inside
     /// dielectric-walled glass and under `coverage = "point"`; `None` where the map holds no
     /// scratch there. Not the pixel centre's footprint, as the layers' and curves' exact
     /// coverage is: the samples' hits spread over the pixel, so a pixel averages the map's
@@ -380,11 +382,26 @@ impl ScratchedMaterial {
     /// alone aliases by up to 10 %). Its direction is drawn by a hash of `u_layer`
     /// ([`crate::maps::MapSample::draw_direction`]) and given in texture space.
     #[inline(always)]
-    fn map_hit(&self, map: &ScratchMap, ctx: &ShadingContext, inside: bool) -> Option<MapHit> {
+    fn map_hit(
+        &self,
+        map: &ScratchMap,
+        ctx: &ShadingContext,
+        cache: &mut CoverageCache,
+        inside: bool,
+    ) -> Option<MapHit> {
         let s = if inside || self.coverage == CoverageMode::Point {
             map.at_point(ctx.uv)
         } else {
-            let (a, b) = ctx.footprint_uv();
+            let (a, b) = match ctx.pixel {
+                Some(hit) if self.coverage == CoverageMode::Footprint => cache.map_footprint(
+                    PixelKey {
+                        shape: hit.shape,
+                        chain: hit.chain,
+                    },
+                    || ctx.footprint_uv(),
+                ),
+                _ => ctx.footprint_uv(),
+            };
             map.filtered(ctx.uv, a, b)
         };
         // (`MapSample::coverage` is never NaN.)
