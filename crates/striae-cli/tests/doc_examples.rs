@@ -10,9 +10,11 @@
 //!   `[camera]` and `[environment]` give way to the fragment's; every material the fragment
 //!   defines is put on a rectangle of its own, so that it is used; every material its shapes
 //!   name without defining it is added as a plain diffuse one; and every file it names
-//!   (`path = "..."` or `curves = "..."`, outside comments) is created beside the scene (an
-//!   OBJ mesh: a tetrahedron; an SVG drawing: one stroke; a glTF: one triangle). A fragment
-//!   with neither materials nor shapes gets a grey rectangle.
+//!   (`path = "..."`, `curves = "..."`, `map = "..."` or `direction = "..."`, outside comments)
+//!   is created beside the scene (an OBJ mesh: a tetrahedron; an SVG drawing: one stroke; a
+//!   glTF: one triangle; a PNG: a 4 x 4 grey image holding one line, which serves as a painted
+//!   scratch map and as its flow map alike). A fragment with neither materials nor shapes gets a
+//!   grey rectangle.
 //! * `<!-- example: transforms -->`: each non-empty line is one `transform = ...` alternative,
 //!   given in turn to a rectangle of [`BASE`].
 //!
@@ -176,7 +178,12 @@ fn splice(fragment: &str) -> (String, Vec<String>) {
     named.sort_unstable();
     named.dedup();
     let files: Vec<String> = code_lines(fragment)
-        .filter_map(|l| quoted_value(l, "path").or_else(|| quoted_value(l, "curves")))
+        .filter_map(|l| {
+            quoted_value(l, "path")
+                .or_else(|| quoted_value(l, "curves"))
+                .or_else(|| quoted_value(l, "map"))
+                .or_else(|| quoted_value(l, "direction"))
+        })
         .map(str::to_owned)
         .collect();
 
@@ -230,6 +237,14 @@ fn render(dir: &Path, label: &str, scene: &str, files: &[String]) -> Result<(), 
     std::fs::create_dir_all(&folder).unwrap();
     for f in files {
         let path = folder.join(f);
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        if f.ends_with(".png") {
+            // A painted scratch map (and a flow map): one line down column 1.
+            image::GrayImage::from_fn(4, 4, |x, _| image::Luma([if x == 1 { 255 } else { 0 }]))
+                .save(&path)
+                .unwrap();
+            continue;
+        }
         let contents = if f.ends_with(".obj") {
             TETRAHEDRON_OBJ
         } else if f.ends_with(".svg") {
@@ -238,11 +253,10 @@ fn render(dir: &Path, label: &str, scene: &str, files: &[String]) -> Result<(), 
             TRIANGLE_GLTF
         } else {
             panic!(
-                "{label}: names `{f}`; only OBJ, SVG and glTF files are made for examples \
+                "{label}: names `{f}`; only OBJ, SVG, glTF and PNG files are made for examples \
                  (add the file type to crates/striae-cli/tests/doc_examples.rs)"
             )
         };
-        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
         std::fs::write(&path, contents).unwrap();
     }
     let file = folder.join("scene.toml");

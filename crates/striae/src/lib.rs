@@ -10,6 +10,7 @@
 //!             groove (the exact 2.5D groove) -> groove_slices, wall_table   (8.1-8.2)
 //! curves      svg / patterns -> stroke -> curve set, footprint queries      (9.1-9.2)
 //! layers      worley -> layer set, raster, footprint queries, caches       (5)
+//! maps        painted scratch maps: coverage and orientation pyramids      (9.5)
 //! render      geometry, camera, lights, scene -> material, scratched, bsdf
 //!             -> integrator -> film, parts                                  (6-7)
 //! lab         gonio, fidelity, figures, plot: measuring the model         (7-8)
@@ -53,6 +54,9 @@ pub mod curves;
 
 // Scratch layers from Worley cell noise (section 5), and the render workers' coverage caches.
 pub mod layers;
+
+// Painted scratch maps: coverage and orientation pyramids (section 9.5).
+pub mod maps;
 
 // The path tracer (sections 6-7).
 pub mod render;

@@ -126,6 +126,9 @@ pub struct CoverageCache {
     /// The curves' footprint tiles ([`Self::curves_tiled`]), direct-mapped; allocated at the
     /// first query.
     curve_tiles: Vec<CurveTileEntry>,
+    /// The current pixel's footprint edges for a painted map ([`Self::map_footprint`]): shape
+    /// and chain, the edges.
+    map_pixel: Option<([u64; 2], Vec2, Vec2)>,
 }
 
 /// Entries of the curves' direct-mapped tile cache (a power of two).
@@ -154,6 +157,7 @@ impl CoverageCache {
             pixel_count: 0,
             curve_pixel: None,
             curve_tiles: Vec::new(),
+            map_pixel: None,
         }
     }
 
@@ -162,6 +166,29 @@ impl CoverageCache {
     pub fn start_pixel(&mut self) {
         self.pixel_count = 0;
         self.curve_pixel = None;
+        self.map_pixel = None;
+    }
+
+    /// The footprint edges `(duvdx, duvdy)` a painted map (METHOD.md 9.5) filters over at a
+    /// hit reached from the camera by delta bounces (on `key`'s shape, along its chain): the
+    /// first such sample's of the pixel, `footprint()`, kept for the pixel's later samples on
+    /// the same shape and chain (which filter over edges of the same size around their own
+    /// hits, without working out their ray differentials).
+    #[inline]
+    pub fn map_footprint(
+        &mut self,
+        key: PixelKey,
+        footprint: impl FnOnce() -> (Vec2, Vec2),
+    ) -> (Vec2, Vec2) {
+        let key = [key.shape as u64, key.chain];
+        match self.map_pixel {
+            Some((k, a, b)) if k == key => (a, b),
+            _ => {
+                let (a, b) = footprint();
+                self.map_pixel = Some((key, a, b));
+                (a, b)
+            }
+        }
     }
 
     /// The per-layer coverage of the current pixel's whole footprint, for a hit at texture

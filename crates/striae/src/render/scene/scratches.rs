@@ -42,16 +42,23 @@
 //! # depth = 1.0                  # curves: depth ratio over the profile's, (0, 1]
 //! # wear = 0.5                   # curves: the most of the depth wear takes, with
 //! # wear_length = 0.02           # its correlation length along the scratch
+//! # map = "wear.png"             # a painted scratch map: each texel the scratched fraction
+//!                                # (METHOD.md 9.5, `crate::maps`)
+//! # direction = "flow.png"       # its flow map (RG: direction = 2 rg - 1); default: the
+//!                                # map's structure tensor
+//! # map_scale = 1.0              # uv tiling of the map and its flow map
 //! ```
 //!
-//! With `curves`, `pattern` or `polylines` and none of the layer keys (`setting`, `length`, `width`,
-//! `threshold`, `layers`), the material has the curves only; with both, both.
+//! With `curves`, `pattern`, `polylines` or `map` and none of the layer keys (`setting`,
+//! `length`, `width`, `threshold`, `layers`), the material has the curves and map only; with
+//! both, both.
 
 use super::materials::{conductor_ior, invalid, MaterialError};
 use crate::curves::patterns::Pattern;
 use crate::curves::stroke::StrokeStyle;
 use crate::curves::{CurveError, CurveSet, Polyline};
 use crate::layers::{LayerError, LayerParams, LayerSet, Orientation, MAX_LAYERS};
+use crate::maps::{MapError, ScratchMap};
 use crate::math::Rgb;
 use crate::optics::fresnel::FresnelLaw;
 use crate::precompute::profile::Profile;
@@ -206,6 +213,16 @@ pub struct ScratchSpec {
     pub depth: Option<f64>,
     pub wear: Option<f64>,
     pub wear_length: Option<f64>,
+    /// A painted scratch map (METHOD.md 9.5, [`crate::maps`]; relative to the scene file): a
+    /// PNG (8 or 16 bits, read linear, not sRGB-decoded) or EXR laid on uv as image textures
+    /// are, each texel the scratched fraction in `[0, 1]` (an RGB file: the mean of R, G, B).
+    pub map: Option<PathBuf>,
+    /// The map's flow map (PNG or EXR of the map's size): `direction = 2 rg - 1` in the tangent
+    /// frame (glTF `KHR_materials_anisotropy`); without it the map's structure gives the
+    /// direction.
+    pub direction: Option<PathBuf>,
+    /// uv tiling of the map (default 1): it is read at `uv * map_scale`.
+    pub map_scale: Option<f64>,
 }
 
 /// One inline curve (`scratches.polylines`), in uv: a constant `width` or a width at each
@@ -217,6 +234,16 @@ pub struct PolylineSpec {
     pub width: Option<f64>,
     pub widths: Option<Vec<f64>>,
     pub depths: Option<Vec<f64>>,
+}
+
+/// A material's painted scratch map (`scratches.map`, `direction`, `map_scale`), resolved.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MapSource {
+    pub map: PathBuf,
+    pub direction: Option<PathBuf>,
+    pub scale: f64,
+    /// Its lobes' depth ratio (`scratches.depth`, default 1).
+    pub depth: f64,
 }
 
 /// Where a material's curves come from (`scratches.curves`, `scratches.pattern` or
@@ -330,6 +357,8 @@ pub struct Resolved {
     pub with_layers: bool,
     /// The curves and their stroke, where it has some.
     pub curves: Option<(CurveSource, StrokeStyle)>,
+    /// The painted map, where it has one.
+    pub map: Option<MapSource>,
 }
 
 /// The base's defaults for the scratch table.
@@ -427,16 +456,19 @@ impl ScratchedDesc {
         let defaults = self.resolve_base()?;
         let table = self.resolve_table(&defaults, base_dir)?;
         let s = &self.scratches;
-        let curves = self.resolve_curves(base_dir)?;
+        let map = self.resolve_map(base_dir)?;
+        let curves = self.resolve_curves(base_dir, map.is_some())?;
         let layer_keys = s.setting.is_some()
             || s.length.is_some()
             || s.width.is_some()
             || s.threshold.is_some()
             || s.layers.is_some();
-        let curves_only = curves.is_some() && !layer_keys;
+        // Curves, a map or both, without layers: as curves alone.
+        let curves_only = (curves.is_some() || map.is_some()) && !layer_keys;
         Ok(Resolved {
             with_layers: !curves_only,
             curves,
+            map,
             model: self.model(),
             base: defaults.base,
             tint: defaults.tint,
@@ -448,7 +480,7 @@ impl ScratchedDesc {
             // docs/fidelity.md, but costs 1.24-1.59 x the instructions a sample on glass, 1.04-
             // 1.24 x on metal). Curves alone, under `model = "default"`: `union`, within 0.2 % of
             // explicit grooves where `max` is 1-1.7 % off, at `max`'s cost within noise
-            // (docs/scratched.md, "Curves").
+            // (docs/scratched.md, "Curves"); a map alone, or with curves, likewise.
             mix: s.layer_mix.unwrap_or(
                 if curves_only && self.model() == ModelKey::Default {
                     LayerMix::Union
@@ -482,11 +514,107 @@ impl ScratchedDesc {
         })
     }
 
+    /// The painted map (`scratches.map`, with `direction`, `map_scale` and `depth`): `direction`
+    /// or `map_scale` without a map are errors. The files are read by [`Self::scratch_map`].
+    fn resolve_map(&self, base_dir: &Path) -> Result<Option<MapSource>, MaterialError> {
+        let s = &self.scratches;
+        let Some(map) = &s.map else {
+            if let Some(d) = &s.direction {
+                return Err(invalid(
+                    "scratches.direction",
+                    format!("{d:?}"),
+                    "a flow map goes with a painted scratch map: give `scratches.map` too",
+                ));
+            }
+            if let Some(x) = s.map_scale {
+                return Err(invalid(
+                    "scratches.map_scale",
+                    format!("{x:?}"),
+                    "applies to a painted scratch map (`scratches.map`) only",
+                ));
+            }
+            return Ok(None);
+        };
+        let scale = s.map_scale.unwrap_or(1.0);
+        if !(scale.is_finite() && scale > 0.0 && (scale as f32).is_normal()) {
+            return Err(invalid(
+                "scratches.map_scale",
+                format!("{scale:?}"),
+                "must be finite and > 0",
+            ));
+        }
+        let depth = s.depth.unwrap_or(1.0);
+        if !(depth > 0.0 && depth <= 1.0) {
+            return Err(invalid(
+                "scratches.depth",
+                format!("{depth:?}"),
+                "a depth ratio must lie in (0, 1]",
+            ));
+        }
+        Ok(Some(MapSource {
+            map: base_dir.join(map),
+            direction: s.direction.as_ref().map(|d| base_dir.join(d)),
+            scale,
+            depth,
+        }))
+    }
+
+    /// The painted map read and prefiltered ([`ScratchMap::new`]), or `None`: errors name
+    /// `scratches.map` (or `scratches.direction`), the file and the pixel.
+    pub fn scratch_map(&self, r: &Resolved) -> Result<Option<ScratchMap>, MaterialError> {
+        let Some(src) = &r.map else {
+            return Ok(None);
+        };
+        let read = |key: &'static str, path: &Path| {
+            crate::render::texture::RgbImage::load(path, Some(false))
+                .map_err(|e| invalid(key, format!("{path:?}"), e.to_string()))
+        };
+        let map = read("scratches.map", &src.map)?;
+        let coverage: Vec<f32> = map.pixels.iter().map(|p| (p.x + p.y + p.z) / 3.0).collect();
+        let flow = match &src.direction {
+            Some(path) => {
+                let f = read("scratches.direction", path)?;
+                if (f.width, f.height) != (map.width, map.height) {
+                    return Err(invalid(
+                        "scratches.direction",
+                        format!("{path:?}"),
+                        format!(
+                            "{} x {} pixels: a flow map must have the map's size, {} x {}",
+                            f.width, f.height, map.width, map.height
+                        ),
+                    ));
+                }
+                Some(f.pixels.iter().map(|p| [p.x, p.y]).collect::<Vec<_>>())
+            }
+            None => None,
+        };
+        ScratchMap::new(map.width, map.height, &coverage, flow.as_deref(), src.scale)
+            .map(Some)
+            .map_err(|e| {
+                let (key, path) = match &e {
+                    MapError::Pixel {
+                        image: "direction", ..
+                    }
+                    | MapError::Size {
+                        image: "direction", ..
+                    } => (
+                        "scratches.direction",
+                        src.direction.as_deref().unwrap_or(&src.map),
+                    ),
+                    MapError::Scale(_) => ("scratches.map_scale", src.map.as_path()),
+                    _ => ("scratches.map", src.map.as_path()),
+                };
+                invalid(key, format!("{path:?}"), e.to_string())
+            })
+    }
+
     /// The curves (`scratches.curves` or `scratches.pattern`) and their stroke; the stroke
-    /// keys without curves are errors.
+    /// keys without curves are errors (but `depth`, which a map's lobes take too, where there
+    /// is a map).
     fn resolve_curves(
         &self,
         base_dir: &Path,
+        with_map: bool,
     ) -> Result<Option<(CurveSource, StrokeStyle)>, MaterialError> {
         let s = &self.scratches;
         let d = StrokeStyle::default();
@@ -540,7 +668,7 @@ impl ScratchedDesc {
                     ("scratches.taper", s.taper.is_some()),
                     ("scratches.dashes", s.dashes.is_some()),
                     ("scratches.dash_offset", s.dash_offset.is_some()),
-                    ("scratches.depth", s.depth.is_some()),
+                    ("scratches.depth", s.depth.is_some() && !with_map),
                     ("scratches.wear", s.wear.is_some()),
                     ("scratches.wear_length", s.wear_length.is_some()),
                 ];
@@ -548,7 +676,7 @@ impl ScratchedDesc {
                     return Err(invalid(
                         key,
                         "(given)",
-                        "applies to curves only (`scratches.curves` or `scratches.pattern`)",
+                        "applies to curves only (`scratches.curves`, `scratches.pattern` or `scratches.polylines`; `depth` also to `scratches.map`)",
                     ));
                 }
                 return Ok(None);
@@ -970,6 +1098,8 @@ impl ScratchedDesc {
             LayerSet::none()
         };
         let drawing = self.curve_drawing(&r)?;
+        let map = self.scratch_map(&r)?;
+        let worn_map = r.map.as_ref().is_some_and(|m| m.depth < 1.0);
         let worn = match &drawing {
             Some(d)
                 if d.polylines
@@ -978,6 +1108,7 @@ impl ScratchedDesc {
             {
                 self.worn_models(&r)?
             }
+            _ if worn_map => self.worn_models(&r)?,
             _ => Vec::new(),
         };
         if let Some(d) = &drawing {
@@ -1003,6 +1134,10 @@ impl ScratchedDesc {
             ScratchedMaterial::with_model(r.base, r.tint, model, layers, r.mix, r.coverage)
                 .with_lean(self.scratches.lean == Some(true))
                 .with_curves(curves)
+                .with_map(
+                    map.map(std::sync::Arc::new),
+                    r.map.as_ref().map_or(1.0, |m| m.depth as f32),
+                )
                 .with_worn(worn),
         )
     }
@@ -1066,7 +1201,7 @@ impl ScratchedDesc {
                     return Err(invalid(
                         "scratches.table",
                         format!("{path:?}"),
-                        "worn curves (a depth ratio below 1: `depth`, `wear`, `depths` or an SVG's stroke-opacity) read tables of the worn profile, which a table file cannot give: give the table's parameters instead",
+                        "worn curves or a worn map (a depth ratio below 1: `depth`, `wear`, `depths` or an SVG's stroke-opacity) read tables of the worn profile, which a table file cannot give: give the table's parameters instead",
                     ))
                 }
             };
@@ -1150,6 +1285,13 @@ impl ScratchedDesc {
     /// The explicit geometry's ingredients (validated like [`ScratchedDesc::resolve`]).
     pub fn explicit(&self, base_dir: &Path) -> Result<ExplicitSpec, MaterialError> {
         let r = self.resolve(base_dir)?;
+        if let Some(m) = &r.map {
+            return Err(invalid(
+                "scratches.map",
+                format!("{:?}", m.map),
+                "a painted map holds fractions, not grooves: it cannot be carved (`scratches.explicit = true`)",
+            ));
+        }
         if let TableSource::Walls(params) | TableSource::Traced(params) = &r.table {
             if let WallKind::Specular { .. } = params.walls {
                 return Err(invalid(

@@ -11,12 +11,15 @@
 //! direction `d` carried to 3D by `d.x dP/du + d.y dP/dv` and projected into the shading plane.
 //! Where no layer covers the footprint the BSDF is the base itself, at no extra cost; glass seen
 //! from inside skips the layer queries (its scratches are on the outer side, `bsdf::scratched`).
+//! Curves (METHOD.md 9.1, [`crate::curves`]) and a painted map (9.5, [`crate::maps`]) add
+//! candidate lobes beside the layers', which `layer_mix` combines alike ([`ScratchedMaterial::bsdf`]).
 
 use crate::curves::{CurveHits, CurveSet};
 use crate::layers::cache::PixelKey;
 use crate::layers::lattice::TileQuery;
 use crate::layers::layer::MAX_FOOTPRINT_CELLS;
 use crate::layers::{CoverageCache, LayerSet, Orientation, Scratch, MAX_LAYERS};
+use crate::maps::{DirectionFrame, ScratchMap};
 use crate::math::{Rgb, Vec3};
 use crate::precompute::groove::totally_reflected;
 use crate::render::bsdf::scratched::MAX_SCRATCH_LOBES;
@@ -111,6 +114,10 @@ pub struct ScratchedMaterial {
     pub layers: LayerSet,
     /// Scratches as curves (METHOD.md 9.1, [`crate::curves`]), beside the layers or alone.
     pub curves: Option<Arc<CurveSet>>,
+    /// A painted scratch map (METHOD.md 9.5, [`crate::maps`]) and its lobes' depth ratio, beside
+    /// the layers and curves or alone ([`Self::with_map`]).
+    pub map: Option<Arc<ScratchMap>>,
+    map_depth: f32,
     /// The model at depth ratios below 1, ascending, for worn curves ([`Self::with_worn`]).
     worn: Vec<(f32, ScratchModel)>,
     /// Each layer's scratch direction `d_k` in texture space ([`LayerSet::direction`]), as `f32`,
@@ -165,6 +172,8 @@ impl ScratchedMaterial {
             model,
             layers,
             curves: None,
+            map: None,
+            map_depth: 1.0,
             worn: Vec::new(),
             directions,
             mix,
@@ -179,6 +188,18 @@ impl ScratchedMaterial {
     /// alike ([`Self::bsdf`]).
     pub fn with_curves(mut self, curves: Option<Arc<CurveSet>>) -> Self {
         self.curves = curves;
+        self
+    }
+
+    /// The same material with the painted scratch map `map` beside its layers and curves
+    /// (METHOD.md 9.5), its lobes of depth ratio `depth` (in `(0, 1]`; below 1 they read the worn
+    /// tables, [`Self::with_worn`]): at a hit the map is one more candidate lobe, its coverage
+    /// the map's filtered fraction over the footprint and its direction drawn from the filtered
+    /// orientation ([`crate::maps::MapSample::draw_direction`]); `layer_mix` combines it with
+    /// layers and curves alike ([`Self::bsdf`]). A map knows no crossings: one lobe at most.
+    pub fn with_map(mut self, map: Option<Arc<ScratchMap>>, depth: f32) -> Self {
+        self.map = map;
+        self.map_depth = depth;
         self
     }
 
@@ -287,11 +308,15 @@ impl ScratchedMaterial {
             Some(c) => self.curve_hits(c, ctx, cache, inside),
             None => CurveHits::new(),
         };
-        if !covered && curves.is_empty() {
+        let map = match &self.map {
+            Some(m) => self.map_hit(m, ctx, cache, inside),
+            None => None,
+        };
+        if !covered && curves.is_empty() && map.is_none() {
             return self.base_bsdf();
         }
         let mut lobes = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
-        let (count, depth) = self.choose_lobes(ctx, &cov[..k], &curves, &mut lobes);
+        let (count, depth) = self.choose_lobes(ctx, &cov[..k], &curves, map, &mut lobes);
         if count == 0 {
             return self.base_bsdf();
         }
@@ -344,20 +369,82 @@ impl ScratchedMaterial {
         }
     }
 
-    /// The lobes of a hit, from the layers' coverages `cov` and the curves `curves` covering
-    /// it, which `layer_mix` treats alike (METHOD.md sections 6, 9.1): `max` takes the largest
+    /// The painted map at the hit (METHOD.md 9.5): its prefiltered value over the sample's own
+    /// footprint centred on the hit, trilinear ([`ScratchMap::filtered`]), its edges the
+    /// pixel's first sample's at hits reached from the camera by delta bounces under
+    /// `coverage = "footprint"` ([`CoverageCache::map_footprint`]), else the sample's own
+    /// (`ShadingContext::footprint_uv`); at the hit point (the finest level) from inside
+    /// dielectric-walled glass and under `coverage = "point"`; `None` where the map holds no
+    /// scratch there. Not the pixel centre's footprint, as the layers' and curves' exact
+    /// coverage is: the samples' hits spread over the pixel, so a pixel averages the map's
+    /// filter over its footprint, and the pixels' sum keeps the map's integral whatever the
+    /// filter's width against the pixel spacing (the filter sampled at the pixel centres
+    /// alone aliases by up to 10 %). Its direction is drawn by a hash of `u_layer`
+    /// ([`crate::maps::MapSample::draw_direction`]) and given in texture space.
+    #[inline(always)]
+    fn map_hit(
+        &self,
+        map: &ScratchMap,
+        ctx: &ShadingContext,
+        cache: &mut CoverageCache,
+        inside: bool,
+    ) -> Option<MapHit> {
+        let s = if inside || self.coverage == CoverageMode::Point {
+            map.at_point(ctx.uv)
+        } else {
+            let (a, b) = match ctx.pixel {
+                Some(hit) if self.coverage == CoverageMode::Footprint => cache.map_footprint(
+                    PixelKey {
+                        shape: hit.shape,
+                        chain: hit.chain,
+                    },
+                    || ctx.footprint_uv(),
+                ),
+                _ => ctx.footprint_uv(),
+            };
+            map.filtered(ctx.uv, a, b)
+        };
+        // (`MapSample::coverage` is never NaN.)
+        if s.coverage <= 0.0 {
+            return None;
+        }
+        // A second uniform from `u_layer`'s bits, hashed: independent of the layers' pick.
+        let v = (crate::hash::mix64(ctx.u_layer.to_bits() as u64 ^ 0x6d61_7073) >> 40) as f32
+            * (1.0 / (1u64 << 24) as f32);
+        let d = s.draw_direction(v);
+        let d = match map.frame() {
+            DirectionFrame::Uv => d,
+            // The flow map's unit tangents in texture space: `dP/du / |dP/du|` is `u / |dP/du|`.
+            DirectionFrame::Tangent => {
+                let (lu, lv) = (ctx.dpdu.length(), ctx.dpdv.length());
+                if lu > 0.0 && lv > 0.0 && (lu * lv).is_finite() {
+                    crate::math::Vec2::new(d.x / lu, d.y / lv)
+                } else {
+                    d
+                }
+            }
+        };
+        Some(MapHit {
+            coverage: s.coverage,
+            direction: [d.x, d.y],
+        })
+    }
+
+    /// The lobes of a hit, from the layers' coverages `cov`, the curves `curves` and the map's
+    /// lobe `map` covering it, which `layer_mix` treats alike (METHOD.md sections 6, 9.1, 9.5): `max` takes the largest
     /// coverage, one of the ties chosen by `ctx.u_layer` (several scratches crossing the
     /// footprint equally); `sum` ([Raymond16]) a lobe for each, the [`MAX_SCRATCH_LOBES`]
     /// largest where more cover the hit; `union` the same, scaled to the union's coverage
     /// ([`union_scale`]). Returns the lobes' count (0 where nothing covers the hit) and the
-    /// depth ratio their BSDF reads (METHOD.md 9.2): the chosen curve's in `max`, the largest
-    /// covering curve's in `sum` and `union`, 1 for layers.
+    /// depth ratio their BSDF reads (METHOD.md 9.2): the chosen curve's (or the map's) in
+    /// `max`, the largest covering curve's (else the map's) in `sum` and `union`, 1 for layers.
     #[inline(always)]
     fn choose_lobes(
         &self,
         ctx: &ShadingContext,
         cov: &[f32],
         curves: &CurveHits,
+        map: Option<MapHit>,
         lobes: &mut [ScratchLobe; MAX_SCRATCH_LOBES],
     ) -> (usize, f32) {
         let curve_lobe = |i: usize, c: f32| {
@@ -367,7 +454,10 @@ impl ScratchedMaterial {
         if self.mix == LayerMix::Max {
             // (`curves` come largest first.)
             let first = curves.first().map_or(0.0, |h| h.coverage as f32);
-            let best = cov.iter().copied().fold(first, f32::max);
+            let mut best = cov.iter().copied().fold(first, f32::max);
+            if let Some(m) = map {
+                best = best.max(m.coverage);
+            }
             if best <= 0.0 {
                 // (`best` is never NaN: `f32::max` drops NaN.)
                 return (0, 1.0);
@@ -383,7 +473,8 @@ impl ScratchedMaterial {
                 .fold(0u64, |m, (i, &c)| m | (tie(c) as u64) << i);
             let nl = layer_ties.count_ones();
             let nc = curves.iter().take_while(|h| tie(h.coverage as f32)).count() as u32;
-            let n = nl + nc;
+            let nm = map.is_some_and(|m| tie(m.coverage)) as u32;
+            let n = nl + nc + nm;
             let pick = ((ctx.u_layer * n as f32) as u32).min(n - 1);
             // `u_layer`'s place within the pick's share, for the lean.
             let u = (ctx.u_layer * n as f32 - pick as f32).clamp(0.0, 1.0);
@@ -396,12 +487,18 @@ impl ScratchedMaterial {
                 lobes[0] = lobe(self, ctx, layer, cov[layer], u);
                 return (1, 1.0);
             }
+            if let Some(m) = map.filter(|_| pick == nl + nc) {
+                lobes[0] = lobe_along(ctx, m.direction, m.coverage);
+                return (1, self.map_depth);
+            }
             let i = (pick - nl) as usize;
             lobes[0] = curve_lobe(i, curves[i].coverage as f32);
             return (1, curves[i].depth);
         }
-        // Sum and union: every covering layer and curve (a curve as `MAX_LAYERS + i`).
-        const ALL: usize = MAX_LAYERS + crate::curves::MAX_CURVE_HITS;
+        // Sum and union: every covering layer and curve (a curve as `MAX_LAYERS + i`) and the
+        // map (as `MAP_SLOT`).
+        const MAP_SLOT: usize = MAX_LAYERS + crate::curves::MAX_CURVE_HITS;
+        const ALL: usize = MAP_SLOT + 1;
         let mut all = arrayvec::ArrayVec::<(f32, usize), ALL>::new();
         all.extend(
             cov.iter()
@@ -415,6 +512,9 @@ impl ScratchedMaterial {
                 .enumerate()
                 .map(|(i, h)| (h.coverage as f32, MAX_LAYERS + i)),
         );
+        if let Some(m) = map {
+            all.push((m.coverage, MAP_SLOT));
+        }
         let scale = if self.mix == LayerMix::Union {
             let c: arrayvec::ArrayVec<f32, ALL> = all.iter().map(|x| x.0).collect();
             union_scale(&c)
@@ -428,14 +528,24 @@ impl ScratchedMaterial {
         for (l, &(c, i)) in lobes.iter_mut().zip(&all[..n]) {
             *l = if i < MAX_LAYERS {
                 lobe(self, ctx, i, c * scale, ctx.u_layer)
+            } else if i == MAP_SLOT {
+                let d = map.map_or([1.0, 0.0], |m| m.direction);
+                lobe_along(ctx, d, c * scale)
             } else {
                 curve_lobe(i - MAX_LAYERS, c * scale)
             };
         }
         let depth = all[..n]
             .iter()
-            .find(|x| x.1 >= MAX_LAYERS)
-            .map_or(1.0, |x| curves[x.1 - MAX_LAYERS].depth);
+            .find(|x| x.1 >= MAX_LAYERS && x.1 != MAP_SLOT)
+            .map(|x| curves[x.1 - MAX_LAYERS].depth)
+            .or_else(|| {
+                all[..n]
+                    .iter()
+                    .any(|x| x.1 == MAP_SLOT)
+                    .then_some(self.map_depth)
+            })
+            .unwrap_or(1.0);
         (n, depth)
     }
 
@@ -670,6 +780,15 @@ pub fn union_scale(cov: &[f32]) -> f32 {
     }
     let uncovered: f32 = cov.iter().map(|c| 1.0 - c.clamp(0.0, 1.0)).product();
     ((1.0 - uncovered) / sum).min(1.0)
+}
+
+/// The painted map's candidate lobe at a hit ([`ScratchedMaterial::map_hit`]).
+#[derive(Clone, Copy, Debug)]
+struct MapHit {
+    /// The filtered scratched fraction, in `(0, 1]`.
+    coverage: f32,
+    /// The direction in texture space (carried to 3D by [`lobe_along`]).
+    direction: [f32; 2],
 }
 
 /// What a hit from inside dielectric-walled glass meets ([`ScratchedMaterial::inside_coverage`]).

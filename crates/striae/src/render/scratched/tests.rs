@@ -1166,3 +1166,72 @@ fn worn_curves_read_the_worn_profiles_table() {
         "{mean} vs {want}"
     );
 }
+
+/// A painted map's lobe (METHOD.md 9.5): its coverage is the map's, and a flow map's direction
+/// `2 rg - 1` is carried along the unit tangents `dP/du / |dP/du|`, `dP/dv / |dP/dv|` into the
+/// shading plane (glTF `KHR_materials_anisotropy`), on a sheared, unequally scaled
+/// parametrisation; without a flow map, the structure's direction is a texture direction.
+#[test]
+fn a_flow_map_turns_the_maps_lobe_in_the_tangent_frame() {
+    use crate::maps::ScratchMap;
+    let t = lossless_diffuse();
+    let material = |map: ScratchMap| {
+        ScratchedMaterial::new(
+            ScratchedBase::Metal {
+                ior: perfect_mirror(),
+            },
+            Rgb::ONE,
+            t.clone(),
+            LayerSet::none(),
+            LayerMix::Union,
+            CoverageMode::Footprint,
+        )
+        .with_map(Some(Arc::new(map)), 1.0)
+    };
+    let mut ctx = flat_ctx(Vec2::splat(0.5), 0.0, Vec3::Z, 0.5);
+    ctx.dpdu = Vec3::new(2.0, 0.0, 0.3);
+    ctx.dpdv = Vec3::new(1.0, 1.0, 0.0);
+    let (tu, tv) = (ctx.dpdu.normalize(), ctx.dpdv.normalize());
+    for (rg, d) in [
+        ([0.5f32, 1.0f32], Vec2::new(0.0, 1.0)),
+        ([1.0, 0.5], Vec2::new(1.0, 0.0)),
+        ([0.0, 0.0], Vec2::new(-1.0, -1.0)),
+        ([0.25, 0.9], Vec2::new(-0.5, 0.8)),
+    ] {
+        let m = material(ScratchMap::new(1, 1, &[0.75], Some(&[rg]), 1.0).unwrap());
+        let Bsdf::Scratched(b) = bsdf_of(&m, &ctx) else {
+            panic!("the map covers every point")
+        };
+        assert_eq!(b.lobes().len(), 1);
+        let l = b.lobes()[0];
+        assert!((l.coverage - 0.75).abs() < 1e-6, "{}", l.coverage);
+        let t3 = tu * d.x + tv * d.y;
+        let expect = Vec2::new(t3.x, t3.y).normalize();
+        // A scratch has no sign.
+        let dot = l.cos * expect.x + l.sin * expect.y;
+        assert!(
+            dot.abs() > 1.0 - 1e-5,
+            "{rg:?}: ({}, {}) vs {expect:?}",
+            l.cos,
+            l.sin
+        );
+    }
+    // No flow map: a band along u reads along dP/du (a texture direction).
+    let (w, h) = (32, 32);
+    let cov: Vec<f32> = (0..w * h)
+        .map(|i| {
+            if (14..18).contains(&(i / w)) {
+                1.0
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let m = material(ScratchMap::new(w, h, &cov, None, 1.0).unwrap());
+    let Bsdf::Scratched(b) = bsdf_of(&m, &ctx) else {
+        panic!("the band covers the centre")
+    };
+    let l = b.lobes()[0];
+    let expect = Vec2::new(ctx.dpdu.x, ctx.dpdu.y).normalize();
+    assert!((l.cos * expect.x + l.sin * expect.y).abs() > 1.0 - 1e-5);
+}

@@ -654,3 +654,90 @@ fn curves_alone_or_beside_layers() {
     .unwrap_err();
     assert!(e.contains("spiral"), "{e}");
 }
+
+/// A painted map (METHOD.md 9.5) alone (no layers, `union`) or beside layers (`max`), and its
+/// errors, each naming the key and the file (and the pixel).
+#[test]
+fn maps_alone_or_beside_layers_and_their_errors() {
+    let dir = std::env::temp_dir().join(format!("striae-map-keys-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let grey = |name: &str, w: u32, h: u32, v: u8| {
+        image::GrayImage::from_pixel(w, h, image::Luma([v]))
+            .save(dir.join(name))
+            .unwrap();
+    };
+    grey("wear.png", 8, 8, 128);
+    grey("flow.png", 8, 8, 255);
+    grey("small.png", 4, 8, 255);
+    // An EXR holding 1.5 at pixel (2, 1).
+    let mut px = vec![crate::math::Rgb::splat(0.5); 4 * 3];
+    px[4 + 2] = crate::math::Rgb::splat(1.5);
+    crate::render::film::Image {
+        width: 4,
+        height: 3,
+        pixels: px,
+    }
+    .write_exr(&dir.join("over.exr"))
+    .unwrap();
+    let prepare = |scratches: &str| -> Result<ScratchedMaterial, String> {
+        let text = format!(
+            "type = \"scratched\"\nbase = \"metal\"\npreset = \"gold\"\n[scratches]\nm = 16\nn = 200\n{scratches}"
+        );
+        let m: MaterialDesc = toml::from_str(&text).map_err(|e| e.to_string())?;
+        let MaterialDesc::Scratched(s) = m else {
+            return Err("not scratched".into());
+        };
+        s.prepare(&dir).map_err(|e| e.to_string())
+    };
+    let m = prepare("map = \"wear.png\"").unwrap();
+    assert_eq!(m.layers.len(), 0);
+    assert_eq!(m.mix, LayerMix::Union);
+    // Read linear: 128 / 255, not sRGB-decoded (0.216).
+    let s = m
+        .map
+        .as_ref()
+        .unwrap()
+        .at_point(crate::math::Vec2::splat(0.5));
+    assert!((s.coverage - 128.0 / 255.0).abs() < 1e-6, "{}", s.coverage);
+    let m =
+        prepare("map = \"wear.png\"\ndirection = \"flow.png\"\nsetting = 2\nlayers = 2").unwrap();
+    assert_eq!((m.layers.len(), m.mix), (2, LayerMix::Max));
+    assert!(m.curves.is_none() && m.map.is_some());
+    let err = |s: &str| prepare(s).unwrap_err();
+    let e = err("map = \"missing.png\"");
+    assert!(
+        e.contains("scratches.map") && e.contains("missing.png"),
+        "{e}"
+    );
+    let e = err("map = \"over.exr\"");
+    assert!(
+        e.contains("scratches.map") && e.contains("over.exr") && e.contains("(2, 1)"),
+        "{e}"
+    );
+    let e = err("direction = \"flow.png\"");
+    assert!(
+        e.contains("scratches.direction") && e.contains("scratches.map"),
+        "{e}"
+    );
+    let e = err("map = \"wear.png\"\ndirection = \"small.png\"");
+    assert!(
+        e.contains("scratches.direction") && e.contains("map's size"),
+        "{e}"
+    );
+    let e = err("map = \"wear.png\"\nmap_scale = 0.0");
+    assert!(e.contains("scratches.map_scale"), "{e}");
+    let e = err("map_scale = 2.0");
+    assert!(e.contains("scratches.map_scale"), "{e}");
+    let e = err("map = \"wear.png\"\ndepth = 1.5");
+    assert!(e.contains("scratches.depth"), "{e}");
+    let e = err("map = \"wear.png\"\ntaper = 0.1");
+    assert!(e.contains("scratches.taper"), "{e}");
+    // A map cannot be carved.
+    let text = "type = \"scratched\"\nbase = \"metal\"\npreset = \"gold\"\n[scratches]\nmap = \"wear.png\"\nexplicit = true";
+    let MaterialDesc::Scratched(s) = toml::from_str::<MaterialDesc>(text).unwrap() else {
+        panic!("not scratched")
+    };
+    let e = s.explicit(&dir).unwrap_err().to_string();
+    assert!(e.contains("scratches.map") && e.contains("carved"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
