@@ -639,7 +639,16 @@ impl Importer {
         else {
             return Err(self.error(element, "no such light"));
         };
-        let intensity = Rgb::from(light.color) * light.intensity / LUMENS_PER_WATT;
+        let json::validation::Checked::Valid(kind) = light.type_ else {
+            return Err(self.error(element, "invalid type"));
+        };
+        // Blender's exporter writes a sun's W/m^2 as its "lux" (docs/blender.md): read as written.
+        let blender_sun = kind == Type::Directional && self.written_by_blender();
+        let lumens_per_watt = if blender_sun { 1.0 } else { LUMENS_PER_WATT };
+        if blender_sun {
+            warn(&self.file, &format!("{element}: written by Blender's exporter, whose directional intensity is the sun's W/m^2, not lux: read as W/m^2"));
+        }
+        let intensity = Rgb::from(light.color) * light.intensity / lumens_per_watt;
         if !(intensity.is_finite() && intensity.min_element() >= 0.0) {
             return Err(self.error(element, "color and intensity must be finite and >= 0"));
         }
@@ -648,9 +657,6 @@ impl Importer {
         }
         let position = world.transform_point3(Vec3::ZERO);
         let direction = world.transform_vector3(-Vec3::Z).normalize_or_zero();
-        let json::validation::Checked::Valid(kind) = light.type_ else {
-            return Err(self.error(element, "invalid type"));
-        };
         Ok(Some(match kind {
             Type::Directional => {
                 if direction == Vec3::ZERO {
@@ -689,6 +695,12 @@ impl Importer {
                 }
             }
         }))
+    }
+
+    /// Whether `asset.generator` names Blender's glTF exporter ("Khronos glTF Blender I/O").
+    fn written_by_blender(&self) -> bool {
+        (self.root.asset.generator.as_deref())
+            .is_some_and(|g| g.starts_with("Khronos glTF Blender I/O"))
     }
 
     /// The local mesh of `meshes[m].primitives[p]`, `None` (with a warning) for a primitive

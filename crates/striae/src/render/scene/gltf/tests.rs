@@ -323,6 +323,37 @@ fn punctual_lights_are_converted_to_radiometric_units() {
     assert!((cos_inner - 0.2f32.cos()).abs() < 1e-6 && (cos_outer - 0.4f32.cos()).abs() < 1e-6);
 }
 
+#[test]
+fn blenders_sun_is_read_in_watts_per_square_metre() {
+    let doc = |generator: &str| {
+        json!({
+            "asset": { "version": "2.0", "generator": generator },
+            "extensionsUsed": ["KHR_lights_punctual"],
+            "scenes": [{ "nodes": [0, 1] }],
+            "nodes": [
+                { "extensions": { "KHR_lights_punctual": { "light": 0 } } },
+                { "extensions": { "KHR_lights_punctual": { "light": 1 } } }
+            ],
+            "extensions": { "KHR_lights_punctual": { "lights": [
+                { "type": "directional", "intensity": 3 },
+                { "type": "point", "intensity": 683 }
+            ] } }
+        })
+    };
+    let irradiance = |g: &GltfScene| match g.lights[0] {
+        GltfLight::Sun { irradiance, .. } => irradiance,
+        _ => panic!("{:?}", g.lights[0]),
+    };
+    let blender = import_ok(&serde_json::to_vec(&doc("Khronos glTF Blender I/O v5.0.21")).unwrap());
+    let other = import_ok(&serde_json::to_vec(&doc("another exporter")).unwrap());
+    assert_eq!(irradiance(&blender), Rgb::splat(3.0));
+    assert_eq!(irradiance(&other), Rgb::splat(3.0 / 683.0));
+    // Point lights are candela in both.
+    for g in [&blender, &other] {
+        assert!(matches!(g.lights[1], GltfLight::Point { intensity, .. } if intensity == Rgb::ONE));
+    }
+}
+
 /// A 2 x 1 PNG: red, then white.
 fn png_bytes() -> Vec<u8> {
     let img = image::RgbImage::from_raw(2, 1, vec![255, 0, 0, 255, 255, 255]).unwrap();
