@@ -37,9 +37,11 @@ LUMA = np.array([0.2126, 0.7152, 0.0722])
 # `cycles-compare.png`, which outlines them.
 REGIONS = {
     "floor lit": (100, 95, 150, 112),
-    "copper cube": (92, 42, 122, 72),
-    "glass sphere": (34, 40, 62, 70),
-    "sphere shadow": (10, 76, 36, 86),
+    "floor far": (0, 42, 30, 52),
+    "copper cube": (94, 44, 120, 70),
+    "glass sphere": (38, 38, 66, 64),
+    "caustic": (44, 72, 62, 80),
+    "sphere shadow": (4, 60, 28, 72),
 }
 
 
@@ -137,7 +139,8 @@ def main():
         for axis in ax[:2]:
             axis.add_patch(Rectangle((x0 - 0.5, y0 - 0.5), x1 - x0, y1 - y0, fill=False,
                                      edgecolor="yellow", linewidth=0.8))
-    lr = np.where(lit, np.log2((bs @ LUMA) / np.maximum(bc @ LUMA, 1e-9)), np.nan)
+    lr = np.full(lit.shape, np.nan)
+    lr[lit] = np.log2(np.maximum(bs @ LUMA, 1e-9)[lit] / (bc @ LUMA)[lit])
     im = ax[2].imshow(lr, cmap="RdBu_r", vmin=-0.5, vmax=0.5)
     ax[2].set_title(f"log2 striae / Cycles, {a.block} x {a.block} blocks")
     fig.colorbar(im, ax=ax[2], fraction=0.035)

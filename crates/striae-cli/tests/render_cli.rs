@@ -139,6 +139,12 @@ fn outputs_that_would_be_wrong_or_would_replace_what_is_not_a_file_are_refused()
         &dir.join("a.jpg"),
     );
     assert!(!ok && err.contains("not .jpg"), "{err}");
+    // A folder that does not exist is named before anything is rendered.
+    let (ok, err) = striae(
+        &["render", "--spp", "1", "--res", "8x6", "-q"],
+        &dir.join("missing/a.exr"),
+    );
+    assert!(!ok && err.contains("missing does not exist"), "{err}");
     assert_eq!(
         std::fs::read_dir(&dir).unwrap().count(),
         0,

@@ -225,6 +225,17 @@ pub fn publish_folder(tmp: TempFile, dest: &Path) -> std::io::Result<()> {
 /// folder at its name is refused before anything is written (renaming over `/dev/null` would
 /// replace the device itself).
 pub fn check_destination(path: &Path) -> std::io::Result<()> {
+    // The folder first, so that a long render does not end in a failed write.
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    if !folder.is_dir() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            format!("folder {} does not exist", folder.display()),
+        ));
+    }
     // `metadata` follows a symbolic link: what it names must be a regular file too.
     match std::fs::metadata(path).ok().as_ref().and_then(not_regular) {
         Some(what) => Err(std::io::Error::new(

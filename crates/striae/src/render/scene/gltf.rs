@@ -13,7 +13,9 @@
 //! Units: glTF lengths are metres and striae's are unitless, taken as they are. Punctual light
 //! intensities are photometric (candela for point and spot lights, lux for directional ones);
 //! striae is radiometric: `I [W/sr] = cd / 683` and `E [W/m^2] = lux / 683`, 683 lm/W being the
-//! luminous efficacy at 555 nm (the definition of the candela).
+//! luminous efficacy at 555 nm (the definition of the candela). One exception: Blender's
+//! exporter writes a sun's W/m^2 as its "lux" (`docs/blender.md`), so a directional light in a
+//! file whose `asset.generator` names that exporter is read as W/m^2, with a warning.
 
 // `!(x > 0.0)` is meant: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -98,26 +100,13 @@ pub struct ImportedMaterial {
     pub index: Option<usize>,
     /// Unique within the scene (`name`, `name#2`, ...; an unnamed material is `material<i>`).
     pub name: String,
-    /// `baseColorFactor` (rgb) times `baseColorTexture` (sRGB decoded).
-    pub base_color: Texture,
-    pub metallic: f32,
-    /// Perceptual roughness (GGX alpha = roughness^2).
-    pub roughness: f32,
-    /// `metallicRoughnessTexture`, linear: green = roughness, blue = metallic (times the factors).
-    pub metallic_roughness: Option<Texture>,
-    pub normal_map: Option<Texture>,
-    pub normal_scale: f32,
-    /// `KHR_materials_ior` (default 1.5).
-    pub ior: f32,
-    /// `KHR_materials_transmission` (default 0).
-    pub transmission: f32,
-    /// `KHR_materials_volume` (the thickness is not needed: meshes are closed).
-    pub attenuation_color: [f32; 3],
-    pub attenuation_distance: Option<f32>,
-    /// `KHR_materials_anisotropy`: strength and rotation in degrees (counter-clockwise from the
-    /// tangent, glTF's radians converted).
-    pub anisotropy: f32,
-    pub anisotropy_rotation: f32,
+    /// The metallic-roughness description, glTF's factors and textures field for field:
+    /// `base_color` is `baseColorFactor` (rgb) times `baseColorTexture` (sRGB decoded), not
+    /// yet clamped; `metallic_roughness` is linear (green: roughness, blue: metallic, times the
+    /// factors); `ior` is `KHR_materials_ior`, `transmission` `KHR_materials_transmission`,
+    /// the attenuation `KHR_materials_volume`'s (its thickness is not needed: meshes are
+    /// closed); `anisotropy_rotation` is in degrees, counter-clockwise from the tangent.
+    pub pbr: PbrDesc,
     /// `emissiveFactor * KHR_materials_emissive_strength`, where not black.
     pub emission: Option<Rgb>,
     /// `STRIAE_materials_scratches`, read as `[materials.NAME.scratches]` is.
@@ -970,18 +959,20 @@ impl Importer {
         Ok(ImportedMaterial {
             index,
             name,
-            base_color,
-            metallic,
-            roughness,
-            metallic_roughness,
-            normal_map,
-            normal_scale,
-            ior,
-            transmission,
-            attenuation_color,
-            attenuation_distance,
-            anisotropy,
-            anisotropy_rotation,
+            pbr: PbrDesc {
+                base_color,
+                metallic,
+                roughness,
+                metallic_roughness,
+                normal_map,
+                normal_scale,
+                ior,
+                transmission,
+                attenuation_color,
+                attenuation_distance,
+                anisotropy,
+                anisotropy_rotation,
+            },
             emission: (emission.max_element() > 0.0).then_some(emission),
             scratches,
         })
@@ -1203,11 +1194,12 @@ impl ImportedMaterial {
     /// base colour ([`metal_ior_from_color`]); the base is smooth. Without it: `type = "pbr"`
     /// ([`PbrDesc`]), field for field.
     pub fn to_desc(&self, file: &Path) -> Result<MaterialDesc, GltfError> {
+        let pbr = &self.pbr;
         let element = match self.index {
             Some(i) => format!("materials[{i}]"),
             None => "(default material)".into(),
         };
-        let constant_color = || match &self.base_color {
+        let constant_color = || match &pbr.base_color {
             Texture::Constant(c) => *c,
             Texture::Image {
                 image: Some(img), ..
@@ -1225,18 +1217,18 @@ impl ImportedMaterial {
                     message: "explicit grooves are carved into a TOML scene's rectangles and boxes, not glTF meshes".into(),
                 });
             }
-            if self.roughness > 0.0 {
+            if pbr.roughness > 0.0 {
                 warn(
                     file,
                     &format!(
                         "{element}: a scratched material's base is smooth: roughness {} ignored",
-                        self.roughness
+                        pbr.roughness
                     ),
                 );
             }
-            let (base, ior, eta, k) = if self.transmission > 0.0 {
-                (BaseKind::Glass, Some(self.ior), None, None)
-            } else if self.metallic > 0.0 {
+            let (base, ior, eta, k) = if pbr.transmission > 0.0 {
+                (BaseKind::Glass, Some(pbr.ior), None, None)
+            } else if pbr.metallic > 0.0 {
                 let (eta, k) = metal_ior_from_color(constant_color());
                 (
                     BaseKind::Metal,
@@ -1260,22 +1252,12 @@ impl ImportedMaterial {
                 scratches: spec.clone(),
             }));
         }
-        if self.base_color.range().is_some_and(|(_, hi)| hi > 1.0) {
+        if pbr.base_color.range().is_some_and(|(_, hi)| hi > 1.0) {
             warn(file, &format!("{element}: base colour above 1 clamped"));
         }
         Ok(MaterialDesc::Pbr(PbrDesc {
-            base_color: clamp_unit(&self.base_color),
-            metallic: self.metallic,
-            roughness: self.roughness,
-            metallic_roughness: self.metallic_roughness.clone(),
-            normal_map: self.normal_map.clone(),
-            normal_scale: self.normal_scale,
-            ior: self.ior,
-            transmission: self.transmission,
-            attenuation_color: self.attenuation_color,
-            attenuation_distance: self.attenuation_distance,
-            anisotropy: self.anisotropy,
-            anisotropy_rotation: self.anisotropy_rotation,
+            base_color: clamp_unit(&pbr.base_color),
+            ..pbr.clone()
         }))
     }
 }

@@ -399,7 +399,7 @@ fn materials_map_factors_textures_and_extensions() {
         srgb: Some(true),
         path,
         ..
-    } = &g.materials[0].base_color
+    } = &g.materials[0].pbr.base_color
     else {
         panic!()
     };
@@ -409,7 +409,7 @@ fn materials_map_factors_textures_and_extensions() {
         vec![Rgb::new(0.5, 0.0, 0.0), Rgb::new(0.5, 1.0, 1.0)]
     );
     assert!(
-        matches!(g.materials[0].to_desc(Path::new("t")).unwrap(), MaterialDesc::Pbr(p) if p.metallic == 0.0 && p.base_color == g.materials[0].base_color)
+        matches!(g.materials[0].to_desc(Path::new("t")).unwrap(), MaterialDesc::Pbr(p) if p.metallic == 0.0 && p.base_color == g.materials[0].pbr.base_color)
     );
     let MaterialDesc::Pbr(gold) = g.materials[1].to_desc(Path::new("t")).unwrap() else {
         panic!()
@@ -419,13 +419,14 @@ fn materials_map_factors_textures_and_extensions() {
         (1.0, 0.5, Texture::Constant(Rgb::new(1.0, 0.78, 0.34)))
     );
     let glass = &g.materials[2];
-    assert_eq!((glass.ior, glass.transmission), (1.7, 1.0));
+    assert_eq!((glass.pbr.ior, glass.pbr.transmission), (1.7, 1.0));
     assert_eq!(
-        (glass.attenuation_color, glass.attenuation_distance),
+        (glass.pbr.attenuation_color, glass.pbr.attenuation_distance),
         ([0.9, 0.8, 0.7], Some(2.0))
     );
     assert!(
-        (glass.anisotropy - 0.6).abs() < 1e-6 && (glass.anisotropy_rotation - 90.0).abs() < 1e-3
+        (glass.pbr.anisotropy - 0.6).abs() < 1e-6
+            && (glass.pbr.anisotropy_rotation - 90.0).abs() < 1e-3
     );
     let MaterialDesc::Pbr(p) = glass.to_desc(Path::new("t")).unwrap() else {
         panic!()
@@ -436,7 +437,7 @@ fn materials_map_factors_textures_and_extensions() {
     );
     assert_eq!(
         (p.anisotropy, p.attenuation_color),
-        (glass.anisotropy, [0.9, 0.8, 0.7])
+        (glass.pbr.anisotropy, [0.9, 0.8, 0.7])
     );
     assert_eq!(g.materials[3].emission, Some(Rgb::new(4.0, 2.0, 1.0)));
     assert_eq!(g.materials[0].emission, None);
@@ -883,8 +884,8 @@ fn blender_export_imports() {
         .lights
         .iter()
         .any(|l| matches!(l, GltfLight::Point { .. })));
-    assert!(g.materials.iter().any(|m| m.transmission == 1.0));
-    assert!(g.materials.iter().any(|m| m.metallic == 1.0));
+    assert!(g.materials.iter().any(|m| m.pbr.transmission == 1.0));
+    assert!(g.materials.iter().any(|m| m.pbr.metallic == 1.0));
     assert!(g.materials.iter().any(|m| m.emission.is_some()));
     let o = Overrides {
         resolution: Some((16, 12)),
