@@ -438,36 +438,11 @@ pub fn structure_orientations(
             tensor[y as usize * width + x as usize] = [gx * gx, gy * gy, gx * gy];
         }
     }
-    // Separable smoothing, wrapping.
-    let kernel = tensor_kernel();
-    let r = TENSOR_RADIUS as i64;
-    let mut tmp = tensor.clone();
-    for y in 0..height {
-        for x in 0..width {
-            let mut s = [0.0f32; 3];
-            for (k, w) in kernel.iter().enumerate() {
-                let xx = (x as i64 + k as i64 - r).rem_euclid(width as i64) as usize;
-                let t = tensor[y * width + xx];
-                for c in 0..3 {
-                    s[c] += w * t[c];
-                }
-            }
-            tmp[y * width + x] = s;
-        }
-    }
-    for y in 0..height {
-        for x in 0..width {
-            let mut s = [0.0f32; 3];
-            for (k, w) in kernel.iter().enumerate() {
-                let yy = (y as i64 + k as i64 - r).rem_euclid(height as i64) as usize;
-                let t = tmp[yy * width + x];
-                for c in 0..3 {
-                    s[c] += w * t[c];
-                }
-            }
-            tensor[y * width + x] = s;
-        }
-    }
+    // Separable smoothing, wrapping: rows, then columns.
+    let mut tmp =
+        crate::memory::try_alloc_vec(width * height, [0.0f32; 3], "a scratch map's tensor")?;
+    smooth_wrapping(&tensor, &mut tmp, width, height, (1, 0));
+    smooth_wrapping(&tmp, &mut tensor, width, height, (0, 1));
     drop(tmp);
     let floor = TENSOR_FLOOR * tensor.iter().map(|t| t[0] + t[1]).fold(0.0f32, f32::max);
     let mut pyramid = vec![Level {
@@ -503,6 +478,34 @@ pub fn structure_orientations(
         }
     }
     Ok(out)
+}
+
+/// `src` convolved with the tensor's Gaussian along `step` (`(1, 0)`: rows, `(0, 1)`: columns),
+/// wrapping at the image's edges, into `dst`.
+fn smooth_wrapping(
+    src: &[[f32; 3]],
+    dst: &mut [[f32; 3]],
+    width: usize,
+    height: usize,
+    step: (i64, i64),
+) {
+    let kernel = tensor_kernel();
+    let r = TENSOR_RADIUS as i64;
+    for y in 0..height {
+        for x in 0..width {
+            let mut s = [0.0f32; 3];
+            for (k, w) in kernel.iter().enumerate() {
+                let d = k as i64 - r;
+                let xx = (x as i64 + d * step.0).rem_euclid(width as i64) as usize;
+                let yy = (y as i64 + d * step.1).rem_euclid(height as i64) as usize;
+                let t = src[yy * width + xx];
+                for c in 0..3 {
+                    s[c] += w * t[c];
+                }
+            }
+            dst[y * width + x] = s;
+        }
+    }
 }
 
 /// The normalised Gaussian weights of [`TENSOR_SIGMA`], `2 TENSOR_RADIUS + 1` taps.
