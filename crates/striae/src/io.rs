@@ -233,7 +233,11 @@ pub fn check_destination(path: &Path) -> std::io::Result<()> {
     if !folder.is_dir() {
         return Err(std::io::Error::new(
             std::io::ErrorKind::NotFound,
-            format!("folder {} does not exist", folder.display()),
+            format!(
+                "cannot write {}: folder {} does not exist",
+                path.display(),
+                folder.display()
+            ),
         ));
     }
     // `metadata` follows a symbolic link: what it names must be a regular file too.

@@ -7,11 +7,12 @@ use crate::layers::CoverageCache;
 use crate::math::{Frame, RayDifferential, Rgb, Vec2, Vec3};
 use crate::render::bsdf::{Bsdf, Conductor, ConductorIor, Dielectric, Diffuse};
 use crate::render::bsdf::{ConductorCompensation, DielectricCompensation};
-use crate::render::bsdf::{GrooveWall, Pbr, RoughConductor, RoughDielectric};
+use crate::render::bsdf::{GrooveWall, LayerAlbedo, Pbr, RoughConductor, RoughDielectric};
 use crate::render::geometry::SurfaceHit;
 use crate::render::scratched::ScratchedMaterial;
 use crate::render::shading::{hit_context, shading_frame, PixelHit};
 use crate::render::texture::Texture;
+use std::sync::Arc;
 
 /// A material ready to render.
 #[derive(Clone, Debug)]
@@ -38,7 +39,8 @@ pub enum Material {
 
 /// glTF 2.0's metallic-roughness material, prepared (textures loaded), built by
 /// `scene::materials::PbrDesc::prepare`: the factors and textures of the description (same
-/// names and meanings, checked there), its absorption coefficient and its anisotropy direction.
+/// names and meanings, checked there), its absorption coefficient, its anisotropy direction and
+/// the albedo table of its specular layer.
 #[derive(Clone, Debug)]
 pub struct PbrMaterial {
     pub base_color: Texture,
@@ -57,6 +59,9 @@ pub struct PbrMaterial {
     pub anisotropy: f32,
     /// `(cos, sin)` of the anisotropy direction's angle from `dP/du` toward the bitangent.
     pub anisotropy_direction: (f32, f32),
+    /// `E(mu, alpha)` of the dielectric specular layer at `ior`, which scales the diffuse
+    /// lobe ([`LayerAlbedo::shared`]: one per distinct `ior`).
+    pub layer: Arc<LayerAlbedo>,
 }
 
 impl PbrMaterial {
@@ -125,7 +130,7 @@ impl PbrMaterial {
     /// GGX `alpha_x` the anisotropic `alpha_t` (along the anisotropy direction, the frame's `s`
     /// as [`Self::shade`] turns it).
     #[inline]
-    pub fn bsdf_at(&self, uv: Vec2, transmits: bool) -> Pbr {
+    pub fn bsdf_at(&self, uv: Vec2, transmits: bool) -> Pbr<'_> {
         let base = self.base_color.eval(uv);
         let (mut metallic, mut roughness) = (self.metallic, self.roughness);
         if let Some(t) = &self.metallic_roughness {
@@ -139,7 +144,7 @@ impl PbrMaterial {
             base,
             metallic,
             self.transmission,
-            self.ior,
+            &self.layer,
             alpha_t,
             alpha,
             transmits,

@@ -55,7 +55,7 @@ pub use diffuse::Diffuse;
 pub use multiscatter::{
     CompensatedConductor, CompensatedDielectric, ConductorCompensation, DielectricCompensation,
 };
-pub use pbr::Pbr;
+pub use pbr::{LayerAlbedo, Pbr};
 pub use scratched::{ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf};
 pub use scratched_glass::{GlassWalls, ScratchedGlassBsdf, TracedGroove, WallLobeTable};
 pub use scratched_metal::ScratchedMetalBsdf;
@@ -114,7 +114,7 @@ pub enum Bsdf<'a> {
     /// The wall of an explicit scratch groove (METHOD.md 8.3).
     Wall(GrooveWall),
     /// glTF 2.0's metallic-roughness BSDF.
-    Pbr(Pbr),
+    Pbr(Pbr<'a>),
 }
 
 impl Bsdf<'_> {

@@ -67,6 +67,52 @@ pub const MU_NODES: usize = 64;
 /// when tabulating `E(mu)`.
 const STRATA: [usize; 2] = [128, 64];
 
+/// The midpoint rule over the unit square of a visible-normal sampler ([`Ggx::sample_visible`]
+/// and the samplers built on it), with `strata = [na, nb]` strata in `u.x` and `u.y`, after
+/// the substitution `u.x = 1 - (1 - s)^4`: the sampler maps `u.x` near 1 to the rim of the
+/// projected disk, the distribution's tail of steep facets that reflect below the horizon
+/// (probability `alpha^2 / (1 + alpha^2)` at normal incidence, 0.25 % at `alpha = 0.05`),
+/// which a uniform grid would step over. Deterministic: the same nodes and order of summation
+/// on any machine.
+///
+/// [`Ggx::sample_visible`]: crate::optics::microfacet::Ggx::sample_visible
+#[derive(Clone, Debug)]
+pub(crate) struct SquareGrid {
+    /// Nodes in `u.x` and their weights `ds / du.x`.
+    xs: Vec<(f32, f64)>,
+    /// Strata in `u.y`.
+    nb: usize,
+    /// The sum of all the weights.
+    total: f64,
+}
+
+impl SquareGrid {
+    pub(crate) fn new(strata: [usize; 2]) -> Self {
+        let [na, nb] = strata;
+        let xs: Vec<(f32, f64)> = (0..na)
+            .map(|a| {
+                let t = 1.0 - (a as f64 + 0.5) / na as f64;
+                ((1.0 - t.powi(4)) as f32, 4.0 * t.powi(3))
+            })
+            .collect();
+        let total: f64 = xs.iter().map(|x| x.1).sum::<f64>() * nb as f64;
+        SquareGrid { xs, nb, total }
+    }
+
+    /// The mean of `f(u)` over the unit square.
+    #[inline]
+    pub(crate) fn mean(&self, mut f: impl FnMut(Vec2) -> f64) -> f64 {
+        let mut sum = 0.0f64;
+        for &(x, w) in &self.xs {
+            for b in 0..self.nb {
+                let u = Vec2::new(x, (b as f32 + 0.5) / self.nb as f32);
+                sum += w * f(u);
+            }
+        }
+        sum / self.total
+    }
+}
+
 /// A single-scattering directional albedo `E(mu)`, `mu = |cos theta_o|`, at [`MU_NODES`] cosines
 /// `(i + 1/2) / MU_NODES`, linearly interpolated.
 #[derive(Clone, Debug, PartialEq)]
@@ -78,33 +124,15 @@ pub struct AlbedoTable {
 
 impl AlbedoTable {
     /// The table of `albedo(wo, u)`, an estimator of `E` for `wo` with `wo.z = mu > 0` whose
-    /// mean over `u` in the unit square is `E(mu)`, integrated by the midpoint rule after the
-    /// substitution `u.x = 1 - (1 - s)^4`: the visible-normal sampler maps `u.x` near 1 to the
-    /// rim of the projected disk, the distribution's tail of steep facets that reflect below
-    /// the horizon (probability `alpha^2 / (1 + alpha^2)` at normal incidence, 0.25 % at
-    /// `alpha = 0.05`), which a uniform grid of 128 strata would step over.
+    /// mean over `u` in the unit square is `E(mu)`, integrated by [`SquareGrid`]'s midpoint
+    /// rule with [`STRATA`].
     fn tabulate(albedo: impl Fn(Vec3, Vec2) -> f64) -> Self {
-        let [na, nb] = STRATA;
-        // Nodes and weights in `u.x`, the weights normalised to sum to 1.
-        let xs: Vec<(f32, f64)> = (0..na)
-            .map(|a| {
-                let t = 1.0 - (a as f64 + 0.5) / na as f64;
-                ((1.0 - t.powi(4)) as f32, 4.0 * t.powi(3))
-            })
-            .collect();
-        let total: f64 = xs.iter().map(|x| x.1).sum::<f64>() * nb as f64;
+        let grid = SquareGrid::new(STRATA);
         let mut e = [0.0f32; MU_NODES];
         for (i, e) in e.iter_mut().enumerate() {
             let mu = (i as f32 + 0.5) / MU_NODES as f32;
             let wo = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
-            let mut sum = 0.0f64;
-            for &(x, w) in &xs {
-                for b in 0..nb {
-                    let u = Vec2::new(x, (b as f32 + 0.5) / nb as f32);
-                    sum += w * albedo(wo, u);
-                }
-            }
-            *e = (sum / total).clamp(0.0, 1.0) as f32;
+            *e = grid.mean(|u| albedo(wo, u)).clamp(0.0, 1.0) as f32;
         }
         let mut t = AlbedoTable { e, average: 0.0 };
         let n = 8192;

@@ -1109,13 +1109,25 @@ mod scratched_metal {
 mod pbr {
     use super::*;
     use crate::optics::fresnel_f32;
+    use std::sync::OnceLock;
 
-    fn pbr(base: Rgb, metallic: f32, transmission: f32, alpha: f32) -> Pbr {
+    /// The specular layer's albedo table for `eta` 1.5 or 2.4, built once for all the tests.
+    fn layer(eta: f32) -> &'static LayerAlbedo {
+        static TABLES: OnceLock<[LayerAlbedo; 2]> = OnceLock::new();
+        let [a, b] = TABLES.get_or_init(|| [LayerAlbedo::new(1.5), LayerAlbedo::new(2.4)]);
+        match eta {
+            1.5 => a,
+            2.4 => b,
+            _ => panic!("no table for eta {eta}"),
+        }
+    }
+
+    fn pbr(base: Rgb, metallic: f32, transmission: f32, alpha: f32) -> Pbr<'static> {
         Pbr::new(
             base,
             metallic,
             transmission,
-            1.5,
+            layer(1.5),
             alpha,
             alpha,
             transmission > 0.0 && metallic < 1.0,
@@ -1132,11 +1144,11 @@ mod pbr {
             ("mixed", pbr(Rgb::new(0.7, 0.7, 0.4), 0.3, 0.5, 0.4)),
             (
                 "anisotropic metal",
-                Pbr::new(Rgb::splat(0.9), 1.0, 0.0, 1.5, 0.5, 0.15, false),
+                Pbr::new(Rgb::splat(0.9), 1.0, 0.0, layer(1.5), 0.5, 0.15, false),
             ),
             (
                 "anisotropic glass",
-                Pbr::new(Rgb::ONE, 0.0, 1.0, 1.5, 0.4, 0.15, true),
+                Pbr::new(Rgb::ONE, 0.0, 1.0, layer(1.5), 0.4, 0.15, true),
             ),
         ];
         let mut seed = 9000;
@@ -1236,7 +1248,7 @@ mod pbr {
                             Rgb::ONE,
                             metallic,
                             transmission,
-                            ior,
+                            layer(ior),
                             alpha,
                             alpha,
                             transmission > 0.0 && metallic < 1.0,
@@ -1347,6 +1359,93 @@ mod pbr {
                 let tint = if a.wi.z * wo.z < 0.0 { base } else { Rgb::ONE };
                 assert!((a.weight - b.weight * tint).abs().max_element() < 1e-6);
             }
+        }
+    }
+
+    /// The specular layer's albedo table: at `alpha = 0` it is the exact Fresnel reflectance
+    /// `F(mu)` and its average `F_avg`; at `alpha > 0` it matches a Monte Carlo estimate of the
+    /// reflection lobe alone (a black base: no diffuse lobe).
+    #[test]
+    fn layer_albedo_is_fresnel_when_smooth_and_the_reflection_lobe_when_rough() {
+        for eta in [1.5f32, 2.4] {
+            let t = layer(eta);
+            for j in 0..=200 {
+                let mu = j as f32 / 200.0;
+                let f = fresnel::dielectric(mu as f64, eta as f64).r;
+                assert!(
+                    (t.eval(mu, 0.0) as f64 - f).abs() < 1e-4,
+                    "eta {eta} mu {mu}: {} vs {f}",
+                    t.eval(mu, 0.0)
+                );
+            }
+            let n = 100_000;
+            let f_avg: f64 = (0..n)
+                .map(|j| {
+                    let mu = (j as f64 + 0.5) / n as f64;
+                    2.0 * fresnel::dielectric(mu, eta as f64).r * mu
+                })
+                .sum::<f64>()
+                / n as f64;
+            assert!(
+                (t.average(0.0) as f64 - f_avg).abs() < 1e-4,
+                "eta {eta}: {} vs {f_avg}",
+                t.average(0.0)
+            );
+        }
+        let mut seed = 14_000;
+        for alpha in [0.1f32, 0.25, 0.4, 0.64, 1.0] {
+            let b = pbr(Rgb::ZERO, 0.0, 0.0, alpha);
+            for wo in wos_outside() {
+                seed += 1;
+                let a = albedo(&Bsdf::Pbr(b), wo, 200_000, seed, false)[0];
+                let e = layer(1.5).eval(wo.z, alpha) as f64;
+                assert!(
+                    (a.mean() - e).abs() < 4.0 * a.std_error() + 3e-3,
+                    "alpha {alpha} wo {wo:?}: table {e} vs sampled {a:?}"
+                );
+            }
+        }
+    }
+
+    /// Reciprocal albedo scaling: a white base under the non-transmitting dielectric layer
+    /// reflects `E(mu_o)` specularly and `1 - E(mu_o)` diffusely, so its albedo is 1 (up to the
+    /// table's error against the lobe it tabulates, a few 1e-3 at most): the diffuse lobe makes
+    /// up exactly what the specular layer does not reflect, at every roughness.
+    #[test]
+    fn white_plastic_albedo_is_one_at_every_roughness() {
+        let mut seed = 15_000;
+        for alpha in [0.0f32, 0.1, 0.4, 1.0] {
+            let b = pbr(Rgb::ONE, 0.0, 0.0, alpha);
+            let wos = wos_outside()
+                .into_iter()
+                .chain([dir(0.3, 0.5), dir(1.5, 0.5)]);
+            for wo in wos {
+                seed += 1;
+                let a = albedo(&Bsdf::Pbr(b), wo, 200_000, seed, false)[0];
+                let tol = if alpha == 0.0 {
+                    1e-3
+                } else {
+                    4.0 * a.std_error() + 3e-3
+                };
+                assert!(
+                    (a.mean() - 1.0).abs() < tol,
+                    "alpha {alpha} wo {wo:?}: {a:?}"
+                );
+            }
+        }
+        // Smooth, `eval` is the diffuse lobe alone: its albedo by quadrature is `1 - F(mu_o)`.
+        let b = pbr(Rgb::ONE, 0.0, 0.0, 0.0);
+        for wo in wos_outside() {
+            let q: f64 = SphereGrid::new(200, 8)
+                .integrate(|wi| (b.eval(wo, wi).x * wi.z.abs()) as f64)
+                .iter()
+                .sum();
+            let e = fresnel_f32::dielectric(wo.z, 1.5).0 as f64;
+            assert!(
+                (q - (1.0 - e)).abs() < 1e-3,
+                "wo {wo:?}: {q} vs {}",
+                1.0 - e
+            );
         }
     }
 }

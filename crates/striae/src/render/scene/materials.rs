@@ -379,6 +379,7 @@ impl PbrDesc {
             transmission: loaded.transmission,
             anisotropy: loaded.anisotropy,
             anisotropy_direction: (angle.cos(), angle.sin()),
+            layer: crate::render::bsdf::LayerAlbedo::shared(loaded.ior),
         })
     }
 }
