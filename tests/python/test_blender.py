@@ -196,12 +196,11 @@ def block_means(image, b=8):
 
 
 def test_striae_renders_blenders_glb_as_cycles_does():
-    """striae renders Blender's own export of the scene with Cycles' structure and the level
-    stated in docs/blender.md: the log luminance of 8 x 8 pixel blocks correlates above 0.99 with
-    Cycles' (lights, camera, transforms and materials in place; a light off by 683 or a camera
-    turned would not), and the whole image is 0.89 x Cycles' (0.85..0.93), the difference between
-    glTF's BRDF, which striae renders, and Blender's Principled BSDF on the floor and the copper
-    (validation/compare_cycles.py measures it at 4 x 1024 spp)."""
+    """striae renders Blender's own export of the scene as Cycles does (docs/blender.md): the log
+    luminance of 8 x 8 pixel blocks correlates above 0.99 with Cycles' (lights, camera, transforms
+    and materials in place), the whole image's mean is within 3 % of Cycles' (a light off by 683,
+    a lost emissive strength or the diffuse base's old Fresnel weight would not be), and half the
+    lit blocks within 3 % (validation/compare_cycles.py measures 0.8 % at 4 x 1024 spp)."""
     import numpy as np
     import striae
 
@@ -215,7 +214,9 @@ def test_striae_renders_blenders_glb_as_cycles_does():
     corr = np.corrcoef(np.log(bc[lit]), np.log(bs[lit] + 1e-6))[0, 1]
     assert corr > 0.99, corr
     ratio = image.mean() / cycles.mean()
-    assert 0.85 < ratio < 0.93, ratio
+    assert abs(ratio - 1) < 0.03, ratio
+    median = np.median(np.abs(bs[lit] / bc[lit] - 1))
+    assert median < 0.03, median
 
 
 SCRATCHED_SCENE = """
