@@ -1017,8 +1017,14 @@ impl Importer {
                 }
             }
         };
-        rebase(&mut spec.curves);
-        rebase(&mut spec.table);
+        for path in [
+            &mut spec.curves,
+            &mut spec.table,
+            &mut spec.map,
+            &mut spec.direction,
+        ] {
+            rebase(path);
+        }
         if let Some(profile) = &mut spec.profile {
             if let Some(file) = profile.strip_prefix("file:") {
                 if Path::new(file).is_relative() {

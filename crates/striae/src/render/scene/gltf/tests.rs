@@ -902,23 +902,26 @@ fn blender_export_imports() {
 fn scratch_paths_are_relative_to_the_gltf() {
     let dir = TempDir::new("paths");
     std::fs::create_dir_all(dir.0.join("sub")).unwrap();
-    let mut b = Builder::default();
-    let mut prim = b.primitive(&TRIANGLE, None, Some(&[0.0, 0.0, 1.0, 0.0, 0.0, 1.0]));
-    prim["material"] = json!(0);
-    let doc = json!({
-        "scenes": [{ "nodes": [0] }], "nodes": [{ "mesh": 0 }],
-        "meshes": [{ "primitives": [prim] }],
-        "materials": [{ "name": "brushed", "pbrMetallicRoughness": { "metallicFactor": 1, "roughnessFactor": 0 },
-            "extensions": { "STRIAE_materials_scratches": { "curves": "marks.svg" } } }]
-    });
-    std::fs::write(dir.0.join("sub/part.glb"), b.glb(doc)).unwrap();
-    let toml = "[camera]\nposition = [0, 0, 3]\nlook_at = [0, 0, 0]\nfov = 40\n[[shapes]]\ntype = \"gltf\"\npath = \"sub/part.glb\"\n";
-    let e = Scene::parse(toml, &dir.0.join("s.toml"), &dir.0, &Overrides::default())
-        .unwrap_err()
-        .to_string();
-    let expect = dir.0.join("sub").join("marks.svg");
-    assert!(
-        e.contains(&expect.display().to_string()) && e.contains("brushed"),
-        "{e}"
-    );
+    // Each file is missing: the error names where it was looked for.
+    for (key, file) in [("curves", "marks.svg"), ("map", "wear.png")] {
+        let mut b = Builder::default();
+        let mut prim = b.primitive(&TRIANGLE, None, Some(&[0.0, 0.0, 1.0, 0.0, 0.0, 1.0]));
+        prim["material"] = json!(0);
+        let doc = json!({
+            "scenes": [{ "nodes": [0] }], "nodes": [{ "mesh": 0 }],
+            "meshes": [{ "primitives": [prim] }],
+            "materials": [{ "name": "brushed", "pbrMetallicRoughness": { "metallicFactor": 1, "roughnessFactor": 0 },
+                "extensions": { "STRIAE_materials_scratches": { key: file } } }]
+        });
+        std::fs::write(dir.0.join("sub/part.glb"), b.glb(doc)).unwrap();
+        let toml = "[camera]\nposition = [0, 0, 3]\nlook_at = [0, 0, 0]\nfov = 40\n[[shapes]]\ntype = \"gltf\"\npath = \"sub/part.glb\"\n";
+        let e = Scene::parse(toml, &dir.0.join("s.toml"), &dir.0, &Overrides::default())
+            .unwrap_err()
+            .to_string();
+        let expect = dir.0.join("sub").join(file);
+        assert!(
+            e.contains(&expect.display().to_string()) && e.contains("brushed"),
+            "{e}"
+        );
+    }
 }
