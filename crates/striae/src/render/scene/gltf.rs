@@ -111,6 +111,10 @@ pub struct ImportedMaterial {
     pub emission: Option<Rgb>,
     /// `STRIAE_materials_scratches`, read as `[materials.NAME.scratches]` is.
     pub scratches: Option<ScratchSpec>,
+    /// `KHR_materials_anisotropy`'s direction texture (its rotation applied) as the flow map of
+    /// the scratches' painted map ([`anisotropy_flow`]), where they have a `map` and no
+    /// `direction`.
+    pub scratch_flow: Option<Arc<RgbImage>>,
 }
 
 /// One triangle primitive instanced by one node, in world space.
@@ -926,27 +930,43 @@ impl Importer {
             );
         }
         let others = ext.map(|e| e.others.clone()).unwrap_or_default();
-        let (mut anisotropy, mut anisotropy_rotation) = (0.0, 0.0);
-        if let Some(a) = others.get("KHR_materials_anisotropy") {
-            anisotropy = a
-                .get("anisotropyStrength")
-                .and_then(|v| v.as_f64())
-                .unwrap_or(0.0) as f32;
-            anisotropy_rotation = (a
-                .get("anisotropyRotation")
-                .and_then(|v| v.as_f64())
-                .unwrap_or(0.0) as f32)
-                .to_degrees();
-            if a.get("anisotropyTexture").is_some() {
-                warn(&self.file, &format!("{element}: KHR_materials_anisotropy's anisotropyTexture is not supported: ignored"));
-            }
-        }
         let scratches = match others.get(SCRATCHES_EXTENSION) {
             Some(v) => {
                 Some(self.scratch_spec(v, &format!("{element}.extensions.{SCRATCHES_EXTENSION}"))?)
             }
             None => None,
         };
+        let (mut anisotropy, mut anisotropy_rotation) = (0.0, 0.0);
+        let mut scratch_flow = None;
+        if let Some(a) = others.get("KHR_materials_anisotropy") {
+            anisotropy = a
+                .get("anisotropyStrength")
+                .and_then(|v| v.as_f64())
+                .unwrap_or(0.0) as f32;
+            let rotation = a
+                .get("anisotropyRotation")
+                .and_then(|v| v.as_f64())
+                .unwrap_or(0.0) as f32;
+            anisotropy_rotation = rotation.to_degrees();
+            if let Some(t) = a.get("anisotropyTexture") {
+                let painted = scratches
+                    .as_ref()
+                    .is_some_and(|s| s.map.is_some() && s.direction.is_none());
+                let at = format!("{element}.extensions.KHR_materials_anisotropy.anisotropyTexture");
+                if painted {
+                    let index = t
+                        .get("index")
+                        .and_then(|i| i.as_u64())
+                        .filter(|&i| i < self.root.textures.len() as u64)
+                        .ok_or_else(|| self.error(at.clone(), "needs the index of a texture"))?;
+                    let tex_coord = t.get("texCoord").and_then(|v| v.as_u64()).unwrap_or(0);
+                    let img = self.texture(index as usize, tex_coord as u32, &None, &at, false)?;
+                    scratch_flow = Some(Arc::new(anisotropy_flow(&img, rotation)));
+                } else {
+                    warn(&self.file, &format!("{at}: orients only a painted scratch map (STRIAE_materials_scratches' `map` without `direction`): ignored"));
+                }
+            }
+        }
         for (key, _) in &others {
             if key != "KHR_materials_anisotropy" && key != SCRATCHES_EXTENSION {
                 warn(
@@ -975,6 +995,7 @@ impl Importer {
             },
             emission: (emission.max_element() > 0.0).then_some(emission),
             scratches,
+            scratch_flow,
         })
     }
 
@@ -1256,6 +1277,7 @@ impl ImportedMaterial {
                 eta,
                 k,
                 scratches: spec.clone(),
+                flow_image: self.scratch_flow.clone(),
             }));
         }
         if pbr.base_color.range().is_some_and(|(_, hi)| hi > 1.0) {
@@ -1266,6 +1288,29 @@ impl ImportedMaterial {
             ..pbr.clone()
         }))
     }
+}
+
+/// `KHR_materials_anisotropy`'s direction texture as a flow map of striae's (`scratches.direction`,
+/// METHOD.md 9.5): each texel's `(2r - 1, 2g - 1)` is a direction in glTF's tangent space
+/// (tangent, bitangent), turned counter-clockwise by `rotation` (radians, the extension's
+/// `anisotropyRotation`), then written in striae's frame (`dP/du`, `dP/dv`): glTF's bitangent
+/// points up the image, toward decreasing `v`, so the second component changes sign.
+pub fn anisotropy_flow(texture: &RgbImage, rotation: f32) -> RgbImage {
+    let (sin, cos) = rotation.sin_cos();
+    let pixels = texture
+        .pixels
+        .iter()
+        .map(|p| {
+            let (x, y) = (2.0 * p.x - 1.0, 2.0 * p.y - 1.0);
+            let (t, b) = (cos * x - sin * y, sin * x + cos * y);
+            Rgb::new(
+                (0.5 * (t + 1.0)).clamp(0.0, 1.0),
+                (0.5 * (1.0 - b)).clamp(0.0, 1.0),
+                0.0,
+            )
+        })
+        .collect();
+    RgbImage::new(texture.width, texture.height, pixels)
 }
 
 /// A conductor's complex IOR `(eta, k)` whose normal-incidence reflectance is `color`:

@@ -385,6 +385,10 @@ pub struct ScratchedDesc {
     pub k: Option<[f32; 3]>,
     #[serde(default)]
     pub scratches: ScratchSpec,
+    /// A flow map given as pixels (R, G as `direction`'s), read where `scratches.direction` is
+    /// not set: the glTF importer's `KHR_materials_anisotropy` texture, in the tangent frame.
+    #[serde(skip)]
+    pub flow_image: Option<std::sync::Arc<crate::render::texture::RgbImage>>,
 }
 
 /// `scratches.KEY` for a trace parameter's name.
@@ -571,13 +575,17 @@ impl ScratchedDesc {
         };
         let map = read("scratches.map", &src.map)?;
         let coverage: Vec<f32> = map.pixels.iter().map(|p| (p.x + p.y + p.z) / 3.0).collect();
-        let flow = match &src.direction {
-            Some(path) => {
-                let f = read("scratches.direction", path)?;
+        let flow = match (&src.direction, &self.flow_image) {
+            (Some(path), _) => Some((read("scratches.direction", path)?, format!("{path:?}"))),
+            (None, Some(f)) => Some(((**f).clone(), "(the glTF's anisotropyTexture)".into())),
+            (None, None) => None,
+        };
+        let flow = match flow {
+            Some((f, name)) => {
                 if (f.width, f.height) != (map.width, map.height) {
                     return Err(invalid(
                         "scratches.direction",
-                        format!("{path:?}"),
+                        name,
                         format!(
                             "{} x {} pixels: a flow map must have the map's size, {} x {}",
                             f.width, f.height, map.width, map.height

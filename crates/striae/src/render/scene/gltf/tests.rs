@@ -925,3 +925,61 @@ fn scratch_paths_are_relative_to_the_gltf() {
         );
     }
 }
+
+/// `KHR_materials_anisotropy`'s texture orients a painted scratch map: its directions, turned by
+/// the rotation and written in striae's frame, become the map's flow map, which the scratched
+/// material reads (a flow map of another size than the map's is refused, naming the texture).
+#[test]
+fn anisotropy_texture_orients_a_painted_map() {
+    // Along the tangent is +u; up the image (glTF's bitangent) is -v.
+    let tex = RgbImage::new(2, 1, vec![Rgb::new(1.0, 0.5, 0.0), Rgb::new(0.5, 1.0, 0.0)]);
+    let flow = anisotropy_flow(&tex, 0.0);
+    assert_eq!(
+        flow.pixels,
+        [Rgb::new(1.0, 0.5, 0.0), Rgb::new(0.5, 0.0, 0.0)]
+    );
+    // A quarter turn counter-clockwise takes the tangent to the bitangent.
+    let turned = anisotropy_flow(&tex, std::f32::consts::FRAC_PI_2);
+    assert!((turned.pixels[0] - Rgb::new(0.5, 0.0, 0.0)).length() < 1e-6);
+
+    let dir = TempDir::new("anisotropy");
+    let mut b = Builder::default();
+    let mut prim = b.primitive(&TRIANGLE, None, Some(&[0.0, 0.0, 1.0, 0.0, 0.0, 1.0]));
+    prim["material"] = json!(0);
+    let doc = json!({
+        "extensionsUsed": ["KHR_materials_anisotropy", "STRIAE_materials_scratches"],
+        "scenes": [{ "nodes": [0] }], "nodes": [{ "mesh": 0 }],
+        "meshes": [{ "primitives": [prim] }],
+        "images": [{ "uri": format!("data:image/png;base64,{}", base64(&png_bytes())) }],
+        "textures": [{ "source": 0 }],
+        "materials": [{ "name": "brushed", "pbrMetallicRoughness": { "metallicFactor": 1, "roughnessFactor": 0 },
+            "extensions": { "STRIAE_materials_scratches": { "map": "wear.png" },
+                            "KHR_materials_anisotropy": { "anisotropyTexture": { "index": 0 } } } }]
+    });
+    let glb = b.glb(doc);
+    std::fs::write(dir.0.join("part.glb"), &glb).unwrap();
+    let g = import_bytes(&glb, &dir.0.join("part.glb"), &Transform::IDENTITY).unwrap();
+    // The texture is red then white: directions (1, -1) and (1, 1) in (tangent, bitangent).
+    let decoded = RgbImage::new(2, 1, vec![Rgb::new(1.0, 0.0, 0.0), Rgb::ONE]);
+    assert_eq!(
+        g.materials[0].scratch_flow.as_deref(),
+        Some(&anisotropy_flow(&decoded, 0.0))
+    );
+    let toml = "[camera]\nposition = [0, 0, 3]\nlook_at = [0, 0, 0]\nfov = 40\n[[shapes]]\ntype = \"gltf\"\npath = \"part.glb\"\n";
+    let parse = || Scene::parse(toml, &dir.0.join("s.toml"), &dir.0, &Overrides::default());
+    for (width, ok) in [(2, true), (3, false)] {
+        image::GrayImage::from_pixel(width, 1, image::Luma([200]))
+            .save(dir.0.join("wear.png"))
+            .unwrap();
+        match parse() {
+            Ok(_) => assert!(ok, "a {width} x 1 map took a 2 x 1 flow map"),
+            Err(e) => {
+                let e = e.to_string();
+                assert!(
+                    !ok && e.contains("anisotropyTexture") && e.contains("map's size"),
+                    "{e}"
+                );
+            }
+        }
+    }
+}
