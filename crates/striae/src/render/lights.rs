@@ -31,7 +31,7 @@ use crate::render::envmap::EnvMap;
 use crate::render::geometry::{Shape, ShapeGeometry};
 
 /// Light arriving from infinitely far away.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub enum Environment {
     /// The same radiance from every direction.
     Constant { radiance: Rgb },
@@ -63,7 +63,7 @@ impl Environment {
 }
 
 /// A light source of the scene.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub enum Light {
     /// Shape `shape` emits `radiance` from its front side.
     Area {

@@ -64,6 +64,17 @@ pub struct PbrMaterial {
     pub layer: Arc<LayerAlbedo>,
 }
 
+/// `-1` or `1`: the sign that turns `t` (a frame's second axis) toward decreasing `v`, the
+/// image's up, which glTF's bitangent and the green of its normal maps point to.
+#[inline]
+fn toward_image_up(t: Vec3, dpdv: Vec3) -> f32 {
+    if t.dot(dpdv) > 0.0 {
+        -1.0
+    } else {
+        1.0
+    }
+}
+
 impl PbrMaterial {
     /// Whether light passes through anywhere on the surface (transmission and not all metal).
     #[inline]
@@ -85,11 +96,7 @@ impl PbrMaterial {
             return None;
         }
         let tangent = Frame::from_normal_tangent(hit.ns, hit.dpdu);
-        let w = if tangent.t.dot(hit.dpdv) > 0.0 {
-            -1.0
-        } else {
-            1.0
-        };
+        let w = toward_image_up(tangent.t, hit.dpdv);
         let n = (tangent.s * x + tangent.t * (w * y) + tangent.n * z).normalize_or_zero();
         // `n` is finite (`normalize_or_zero`): zero fails the test too.
         if n.dot(hit.ng) * hit.ns.dot(hit.ng) <= 0.0 {
@@ -111,11 +118,7 @@ impl PbrMaterial {
         if self.anisotropy > 0.0 {
             let (cos, sin) = self.anisotropy_direction;
             // The bitangent toward decreasing v, as the normal map's.
-            let w = if frame.t.dot(hit.dpdv) > 0.0 {
-                -1.0
-            } else {
-                1.0
-            };
+            let w = toward_image_up(frame.t, hit.dpdv);
             let s = (frame.s * cos + frame.t * (w * sin)).normalize_or(frame.s);
             frame = Frame {
                 s,

@@ -24,6 +24,7 @@ use super::materials::{MaterialDesc, PbrDesc};
 use super::scratches::{BaseKind, ScratchSpec, ScratchedDesc};
 use crate::math::{Rgb, Vec2, Vec3};
 use crate::render::geometry::{Transform, TriangleMesh};
+use crate::render::lights::Light;
 use crate::render::texture::{RgbImage, Texture};
 use ::gltf::json;
 use glam::{Mat4, Quat, Vec4};
@@ -73,24 +74,6 @@ pub struct GltfCamera {
     pub fov_deg: f32,
 }
 
-/// A `KHR_lights_punctual` light in striae's radiometric units (world space).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum GltfLight {
-    /// Directional: `direction` points toward the light (the node's `+z`), `irradiance`
-    /// `= colour * lux / 683` W/m^2 on a surface facing it.
-    Sun { direction: Vec3, irradiance: Rgb },
-    /// `intensity = colour * cd / 683` W/sr.
-    Point { position: Vec3, intensity: Rgb },
-    /// `direction` is the way the light travels (the node's `-z`), cones as cosines.
-    Spot {
-        position: Vec3,
-        direction: Vec3,
-        intensity: Rgb,
-        cos_inner: f32,
-        cos_outer: f32,
-    },
-}
-
 /// A glTF material as imported, before it is mapped onto a striae material
 /// ([`ImportedMaterial::to_desc`]). Factors and textures keep glTF's meaning, except that the
 /// base colour factor is multiplied into the base colour texture's pixels.
@@ -134,7 +117,9 @@ pub struct GltfScene {
     pub meshes: Vec<GltfMesh>,
     pub materials: Vec<ImportedMaterial>,
     pub camera: Option<GltfCamera>,
-    pub lights: Vec<GltfLight>,
+    /// `KHR_lights_punctual`'s lights in striae's radiometric units, world space: suns, point
+    /// and spot lights.
+    pub lights: Vec<Light>,
 }
 
 /// Whether `path` names a glTF file by its extension (`.gltf` or `.glb`, any case).
@@ -620,7 +605,7 @@ impl Importer {
     }
 
     /// `KHR_lights_punctual.lights[l]` placed by a node's world matrix.
-    fn light(&self, l: usize, world: Mat4) -> Result<Option<GltfLight>, GltfError> {
+    fn light(&self, l: usize, world: Mat4) -> Result<Option<Light>, GltfError> {
         use json::extensions::scene::khr_lights_punctual::Type;
         let element = format!("extensions.KHR_lights_punctual.lights[{l}]");
         let Some(light) = self
@@ -655,12 +640,12 @@ impl Importer {
                 if direction == Vec3::ZERO {
                     return Err(self.error(element, "its node's transform is degenerate"));
                 }
-                GltfLight::Sun {
+                Light::Sun {
                     direction: -direction,
                     irradiance: intensity,
                 }
             }
-            Type::Point => GltfLight::Point {
+            Type::Point => Light::Point {
                 position,
                 intensity,
             },
@@ -679,7 +664,7 @@ impl Importer {
                 if direction == Vec3::ZERO {
                     return Err(self.error(element, "its node's transform is degenerate"));
                 }
-                GltfLight::Spot {
+                Light::Spot {
                     position,
                     direction,
                     intensity,

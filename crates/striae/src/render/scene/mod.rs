@@ -433,7 +433,7 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
     }
     lights.extend(punctual_lights(&f, file)?);
     for (_, g) in &gltfs {
-        lights.extend(gltf_lights(g));
+        lights.extend(g.lights.iter().cloned());
     }
     Ok(Scene {
         camera,
@@ -533,43 +533,6 @@ fn gltf_shapes(
         }
     }
     Ok(())
-}
-
-/// A glTF's punctual lights as striae's.
-fn gltf_lights(g: &gltf::GltfScene) -> Vec<Light> {
-    let mut out = Vec::new();
-    for l in &g.lights {
-        match *l {
-            gltf::GltfLight::Sun {
-                direction,
-                irradiance,
-            } => out.push(Light::Sun {
-                direction,
-                irradiance,
-            }),
-            gltf::GltfLight::Point {
-                position,
-                intensity,
-            } => out.push(Light::Point {
-                position,
-                intensity,
-            }),
-            gltf::GltfLight::Spot {
-                position,
-                direction,
-                intensity,
-                cos_inner,
-                cos_outer,
-            } => out.push(Light::Spot {
-                position,
-                direction,
-                intensity,
-                cos_inner,
-                cos_outer,
-            }),
-        }
-    }
-    out
 }
 
 /// The render settings: the file's `[render]` table with the command line's overrides.

@@ -575,9 +575,13 @@ impl ScratchedDesc {
         };
         let map = read("scratches.map", &src.map)?;
         let coverage: Vec<f32> = map.pixels.iter().map(|p| (p.x + p.y + p.z) / 3.0).collect();
+        use std::borrow::Cow;
         let flow = match (&src.direction, &self.flow_image) {
-            (Some(path), _) => Some((read("scratches.direction", path)?, format!("{path:?}"))),
-            (None, Some(f)) => Some(((**f).clone(), "(the glTF's anisotropyTexture)".into())),
+            (Some(path), _) => Some((
+                Cow::Owned(read("scratches.direction", path)?),
+                format!("{path:?}"),
+            )),
+            (None, Some(f)) => Some((Cow::Borrowed(&**f), "(the glTF's anisotropyTexture)".into())),
             (None, None) => None,
         };
         let flow = match flow {
