@@ -39,7 +39,7 @@ use crate::render::bsdf::{Bsdf, BsdfSample};
 use crate::render::film::Image;
 use crate::render::geometry::{Geometry, SurfaceHit, PACKET};
 use crate::render::material::{HitView, Material};
-use crate::render::sampler::PixelSampler;
+use crate::render::sampler::{PixelSampler, LOBE_DIM};
 use crate::render::scene::{Scene, NO_MATERIAL};
 use crate::render::shading::{
     footprint_dp, hit_context, spawn_differentials, PixelHit, ShadingContext,
@@ -931,7 +931,7 @@ fn radiance<const DIFFERENTIALS: bool>(
         }
 
         // Continue the path by sampling the BSDF.
-        sampler.seek(depth, 4);
+        sampler.seek(depth, LOBE_DIM);
         let u_lobe = sampler.next_1d();
         let u_dir = sampler.next_2d();
         let Some(bs) = bsdf.sample(wo, u_lobe, u_dir) else {
@@ -1102,8 +1102,19 @@ fn shade_hit<'a, const DIFFERENTIALS: bool>(
     // scratches, so it is hashed: the block's first Sobol set (light choice and position) is
     // computed only where light sampling runs, not at every hit of a scratched surface (most
     // of them see no scratch and are delta bounces).
+    // A material that picks one lobe by it (`layer_mix = "stochastic"`) reads the bounce's
+    // BSDF-lobe number instead, and its BSDF the place of that number within the pick's
+    // share: one stratified number picks the layer and the component, as `union`'s
+    // sampling does with all the layers' lobes (without, the two choices are stratified apart
+    // and mirror-walled glints came out at twice the variance).
     let u_layer = if material.reads_hit_context(wo_world, hit.ng) {
-        Some(sampler.next_1d_hashed())
+        if material.picks_lobe_by_lobe_number() {
+            let u = sampler.peek(depth, LOBE_DIM);
+            sampler.seek(depth, 1);
+            Some(u)
+        } else {
+            Some(sampler.next_1d_hashed())
+        }
     } else {
         sampler.seek(depth, 1);
         None

@@ -219,6 +219,17 @@ impl Material {
         }
     }
 
+    /// Whether the material picks its one lobe at a hit by the bounce's BSDF-lobe number
+    /// (`layer_mix = "stochastic"`), which its BSDF's sampling then reads within the pick's
+    /// share ([`crate::render::bsdf::LobeShare`]).
+    #[inline]
+    pub fn picks_lobe_by_lobe_number(&self) -> bool {
+        match self {
+            Material::Scratched(m) => m.mix == crate::render::scratched::LayerMix::Stochastic,
+            _ => false,
+        }
+    }
+
     /// Whether the BSDF at a hit that reads its context ([`Self::reads_hit_context`]) reads
     /// its footprint too: not scratched glass seen from inside.
     #[inline]

@@ -29,6 +29,8 @@ pub const CAMERA_DIMS: u32 = 4;
 /// position (2), Russian roulette (1), and one for the material's layer choice (1, drawn by
 /// [`PixelSampler::next_1d_hashed`]).
 pub const BOUNCE_DIMS: u32 = 8;
+/// The BSDF lobe's dimension within a bounce's block ([`PixelSampler::seek`]).
+pub const LOBE_DIM: u32 = 4;
 /// The most samples per pixel one sequence supports (a limit of `sobol_burley`).
 pub const MAX_SPP: u32 = 1 << 16;
 
@@ -129,6 +131,17 @@ impl PixelSampler {
     /// 7 Russian roulette), so a decision keeps its dimension whether or not earlier ones ran.
     pub fn seek(&mut self, depth: u32, offset: u32) {
         self.dimension = CAMERA_DIMS + depth * BOUNCE_DIMS + offset;
+    }
+
+    /// The number of dimension `offset` within the block of bounce `depth`, without moving
+    /// the stream: the value a later [`Self::seek`] there then draws again.
+    #[inline(always)]
+    pub fn peek(&mut self, depth: u32, offset: u32) -> f32 {
+        let d = self.dimension;
+        self.seek(depth, offset);
+        let u = self.next_1d();
+        self.dimension = d;
+        u
     }
 
     /// The next number in `[0, 1)`. (Forced inline: the render loop's copies must hold it.)

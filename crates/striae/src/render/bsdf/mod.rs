@@ -56,7 +56,7 @@ pub use multiscatter::{
     CompensatedConductor, CompensatedDielectric, ConductorCompensation, DielectricCompensation,
 };
 pub use pbr::{LayerAlbedo, Pbr};
-pub use scratched::{ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf};
+pub use scratched::{LobeShare, ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf};
 pub use scratched_glass::{GlassWalls, ScratchedGlassBsdf, TracedGroove, WallLobeTable};
 pub use scratched_metal::ScratchedMetalBsdf;
 pub use wall::GrooveWall;

@@ -296,6 +296,42 @@ impl ScratchLobe {
     }
 }
 
+/// Where a hit's one lobe lies within the bounce's BSDF-lobe number under `layer_mix =
+/// "stochastic"`: the material picked the lobe by that number (`u` in `[start, start + len)`),
+/// and the BSDF's sampling reads its place within the share, `(u - start) / len`, uniform in
+/// `[0, 1)` and independent of the pick, so one stratified number chooses both
+/// (`render::scratched::ScratchedMaterial::bsdf`). The whole of `[0, 1)` elsewhere.
+#[derive(Clone, Copy, Debug)]
+pub struct LobeShare {
+    start: f32,
+    inv_len: f32,
+}
+
+impl Default for LobeShare {
+    fn default() -> Self {
+        LobeShare {
+            start: 0.0,
+            inv_len: 1.0,
+        }
+    }
+}
+
+impl LobeShare {
+    /// The share `[start, start + len)`, `len > 0`.
+    pub fn new(start: f32, len: f32) -> Self {
+        LobeShare {
+            start,
+            inv_len: 1.0 / len,
+        }
+    }
+
+    /// `u`'s place within the share, in `[0, 1)` (`u` itself for the whole of `[0, 1)`).
+    #[inline(always)]
+    pub fn place(&self, u: f32) -> f32 {
+        ((u - self.start) * self.inv_len).clamp(0.0, 1.0 - f32::EPSILON / 2.0)
+    }
+}
+
 /// The scratch lobes of one hit, shared by the scratched BSDFs: those with coverage `c_k > 0`,
 /// at most [`MAX_SCRATCH_LOBES`] (extra ones ignored), each `c_k` clamped to 1 and all rescaled
 /// so that `C = sum c_k <= 1` (the `sum` mode's normalisation).
@@ -305,6 +341,8 @@ pub struct CoveredLobes {
     count: u8,
     /// `C = sum_k c_k <= 1`.
     total: f32,
+    /// Where the sampling's lobe number lies ([`LobeShare`]).
+    share: LobeShare,
 }
 
 impl CoveredLobes {
@@ -336,6 +374,18 @@ impl CoveredLobes {
     #[inline]
     pub fn as_slice(&self) -> &[ScratchLobe] {
         &self.lobes[..self.count as usize]
+    }
+
+    /// These lobes with the sampling's lobe number read within `share`.
+    #[inline(always)]
+    pub fn in_share(self, share: LobeShare) -> Self {
+        CoveredLobes { share, ..self }
+    }
+
+    /// The sampling's lobe number `u_lobe`, read within the share ([`LobeShare::place`]).
+    #[inline(always)]
+    pub fn lobe_number(&self, u_lobe: f32) -> f32 {
+        self.share.place(u_lobe)
     }
 
     /// `C = sum_k c_k`.
@@ -411,6 +461,13 @@ impl WoCache {
 }
 
 impl<'a> ScratchedBsdf<'a> {
+    /// This BSDF with its sampling's lobe number read within `share` ([`LobeShare`]).
+    #[inline(always)]
+    pub fn in_share(mut self, share: LobeShare) -> Self {
+        self.lobes = self.lobes.in_share(share);
+        self
+    }
+
     /// `lobes` with coverages `c_k >= 0`; at most [`MAX_SCRATCH_LOBES`] (extra ones are
     /// ignored), rescaled so that `sum c_k <= 1` (the `sum` mode's normalisation).
     pub fn new(
@@ -550,6 +607,7 @@ impl<'a> ScratchedBsdf<'a> {
     /// `u` drives the scratch lobe's sampler.
     #[inline]
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+        let u_lobe = self.lobes.lobe_number(u_lobe);
         match self.base {
             ScratchedBase::Glass { eta } => {
                 if wo.z <= 0.0 {

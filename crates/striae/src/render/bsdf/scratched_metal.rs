@@ -32,6 +32,13 @@ pub struct ScratchedMetalBsdf<'a> {
 }
 
 impl<'a> ScratchedMetalBsdf<'a> {
+    /// This BSDF with its sampling's lobe number read within `share` ([`super::LobeShare`]).
+    #[inline(always)]
+    pub fn in_share(mut self, share: super::LobeShare) -> Self {
+        self.lobes = self.lobes.in_share(share);
+        self
+    }
+
     /// `lobes` with coverages `c_k >= 0` ([`CoveredLobes`]).
     pub fn new(
         ior: ConductorIor,
@@ -72,6 +79,7 @@ impl<'a> ScratchedMetalBsdf<'a> {
     /// the direction in it.
     #[inline]
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+        let u_lobe = self.lobes.lobe_number(u_lobe);
         if !(wo.z > 0.0) {
             return None;
         }

@@ -30,7 +30,7 @@
 //! setting = 1                    # the seed's Table 1, or length / width / threshold
 //! layers = 8
 //! seed = 1
-//! layer_mix = "max"              # or "sum" ([Raymond16]), "union"
+//! layer_mix = "stochastic"       # or "union", "sum" ([Raymond16]), "max" (the seed's)
 //! # table = "my-table.npz"       # load a table instead of computing one
 //! # explicit = true              # real grooves on planar faces (METHOD.md 8.3)
 //! # stations = 16                # stations along each explicit groove
@@ -110,14 +110,14 @@ pub enum ModelKey {
     /// striae's defaults: per key the most accurate validated choice that costs under about
     /// 10 % a sample (docs/fidelity.md, "The defaults"): glass with diffuse walls and a
     /// Fresnel law takes `groove_slices = 6` (with `fresnel = "walls"`) at
-    /// [`GROOVE_TABLE_SIZES`]; every other key the seed's (`layer_mix = "union"`, closer to
-    /// explicit grooves, costs 1.24-1.59 x the instructions a sample on glass and up to 1.24 x
-    /// on metal, `lean` and dielectric walls 1.2-1.7 x: they stay options).
+    /// [`GROOVE_TABLE_SIZES`]; layers combine by `layer_mix = "stochastic"` (curves or a map
+    /// alone by `"union"`); every other key the seed's (`lean` and dielectric walls cost
+    /// 1.2-1.7 x: they stay options).
     #[default]
     Default,
     /// The seed's choices (METHOD.md sections 3-6; a metal base [Raymond16]'s): no
     /// exact-groove slices (eq. (3)), glass `fresnel = "seed"`, the seed's `M`, `N`, `N_r`,
-    /// and, as under `default`, `layer_mix = "max"`, `coverage = "footprint"`, `orientation =
+    /// `layer_mix = "max"`, and, as under `default`, `coverage = "footprint"`, `orientation =
     /// "layer"`, no `lean`.
     Seed,
 }
@@ -173,7 +173,8 @@ pub struct ScratchSpec {
     /// `layer` (default, the seed: a direction per layer) or `random` (a direction per scratch).
     #[serde(default)]
     pub orientation: Option<Orientation>,
-    /// `max` (default, the seed's section 6), `sum` or `union` ([`LayerMix`]).
+    /// `stochastic` (default; curves or a map alone: `union`), `union`, `sum` or `max` (the
+    /// seed's section 6, default under `model = "seed"`) ([`LayerMix`]).
     #[serde(default)]
     pub layer_mix: Option<LayerMix>,
     /// `footprint` (default, section 6) or `point` (see [`CoverageMode`]).
@@ -480,18 +481,17 @@ impl ScratchedDesc {
             layers: self.resolve_layers()?,
             layer_seed: s.seed.unwrap_or(DEFAULT_LAYER_SEED),
             orientation: s.orientation.unwrap_or_default(),
-            // Layers: `max` under either model (`union` is closer to explicit grooves,
-            // docs/fidelity.md, but costs 1.24-1.59 x the instructions a sample on glass, 1.04-
-            // 1.24 x on metal). Curves alone, under `model = "default"`: `union`, within 0.2 % of
-            // explicit grooves where `max` is 1-1.7 % off, at `max`'s cost within noise
-            // (docs/scratched.md, "Curves"); a map alone, or with curves, likewise.
-            mix: s.layer_mix.unwrap_or(
-                if curves_only && self.model() == ModelKey::Default {
-                    LayerMix::Union
-                } else {
-                    LayerMix::Max
-                },
-            ),
+            // Under `model = "default"`, layers: `stochastic`, `union` in expectation (within
+            // 1.5 % of explicit grooves where the seed's `max` is 24-85 % off far away) at
+            // 1.04-1.07 x `max`'s instructions a sample (`union`: 1.24-1.64 x; docs/fidelity.md,
+            // "The defaults"). Curves alone: `union`, within 0.2 % of explicit grooves where
+            // `max` is 1-1.7 % off, at `max`'s cost within noise (few cover a footprint;
+            // docs/scratched.md, "Curves"); a map alone, or with curves, likewise.
+            mix: s.layer_mix.unwrap_or(match self.model() {
+                ModelKey::Seed => LayerMix::Max,
+                ModelKey::Default if curves_only => LayerMix::Union,
+                ModelKey::Default => LayerMix::Stochastic,
+            }),
             coverage: s.coverage.unwrap_or_default(),
             stations: match s.stations {
                 None => DEFAULT_STATIONS,

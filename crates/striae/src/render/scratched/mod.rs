@@ -24,7 +24,7 @@ use crate::math::{Rgb, Vec3};
 use crate::precompute::groove::totally_reflected;
 use crate::render::bsdf::scratched::MAX_SCRATCH_LOBES;
 use crate::render::bsdf::{
-    Bsdf, Conductor, Dielectric, GlassWalls, ScratchLobe, ScratchLobeTable, ScratchedBase,
+    Bsdf, Conductor, Dielectric, GlassWalls, LobeShare, ScratchLobe, ScratchLobeTable, ScratchedBase,
     ScratchedBsdf, ScratchedGlassBsdf, ScratchedMetalBsdf, WallLobeTable,
 };
 use crate::render::shading::ShadingContext;
@@ -45,6 +45,11 @@ pub enum LayerMix {
     /// (exact for independent layers): `max` takes one layer's share of a footprint that holds
     /// scratches of several, `sum` counts their overlaps twice (`docs/fidelity.md`).
     Union,
+    /// `union` in expectation at one lobe's cost: a single lobe a hit, of the union's coverage
+    /// `1 - prod(1 - c_k)`, its layer (curve, map) drawn by `ShadingContext::u_layer` with
+    /// probability `c_k / sum c_k` (stochastic layer selection; the default under
+    /// `model = "default"`).
+    Stochastic,
 }
 
 /// How a hit measures the layers' scratch coverage.
@@ -298,7 +303,9 @@ impl ScratchedMaterial {
             (ScratchModel::DielectricWalls(walls), ScratchedBase::Glass { .. }) if inside => {
                 match self.inside_coverage(ctx, walls, &mut cov[..k]) {
                     InsideHit::Covered => true,
-                    InsideHit::Ridge(l) => return self.with_lobes_at(ctx, &self.model, &[l]),
+                    InsideHit::Ridge(l) => {
+                        return self.with_lobes_at(ctx, &self.model, &[l], LobeShare::default())
+                    }
                     InsideHit::Plain => false,
                 }
             }
@@ -316,7 +323,7 @@ impl ScratchedMaterial {
             return self.base_bsdf();
         }
         let mut lobes = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
-        let (count, depth) = self.choose_lobes(ctx, &cov[..k], &curves, map, &mut lobes);
+        let (count, depth, share) = self.choose_lobes(ctx, &cov[..k], &curves, map, &mut lobes);
         if count == 0 {
             return self.base_bsdf();
         }
@@ -324,6 +331,7 @@ impl ScratchedMaterial {
             ctx,
             self.model_at_depth(depth, ctx.u_layer),
             &lobes[..count],
+            share,
         )
     }
 
@@ -435,9 +443,11 @@ impl ScratchedMaterial {
     /// coverage, one of the ties chosen by `ctx.u_layer` (several scratches crossing the
     /// footprint equally); `sum` ([Raymond16]) a lobe for each, the [`MAX_SCRATCH_LOBES`]
     /// largest where more cover the hit; `union` the same, scaled to the union's coverage
-    /// ([`union_scale`]). Returns the lobes' count (0 where nothing covers the hit) and the
-    /// depth ratio their BSDF reads (METHOD.md 9.2): the chosen curve's (or the map's) in
-    /// `max`, the largest covering curve's (else the map's) in `sum` and `union`, 1 for layers.
+    /// ([`union_scale`]); `stochastic` one of them drawn in proportion to its coverage, with the
+    /// union's. Returns the lobes' count (0 where nothing covers the hit), the depth ratio
+    /// their BSDF reads (METHOD.md 9.2: the chosen curve's (or the map's) in `max` and
+    /// `stochastic`, the largest covering curve's (else the map's) in `sum` and `union`, 1 for
+    /// layers) and where `stochastic`'s pick lies within `ctx.u_layer` ([`LobeShare`]).
     #[inline(always)]
     fn choose_lobes(
         &self,
@@ -446,7 +456,8 @@ impl ScratchedMaterial {
         curves: &CurveHits,
         map: Option<MapHit>,
         lobes: &mut [ScratchLobe; MAX_SCRATCH_LOBES],
-    ) -> (usize, f32) {
+    ) -> (usize, f32, LobeShare) {
+        let whole = LobeShare::default();
         let curve_lobe = |i: usize, c: f32| {
             let d = curves[i].direction;
             lobe_along(ctx, [d.x as f32, d.y as f32], c)
@@ -460,7 +471,7 @@ impl ScratchedMaterial {
             }
             if best <= 0.0 {
                 // (`best` is never NaN: `f32::max` drops NaN.)
-                return (0, 1.0);
+                return (0, 1.0, whole);
             }
             // `c > 0`: with a tiny best (a disc grazing the footprint) an uncovered layer must
             // not count as a tie. The layers' ties as a bit mask (one pass, no branch per
@@ -485,18 +496,18 @@ impl ScratchedMaterial {
                 }
                 let layer = rest.trailing_zeros() as usize;
                 lobes[0] = lobe(self, ctx, layer, cov[layer], u);
-                return (1, 1.0);
+                return (1, 1.0, whole);
             }
             if let Some(m) = map.filter(|_| pick == nl + nc) {
                 lobes[0] = lobe_along(ctx, m.direction, m.coverage);
-                return (1, self.map_depth);
+                return (1, self.map_depth, whole);
             }
             let i = (pick - nl) as usize;
             lobes[0] = curve_lobe(i, curves[i].coverage as f32);
-            return (1, curves[i].depth);
+            return (1, curves[i].depth, whole);
         }
-        // Sum and union: every covering layer and curve (a curve as `MAX_LAYERS + i`) and the
-        // map (as `MAP_SLOT`).
+        // Sum, union and stochastic: every covering layer and curve (a curve as
+        // `MAX_LAYERS + i`) and the map (as `MAP_SLOT`).
         const MAP_SLOT: usize = MAX_LAYERS + crate::curves::MAX_CURVE_HITS;
         const ALL: usize = MAP_SLOT + 1;
         let mut all = arrayvec::ArrayVec::<(f32, usize), ALL>::new();
@@ -515,12 +526,49 @@ impl ScratchedMaterial {
         if let Some(m) = map {
             all.push((m.coverage, MAP_SLOT));
         }
-        let scale = if self.mix == LayerMix::Union {
+        let scale = if self.mix == LayerMix::Sum {
+            1.0
+        } else {
             let c: arrayvec::ArrayVec<f32, ALL> = all.iter().map(|x| x.0).collect();
             union_scale(&c)
-        } else {
-            1.0
         };
+        if self.mix == LayerMix::Stochastic {
+            // One candidate drawn in proportion to its coverage, with the union's coverage:
+            // the expected BSDF is `union`'s (`sum_k (c_k / sum) (scale sum) f_k`).
+            let sum: f32 = all.iter().map(|x| x.0).sum();
+            if all.is_empty() || !(sum > 0.0) {
+                return (0, 1.0, whole);
+            }
+            let target = ctx.u_layer * sum;
+            let mut below = 0.0;
+            let mut chosen = all[all.len() - 1];
+            for &(c, i) in &all[..all.len() - 1] {
+                if target < below + c {
+                    chosen = (c, i);
+                    break;
+                }
+                below += c;
+            }
+            let (c, i) = chosen;
+            let share = LobeShare::new(below / sum, c / sum);
+            // The lean's place along the scratch: hashed from `u_layer`'s bits, as the BSDF's
+            // sampling reads the place within the share.
+            let u = (crate::hash::mix64(ctx.u_layer.to_bits() as u64 ^ 0x6c65_616e) >> 40) as f32
+                * (1.0 / (1u64 << 24) as f32);
+            let union = scale * sum;
+            let depth = if i < MAX_LAYERS {
+                lobes[0] = lobe(self, ctx, i, union, u);
+                1.0
+            } else if i == MAP_SLOT {
+                let d = map.map_or([1.0, 0.0], |m| m.direction);
+                lobes[0] = lobe_along(ctx, d, union);
+                self.map_depth
+            } else {
+                lobes[0] = curve_lobe(i - MAX_LAYERS, union);
+                curves[i - MAX_LAYERS].depth
+            };
+            return (1, depth, share);
+        }
         if all.len() > MAX_SCRATCH_LOBES {
             all.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
         }
@@ -546,7 +594,7 @@ impl ScratchedMaterial {
                     .then_some(self.map_depth)
             })
             .unwrap_or(1.0);
-        (n, depth)
+        (n, depth, whole)
     }
 
     /// The model a lobe of depth ratio `depth` reads (METHOD.md 9.2, wear): between the two
@@ -585,6 +633,7 @@ impl ScratchedMaterial {
         ctx: &ShadingContext,
         model: &'a ScratchModel,
         lobes: &[ScratchLobe],
+        share: LobeShare,
     ) -> Bsdf<'a> {
         let table = match model {
             ScratchModel::Seed(table) => table,
@@ -592,13 +641,13 @@ impl ScratchedMaterial {
                 let ScratchedBase::Glass { eta } = self.base else {
                     return self.base_bsdf();
                 };
-                return Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(eta, walls, lobes));
+                return Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(eta, walls, lobes).in_share(share));
             }
             ScratchModel::SpecularWalls(walls) => {
                 let ScratchedBase::Metal { ior } = self.base else {
                     return self.base_bsdf();
                 };
-                let b = ScratchedMetalBsdf::new(ior, self.tint, walls, lobes);
+                let b = ScratchedMetalBsdf::new(ior, self.tint, walls, lobes).in_share(share);
                 return Bsdf::ScratchedMetal(b);
             }
         };
@@ -606,6 +655,7 @@ impl ScratchedMaterial {
         // first lobe's `wo` terms once (`ScratchedBsdf::at_wo`; the same results bit for bit).
         Bsdf::Scratched(
             ScratchedBsdf::new(self.base, table, self.tint, lobes)
+                .in_share(share)
                 .at_wo(ctx.frame.to_local(ctx.wo)),
         )
     }
@@ -725,7 +775,7 @@ impl ScratchedMaterial {
     ) -> bool {
         let query = match self.mix {
             LayerMix::Max => TileQuery::Max,
-            LayerMix::Sum | LayerMix::Union => TileQuery::All,
+            LayerMix::Sum | LayerMix::Union | LayerMix::Stochastic => TileQuery::All,
         };
         match self.coverage {
             CoverageMode::Footprint => match ctx.pixel {

@@ -1235,3 +1235,133 @@ fn a_flow_map_turns_the_maps_lobe_in_the_tangent_frame() {
     let expect = Vec2::new(ctx.dpdu.x, ctx.dpdu.y).normalize();
     assert!((l.cos * expect.x + l.sin * expect.y).abs() > 1.0 - 1e-5);
 }
+
+/// `layer_mix = "stochastic"` is `union` in expectation: over the pick's number `u_layer`
+/// its BSDF's value averages `union`'s at a footprint that several layers' scratches share,
+/// and its sampling, which reads the same number within the pick's share (the integrator
+/// gives the bounce's lobe number to both), gives `union`'s estimate of the reflected and the
+/// transmitted light and of the light toward a cone of directions. Reading the number afresh
+/// instead (no share) would tie the component to the layer and fail.
+#[test]
+fn stochastic_mix_is_union_in_expectation() {
+    let t = schlick_diffuse();
+    let layers = wide_layers(4, 7);
+    let material = |mix| {
+        ScratchedMaterial::new(
+            ScratchedBase::Glass { eta: 1.5 },
+            Rgb::ONE,
+            t.clone(),
+            layers.clone(),
+            mix,
+            CoverageMode::Footprint,
+        )
+    };
+    let (union, stochastic) = (material(LayerMix::Union), material(LayerMix::Stochastic));
+    let wo = dir(40.0, 70.0);
+    // A footprint that three or more layers' scratches cover, unequally.
+    let mut rng = Pcg64::seed_from_u64(3);
+    let ctx = loop {
+        let uv = Vec2::new(rng.random(), rng.random());
+        let ctx = flat_ctx(uv, 0.08, wo, 0.5);
+        if let Bsdf::Scratched(b) = bsdf_of(&union, &ctx) {
+            let c: Vec<f32> = b.lobes().iter().map(|l| l.coverage).collect();
+            if c.len() >= 3 && c.iter().any(|&x| (x - c[0]).abs() > 0.05) {
+                break ctx;
+            }
+        }
+    };
+    let at = |u: f32| ShadingContext { u_layer: u, ..ctx };
+    let n = 20_000;
+    let us = |k: usize| (k as f32 + 0.5) / n as f32;
+    // Values.
+    let b_union = bsdf_of(&union, &ctx);
+    for wi in [dir(30.0, 200.0), dir(60.0, 10.0), dir(20.0, 120.0)] {
+        let want = b_union.eval(wo, wi);
+        let mean = (0..n)
+            .map(|k| bsdf_of(&stochastic, &at(us(k))).eval(wo, wi))
+            .fold(Rgb::ZERO, |s, x| s + x)
+            / n as f32;
+        assert!(
+            (mean - want).abs().max_element() <= 2e-3 * want.max_element(),
+            "{wi}: {mean} vs {want}"
+        );
+    }
+    // Sampling: reflected, transmitted, a cone (within 50 degrees of `(0.5, -0.3, 0.8)`) and
+    // the reflected light's spread, with the means' standard errors.
+    let cone = Vec3::new(0.5, -0.3, 0.8).normalize();
+    let tally = |b: &Bsdf, u_lobe: f32, u: Vec2, out: &mut [[f64; 2]; 4]| {
+        if let Some(s) = b.sample(wo, u_lobe, u) {
+            let w = s.weight.x as f64;
+            let mut add = |i: usize| {
+                out[i][0] += w;
+                out[i][1] += w * w;
+            };
+            add((s.wi.z < 0.0) as usize);
+            if s.wi.dot(cone) > 50f32.to_radians().cos() {
+                add(2);
+            }
+            // The reflected light's spread along x against y: each layer's scratches spread
+            // it across their own direction.
+            if s.wi.z > 0.0 {
+                let a = w * (s.wi.x * s.wi.x - s.wi.y * s.wi.y) as f64;
+                out[3][0] += a;
+                out[3][1] += a * a;
+            }
+        }
+    };
+    let n = 200_000;
+    let us = |k: usize| (k as f32 + 0.5) / n as f32;
+    let (mut want, mut got) = ([[0.0f64; 2]; 4], [[0.0f64; 2]; 4]);
+    let mut rng = Pcg64::seed_from_u64(11);
+    for k in 0..n {
+        let u = us(k);
+        let d = Vec2::new(rng.random(), rng.random());
+        tally(&b_union, u, d, &mut want);
+        tally(&bsdf_of(&stochastic, &at(u)), u, d, &mut got);
+    }
+    let n = n as f64;
+    let mean_se = |x: [f64; 2]| (x[0] / n, ((x[1] / n - (x[0] / n).powi(2)) / n).sqrt());
+    for i in 0..4 {
+        let ((w, sw), (g, sg)) = (mean_se(want[i]), mean_se(got[i]));
+        let sigma = (sw * sw + sg * sg).sqrt();
+        assert!((g - w).abs() < 4.0 * sigma + 1e-4 * w.abs(), "{i}: {g} vs {w} (sigma {sigma})");
+    }
+    // The component is independent of the pick: on a mirror base, each picked layer's
+    // samples take the base's mirror direction with probability `1 - C`.
+    let metal = ScratchedMaterial::new(
+        ScratchedBase::Metal {
+            ior: perfect_mirror(),
+        },
+        Rgb::ONE,
+        t.clone(),
+        layers.clone(),
+        LayerMix::Stochastic,
+        CoverageMode::Footprint,
+    );
+    let mirror = Vec3::new(-wo.x, -wo.y, wo.z);
+    let n = 20_000;
+    let mut by_layer: Vec<([u32; 2], u32, u32)> = Vec::new();
+    let mut coverage = 0.0;
+    for k in 0..n {
+        let u = (k as f32 + 0.5) / n as f32;
+        let Bsdf::Scratched(b) = bsdf_of(&metal, &at(u)) else {
+            panic!("the footprint is scratched")
+        };
+        let l = b.lobes()[0];
+        coverage = l.coverage;
+        let key = [l.cos.to_bits(), l.sin.to_bits()];
+        let s = Bsdf::Scratched(b).sample(wo, u, Vec2::new(rng.random(), rng.random()));
+        let base = s.is_some_and(|s| (s.wi - mirror).length() < 1e-6) as u32;
+        match by_layer.iter_mut().find(|e| e.0 == key) {
+            Some(e) => (e.1, e.2) = (e.1 + 1, e.2 + base),
+            None => by_layer.push((key, 1, base)),
+        }
+    }
+    assert!(by_layer.len() >= 3, "{}", by_layer.len());
+    let p = 1.0 - coverage as f64;
+    for (_, count, base) in by_layer {
+        let sigma = (p * (1.0 - p) / count as f64).sqrt();
+        let f = base as f64 / count as f64;
+        assert!((f - p).abs() < 4.0 * sigma, "{f} of {count} vs {p}");
+    }
+}

@@ -478,8 +478,8 @@ fn model_seed_is_the_seeds_model() {
 
 /// The defaults (`model` left out, or `"default"`) are docs/fidelity.md's "The defaults":
 /// glass with diffuse walls and a Fresnel law takes 6 exact-groove slices, `fresnel =
-/// "walls"`, M 64, N 50000, N_r 1; everything else is the seed's (`layer_mix = "max"`, the
-/// footprint, a direction per layer, a metal's mirror walls).
+/// "walls"`, M 64, N 50000, N_r 1; layers combine by `layer_mix = "stochastic"`; everything
+/// else is the seed's (the footprint, a direction per layer, a metal's mirror walls).
 #[test]
 fn the_defaults_are_the_documented_ones() {
     let glass = "base = \"glass\"";
@@ -499,7 +499,11 @@ fn the_defaults_are_the_documented_ones() {
         assert_eq!((t.m, t.n, t.nr, t.albedo), (64, 50_000, 1, 1.0));
         assert_eq!(
             (r.mix, r.coverage, r.orientation),
-            (LayerMix::Max, CoverageMode::Footprint, Orientation::Layer)
+            (
+                LayerMix::Stochastic,
+                CoverageMode::Footprint,
+                Orientation::Layer
+            )
         );
         assert_eq!(r.layers, LayerParams::setting(1).unwrap());
         let m = parse(&format!("type = \"scratched\"\n{glass}\n[scratches]\n{model}\nlayers = 1\nm = 8\nn = 50\nnr = 2"))
@@ -516,7 +520,7 @@ fn the_defaults_are_the_documented_ones() {
         (t.walls, t.fresnel_mode, t.groove_slices, t.m, t.n, t.nr),
         (Walls::Specular, FresnelMode::Walls, 0, 256, 10_000, 100)
     );
-    assert_eq!(r.mix, LayerMix::Max);
+    assert_eq!(r.mix, LayerMix::Stochastic);
     // A metal's Lambertian walls keep the seed's table (Fresnel at every hit, eq. (3)).
     let t = trace_of(&resolved(gold, "walls = \"diffuse\"")).clone();
     assert_eq!(
@@ -606,7 +610,7 @@ fn curves_alone_or_beside_layers() {
     let m = prepare("curves = \"marks.svg\"\ntaper = 0.5").unwrap();
     assert_eq!(m.layers.len(), 0);
     // Curves alone default to `union` (closest to explicit grooves), under the seed's model
-    // and beside layers to `max`.
+    // to `max`, beside layers to `stochastic`.
     assert_eq!(m.mix, LayerMix::Union);
     let seed = prepare("curves = \"marks.svg\"\nmodel = \"seed\"").unwrap();
     assert_eq!(seed.mix, LayerMix::Max);
@@ -614,7 +618,7 @@ fn curves_alone_or_beside_layers() {
     // With a layer key: both.
     let m = prepare("curves = \"marks.svg\"\nsetting = 2\nlayers = 2").unwrap();
     assert_eq!(m.layers.len(), 2);
-    assert_eq!(m.mix, LayerMix::Max);
+    assert_eq!(m.mix, LayerMix::Stochastic);
     assert!(m.curves.is_some());
     // A pattern.
     let m =
@@ -701,7 +705,7 @@ fn maps_alone_or_beside_layers_and_their_errors() {
     assert!((s.coverage - 128.0 / 255.0).abs() < 1e-6, "{}", s.coverage);
     let m =
         prepare("map = \"wear.png\"\ndirection = \"flow.png\"\nsetting = 2\nlayers = 2").unwrap();
-    assert_eq!((m.layers.len(), m.mix), (2, LayerMix::Max));
+    assert_eq!((m.layers.len(), m.mix), (2, LayerMix::Stochastic));
     assert!(m.curves.is_none() && m.map.is_some());
     let err = |s: &str| prepare(s).unwrap_err();
     let e = err("map = \"missing.png\"");
