@@ -540,10 +540,10 @@ fn the_defaults_are_the_documented_ones() {
         assert_eq!(a, b, "{keys}");
         assert_eq!((a.groove_slices, a.m, a.n, a.nr), (0, 256, 10_000, 100));
     }
-    // Dielectric walls: no 2D table; the seed's layer choice.
+    // Dielectric walls: no 2D table; the default layer choice.
     let r = resolved(glass, "walls = \"dielectric\"");
     assert!(matches!(r.table, TableSource::Traced(_)), "{:?}", r.table);
-    assert_eq!(r.mix, LayerMix::Max);
+    assert_eq!(r.mix, LayerMix::Stochastic);
 }
 
 /// A key given explicitly wins over either model's default.
