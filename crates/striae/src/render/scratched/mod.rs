@@ -24,8 +24,8 @@ use crate::math::{Rgb, Vec3};
 use crate::precompute::groove::totally_reflected;
 use crate::render::bsdf::scratched::MAX_SCRATCH_LOBES;
 use crate::render::bsdf::{
-    Bsdf, Conductor, Dielectric, GlassWalls, LobeShare, ScratchLobe, ScratchLobeTable, ScratchedBase,
-    ScratchedBsdf, ScratchedGlassBsdf, ScratchedMetalBsdf, WallLobeTable,
+    Bsdf, Conductor, Dielectric, GlassWalls, LobeShare, ScratchLobe, ScratchLobeTable,
+    ScratchedBase, ScratchedBsdf, ScratchedGlassBsdf, ScratchedMetalBsdf, WallLobeTable,
 };
 use crate::render::shading::ShadingContext;
 use lean::Along;
@@ -536,7 +536,7 @@ impl ScratchedMaterial {
             // One candidate drawn in proportion to its coverage, with the union's coverage:
             // the expected BSDF is `union`'s (`sum_k (c_k / sum) (scale sum) f_k`).
             let sum: f32 = all.iter().map(|x| x.0).sum();
-            if all.is_empty() || !(sum > 0.0) {
+            if all.is_empty() || sum.is_nan() || sum <= 0.0 {
                 return (0, 1.0, whole);
             }
             let target = ctx.u_layer * sum;
@@ -641,7 +641,9 @@ impl ScratchedMaterial {
                 let ScratchedBase::Glass { eta } = self.base else {
                     return self.base_bsdf();
                 };
-                return Bsdf::ScratchedGlass(ScratchedGlassBsdf::new(eta, walls, lobes).in_share(share));
+                return Bsdf::ScratchedGlass(
+                    ScratchedGlassBsdf::new(eta, walls, lobes).in_share(share),
+                );
             }
             ScratchModel::SpecularWalls(walls) => {
                 let ScratchedBase::Metal { ior } = self.base else {

@@ -1324,7 +1324,10 @@ fn stochastic_mix_is_union_in_expectation() {
     for i in 0..4 {
         let ((w, sw), (g, sg)) = (mean_se(want[i]), mean_se(got[i]));
         let sigma = (sw * sw + sg * sg).sqrt();
-        assert!((g - w).abs() < 4.0 * sigma + 1e-4 * w.abs(), "{i}: {g} vs {w} (sigma {sigma})");
+        assert!(
+            (g - w).abs() < 4.0 * sigma + 1e-4 * w.abs(),
+            "{i}: {g} vs {w} (sigma {sigma})"
+        );
     }
     // The component is independent of the pick: on a mirror base, each picked layer's
     // samples take the base's mirror direction with probability `1 - C`.
