@@ -317,8 +317,11 @@ impl Default for LobeShare {
 }
 
 impl LobeShare {
-    /// The share `[start, start + len)`, `len > 0`.
+    /// The share `[start, start + len)`; the whole of `[0, 1)` unless `len > 0`.
     pub fn new(start: f32, len: f32) -> Self {
+        if len.is_nan() || len <= 0.0 {
+            return Self::default();
+        }
         LobeShare {
             start,
             inv_len: 1.0 / len,
