@@ -68,7 +68,8 @@ class StriaeScratches(bpy.types.PropertyGroup):
                              description="Worley threshold tau, (0, 1]")
     layers: IntProperty(name="Layers", min=1, max=64, default=8, description="Number of scratch layers K")
     seed: IntProperty(name="Seed", min=0, default=1, description="Seed of the layer set (and of the curves' wear)")
-    layer_mix: EnumProperty(name="Layer mix", items=_enum("max", "sum", "union"), default="max",
+    layer_mix: EnumProperty(name="Layer mix", items=_enum("stochastic", "union", "sum", "max"),
+                            default="stochastic",
                             description="How layers (and curves) covering a footprint combine")
     orientation: EnumProperty(name="Orientation", items=_enum("layer", "random"), default="layer",
                               description="A direction per layer, or per scratch")
