@@ -25,6 +25,12 @@ pub fn unit_from_u32(x: u64) -> f64 {
     f64::from_bits(0x3FF0_0000_0000_0000 | (x << 20)) - 1.0
 }
 
+/// The top 24 bits of a hash `h` as a number in `[0, 1)`, exactly representable in `f32`.
+#[inline(always)]
+pub fn unit_f32(h: u64) -> f32 {
+    (h >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
+}
+
 /// One SplitMix64 step from state `x`: `mix64(x + GOLDEN)`.
 #[inline(always)]
 pub fn splitmix64(x: u64) -> u64 {

@@ -1097,16 +1097,15 @@ fn shade_hit<'a, const DIFFERENTIALS: bool>(
     worker: &mut Worker,
 ) -> (Frame, Bsdf<'a>) {
     let material = &scene.materials[scene.geometry.shapes()[hit.shape as usize].material as usize];
-    // Dimension 0 of the bounce's block; drawn only where the material reads it (the
-    // scratched material, not glass seen from inside). It only breaks ties between crossing
-    // scratches, so it is hashed: the block's first Sobol set (light choice and position) is
-    // computed only where light sampling runs, not at every hit of a scratched surface (most
-    // of them see no scratch and are delta bounces).
-    // A material that picks one lobe by it (`layer_mix = "stochastic"`) reads the bounce's
-    // BSDF-lobe number instead, and its BSDF the place of that number within the pick's
-    // share: one stratified number picks the layer and the component, as `union`'s
-    // sampling does with all the layers' lobes (without, the two choices are stratified apart
-    // and mirror-walled glints came out at twice the variance).
+    // `u_layer`: dimension 0 of the bounce's block, drawn only where the material reads it
+    // (the scratched material, not glass seen from inside). Where it only breaks ties between
+    // crossing scratches it is hashed: the block's first Sobol set (light choice and position)
+    // is computed only where light sampling runs, not at every hit of a scratched surface
+    // (most of them see no scratch and are delta bounces). A material that picks one lobe by
+    // it (`layer_mix = "stochastic"`) reads the bounce's BSDF-lobe number instead, and its
+    // BSDF the place of that number within the pick's share: one stratified number picks the
+    // layer and the component, as `union`'s sampling does with all the layers' lobes (drawn
+    // apart, the two choices gave mirror-walled glints twice the variance).
     let u_layer = if material.reads_hit_context(wo_world, hit.ng) {
         if material.picks_lobe_by_lobe_number() {
             let u = sampler.peek(depth, LOBE_DIM);

@@ -27,7 +27,7 @@ use crate::math::Vec2;
 pub const CAMERA_DIMS: u32 = 4;
 /// Dimensions reserved per bounce: BSDF lobe (1) and direction (2), light choice (1) and
 /// position (2), Russian roulette (1), and one for the material's layer choice (1, drawn by
-/// [`PixelSampler::next_1d_hashed`]).
+/// [`PixelSampler::next_1d_hashed`]; `layer_mix = "stochastic"` reads the BSDF lobe's instead).
 pub const BOUNCE_DIMS: u32 = 8;
 /// The BSDF lobe's dimension within a bounce's block ([`PixelSampler::seek`]).
 pub const LOBE_DIM: u32 = 4;
@@ -175,9 +175,7 @@ impl PixelSampler {
     pub fn next_1d_hashed(&mut self) -> f32 {
         let d = self.dimension;
         self.dimension += 1;
-        // The top 24 bits of a SplitMix64 output: exactly representable, in [0, 1).
-        let bits = splitmix64(self.key.wrapping_add(d as u64)) >> 40;
-        bits as f32 * (1.0 / (1u64 << 24) as f32)
+        crate::hash::unit_f32(splitmix64(self.key.wrapping_add(d as u64)))
     }
 
     /// The next two numbers in `[0, 1)^2`.

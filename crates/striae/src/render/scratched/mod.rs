@@ -416,9 +416,8 @@ impl ScratchedMaterial {
         if s.coverage <= 0.0 {
             return None;
         }
-        // A second uniform from `u_layer`'s bits, hashed: independent of the layers' pick.
-        let v = (crate::hash::mix64(ctx.u_layer.to_bits() as u64 ^ 0x6d61_7073) >> 40) as f32
-            * (1.0 / (1u64 << 24) as f32);
+        // A second uniform from `u_layer`, independent of the layers' pick.
+        let v = rehashed(ctx.u_layer, 0x6d61_7073);
         let d = s.draw_direction(v);
         let d = match map.frame() {
             DirectionFrame::Uv => d,
@@ -526,6 +525,16 @@ impl ScratchedMaterial {
         if let Some(m) = map {
             all.push((m.coverage, MAP_SLOT));
         }
+        // The lobe of slot `i` with coverage `c` (`u` places a layer's lean).
+        let slot_lobe = |i: usize, c: f32, u: f32| {
+            if i < MAX_LAYERS {
+                lobe(self, ctx, i, c, u)
+            } else if i == MAP_SLOT {
+                lobe_along(ctx, map.map_or([1.0, 0.0], |m| m.direction), c)
+            } else {
+                curve_lobe(i - MAX_LAYERS, c)
+            }
+        };
         let scale = if self.mix == LayerMix::Sum {
             1.0
         } else {
@@ -551,20 +560,14 @@ impl ScratchedMaterial {
             }
             let (c, i) = chosen;
             let share = LobeShare::new(below / sum, c / sum);
-            // The lean's place along the scratch: hashed from `u_layer`'s bits, as the BSDF's
-            // sampling reads the place within the share.
-            let u = (crate::hash::mix64(ctx.u_layer.to_bits() as u64 ^ 0x6c65_616e) >> 40) as f32
-                * (1.0 / (1u64 << 24) as f32);
-            let union = scale * sum;
+            // The lean's place along the scratch: another uniform from `u_layer`, since the
+            // BSDF's sampling reads the place within the share.
+            lobes[0] = slot_lobe(i, scale * sum, rehashed(ctx.u_layer, 0x6c65_616e));
             let depth = if i < MAX_LAYERS {
-                lobes[0] = lobe(self, ctx, i, union, u);
                 1.0
             } else if i == MAP_SLOT {
-                let d = map.map_or([1.0, 0.0], |m| m.direction);
-                lobes[0] = lobe_along(ctx, d, union);
                 self.map_depth
             } else {
-                lobes[0] = curve_lobe(i - MAX_LAYERS, union);
                 curves[i - MAX_LAYERS].depth
             };
             return (1, depth, share);
@@ -574,14 +577,7 @@ impl ScratchedMaterial {
         }
         let n = all.len().min(MAX_SCRATCH_LOBES);
         for (l, &(c, i)) in lobes.iter_mut().zip(&all[..n]) {
-            *l = if i < MAX_LAYERS {
-                lobe(self, ctx, i, c * scale, ctx.u_layer)
-            } else if i == MAP_SLOT {
-                let d = map.map_or([1.0, 0.0], |m| m.direction);
-                lobe_along(ctx, d, c * scale)
-            } else {
-                curve_lobe(i - MAX_LAYERS, c * scale)
-            };
+            *l = slot_lobe(i, c * scale, ctx.u_layer);
         }
         let depth = all[..n]
             .iter()
@@ -616,8 +612,8 @@ impl ScratchedMaterial {
             return &self.worn[0].1;
         }
         let ((d0, m0), (d1, m1)) = (level(i - 1), level(i));
-        // A second uniform from `u`'s bits, hashed: independent of what `u` stratifies.
-        let v = (crate::hash::mix64(u.to_bits() as u64) >> 40) as f32 * (1.0 / (1u64 << 24) as f32);
+        // A second uniform from `u`, independent of what `u` stratifies.
+        let v = rehashed(u, 0);
         if v * (d1 - d0) < depth - d0 {
             m1
         } else {
@@ -1015,6 +1011,13 @@ fn lobe_along(ctx: &ShadingContext, d: [f32; 2], c: f32) -> ScratchLobe {
         (1.0, 0.0)
     };
     ScratchLobe::new(c, cos, sin)
+}
+
+/// A uniform in `[0, 1)` hashed from `u`'s bits and `salt`: a further number from one already
+/// drawn, independent of what `u` itself decides.
+#[inline(always)]
+fn rehashed(u: f32, salt: u64) -> f32 {
+    crate::hash::unit_f32(crate::hash::mix64(u.to_bits() as u64 ^ salt))
 }
 
 mod lean;
