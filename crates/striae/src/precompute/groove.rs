@@ -41,6 +41,7 @@ use crate::optics::microfacet::Ggx;
 use crate::optics::microsurface::Microsurface;
 use crate::precompute::angle_bins::AngleBins;
 use crate::precompute::cross_section::{CrossSection, T_EPS};
+use crate::precompute::crossing::{Crossing, CrossingEnd, Partner};
 use crate::precompute::profile::Profile;
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -823,28 +824,97 @@ impl GroovePaths {
     /// from the air through the opening; `d0.z > 0`: from inside, through the opening or
     /// meeting the ridge beside it, uniformly over the light the groove intercepts, as the
     /// goniometer's `beside`), entering at `x` in `[0, 1)` across the opening (or the band),
-    /// its bounces (and further entry points, from inside) drawn from the stream `key`.
-    /// `None` for a path that runs out of bounces or leaves along the surface.
-    pub fn trace(&self, d0: [f64; 3], x: f64, key: u64) -> Option<GrooveExit> {
+    /// its bounces (and further entry points, from inside) drawn from the stream `key`; with a
+    /// `partner`, through the union of this groove and the partner crossing it
+    /// ([`crate::precompute::crossing`]). `None` for a path that runs out of bounces or leaves
+    /// along the surface.
+    pub fn trace(
+        &self,
+        d0: [f64; 3],
+        x: f64,
+        key: u64,
+        partner: Option<Partner>,
+    ) -> Option<GrooveExit> {
         let t = &self.tracer;
         let inside = d0[2] > 0.0;
         let (start, width) = entry_band(&t.cs, d0, inside, t.s.ior);
         for attempt in 0..ENTRY_TRIES {
             let path_key = mix64(key.wrapping_add(attempt.wrapping_mul(GOLDEN)));
             let u = if attempt == 0 { x } else { t.draw(path_key, 0) };
-            match t.run(t.entry(start + width * u, d0, inside), path_key, inside) {
-                Outcome::Left(r) if r.d[2] != 0.0 && (r.d[2] < 0.0) == r.in_object => {
-                    return Some(GrooveExit {
-                        d: r.d,
-                        in_object: r.in_object,
-                        w: r.w,
-                    })
+            let x0 = start + width * u;
+            let end = match partner {
+                Some(p) => Crossing::new(&t.cs, t.s.ior, x0, p).run(
+                    x0,
+                    d0,
+                    inside,
+                    PathDraws::new(path_key),
+                    t.s.max_bounces,
+                ),
+                None => self.run_2d(x0, d0, inside, path_key),
+            };
+            match end {
+                CrossingEnd::Left(e) if e.d[2] != 0.0 && (e.d[2] < 0.0) == e.in_object => {
+                    return Some(e)
                 }
-                Outcome::Missed => continue,
+                CrossingEnd::Missed => continue,
                 _ => return None,
             }
         }
         None
+    }
+
+    /// One path of the 2.5D tracer entering on the line through `(x0, 0)`.
+    fn run_2d(&self, x0: f64, d0: [f64; 3], inside: bool, path_key: u64) -> CrossingEnd {
+        let t = &self.tracer;
+        match t.run(t.entry(x0, d0, inside), path_key, inside) {
+            Outcome::Left(r) => CrossingEnd::Left(GrooveExit {
+                d: r.d,
+                in_object: r.in_object,
+                w: r.w,
+            }),
+            Outcome::Missed => CrossingEnd::Missed,
+            Outcome::Absorbed | Outcome::Dropped(_) => CrossingEnd::Lost,
+        }
+    }
+
+    /// [`Self::run_2d`] for the crossing tracer's tests: `Some(Some(exit))`, `Some(None)`
+    /// missed, `None` lost.
+    #[cfg(test)]
+    pub(crate) fn run_from(
+        &self,
+        x0: f64,
+        d0: [f64; 3],
+        inside: bool,
+        path_key: u64,
+    ) -> Option<Option<GrooveExit>> {
+        match self.run_2d(x0, d0, inside, path_key) {
+            CrossingEnd::Left(e) => Some(Some(e)),
+            CrossingEnd::Missed => Some(None),
+            CrossingEnd::Lost => None,
+        }
+    }
+}
+
+/// The random numbers the tracers draw for one path, from its counter-based stream: the
+/// Fresnel choice of bounce `k` is counter `3 + 3k` ([`Tracer::draw`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PathDraws {
+    key: u64,
+}
+
+impl PathDraws {
+    pub fn new(path_key: u64) -> Self {
+        PathDraws { key: path_key }
+    }
+
+    /// The number that picks reflection or refraction at bounce `k`.
+    #[inline]
+    pub fn fresnel(self, k: usize) -> f64 {
+        Draws {
+            key: self.key,
+            base: 1 + 3 * k as u64,
+        }
+        .get(2)
     }
 }
 
@@ -1489,7 +1559,9 @@ mod tests {
             for k in 0..n {
                 let key = mix64(k ^ (i as u64) << 40);
                 let x = (k as f64 + 0.5) / n as f64;
-                let e = paths.trace(d0, x, key).expect("a lossless path leaves");
+                let e = paths
+                    .trace(d0, x, key, None)
+                    .expect("a lossless path leaves");
                 assert_eq!(e.w, 1.0);
                 let up = if e.in_object { -e.d[2] } else { e.d[2] };
                 let reflected = e.in_object == (side == LightSide::Inside);

@@ -181,13 +181,16 @@ pub enum ScratchedBase {
 /// One scratch lobe at a hit: its coverage `c` of the footprint and the rotation of its scratch
 /// frame, `(cos beta, sin beta)` with `t = cos beta s + sin beta t_shading`, and the frame's
 /// lean along the scratch (`lean = true`, METHOD.md 8.3): its normal tilted toward `t` by an
-/// angle `alpha`, as `sin alpha` (0 without one).
+/// angle `alpha`, as `sin alpha` (0 without one); and where the hit lies where two scratches
+/// cross (traced glass walls, METHOD.md 8.3), the other scratch's across axis `b` in this
+/// lobe's scratch frame, `(x, y)` (zero without one).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ScratchLobe {
     pub coverage: f32,
     pub cos: f32,
     pub sin: f32,
     pub lean: f32,
+    pub cross: [f32; 2],
 }
 
 impl Default for ScratchLobe {
@@ -204,6 +207,18 @@ impl ScratchLobe {
             cos,
             sin,
             lean: 0.0,
+            cross: [0.0; 2],
+        }
+    }
+
+    /// The same lobe at a crossing with the scratch of `other`'s direction: `other`'s across
+    /// axis `b' = (sin beta', -cos beta')` in this lobe's scratch frame (the lean left out).
+    pub fn crossed_by(self, other: &ScratchLobe) -> Self {
+        let along = self.cos * other.cos + self.sin * other.sin;
+        let across = self.sin * other.cos - self.cos * other.sin;
+        ScratchLobe {
+            cross: [along, -across],
+            ..self
         }
     }
 

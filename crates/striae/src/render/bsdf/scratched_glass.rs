@@ -58,9 +58,10 @@
 use super::dielectric::{mirror_sample, refraction_sample};
 use super::scratched::CoveredLobes;
 use super::{BsdfSample, ScratchLobe};
-use crate::hash::mix64;
+use crate::hash::{mix64, unit_from_u32};
 use crate::math::{Rgb, Vec2, Vec3};
 use crate::optics::fresnel_f32;
+use crate::precompute::crossing::Partner;
 use crate::precompute::groove::GroovePaths;
 use crate::precompute::profile::Profile;
 use crate::precompute::wall_table::{self, WallTable, WallTableParams};
@@ -440,6 +441,9 @@ fn pick_neighbour(pair: [(usize, f64); 2], u: f32) -> (usize, f32) {
 /// The largest `f32` below 1.
 const ONE_BELOW: f32 = 1.0 - f32::EPSILON / 2.0;
 
+/// Keys the place across a crossing groove's opening ([`TracedGroove::sample`]).
+const CROSSING_SALT: u64 = 0x6372_6f73_7369_6e67;
+
 /// A smooth-wall groove sample ([`WallLobeTable::sample_smooth`], [`TracedGroove::sample`]),
 /// scratch frame.
 #[derive(Clone, Copy, Debug)]
@@ -452,6 +456,30 @@ pub(super) struct SmoothSample {
     pub weight: f32,
     /// The density of `wi` from the chosen slice; 1 for a traced path, which has none.
     pub pdf: f32,
+}
+
+/// The groove crossing a traced one along `cross` ([`ScratchLobe::cross`]), placed from the
+/// path's stream `key` as a covered point of two independent scratches lies (METHOD.md 8.3):
+/// the entry line uniformly across its opening, and its width over the traced groove's that of
+/// two tapered scratches (`w(s) = w_0 sqrt(1 - (s/l)^2)`, each at a point drawn in proportion
+/// to its width: `s/l` the `x` of a uniform point of the unit disc).
+fn crossing_partner(cross: [f32; 2], key: u64) -> Partner {
+    let mut h = mix64(key ^ CROSSING_SALT);
+    let mut next = || {
+        h = mix64(h);
+        unit_from_u32(h >> 32)
+    };
+    let at = next() - 0.5;
+    let mut width = || {
+        let x = next().sqrt() * (std::f64::consts::TAU * next()).cos();
+        (1.0 - x * x).sqrt()
+    };
+    let ratio = width() / width();
+    Partner {
+        across: [cross[0] as f64, cross[1] as f64],
+        at,
+        width: ratio.clamp(0.05, 20.0),
+    }
 }
 
 /// Smooth glass walls with no table (`lobes = "traced"`, see the module notes): the groove
@@ -481,12 +509,16 @@ impl TracedGroove {
 
     /// One path through the groove for light arriving along `-w` (`w` toward the viewer,
     /// scratch frame, as a table is read): `u.x` the entry point, the bounces from a stream
-    /// keyed by `u0` and `u.y`. `None` where the path is lost.
+    /// keyed by `u0` and `u.y`; at a crossing (`cross`, [`ScratchLobe::cross`], not zero)
+    /// through the union with the other groove, its entry line at a uniform place across that
+    /// groove's opening, drawn from the same stream (METHOD.md 8.3). `None` where the path is
+    /// lost.
     #[inline]
-    fn sample(&self, w: Vec3, u0: f32, u: Vec2) -> Option<SmoothSample> {
+    fn sample(&self, w: Vec3, u0: f32, u: Vec2, cross: [f32; 2]) -> Option<SmoothSample> {
         let key = mix64((u0.to_bits() as u64) << 32 | u.y.to_bits() as u64);
         let d0 = [-w.x as f64, -w.y as f64, -w.z as f64];
-        let e = self.paths.trace(d0, u.x as f64, key)?;
+        let partner = (cross != [0.0; 2]).then(|| crossing_partner(cross, key));
+        let e = self.paths.trace(d0, u.x as f64, key, partner)?;
         let wi = Vec3::new(e.d[0] as f32, e.d[1] as f32, e.d[2] as f32);
         let lobe = ((wi.z > 0.0) != (w.z > 0.0)) as usize;
         let side = (w.z < 0.0) as usize;
@@ -687,7 +719,7 @@ impl<'a> ScratchedGlassBsdf<'a> {
                 // light sampling to weigh against.
                 let w = l.wo_to_scratch(wo);
                 let s = match walls {
-                    GlassWalls::Traced(g) => g.sample(w, u0, u),
+                    GlassWalls::Traced(g) => g.sample(w, u0, u, l.cross),
                     GlassWalls::Table(t) => t.sample_smooth(w, u0, u),
                 }?;
                 return Some(BsdfSample {

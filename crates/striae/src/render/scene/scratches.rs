@@ -194,6 +194,10 @@ pub struct ScratchSpec {
     /// (default `false`, the seed's extruded groove; [`ScratchedMaterial::with_lean`]).
     /// Explicit grooves have the lean of their geometry whatever this says.
     pub lean: Option<bool>,
+    /// Trace the union of two crossing grooves where two scratches cover a hit (traced glass
+    /// walls under `layer_mix` `stochastic` or `union`; METHOD.md 8.3, "Ours": crossings).
+    /// Default `true` under `model = "default"`, `false` under `"seed"`.
+    pub crossings: Option<bool>,
     /// Stations along each explicit groove (default [`DEFAULT_STATIONS`]): its opening is the
     /// polygon through them (`geometry::carve`). The SV-BRDF does not read it.
     pub stations: Option<usize>,
@@ -1145,6 +1149,11 @@ impl ScratchedDesc {
         Ok(
             ScratchedMaterial::with_model(r.base, r.tint, model, layers, r.mix, r.coverage)
                 .with_lean(self.scratches.lean == Some(true))
+                .with_crossings(
+                    self.scratches
+                        .crossings
+                        .unwrap_or(self.model() == ModelKey::Default),
+                )
                 .with_curves(curves)
                 .with_map(
                     map.map(std::sync::Arc::new),

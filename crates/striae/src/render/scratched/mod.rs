@@ -132,6 +132,8 @@ pub struct ScratchedMaterial {
     pub coverage: CoverageMode,
     /// `lean = true`: twice the profile's cross-section area ([`Self::with_lean`]); 0 without.
     lean: f64,
+    /// Crossing scratches traced through their union ([`Self::with_crossings`]).
+    crossings: bool,
 }
 
 impl std::fmt::Debug for ScratchedMaterial {
@@ -184,7 +186,22 @@ impl ScratchedMaterial {
             mix,
             coverage,
             lean: 0.0,
+            crossings: false,
         }
+    }
+
+    /// The same material with `crossings` on or off (METHOD.md 8.3, "Ours": crossings): with
+    /// traced glass walls (`lobes = "traced"`) and `layer_mix` `stochastic` or `union`, a hit
+    /// that two scratches cover ([`crossing_partner`]) traces the union of their grooves
+    /// ([`crate::precompute::crossing`]) instead of one groove alone. Other models have no
+    /// crossings.
+    pub fn with_crossings(mut self, on: bool) -> Self {
+        let traced = matches!(
+            self.model,
+            ScratchModel::DielectricWalls(GlassWalls::Traced(_))
+        );
+        self.crossings = on && traced;
+        self
     }
 
     /// The same material with the scratch curves `curves` beside its layers (METHOD.md 9.1):
@@ -563,6 +580,11 @@ impl ScratchedMaterial {
             // The lean's place along the scratch: another uniform from `u_layer`, since the
             // BSDF's sampling reads the place within the share.
             lobes[0] = slot_lobe(i, scale * sum, rehashed(ctx.u_layer, 0x6c65_616e));
+            if self.crossings {
+                if let Some((cj, j)) = crossing_partner(&all, i, ctx.u_layer) {
+                    lobes[0] = lobes[0].crossed_by(&slot_lobe(j, cj, ctx.u_layer));
+                }
+            }
             let depth = if i < MAX_LAYERS {
                 1.0
             } else if i == MAP_SLOT {
@@ -578,6 +600,17 @@ impl ScratchedMaterial {
         let n = all.len().min(MAX_SCRATCH_LOBES);
         for (l, &(c, i)) in lobes.iter_mut().zip(&all[..n]) {
             *l = slot_lobe(i, c * scale, ctx.u_layer);
+        }
+        if self.crossings && self.mix == LayerMix::Union {
+            // Each lobe's partner among the others, by a uniform of its own.
+            let built = *lobes;
+            for (k, &(_, i)) in all[..n].iter().enumerate() {
+                let u = rehashed(ctx.u_layer, k as u64);
+                if let Some((_, j)) = crossing_partner(&all[..n], i, u) {
+                    let other = all[..n].iter().position(|x| x.1 == j).unwrap_or(k);
+                    lobes[k] = built[k].crossed_by(&built[other]);
+                }
+            }
         }
         let depth = all[..n]
             .iter()
@@ -817,6 +850,42 @@ impl ScratchedMaterial {
         }
         true
     }
+}
+
+/// At a hit in the scratch of slot `i` among the candidates `all` (`(coverage, slot)`), the
+/// scratch that crosses it there, if one does (METHOD.md 8.3, "Ours": crossings): with the
+/// chance that a covered point lies in two or more scratches, `1 - P_1 / C` (`C = 1 - prod(1 -
+/// c_k)` the union's coverage, `P_1 = sum_k c_k prod_(j != k) (1 - c_j)` the chance of exactly
+/// one, layers independent), one of the others drawn in proportion to its coverage; both draws
+/// are uniforms hashed from `u`. At a point test's hit (`c` 0 or 1) it is exact: a partner
+/// wherever two scratches cover the point. Returns the partner's coverage and slot.
+#[inline]
+fn crossing_partner(all: &[(f32, usize)], i: usize, u: f32) -> Option<(f32, usize)> {
+    if all.len() < 2 {
+        return None;
+    }
+    let c = |x: &(f32, usize)| x.0.clamp(0.0, 1.0);
+    let open = |skip: usize| -> f32 {
+        all.iter()
+            .enumerate()
+            .filter(|(j, _)| *j != skip)
+            .map(|(_, x)| 1.0 - c(x))
+            .product()
+    };
+    let union = 1.0 - open(usize::MAX);
+    let one: f32 = all.iter().enumerate().map(|(k, x)| c(x) * open(k)).sum();
+    if !(union > 0.0) || rehashed(u, 0x6372_6f73) * union >= union - one {
+        return None;
+    }
+    let others = all.iter().filter(|x| x.1 != i);
+    let mut target = rehashed(u, 0x7061_7274) * others.clone().map(c).sum::<f32>();
+    for x in others.clone() {
+        if target < c(x) {
+            return Some(*x);
+        }
+        target -= c(x);
+    }
+    others.last().copied()
 }
 
 /// The factor that takes the coverages `cov` to add up to their union's coverage

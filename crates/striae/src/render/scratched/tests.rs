@@ -1368,3 +1368,86 @@ fn stochastic_mix_is_union_in_expectation() {
         assert!((f - p).abs() < 4.0 * sigma, "{f} of {count} vs {p}");
     }
 }
+
+/// [`crossing_partner`] draws what a point covered by independent scratches meets: no partner
+/// with probability `P_1 / C` (exactly one scratch, given one or more), else one of the others
+/// in proportion to its coverage (chi-square over the outcomes, for footprint coverages and a
+/// point test's 0 or 1); one candidate never has one.
+#[test]
+fn crossing_partner_draws_the_chance_of_two_scratches() {
+    let cases: [&[(f32, usize)]; 3] = [
+        &[(0.2, 0), (0.5, 3), (0.1, 7)],
+        &[(0.05, 1), (0.03, 2)],
+        &[(1.0, 0), (1.0, 4), (1.0, 5)],
+    ];
+    let n = 200_000u32;
+    for all in cases {
+        let p_none_given = |_: usize| {
+            let open = |skip: usize| -> f64 {
+                all.iter()
+                    .enumerate()
+                    .filter(|(j, _)| *j != skip)
+                    .map(|(_, x)| 1.0 - x.0 as f64)
+                    .product()
+            };
+            let union = 1.0 - open(usize::MAX);
+            let one: f64 = (0..all.len()).map(|k| all[k].0 as f64 * open(k)).sum();
+            one / union
+        };
+        for &(_, i) in all {
+            let mut counts = vec![0u64; all.len() + 1];
+            for k in 0..n {
+                let u = (k as f32 + 0.5) / n as f32;
+                match crossing_partner(all, i, u) {
+                    None => counts[all.len()] += 1,
+                    Some((c, j)) => {
+                        let at = all.iter().position(|x| x.1 == j).unwrap();
+                        assert_ne!(j, i, "{all:?}: a scratch crossing itself");
+                        assert_eq!(c, all[at].0);
+                        counts[at] += 1;
+                    }
+                }
+            }
+            let none = p_none_given(i);
+            let others: f64 = all.iter().filter(|x| x.1 != i).map(|x| x.0 as f64).sum();
+            let mut expected: Vec<f64> = all
+                .iter()
+                .map(|x| {
+                    if x.1 == i {
+                        0.0
+                    } else {
+                        n as f64 * (1.0 - none) * x.0 as f64 / others
+                    }
+                })
+                .collect();
+            expected.push(n as f64 * none);
+            let r = chi2_discrete(&counts, &expected);
+            assert!(
+                r.p_value > 1e-4,
+                "{all:?} slot {i}: {counts:?} vs {expected:?}: {r:?}"
+            );
+        }
+    }
+    assert_eq!(crossing_partner(&[(0.7, 2)], 2, 0.3), None);
+}
+
+/// [`ScratchLobe::crossed_by`]: the other scratch's across axis in this lobe's scratch frame,
+/// the frame's own `x` for a parallel scratch and `-y`/`+y` a quarter turn either way.
+#[test]
+fn crossed_by_gives_the_partner_axis_in_the_scratch_frame() {
+    let at = |beta: f32| ScratchLobe::new(0.5, beta.cos(), beta.sin());
+    for beta in [0.0f32, 0.7, 2.0] {
+        let l = at(beta);
+        let close = |a: [f32; 2], b: [f32; 2]| (a[0] - b[0]).abs() + (a[1] - b[1]).abs() < 1e-5;
+        assert!(close(l.crossed_by(&at(beta)).cross, [1.0, 0.0]));
+        // The other's `b = t' x n` against this frame's `(b, t)`.
+        for turn in [0.4f32, FRAC_PI_2 as f32, 2.5] {
+            let c = l.crossed_by(&at(beta + turn)).cross;
+            let v = l.to_scratch(Vec3::new((beta + turn).sin(), -(beta + turn).cos(), 0.0));
+            assert!(
+                close(c, [v.x, v.y]),
+                "beta {beta} turn {turn}: {c:?} vs {v:?}"
+            );
+        }
+    }
+}
