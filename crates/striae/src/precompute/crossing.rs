@@ -92,40 +92,53 @@ impl<'a> Crossing<'a> {
         inside
     }
 
-    /// The nearest point of the union's boundary along `pos + t d`, `t > t_min`, from either
-    /// side, skipping the segment `skip` last hit: `(groove, segment, t)`.
+    /// The nearest point of the union's boundary along `pos + t d`, `t > t_min`, skipping the
+    /// segment `skip` last hit: `(groove, segment, t)`. A path in the void meets walls from
+    /// their void side, one in the object from theirs (`in_object`): the nearest such wall hit
+    /// of either groove, passed through while it lies inside the other groove's void.
     fn nearest(
         &self,
         pos: [f64; 3],
         d: [f64; 3],
-        skip: (usize, usize),
-        t_min: f64,
+        in_object: bool,
+        mut skip: (usize, usize),
+        mut t_min: f64,
     ) -> Option<(usize, usize, f64)> {
-        let mut best = None;
-        let mut best_t = f64::INFINITY;
-        for g in 0..2 {
-            let o = self.local(g, pos);
-            let k = self.k[g];
-            let d2 = [k * (self.b[g][0] * d[0] + self.b[g][1] * d[1]), k * d[2]];
-            for (k, s) in self.cs.segs.iter().enumerate() {
-                let denom = d2[0] * s.e[1] - d2[1] * s.e[0];
-                if denom == 0.0 || (g, k) == skip {
-                    continue;
-                }
-                let w = [s.p[0] - o[0], s.p[1] - o[1]];
-                let t = (w[0] * s.e[1] - w[1] * s.e[0]) / denom;
-                let u = (w[0] * d2[1] - w[1] * d2[0]) / denom;
-                if !(t > t_min && t < best_t && (-1e-12..=1.0 + 1e-12).contains(&u)) {
-                    continue;
-                }
-                let q = [pos[0] + t * d[0], pos[1] + t * d[1], pos[2] + t * d[2]];
-                if !self.in_void(1 - g, q) {
-                    best = Some((g, k));
-                    best_t = t;
+        loop {
+            let mut best = None;
+            let mut best_t = f64::INFINITY;
+            for g in 0..2 {
+                let o = self.local(g, pos);
+                let k = self.k[g];
+                let d2 = [k * (self.b[g][0] * d[0] + self.b[g][1] * d[1]), k * d[2]];
+                for (i, s) in self.cs.segs.iter().enumerate() {
+                    // Positive where the path meets the segment from the void (its normal side).
+                    let denom = d2[0] * s.e[1] - d2[1] * s.e[0];
+                    let facing = if in_object { -denom } else { denom };
+                    if !(facing > 0.0) || (g, i) == skip {
+                        continue;
+                    }
+                    let w = [s.p[0] - o[0], s.p[1] - o[1]];
+                    let t = (w[0] * s.e[1] - w[1] * s.e[0]) / denom;
+                    let u = (w[0] * d2[1] - w[1] * d2[0]) / denom;
+                    if t > t_min && t < best_t && (-1e-12..=1.0 + 1e-12).contains(&u) {
+                        best = Some((g, i));
+                        best_t = t;
+                    }
                 }
             }
+            let (g, i) = best?;
+            let q = [
+                pos[0] + best_t * d[0],
+                pos[1] + best_t * d[1],
+                pos[2] + best_t * d[2],
+            ];
+            if !self.in_void(1 - g, q) {
+                return Some((g, i, best_t));
+            }
+            // Inside the other void: no surface there; on past it.
+            (skip, t_min) = ((g, i), best_t);
         }
-        best.map(|(g, k)| (g, k, best_t))
     }
 
     /// One path along `d0` whose line meets `z = 0` at `(x0, 0)`: from the air there, or from
@@ -159,7 +172,7 @@ impl<'a> Crossing<'a> {
         for bounce in 0..max_bounces {
             let u = draws.fresnel(bounce);
             let t_min = if bounce == 0 { -1e-12 } else { T_EPS };
-            let hit = self.nearest(pos, d, skip, t_min);
+            let hit = self.nearest(pos, d, in_object, skip, t_min);
             let t_flat = if in_object && d[2] > 0.0 {
                 -pos[2] / d[2]
             } else {
@@ -357,7 +370,8 @@ mod tests {
                     -theta.cos(),
                 ];
                 let c = Crossing::new(&cs, 1.5, x0, partner);
-                let Some((_, _, t)) = c.nearest([x0, 0.0, 0.0], d, (usize::MAX, usize::MAX), 0.0)
+                let Some((_, _, t)) =
+                    c.nearest([x0, 0.0, 0.0], d, false, (usize::MAX, usize::MAX), 0.0)
                 else {
                     panic!("{spec}: no floor below an opening");
                 };

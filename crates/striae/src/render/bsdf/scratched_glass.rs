@@ -629,6 +629,11 @@ pub struct ScratchedGlassBsdf<'a> {
 }
 
 impl<'a> ScratchedGlassBsdf<'a> {
+    /// The lobes at the hit.
+    pub fn lobes(&self) -> &[ScratchLobe] {
+        self.lobes.as_slice()
+    }
+
     /// This BSDF with its sampling's lobe number read within `share` ([`super::LobeShare`]).
     #[inline(always)]
     pub fn in_share(mut self, share: super::LobeShare) -> Self {

@@ -831,6 +831,49 @@ mod tests {
         assert!(e.contains("lean") || e.contains("boolean"), "{e}");
     }
 
+    /// `scratches.crossings`: on by default for traced glass walls, where two layers' scratches
+    /// cover a hit (here every hit: the point test on scratches wider than the face) its lobe
+    /// carries the other scratch's axis; `false` and `model = "seed"` leave it out; `true`
+    /// where the walls are not traced glass, or not a boolean, is refused naming the key.
+    #[test]
+    fn scratched_crossings_key_crosses_the_lobes() {
+        let text = |walls: &str, key: &str| {
+            format!(
+                "type = \"scratched\"\nbase = \"glass\"\nior = 1.5\n[scratches]\n{walls}\nlength = 2.0\nwidth = 2.0\nthreshold = 1.0\nlayers = 2\ncoverage = \"point\"\n{key}"
+            )
+        };
+        let traced = "walls = \"dielectric\"\nprofile = \"v:angle=90\"";
+        for (key, crossed) in [
+            ("", true),
+            ("crossings = true", true),
+            ("crossings = false", false),
+            ("model = \"seed\"", false),
+        ] {
+            let m = prepared(&text(traced, key));
+            let mut seen = 0;
+            for i in 0..16 {
+                let uv = Vec2::new((i % 4) as f32 + 0.5, (i / 4) as f32 + 0.5) / 4.0;
+                let hit = crate::render::geometry::SurfaceHit::flat(uv);
+                let view = crate::render::material::HitView {
+                    wo: Vec3::Z,
+                    rd: None,
+                    u_layer: Some((i as f32 + 0.5) / 16.0),
+                    pixel: None,
+                };
+                let mut cache = crate::layers::CoverageCache::new();
+                if let Bsdf::ScratchedGlass(b) = m.shade(&hit, view, &mut cache).1 {
+                    assert_eq!(b.lobes()[0].cross != [0.0; 2], crossed, "{key} {uv:?}");
+                    seen += 1;
+                }
+            }
+            assert!(seen >= 8, "{key}: {seen}");
+        }
+        let e = parse(&text("walls = \"diffuse\"", "crossings = true")).unwrap_err();
+        assert!(e.contains("scratches.crossings"), "{e}");
+        let e = parse(&text(traced, "crossings = \"yes\"")).unwrap_err();
+        assert!(e.contains("crossings") || e.contains("boolean"), "{e}");
+    }
+
     #[test]
     fn bad_materials_are_rejected_with_key_and_value() {
         let cases = [

@@ -465,6 +465,13 @@ impl ScratchedDesc {
         let defaults = self.resolve_base()?;
         let table = self.resolve_table(&defaults, base_dir)?;
         let s = &self.scratches;
+        if s.crossings == Some(true) && !matches!(table, TableSource::Traced(_)) {
+            return Err(invalid(
+                "scratches.crossings",
+                "true",
+                "applies to traced glass walls only (walls = \"dielectric\", smooth, lobes = \"traced\")",
+            ));
+        }
         let map = self.resolve_map(base_dir)?;
         let curves = self.resolve_curves(base_dir, map.is_some())?;
         let layer_keys = s.setting.is_some()

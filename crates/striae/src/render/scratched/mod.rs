@@ -864,19 +864,27 @@ fn crossing_partner(all: &[(f32, usize)], i: usize, u: f32) -> Option<(f32, usiz
     if all.len() < 2 {
         return None;
     }
-    let c = |x: &(f32, usize)| x.0.clamp(0.0, 1.0);
-    let open = |skip: usize| -> f32 {
-        all.iter()
-            .enumerate()
-            .filter(|(j, _)| *j != skip)
-            .map(|(_, x)| 1.0 - c(x))
-            .product()
+    // `prod(1 - c_j)` over the candidates not certain to cover, how many are, and `sum c_j /
+    // (1 - c_j)` over the others: `P_1` in one pass.
+    let (mut open, mut certain, mut odds) = (1.0f32, 0, 0.0f32);
+    for x in all {
+        let c = x.0.clamp(0.0, 1.0);
+        if c >= 1.0 {
+            certain += 1;
+        } else {
+            open *= 1.0 - c;
+            odds += c / (1.0 - c);
+        }
+    }
+    let (union, one) = match certain {
+        0 => (1.0 - open, open * odds),
+        1 => (1.0, open),
+        _ => (1.0, 0.0),
     };
-    let union = 1.0 - open(usize::MAX);
-    let one: f32 = all.iter().enumerate().map(|(k, x)| c(x) * open(k)).sum();
     if !(union > 0.0) || rehashed(u, 0x6372_6f73) * union >= union - one {
         return None;
     }
+    let c = |x: &(f32, usize)| x.0.clamp(0.0, 1.0);
     let others = all.iter().filter(|x| x.1 != i);
     let mut target = rehashed(u, 0x7061_7274) * others.clone().map(c).sum::<f32>();
     for x in others.clone() {
