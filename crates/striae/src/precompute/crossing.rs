@@ -115,7 +115,7 @@ impl<'a> Crossing<'a> {
                     // Positive where the path meets the segment from the void (its normal side).
                     let denom = d2[0] * s.e[1] - d2[1] * s.e[0];
                     let facing = if in_object { -denom } else { denom };
-                    if !(facing > 0.0) || (g, i) == skip {
+                    if facing <= 0.0 || (g, i) == skip {
                         continue;
                     }
                     let w = [s.p[0] - o[0], s.p[1] - o[1]];

@@ -462,8 +462,9 @@ pub(super) struct SmoothSample {
 /// path's stream `key` as a covered point of two independent scratches lies (METHOD.md 8.3):
 /// the entry line uniformly across its opening, and its width over the traced groove's that of
 /// two tapered scratches (`w(s) = w_0 sqrt(1 - (s/l)^2)`, each at a point drawn in proportion
-/// to its width: `s/l` the `x` of a uniform point of the unit disc).
-fn crossing_partner(cross: [f32; 2], key: u64) -> Partner {
+/// to its width: `s/l` the `x` of a uniform point of the unit disc; the ratio kept within 1/20
+/// and 20, where a tip is narrower).
+fn crossing_groove(cross: [f32; 2], key: u64) -> Partner {
     let mut h = mix64(key ^ CROSSING_SALT);
     let mut next = || {
         h = mix64(h);
@@ -517,7 +518,7 @@ impl TracedGroove {
     fn sample(&self, w: Vec3, u0: f32, u: Vec2, cross: [f32; 2]) -> Option<SmoothSample> {
         let key = mix64((u0.to_bits() as u64) << 32 | u.y.to_bits() as u64);
         let d0 = [-w.x as f64, -w.y as f64, -w.z as f64];
-        let partner = (cross != [0.0; 2]).then(|| crossing_partner(cross, key));
+        let partner = (cross != [0.0; 2]).then(|| crossing_groove(cross, key));
         let e = self.paths.trace(d0, u.x as f64, key, partner)?;
         let wi = Vec3::new(e.d[0] as f32, e.d[1] as f32, e.d[2] as f32);
         let lobe = ((wi.z > 0.0) != (w.z > 0.0)) as usize;

@@ -881,19 +881,20 @@ fn crossing_partner(all: &[(f32, usize)], i: usize, u: f32) -> Option<(f32, usiz
         1 => (1.0, open),
         _ => (1.0, 0.0),
     };
-    if !(union > 0.0) || rehashed(u, 0x6372_6f73) * union >= union - one {
+    if union.is_nan() || union <= 0.0 || rehashed(u, 0x6372_6f73) * union >= union - one {
         return None;
     }
     let c = |x: &(f32, usize)| x.0.clamp(0.0, 1.0);
     let others = all.iter().filter(|x| x.1 != i);
     let mut target = rehashed(u, 0x7061_7274) * others.clone().map(c).sum::<f32>();
-    for x in others.clone() {
+    // (Round-off can leave `target` past the last: the last then.)
+    for x in others {
         if target < c(x) {
             return Some(*x);
         }
         target -= c(x);
     }
-    others.last().copied()
+    all.iter().rev().find(|x| x.1 != i).copied()
 }
 
 /// The factor that takes the coverages `cov` to add up to their union's coverage
