@@ -14,9 +14,8 @@
 //! that two parallel grooves trace exactly as the 2.5D tracer traces their union's profile
 //! (the tests).
 
-use crate::optics::fresnel::dielectric;
 use crate::precompute::cross_section::{CrossSection, T_EPS};
-use crate::precompute::groove::{totally_reflected, GrooveExit, PathDraws};
+use crate::precompute::groove::{smooth_interface, totally_reflected, GrooveExit, PathDraws};
 
 /// The second groove at a crossing, placed in the first groove's frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -204,30 +203,15 @@ impl<'a> Crossing<'a> {
     }
 }
 
-/// A smooth interface of normal `n` (either way) and relative index `eta = n_t / n_i`:
-/// reflect `d` with the Fresnel reflectance (`u` below it), else refract it to the other side.
+/// [`smooth_interface`] for a normal `n` pointing either way: turned to face the ray first.
 fn smooth_dielectric(d: &mut [f64; 3], in_object: &mut bool, n: [f64; 3], eta: f64, u: f64) {
     let dn = d[0] * n[0] + d[1] * n[1] + d[2] * n[2];
-    // `n` turned to face the ray.
     let (n, cos_i) = if dn > 0.0 {
         ([-n[0], -n[1], -n[2]], dn)
     } else {
         (n, -dn)
     };
-    let f = dielectric(cos_i, eta);
-    if u < f.r {
-        let c = 2.0 * cos_i;
-        *d = [d[0] + c * n[0], d[1] + c * n[1], d[2] + c * n[2]];
-    } else {
-        let e = 1.0 / eta;
-        let k = e * cos_i + f.cos_theta_t; // cos_theta_t < 0 from the incident side
-        *d = [
-            e * d[0] + k * n[0],
-            e * d[1] + k * n[1],
-            e * d[2] + k * n[2],
-        ];
-        *in_object = !*in_object;
-    }
+    smooth_interface(d, in_object, n, cos_i, eta, u);
 }
 
 #[cfg(test)]

@@ -660,20 +660,7 @@ impl Tracer {
     /// Smooth dielectric interface of normal `n` (facing the ray), relative index
     /// `eta = n_t / n_i`: reflect with the Fresnel reflectance, else refract.
     fn smooth_dielectric(&self, ray: &mut Ray, n: [f64; 3], cos_i: f64, eta: f64, u: f64) {
-        let f = dielectric(cos_i, eta);
-        if u < f.r {
-            let c = 2.0 * cos_i;
-            ray.d = [ray.d[0] + c * n[0], ray.d[1], ray.d[2] + c * n[2]];
-        } else {
-            let e = 1.0 / eta;
-            let k = e * cos_i + f.cos_theta_t; // cos_theta_t < 0 from the incident side
-            ray.d = [
-                e * ray.d[0] + k * n[0],
-                e * ray.d[1],
-                e * ray.d[2] + k * n[2],
-            ];
-            ray.in_object = !ray.in_object;
-        }
+        smooth_interface(&mut ray.d, &mut ray.in_object, n, cos_i, eta, u);
     }
 
     /// The flat surface `z = 0` hit from inside the object.
@@ -781,6 +768,33 @@ impl Tracer {
         ray.w *= weight * ggx.g1(wi32, m32) as f64;
         ray.d = unit_from_frame(x, n, wi);
         Scatter::On
+    }
+}
+
+/// A smooth interface of unit normal `n` facing the ray (`cos_i = -d . n`) and relative index
+/// `eta = n_t / n_i`: reflect `d` with the exact Fresnel reflectance (`u` below it), else refract
+/// it to the other side (`in_object` flips). Both tracers' walls and flat surface.
+pub(crate) fn smooth_interface(
+    d: &mut [f64; 3],
+    in_object: &mut bool,
+    n: [f64; 3],
+    cos_i: f64,
+    eta: f64,
+    u: f64,
+) {
+    let f = dielectric(cos_i, eta);
+    if u < f.r {
+        let c = 2.0 * cos_i;
+        *d = [d[0] + c * n[0], d[1] + c * n[1], d[2] + c * n[2]];
+    } else {
+        let e = 1.0 / eta;
+        let k = e * cos_i + f.cos_theta_t; // cos_theta_t < 0 from the incident side
+        *d = [
+            e * d[0] + k * n[0],
+            e * d[1] + k * n[1],
+            e * d[2] + k * n[2],
+        ];
+        *in_object = !*in_object;
     }
 }
 
