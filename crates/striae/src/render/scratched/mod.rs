@@ -601,12 +601,15 @@ impl ScratchedMaterial {
         for (l, &(c, i)) in lobes.iter_mut().zip(&all[..n]) {
             *l = slot_lobe(i, c * scale, ctx.u_layer);
         }
-        if self.crossings && self.mix == LayerMix::Union {
+        let odds = (self.crossings && self.mix == LayerMix::Union)
+            .then(|| crossing_odds(&all[..n]))
+            .flatten();
+        if let Some(odds) = odds {
             // Each lobe's partner among the others, by a uniform of its own.
             let built = *lobes;
             for (k, &(_, i)) in all[..n].iter().enumerate() {
                 let u = rehashed(ctx.u_layer, k as u64);
-                if let Some((_, j)) = crossing_partner(&all[..n], i, u) {
+                if let Some((_, j)) = partner_given(&all[..n], i, odds, u) {
                     let other = all[..n].iter().position(|x| x.1 == j).unwrap_or(k);
                     lobes[k] = built[k].crossed_by(&built[other]);
                 }
@@ -861,6 +864,13 @@ impl ScratchedMaterial {
 /// wherever two scratches cover the point. Returns the partner's coverage and slot.
 #[inline]
 fn crossing_partner(all: &[(f32, usize)], i: usize, u: f32) -> Option<(f32, usize)> {
+    partner_given(all, i, crossing_odds(all)?, u)
+}
+
+/// `(C, P_1)` of the candidates `all` ([`crossing_partner`]); `None` where fewer than two
+/// could cross or nothing covers.
+#[inline]
+fn crossing_odds(all: &[(f32, usize)]) -> Option<(f32, f32)> {
     if all.len() < 2 {
         return None;
     }
@@ -881,7 +891,18 @@ fn crossing_partner(all: &[(f32, usize)], i: usize, u: f32) -> Option<(f32, usiz
         1 => (1.0, open),
         _ => (1.0, 0.0),
     };
-    if union.is_nan() || union <= 0.0 || rehashed(u, 0x6372_6f73) * union >= union - one {
+    (!union.is_nan() && union > 0.0).then_some((union, one))
+}
+
+/// [`crossing_partner`] with the candidates' `(C, P_1)` known.
+#[inline]
+fn partner_given(
+    all: &[(f32, usize)],
+    i: usize,
+    (union, one): (f32, f32),
+    u: f32,
+) -> Option<(f32, usize)> {
+    if rehashed(u, 0x6372_6f73) * union >= union - one {
         return None;
     }
     let c = |x: &(f32, usize)| x.0.clamp(0.0, 1.0);
