@@ -891,7 +891,7 @@ fn crossing_odds(all: &[(f32, usize)]) -> Option<(f32, f32)> {
         1 => (1.0, open),
         _ => (1.0, 0.0),
     };
-    (!union.is_nan() && union > 0.0).then_some((union, one))
+    (union > 0.0).then_some((union, one))
 }
 
 /// [`crossing_partner`] with the candidates' `(C, P_1)` known.
