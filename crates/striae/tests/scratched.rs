@@ -556,3 +556,158 @@ radiance = [0.02, 0.02, 0.02]
         "{cut} against {cut_mirrored} mirrored"
     );
 }
+
+/// The exact groove (`precompute::groove::GroovePaths`, the renderer's traced lobe) leaves light
+/// from inside the glass as its explicit geometry does: rays aimed from inside at a straight V
+/// groove carved into a thick box (`explicit = true`, the renderer's BVH), split at every
+/// surface by the exact Fresnel of glass (reflected or refracted by a uniform), end out in the
+/// air, back in the glass below the critical angle (free to leave by the far face) or beyond
+/// it (trapped by the flat faces); among the rays that met a wall, the three shares are the
+/// tracer's within noise, below the ridges' angle (50 degrees: only through the opening) and
+/// above it (70: beside the opening too).
+#[test]
+fn the_traced_groove_leaves_light_from_inside_as_its_explicit_geometry_does() {
+    use rand::{Rng, SeedableRng};
+    use rand_pcg::Pcg64;
+    use striae::math::{Ray, Vec3};
+    use striae::precompute::groove::GroovePaths;
+    use striae::precompute::profile::Profile;
+    let s = scene(
+        r#"
+[render]
+width = 4
+height = 4
+spp = 1
+[camera]
+position = [0.0, 3.0, 0.01]
+look_at = [0.0, 0.0, 0.0]
+fov = 45
+[materials.glass]
+type = "scratched"
+base = "glass"
+ior = 1.5
+[materials.glass.scratches]
+profile = "v:depth=0.3"
+walls = "dielectric"
+explicit = true
+polylines = [{ points = [[0.0, 0.5], [1.0, 0.5]], width = 0.02 }]
+[[shapes]]
+type = "box"
+material = "glass"
+transform = [{ scale = [1.0, 0.2, 1.0] }]
+"#,
+    );
+    let g = &s.geometry;
+    // The groove lies along one axis of the top face (y = 0.2): find it by rays straight down.
+    let down = |x: f32, z: f32| g.intersect(&Ray::new(Vec3::new(x, 1.0, z), -Vec3::Y));
+    let walls = |along_z: bool| -> Vec<f32> {
+        (0..2000)
+            .map(|i| -0.5 + i as f32 * 0.0005)
+            .filter(|&c| {
+                let h = if along_z { down(c, 0.3) } else { down(0.3, c) };
+                h.is_some_and(|h| h.shape != 0)
+            })
+            .collect()
+    };
+    let (along_z, found) = match walls(true) {
+        w if !w.is_empty() => (true, w),
+        _ => (false, walls(false)),
+    };
+    // 0.04 wide in the world (the face is 2 across).
+    assert!(
+        (found.len() as f32 * 0.0005 - 0.04).abs() < 0.002,
+        "{}",
+        found.len()
+    );
+    let centre = 0.5 * (found[0] + found[found.len() - 1]);
+    let (along, across) = if along_z {
+        (Vec3::Z, Vec3::X)
+    } else {
+        (Vec3::X, Vec3::Z)
+    };
+    let fresnel = |cos_i: f32, eta: f32| {
+        let sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta);
+        if sin_t2 >= 1.0 {
+            return 1.0;
+        }
+        let cos_t = (1.0 - sin_t2).sqrt();
+        let rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+        let rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+        0.5 * (rs * rs + rp * rp)
+    };
+    let share = |class: [usize; 3]| {
+        let n = class.iter().sum::<usize>() as f64;
+        (class.map(|c| c as f64 / n), n)
+    };
+    let paths = GroovePaths::new(&Profile::parse("v:depth=0.3").unwrap(), 1.5);
+    let mut rng = Pcg64::seed_from_u64(21);
+    for (theta, psi) in [(50.0f32, 60.0f32), (70.0, 80.0)] {
+        let (t, p) = (theta.to_radians(), psi.to_radians());
+        // Travel in the groove's frame: across, along, up.
+        let d_groove = [t.sin() * p.sin(), t.sin() * p.cos(), t.cos()];
+        let d = across * d_groove[0] + along * d_groove[1] + Vec3::Y * d_groove[2];
+        // Trapped beyond the critical angle: |d.y| below cos(asin(1 / 1.5)).
+        let critical = (1.0f32 - 1.0 / 2.25).sqrt();
+        let class = |inside: bool, dy: f32| match (inside, dy.abs() < critical) {
+            (false, _) => 0,
+            (true, true) => 1,
+            (true, false) => 2,
+        };
+        let mut explicit = [0usize; 3];
+        for _ in 0..60_000 {
+            let at = along * rng.random_range(-0.5..0.5)
+                + across * (centre + rng.random_range(-0.04..0.04))
+                + Vec3::Y * 0.2;
+            let (mut o, mut dir, mut inside, mut met) = (at - d * (0.05 / d.y), d, true, false);
+            for _ in 0..100 {
+                let Some(h) = g.intersect(&Ray::new(o, dir)) else {
+                    if met && !inside {
+                        explicit[0] += 1;
+                    }
+                    break;
+                };
+                // Back in the bulk, past the groove's depth or well beside it.
+                let off = (h.p.dot(across) - centre).abs();
+                if inside && (off > 0.15 || h.p.y < 0.15) {
+                    if met {
+                        explicit[class(true, dir.y)] += 1;
+                    }
+                    break;
+                }
+                met |= h.shape != 0;
+                let n = if dir.dot(h.ng) < 0.0 { h.ng } else { -h.ng };
+                let cos_i = -dir.dot(n);
+                let eta = if inside { 1.0 / 1.5 } else { 1.5 };
+                if rng.random::<f32>() < fresnel(cos_i, eta) {
+                    dir -= n * (2.0 * dir.dot(n));
+                } else {
+                    let e = 1.0 / eta;
+                    let k = 1.0 - e * e * (1.0 - cos_i * cos_i);
+                    dir = (dir * e + n * (e * cos_i - k.sqrt())).normalize();
+                    inside = !inside;
+                }
+                o = g.spawn_origin(h.p, h.ng, h.shape, dir);
+            }
+        }
+        let mut traced = [0usize; 3];
+        for _ in 0..60_000 {
+            let dg = d_groove.map(|x| x as f64);
+            if let Some(e) = paths.trace(dg, rng.random(), rng.random::<u64>(), None) {
+                traced[class(e.in_object, e.d[2] as f32)] += 1;
+            }
+        }
+        let ((a, na), (b, nb)) = (share(explicit), share(traced));
+        assert!(
+            na > 8000.0 && nb > 50_000.0,
+            "{theta}: {na} explicit, {nb} traced"
+        );
+        for k in 0..3 {
+            let p = 0.5 * (a[k] + b[k]);
+            let sigma = (p * (1.0 - p) * (1.0 / na + 1.0 / nb)).sqrt();
+            assert!(
+                (a[k] - b[k]).abs() <= 4.0 * sigma + 1e-3,
+                "{theta} degrees, psi {psi}: explicit {a:?} against traced {b:?}"
+            );
+        }
+    }
+}

@@ -237,6 +237,17 @@ pub struct CurveHit {
 /// The curves a footprint meets, at most [`MAX_CURVE_HITS`].
 pub type CurveHits = arrayvec::ArrayVec<CurveHit, MAX_CURVE_HITS>;
 
+/// One thick segment's groove as the ridge search of dielectric-walled glass reads it
+/// ([`CurveSet::for_segments_along`]): its axis from `start` to `end` (texture space), the
+/// half-width across the axis at either end and the depth ratio (METHOD.md 9.1-9.2).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SegmentAxis {
+    pub start: DVec2,
+    pub end: DVec2,
+    pub half_widths: [f64; 2],
+    pub depth: f32,
+}
+
 /// A set of scratch curves with a uniform grid over their segments in texture space.
 #[derive(Clone, Debug)]
 pub struct CurveSet {
@@ -435,6 +446,42 @@ impl CurveSet {
                 }
             }
         }
+    }
+
+    /// Calls `f` with the axis of every thick segment whose bounds meet the texture segment
+    /// from `from` to `to`'s box, until `f` returns `true`; whether one did. A groove that a
+    /// ray passing under the surface along that segment meets lies among them: its walls lie
+    /// under its opening, which the segment's projection must enter.
+    pub fn for_segments_along(
+        &self,
+        from: DVec2,
+        to: DVec2,
+        mut f: impl FnMut(&SegmentAxis) -> bool,
+    ) -> bool {
+        let (lo, hi) = (from.min(to), from.max(to));
+        if self.outside(lo, hi) {
+            return false;
+        }
+        let mut found = false;
+        self.for_segments_in(lo, hi, self.cells_of(lo, hi), |seg| {
+            if found {
+                return;
+            }
+            let q = &seg.quad;
+            // The quad's sides are the mitred ends: their part across the axis is the width.
+            let across = seg.tangent.perp();
+            let axis = SegmentAxis {
+                start: 0.5 * (q[0] + q[3]),
+                end: 0.5 * (q[1] + q[2]),
+                half_widths: [
+                    0.5 * (q[3] - q[0]).dot(across).abs(),
+                    0.5 * (q[2] - q[1]).dot(across).abs(),
+                ],
+                depth: seg.depth,
+            };
+            found = f(&axis);
+        });
+        found
     }
 
     /// The curves whose opening holds texture point `uv` (coverage 1 each, the direction of the

@@ -288,7 +288,7 @@ impl ScratchedMaterial {
     /// Whether [`Self::bsdf`] reads the hit's footprint (and its pixel) for `wo` and `ng` as
     /// [`Self::reads_hit_context`]: where it reads the context at all, except glass with
     /// dielectric walls seen from inside, whose hits take the point test
-    /// ([`Self::inside_coverage`]) and read only `u_layer`.
+    /// ([`Self::ridge_lobe`]) and read only `u_layer`.
     #[inline]
     pub fn reads_footprint_at(&self, wo: Vec3, ng: Vec3) -> bool {
         let inside_walls = matches!(self.model, ScratchModel::DielectricWalls(_))
@@ -315,18 +315,17 @@ impl ScratchedMaterial {
         let k = self.layers.len();
         let mut cov = [0.0f32; MAX_LAYERS];
         let inside = ctx.wo.dot(ctx.ng) <= 0.0;
-        let covered = match (&self.model, self.base) {
-            _ if k == 0 => false,
+        // Dielectric walls seen from inside: the point tests, then the ridges (METHOD.md 8.1).
+        let walls_inside = match (&self.model, self.base) {
             (ScratchModel::DielectricWalls(walls), ScratchedBase::Glass { .. }) if inside => {
-                match self.inside_coverage(ctx, walls, &mut cov[..k]) {
-                    InsideHit::Covered => true,
-                    InsideHit::Ridge(l) => {
-                        return self.with_lobes_at(ctx, &self.model, &[l], LobeShare::default())
-                    }
-                    InsideHit::Plain => false,
-                }
+                Some(walls)
             }
-            _ => self.layer_coverage(ctx, cache, &mut cov[..k]),
+            _ => None,
+        };
+        let covered = match walls_inside {
+            _ if k == 0 => false,
+            Some(_) => self.point_coverage(ctx.uv, &mut cov[..k]),
+            None => self.layer_coverage(ctx, cache, &mut cov[..k]),
         };
         let curves = match &self.curves {
             Some(c) => self.curve_hits(c, ctx, cache, inside),
@@ -337,6 +336,10 @@ impl ScratchedMaterial {
             None => None,
         };
         if !covered && curves.is_empty() && map.is_none() {
+            if let Some((lobe, depth)) = walls_inside.and_then(|w| self.ridge_lobe(ctx, w)) {
+                let model = self.model_at_depth(depth, ctx.u_layer);
+                return self.with_lobes_at(ctx, model, &[lobe], LobeShare::default());
+            }
             return self.base_bsdf();
         }
         let mut lobes = [ScratchLobe::default(); MAX_SCRATCH_LOBES];
@@ -694,66 +697,70 @@ impl ScratchedMaterial {
         )
     }
 
-    /// A hit from inside dielectric-walled glass (METHOD.md 8.1): the point test's coverage
-    /// (`cov`: 1 for each layer scratched at the hit, [`CoverageMode::Point`], whatever the
-    /// material's mode), and where no scratch covers the hit, the groove whose ridge the light
-    /// met on its way. These hits lie behind a refraction, where the camera's footprint says
-    /// little and the seed's model has no scratches at all, and a path through a plate makes
-    /// many of them: the point test estimates the same pixel average without bias
-    /// (`sum`/`union`) at a fraction of the footprint's cost (BENCHMARKS.md, "Dielectric walls
-    /// over the seed's model"). Seen from
+    /// A hit from inside dielectric-walled glass (METHOD.md 8.1) that no opening holds: the
+    /// groove whose ridge the light met on its way, as a lobe of coverage 1 and the depth ratio
+    /// of its model. Inside hits take the point test ([`CoverageMode::Point`] for layers,
+    /// [`CurveSet::at_point`], the map's finest level), whatever the material's mode: they lie
+    /// behind a refraction, where the camera's footprint says little and the seed's model has
+    /// no scratches at all, and a path through a plate makes many of them; the point test
+    /// estimates the same pixel average without bias (`sum`/`union`) at a fraction of the
+    /// footprint's cost (BENCHMARKS.md, "Dielectric walls over the seed's model"). Seen from
     /// inside, a groove is a ridge of air below the surface, and light arriving at a grazing
     /// angle meets it beside its opening (the table's inside lobes are per unit of that
-    /// intercepted light, [`crate::precompute::wall_table`]). The ray back along `wo` passes under the
-    /// surface within the grooves' depth over the horizontal reach `R = D tan theta` (the
-    /// deepest groove's `D`), and under total internal reflection the ray on from the hit,
-    /// mirrored, over as much again past it ([`RidgeReach::reflected`]). The point test comes
-    /// first (every hit needs it, and a covered hit needs nothing more); at a grazing hit it
-    /// leaves uncovered, one capsule test of that segment ([`LayerSet::capsule_mask`]) finds
-    /// the layers whose scratches come within reach, most hits none, and for each of their
-    /// scratches near the segment the ray is met against the groove's cross-section, the
-    /// profile scaled to the scratch's local width ([`RidgeReach::meets_ridge`]), first on the
-    /// way to the hit, then on the way back. The first scratch met scatters with coverage 1, as
-    /// the point test's covered hits do. Randomly oriented layers are searched by point tests
-    /// along the segment, spaced half the narrowest groove's width: a ridge where a scratch
-    /// tapers narrower is missed (about 2 % of them at 85 degrees).
+    /// intercepted light, [`crate::precompute::wall_table`]). The ray back along `wo` passes
+    /// under the surface within the grooves' depth over the horizontal reach `R = D tan theta`
+    /// (the deepest groove's `D`), and under total internal reflection the ray on from the
+    /// hit, mirrored, over as much again past it ([`RidgeReach::reflected`]). Over that
+    /// segment, one capsule test ([`LayerSet::capsule_mask`]) finds the layers whose scratches
+    /// come within reach (most hits none) and the curves' grid the thick segments whose bounds
+    /// it meets ([`CurveSet::for_segments_along`]); each is met against the groove's
+    /// cross-section, the profile scaled to the local width ([`RidgeReach::meets_ridge`],
+    /// [`RidgeReach::meets_segment`]), first on the way to the hit, then on the way back. The
+    /// first groove met scatters with coverage 1, as the point test's covered hits do.
+    /// Randomly oriented layers are searched by point tests along the segment, spaced half the
+    /// narrowest groove's width: a ridge where a scratch tapers narrower is missed (about 2 %
+    /// of them at 85 degrees). A painted map has no grooves to meet beside their openings.
     #[inline(always)]
-    fn inside_coverage(
-        &self,
-        ctx: &ShadingContext,
-        walls: &GlassWalls,
-        cov: &mut [f32],
-    ) -> InsideHit {
-        if self.point_coverage(ctx.uv, cov) {
-            return InsideHit::Covered;
-        }
-        let Some(r) = RidgeReach::new(self, ctx, walls) else {
-            return InsideHit::Plain;
-        };
+    fn ridge_lobe(&self, ctx: &ShadingContext, walls: &GlassWalls) -> Option<(ScratchLobe, f32)> {
+        let r = RidgeReach::new(self, ctx, walls)?;
         let uv = ctx.uv.as_dvec2();
+        let profile = walls.profile();
         // Under total internal reflection the ray's reach continues past the hit, mirrored.
         let reflected =
             totally_reflected(r.wo.to_array(), walls.ior() as f64).then(|| r.reflected());
         let maybe = match reflected {
+            _ if self.layers.is_empty() => 0,
             Some(_) => self.layers.capsule_mask(uv - r.reach_uv, 2.0 * r.reach_uv),
             None => self.layers.capsule_mask(uv, r.reach_uv),
         };
-        if maybe == 0 {
-            return InsideHit::Plain;
-        }
-        let met = self
-            .ridge_met(&r, uv, maybe, walls.profile())
-            .or_else(|| reflected.and_then(|m| self.ridge_met(&m, uv, maybe, walls.profile())));
-        match met {
-            Some(sc) if self.has_lean() => {
-                InsideHit::Ridge(leaned_lobe(self, ctx, &sc, 1.0, Along::Hit))
-            }
-            Some(sc) => {
+        let layer = |reach: &RidgeReach| {
+            let sc = self.ridge_met(reach, uv, maybe, profile)?;
+            let lobe = if self.has_lean() {
+                leaned_lobe(self, ctx, &sc, 1.0, Along::Hit)
+            } else {
                 let d = sc.direction.as_vec2();
-                InsideHit::Ridge(lobe_along(ctx, [d.x, d.y], 1.0))
-            }
-            None => InsideHit::Plain,
-        }
+                lobe_along(ctx, [d.x, d.y], 1.0)
+            };
+            Some((lobe, 1.0))
+        };
+        let curve = |reach: &RidgeReach| {
+            let mut met = None;
+            self.curves
+                .as_ref()?
+                .for_segments_along(uv, uv + reach.reach_uv, |axis| {
+                    let hit = reach.meets_segment(axis, uv, profile);
+                    if hit {
+                        met = Some(*axis);
+                    }
+                    hit
+                });
+            met.map(|a| {
+                let d = (a.end - a.start).as_vec2();
+                (lobe_along(ctx, [d.x, d.y], 1.0), a.depth)
+            })
+        };
+        let met = |reach: &RidgeReach| layer(reach).or_else(|| curve(reach));
+        met(&r).or_else(|| reflected.and_then(|m| met(&m)))
     }
 
     /// The first scratch of the layers in `maybe` whose groove the reach `r` from `uv` meets
@@ -766,6 +773,9 @@ impl ScratchedMaterial {
         maybe: u64,
         profile: &crate::precompute::profile::Profile,
     ) -> Option<Scratch> {
+        if maybe == 0 {
+            return None;
+        }
         let mut met = None;
         if self.layers.orientation() == Orientation::Random {
             for j in 1..=r.tests {
@@ -938,16 +948,6 @@ struct MapHit {
     direction: [f32; 2],
 }
 
-/// What a hit from inside dielectric-walled glass meets ([`ScratchedMaterial::inside_coverage`]).
-enum InsideHit {
-    /// A scratch's opening: the coverages are set.
-    Covered,
-    /// A groove's ridge beside its opening: its lobe, coverage 1.
-    Ridge(ScratchLobe),
-    /// The flat glass.
-    Plain,
-}
-
 /// The most points the search of randomly oriented layers tests along a ray's reach: enough
 /// for a groove of depth 0.3 (in opening widths) up to 84 degrees from the normal.
 const MAX_RIDGE_TESTS: usize = 16;
@@ -992,12 +992,15 @@ impl RidgeReach {
             return None;
         }
         let sigma_min = det.abs() / sigma_max;
-        // Every layer of a set has the same scratch width.
-        let w = m.layers.layers()[0].half_axes().1;
+        // Every layer of a set has the same scratch width; the curves' widest sets their reach.
+        let w_layers = m.layers.layers().first().map_or(0.0, |l| l.half_axes().1);
+        let w_curves = m.curves.as_ref().map_or(0.0, |c| c.max_half_width());
+        let w = w_layers.max(w_curves);
         let reach = walls.profile().depth() * 2.0 * w * sigma_max * tan;
         let v = DVec2::new(wo.x, wo.y) * (reach / h_len);
         let reach_uv = DVec2::new(v.perp_dot(av), au.perp_dot(v)) / det;
-        let tests = ((reach / (w * sigma_min)).ceil() as usize).clamp(1, MAX_RIDGE_TESTS);
+        let narrowest = if w_layers > 0.0 { w_layers } else { w };
+        let tests = ((reach / (narrowest * sigma_min)).ceil() as usize).clamp(1, MAX_RIDGE_TESTS);
         Some(RidgeReach {
             wo,
             au,
@@ -1046,12 +1049,63 @@ impl RidgeReach {
         let t = if t.is_finite() { t } else { 0.0 };
         let s = (reach * t - centre).dot(along) / (sc.half_length * d_len);
         let half_width = sc.mapped_half_axes(d_len, self.det.abs()).1 * (1.0 - s * s).sqrt();
-        let open = half_width > 0.0;
-        if !open {
+        self.meets_section(-centre.dot(across), dx, half_width, 1.0, profile)
+    }
+
+    /// [`Self::meets_ridge`] for a curve's thick segment `a` (METHOD.md 9.1): its groove's
+    /// cross-section where the reach crosses the segment's axis, of the half-width there
+    /// (linear between its ends) and depth ratio `a.depth`; `false` where the crossing lies
+    /// off the segment (its neighbours hold it).
+    #[inline(always)]
+    fn meets_segment(
+        &self,
+        a: &crate::curves::SegmentAxis,
+        uv: glam::DVec2,
+        profile: &crate::precompute::profile::Profile,
+    ) -> bool {
+        let map = |v: glam::DVec2| self.au * v.x + self.av * v.y;
+        let (start, d) = (map(a.start - uv), map(a.end - a.start));
+        let d_len = d.length();
+        if !(d_len > 0.0) {
             return false;
         }
-        let x = -centre.dot(across) / (2.0 * half_width);
-        x.abs() >= 0.5 && profile.ray_meets_ridge(x, dx, self.wo.z)
+        let (along, across) = (d / d_len, -(d / d_len).perp());
+        let dx = glam::DVec2::new(self.wo.x, self.wo.y).dot(across);
+        if start.dot(across) * dx <= 0.0 {
+            return false;
+        }
+        let reach = map(self.reach_uv);
+        let t = (start.dot(across) / reach.dot(across)).clamp(0.0, 1.0);
+        let t = if t.is_finite() { t } else { 0.0 };
+        let s = (reach * t - start).dot(along) / d_len;
+        if !(0.0..=1.0).contains(&s) {
+            return false;
+        }
+        // A texture width `h` across the axis maps to `h |det A| |e| / |A e|` (`e` the axis).
+        let h = a.half_widths[0] + (a.half_widths[1] - a.half_widths[0]) * s;
+        let half_width = h * self.det.abs() * (a.end - a.start).length() / d_len;
+        let across_offset = -start.dot(across);
+        self.meets_section(across_offset, dx, half_width, a.depth as f64, profile)
+    }
+
+    /// Whether the ray back along `wo` from a hit `offset` across a groove's axis (tangent
+    /// plane units, `dx` its direction's part across), beside the opening of half-width
+    /// `half_width` and depth ratio `depth` (the profile's depth scaled by it), meets its walls.
+    #[inline(always)]
+    fn meets_section(
+        &self,
+        offset: f64,
+        dx: f64,
+        half_width: f64,
+        depth: f64,
+        profile: &crate::precompute::profile::Profile,
+    ) -> bool {
+        if !(half_width > 0.0 && depth > 0.0) {
+            return false;
+        }
+        let x = offset / (2.0 * half_width);
+        // A groove `depth` times as deep meets the ray `wo.z / depth` steep in the profile's units.
+        x.abs() >= 0.5 && profile.ray_meets_ridge(x, dx, self.wo.z / depth)
     }
 }
 

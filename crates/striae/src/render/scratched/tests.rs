@@ -1038,6 +1038,94 @@ fn ridges_meet_grazing_light_from_inside() {
     }
 }
 
+/// Curves seen from inside dielectric-walled glass meet grazing light beside their openings
+/// as layers do (METHOD.md 8.1, 9.1): hit for hit, the ridge search finds the straight V
+/// groove exactly where its closed form says. A ray back along `wo` from `|x|` widths off the
+/// axis, running toward it with `k = |wo_x| / |wo_z|` across per unit depth, meets a V of
+/// depth ratio `D` iff `1/2 <= |x| <= k D` (the near wall's lowest point is the last it can
+/// meet); under total internal reflection on both sides, mirrored, else on the side it comes
+/// from. A worn curve (depth ratio 1/2) halves `D`; none is met from outside.
+#[test]
+fn curves_meet_grazing_light_beside_their_openings() {
+    use crate::curves::{CurveSet, Polyline};
+    use crate::precompute::wall_table::{WallTable, WallTableParams};
+    use glam::{DVec2, DVec3};
+    let profile = Profile::parse("v:depth=0.3").unwrap();
+    let table = WallTable::compute(&WallTableParams {
+        theta_bins: 2,
+        phi_bins: 2,
+        bins: 4,
+        paths: 200,
+        ..WallTableParams::new(profile.clone(), 1.5, 0.0)
+    })
+    .unwrap();
+    let (angle, hw) = (0.4f64, 0.02);
+    let (axis, across) = (DVec2::from_angle(angle), DVec2::from_angle(angle).perp());
+    let (a, b) = (
+        DVec2::splat(0.5) - 0.45 * axis,
+        DVec2::splat(0.5) + 0.45 * axis,
+    );
+    for wear in [1.0, 0.5] {
+        let line = Polyline {
+            depths: vec![wear; 2],
+            ..Polyline::uniform(vec![a, b], hw)
+        };
+        let curves = CurveSet::new(&[line], DVec2::ONE).unwrap();
+        let m = ScratchedMaterial::with_model(
+            ScratchedBase::Glass { eta: 1.5 },
+            Rgb::ONE,
+            ScratchModel::DielectricWalls(GlassWalls::Table(Arc::new(WallLobeTable::new(&table)))),
+            LayerSet::none(),
+            LayerMix::Union,
+            CoverageMode::Footprint,
+        )
+        .with_curves(Some(Arc::new(curves)));
+        let depth = 0.3 * wear;
+        let mut rng = Pcg64::seed_from_u64(11);
+        let mut met = 0;
+        for (deg, turn) in [
+            (50.0f64, 0.0f64),
+            (65.0, 0.3),
+            (75.0, 1.2),
+            (85.0, 0.1),
+            (85.0, 2.5),
+        ] {
+            let (t, h) = (deg.to_radians(), angle + FRAC_PI_2 + turn);
+            let wo = DVec3::new(t.sin() * h.cos(), t.sin() * h.sin(), -t.cos());
+            let tir = 1.5 * t.sin() > 1.0;
+            let dx = DVec2::new(wo.x, wo.y).dot(across);
+            let k = dx.abs() / -wo.z;
+            for _ in 0..20_000 {
+                let x = rng.random_range(-4.0..4.0);
+                let uv = DVec2::splat(0.5)
+                    + across * (2.0 * hw * x)
+                    + axis * rng.random_range(-0.3..0.3);
+                // Toward the axis on the way in (`x` and `dx` of opposite signs), or on the way
+                // on under total internal reflection.
+                let toward = x * dx < 0.0 || tir;
+                let want = x.abs() >= 0.5 && x.abs() <= k * depth && toward;
+                let edge = (x.abs() - 0.5).abs().min((x.abs() - k * depth).abs()) < 1e-6;
+                if x.abs() < 0.5 || edge {
+                    continue;
+                }
+                let ctx = flat_ctx(uv.as_vec2(), 0.0, wo.as_vec3(), rng.random());
+                let ridge = matches!(bsdf_of(&m, &ctx), Bsdf::ScratchedGlass(_));
+                assert_eq!(
+                    ridge, want,
+                    "wear {wear}, {deg} degrees, turn {turn}, x {x}"
+                );
+                met += ridge as usize;
+                let up = ShadingContext {
+                    wo: Vec3::new(ctx.wo.x, ctx.wo.y, -ctx.wo.z),
+                    ..ctx
+                };
+                assert!(!matches!(bsdf_of(&m, &up), Bsdf::ScratchedGlass(_)));
+            }
+        }
+        assert!(met > 1000, "wear {wear}: {met} ridges met");
+    }
+}
+
 /// Hits from inside glass with dielectric walls read `u_layer` but not the footprint
 /// (`reads_footprint_at`, which lets the integrator leave their ray differentials unworked):
 /// their BSDF is the same with no differentials as with any footprint. From outside the
