@@ -445,6 +445,21 @@ fn mirror_walls_delta(t: &ScratchLobeTable, l: ScratchLobe) {
 }
 
 /// The material's BSDF at `ctx`, with a cache of its own.
+/// Smooth glass walls of index 1.5 in `profile`, from a coarse table (the ridge tests read
+/// only whether a lobe is there).
+fn coarse_glass_walls(profile: &Profile) -> GlassWalls {
+    use crate::precompute::wall_table::{WallTable, WallTableParams};
+    let table = WallTable::compute(&WallTableParams {
+        theta_bins: 2,
+        phi_bins: 2,
+        bins: 4,
+        paths: 200,
+        ..WallTableParams::new(profile.clone(), 1.5, 0.0)
+    })
+    .unwrap();
+    GlassWalls::Table(Arc::new(WallLobeTable::new(&table)))
+}
+
 fn bsdf_of<'a>(m: &'a ScratchedMaterial, ctx: &ShadingContext) -> Bsdf<'a> {
     m.bsdf(ctx, &mut CoverageCache::new())
 }
@@ -915,17 +930,9 @@ fn union_mix_scales_coverages_to_their_union() {
 /// the ridge, nor from outside.
 #[test]
 fn ridges_meet_grazing_light_from_inside() {
-    use crate::precompute::wall_table::{WallTable, WallTableParams};
     use glam::DVec2;
     let profile = Profile::parse("round:depth=0.3,segments=256").unwrap();
-    let table = WallTable::compute(&WallTableParams {
-        theta_bins: 2,
-        phi_bins: 2,
-        bins: 4,
-        paths: 200,
-        ..WallTableParams::new(profile.clone(), 1.5, 0.0)
-    })
-    .unwrap();
+    let walls = coarse_glass_walls(&profile);
     let layers = LayerSet::new(
         LayerParams {
             length: 0.3,
@@ -940,7 +947,7 @@ fn ridges_meet_grazing_light_from_inside() {
     let m = ScratchedMaterial::with_model(
         ScratchedBase::Glass { eta: 1.5 },
         Rgb::ONE,
-        ScratchModel::DielectricWalls(GlassWalls::Table(Arc::new(WallLobeTable::new(&table)))),
+        ScratchModel::DielectricWalls(walls),
         layers,
         LayerMix::Max,
         CoverageMode::Footprint,
@@ -1048,17 +1055,9 @@ fn ridges_meet_grazing_light_from_inside() {
 #[test]
 fn curves_meet_grazing_light_beside_their_openings() {
     use crate::curves::{CurveSet, Polyline};
-    use crate::precompute::wall_table::{WallTable, WallTableParams};
     use glam::{DVec2, DVec3};
     let profile = Profile::parse("v:depth=0.3").unwrap();
-    let table = WallTable::compute(&WallTableParams {
-        theta_bins: 2,
-        phi_bins: 2,
-        bins: 4,
-        paths: 200,
-        ..WallTableParams::new(profile.clone(), 1.5, 0.0)
-    })
-    .unwrap();
+    let walls = coarse_glass_walls(&profile);
     let (angle, hw) = (0.4f64, 0.02);
     let (axis, across) = (DVec2::from_angle(angle), DVec2::from_angle(angle).perp());
     let (a, b) = (
@@ -1074,7 +1073,7 @@ fn curves_meet_grazing_light_beside_their_openings() {
         let m = ScratchedMaterial::with_model(
             ScratchedBase::Glass { eta: 1.5 },
             Rgb::ONE,
-            ScratchModel::DielectricWalls(GlassWalls::Table(Arc::new(WallLobeTable::new(&table)))),
+            ScratchModel::DielectricWalls(walls.clone()),
             LayerSet::none(),
             LayerMix::Union,
             CoverageMode::Footprint,
@@ -1133,19 +1132,11 @@ fn curves_meet_grazing_light_beside_their_openings() {
 /// anything.
 #[test]
 fn inside_hits_read_no_footprint() {
-    use crate::precompute::wall_table::{WallTable, WallTableParams};
-    let table = WallTable::compute(&WallTableParams {
-        theta_bins: 2,
-        phi_bins: 2,
-        bins: 4,
-        paths: 200,
-        ..WallTableParams::new(Profile::parse("v:angle=90").unwrap(), 1.5, 0.0)
-    })
-    .unwrap();
+    let walls = coarse_glass_walls(&Profile::parse("v:angle=90").unwrap());
     let glass = ScratchedMaterial::with_model(
         ScratchedBase::Glass { eta: 1.5 },
         Rgb::ONE,
-        ScratchModel::DielectricWalls(GlassWalls::Table(Arc::new(WallLobeTable::new(&table)))),
+        ScratchModel::DielectricWalls(walls),
         wide_layers(4, 5),
         LayerMix::Max,
         CoverageMode::Footprint,
