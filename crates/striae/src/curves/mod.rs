@@ -428,13 +428,28 @@ impl CurveSet {
         (c0, c1): ([usize; 2], [usize; 2]),
         mut f: impl FnMut(&Segment),
     ) {
+        let misses = |seg: &Segment| {
+            seg.hi.x < lo.x || seg.hi.y < lo.y || seg.lo.x > hi.x || seg.lo.y > hi.y
+        };
+        if c1[0] - c0[0] == 1 && c1[1] - c0[1] == 1 {
+            // One cell (every point query): its list holds each segment once.
+            let cell = c0[1] * self.dims[0] + c0[0];
+            let range = self.cell_start[cell] as usize..self.cell_start[cell + 1] as usize;
+            for &s in &self.cell_segments[range] {
+                let seg = &self.segments[s as usize];
+                if !misses(seg) {
+                    f(seg);
+                }
+            }
+            return;
+        }
         for j in c0[1]..c1[1] {
             for i in c0[0]..c1[0] {
                 let cell = j * self.dims[0] + i;
                 let range = self.cell_start[cell] as usize..self.cell_start[cell + 1] as usize;
                 for &s in &self.cell_segments[range] {
                     let seg = &self.segments[s as usize];
-                    if seg.hi.x < lo.x || seg.hi.y < lo.y || seg.lo.x > hi.x || seg.lo.y > hi.y {
+                    if misses(seg) {
                         continue;
                     }
                     // Deduplicate: visit from the first cell of the overlap only.
