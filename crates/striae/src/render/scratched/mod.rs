@@ -1066,7 +1066,7 @@ impl RidgeReach {
         let map = |v: glam::DVec2| self.au * v.x + self.av * v.y;
         let (start, d) = (map(a.start - uv), map(a.end - a.start));
         let d_len = d.length();
-        if !(d_len > 0.0) {
+        if d_len.is_nan() || d_len <= 0.0 {
             return false;
         }
         let (along, across) = (d / d_len, -(d / d_len).perp());
