@@ -948,6 +948,16 @@ struct MapHit {
     direction: [f32; 2],
 }
 
+/// Where a ray's reach crosses a groove's axis ([`RidgeReach::axis_crossing`]), tangent-plane
+/// units: how far along the axis from its given point, the axis vector's length there, the
+/// hit's offset across it (the profile's `x`) and `wo`'s part across.
+struct AxisCrossing {
+    along: f64,
+    axis_len: f64,
+    offset: f64,
+    dx: f64,
+}
+
 /// The most points the search of randomly oriented layers tests along a ray's reach: enough
 /// for a groove of depth 0.3 (in opening widths) up to 84 degrees from the normal.
 const MAX_RIDGE_TESTS: usize = 16;
@@ -1032,24 +1042,12 @@ impl RidgeReach {
         uv: glam::DVec2,
         profile: &crate::precompute::profile::Profile,
     ) -> bool {
-        let map = |v: glam::DVec2| self.au * v.x + self.av * v.y;
-        let d = map(sc.direction);
-        let d_len = d.length();
-        // `across` is the scratch frame's `x`, `b = t x n` (METHOD.md section 1), the profile's.
-        let (along, across) = (d / d_len, -(d / d_len).perp());
-        let centre = map(sc.centre - uv);
-        // The ray runs toward the scratch's axis, or it cannot meet the groove (most of the
-        // scratches near the reach lie behind it).
-        let dx = glam::DVec2::new(self.wo.x, self.wo.y).dot(across);
-        if centre.dot(across) * dx <= 0.0 {
+        let Some(c) = self.axis_crossing(sc.centre, sc.direction, uv) else {
             return false;
-        }
-        let reach = map(self.reach_uv);
-        let t = (centre.dot(across) / reach.dot(across)).clamp(0.0, 1.0);
-        let t = if t.is_finite() { t } else { 0.0 };
-        let s = (reach * t - centre).dot(along) / (sc.half_length * d_len);
-        let half_width = sc.mapped_half_axes(d_len, self.det.abs()).1 * (1.0 - s * s).sqrt();
-        self.meets_section(-centre.dot(across), dx, half_width, 1.0, profile)
+        };
+        let s = c.along / (sc.half_length * c.axis_len);
+        let half_width = sc.mapped_half_axes(c.axis_len, self.det.abs()).1 * (1.0 - s * s).sqrt();
+        self.meets_section(c.offset, c.dx, half_width, 1.0, profile)
     }
 
     /// [`Self::meets_ridge`] for a curve's thick segment `a` (METHOD.md 9.1): its groove's
@@ -1063,29 +1061,52 @@ impl RidgeReach {
         uv: glam::DVec2,
         profile: &crate::precompute::profile::Profile,
     ) -> bool {
-        let map = |v: glam::DVec2| self.au * v.x + self.av * v.y;
-        let (start, d) = (map(a.start - uv), map(a.end - a.start));
-        let d_len = d.length();
-        if d_len.is_nan() || d_len <= 0.0 {
+        let Some(c) = self.axis_crossing(a.start, a.end - a.start, uv) else {
             return false;
-        }
-        let (along, across) = (d / d_len, -(d / d_len).perp());
-        let dx = glam::DVec2::new(self.wo.x, self.wo.y).dot(across);
-        if start.dot(across) * dx <= 0.0 {
-            return false;
-        }
-        let reach = map(self.reach_uv);
-        let t = (start.dot(across) / reach.dot(across)).clamp(0.0, 1.0);
-        let t = if t.is_finite() { t } else { 0.0 };
-        let s = (reach * t - start).dot(along) / d_len;
+        };
+        let s = c.along / c.axis_len;
         if !(0.0..=1.0).contains(&s) {
             return false;
         }
         // A texture width `h` across the axis maps to `h |det A| |e| / |A e|` (`e` the axis).
         let h = a.half_widths[0] + (a.half_widths[1] - a.half_widths[0]) * s;
-        let half_width = h * self.det.abs() * (a.end - a.start).length() / d_len;
-        let across_offset = -start.dot(across);
-        self.meets_section(across_offset, dx, half_width, a.depth as f64, profile)
+        let half_width = h * self.det.abs() * (a.end - a.start).length() / c.axis_len;
+        self.meets_section(c.offset, c.dx, half_width, a.depth as f64, profile)
+    }
+
+    /// Where the reach from texture point `uv` crosses the axis through texture point `p`
+    /// along texture vector `e`, in the tangent plane ([`AxisCrossing`]); `None` where the
+    /// ray runs away from the axis (it cannot meet the groove: most of the grooves near the
+    /// reach lie behind it) or `e` maps to nothing.
+    #[inline(always)]
+    fn axis_crossing(
+        &self,
+        p: glam::DVec2,
+        e: glam::DVec2,
+        uv: glam::DVec2,
+    ) -> Option<AxisCrossing> {
+        let map = |v: glam::DVec2| self.au * v.x + self.av * v.y;
+        let d = map(e);
+        let axis_len = d.length();
+        if axis_len.is_nan() || axis_len <= 0.0 {
+            return None;
+        }
+        // `across` is the scratch frame's `x`, `b = t x n` (METHOD.md section 1), the profile's.
+        let (along, across) = (d / axis_len, -(d / axis_len).perp());
+        let point = map(p - uv);
+        let dx = glam::DVec2::new(self.wo.x, self.wo.y).dot(across);
+        if point.dot(across) * dx <= 0.0 {
+            return None;
+        }
+        let reach = map(self.reach_uv);
+        let t = (point.dot(across) / reach.dot(across)).clamp(0.0, 1.0);
+        let t = if t.is_finite() { t } else { 0.0 };
+        Some(AxisCrossing {
+            along: (reach * t - point).dot(along),
+            axis_len,
+            offset: -point.dot(across),
+            dx,
+        })
     }
 
     /// Whether the ray back along `wo` from a hit `offset` across a groove's axis (tangent
