@@ -560,7 +560,8 @@ radiance = [0.02, 0.02, 0.02]
 /// The exact groove (`precompute::groove::GroovePaths`, the renderer's traced lobe) leaves light
 /// from inside the glass as its explicit geometry does: rays aimed from inside at a straight V
 /// groove carved into a thick box (`explicit = true`, the renderer's BVH), split at every
-/// surface by the exact Fresnel of glass (reflected or refracted by a uniform), end out in the
+/// surface by the exact Fresnel of glass (`optics::fresnel::dielectric`; reflected or refracted
+/// by a uniform), end out in the
 /// air, back in the glass below the critical angle (free to leave by the far face) or beyond
 /// it (trapped by the flat faces); among the rays that met a wall, the three shares are the
 /// tracer's within noise, below the ridges' angle (50 degrees: only through the opening) and
@@ -569,9 +570,11 @@ radiance = [0.02, 0.02, 0.02]
 fn the_traced_groove_leaves_light_from_inside_as_its_explicit_geometry_does() {
     use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64;
-    use striae::math::{Ray, Vec3};
+    use striae::math::{reflect, Ray, Vec3};
+    use striae::optics::fresnel::dielectric;
     use striae::precompute::groove::GroovePaths;
     use striae::precompute::profile::Profile;
+    use striae::render::shading::refract_dir;
     let s = scene(
         r#"
 [render]
@@ -625,16 +628,6 @@ transform = [{ scale = [1.0, 0.2, 1.0] }]
     } else {
         (Vec3::X, Vec3::Z)
     };
-    let fresnel = |cos_i: f32, eta: f32| {
-        let sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta);
-        if sin_t2 >= 1.0 {
-            return 1.0;
-        }
-        let cos_t = (1.0 - sin_t2).sqrt();
-        let rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
-        let rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
-        0.5 * (rs * rs + rp * rp)
-    };
     let share = |class: [usize; 3]| {
         let n = class.iter().sum::<usize>() as f64;
         (class.map(|c| c as f64 / n), n)
@@ -675,16 +668,17 @@ transform = [{ scale = [1.0, 0.2, 1.0] }]
                     break;
                 }
                 met |= h.shape != 0;
+                // `n` faces the ray; the Fresnel cosine is signed by the side of the glass.
                 let n = if dir.dot(h.ng) < 0.0 { h.ng } else { -h.ng };
-                let cos_i = -dir.dot(n);
-                let eta = if inside { 1.0 / 1.5 } else { 1.5 };
-                if rng.random::<f32>() < fresnel(cos_i, eta) {
-                    dir -= n * (2.0 * dir.dot(n));
-                } else {
-                    let e = 1.0 / eta;
-                    let k = 1.0 - e * e * (1.0 - cos_i * cos_i);
-                    dir = (dir * e + n * (e * cos_i - k.sqrt())).normalize();
-                    inside = !inside;
+                let cos_i = -dir.dot(n) as f64;
+                let f = dielectric(if inside { -cos_i } else { cos_i }, 1.5);
+                let refracted = refract_dir(dir, n, (1.0 / f.eta_it) as f32);
+                match refracted.filter(|_| rng.random::<f32>() >= f.r as f32) {
+                    Some(t) => {
+                        dir = t.normalize();
+                        inside = !inside;
+                    }
+                    None => dir = reflect(-dir, n),
                 }
                 o = g.spawn_origin(h.p, h.ng, h.shape, dir);
             }

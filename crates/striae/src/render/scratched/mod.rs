@@ -722,6 +722,9 @@ impl ScratchedMaterial {
     /// of them at 85 degrees). A painted map has no grooves to meet beside their openings.
     #[inline(always)]
     fn ridge_lobe(&self, ctx: &ShadingContext, walls: &GlassWalls) -> Option<(ScratchLobe, f32)> {
+        if self.layers.is_empty() && self.curves.is_none() {
+            return None;
+        }
         let r = RidgeReach::new(self, ctx, walls)?;
         let uv = ctx.uv.as_dvec2();
         let profile = walls.profile();

@@ -444,7 +444,6 @@ fn mirror_walls_delta(t: &ScratchLobeTable, l: ScratchLobe) {
     }
 }
 
-/// The material's BSDF at `ctx`, with a cache of its own.
 /// Smooth glass walls of index 1.5 in `profile`, from a coarse table (the ridge tests read
 /// only whether a lobe is there).
 fn coarse_glass_walls(profile: &Profile) -> GlassWalls {
@@ -460,6 +459,7 @@ fn coarse_glass_walls(profile: &Profile) -> GlassWalls {
     GlassWalls::Table(Arc::new(WallLobeTable::new(&table)))
 }
 
+/// The material's BSDF at `ctx`, with a cache of its own.
 fn bsdf_of<'a>(m: &'a ScratchedMaterial, ctx: &ShadingContext) -> Bsdf<'a> {
     m.bsdf(ctx, &mut CoverageCache::new())
 }
