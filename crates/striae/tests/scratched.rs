@@ -686,7 +686,7 @@ transform = [{ scale = [1.0, 0.2, 1.0] }]
         let mut traced = [0usize; 3];
         for _ in 0..60_000 {
             let dg = d_groove.map(|x| x as f64);
-            if let Some(e) = paths.trace(dg, rng.random(), rng.random::<u64>(), None) {
+            if let Some(e) = paths.trace(dg, rng.random(), None, rng.random::<u64>(), None) {
                 traced[class(e.in_object, e.d[2] as f32)] += 1;
             }
         }

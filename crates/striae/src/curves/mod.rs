@@ -224,6 +224,24 @@ struct Segment {
     depth: f32,
 }
 
+impl Segment {
+    /// Its groove's axis, the half-widths at its ends and its depth ratio.
+    fn axis(&self) -> SegmentAxis {
+        let q = &self.quad;
+        // The quad's sides are the mitred ends: their part across the axis is the width.
+        let across = self.tangent.perp();
+        SegmentAxis {
+            start: 0.5 * (q[0] + q[3]),
+            end: 0.5 * (q[1] + q[2]),
+            half_widths: [
+                0.5 * (q[3] - q[0]).dot(across).abs(),
+                0.5 * (q[2] - q[1]).dot(across).abs(),
+            ],
+            depth: self.depth,
+        }
+    }
+}
+
 /// One curve's part of a footprint ([`CurveSet::footprint`]): its coverage and the direction
 /// of one of its segments, chosen in proportion to the segment's share of the footprint.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -232,6 +250,8 @@ pub struct CurveHit {
     pub coverage: f64,
     pub direction: DVec2,
     pub depth: f32,
+    /// The point test's segment ([`CurveSet::at_point`]): where the hit lies across it.
+    pub axis: Option<SegmentAxis>,
 }
 
 /// The curves a footprint meets, at most [`MAX_CURVE_HITS`].
@@ -482,19 +502,7 @@ impl CurveSet {
             if found {
                 return;
             }
-            let q = &seg.quad;
-            // The quad's sides are the mitred ends: their part across the axis is the width.
-            let across = seg.tangent.perp();
-            let axis = SegmentAxis {
-                start: 0.5 * (q[0] + q[3]),
-                end: 0.5 * (q[1] + q[2]),
-                half_widths: [
-                    0.5 * (q[3] - q[0]).dot(across).abs(),
-                    0.5 * (q[2] - q[1]).dot(across).abs(),
-                ],
-                depth: seg.depth,
-            };
-            found = f(&axis);
+            found = f(&seg.axis());
         });
         found
     }
@@ -515,6 +523,7 @@ impl CurveSet {
                     coverage: 1.0,
                     direction: seg.tangent,
                     depth: seg.depth,
+                    axis: Some(seg.axis()),
                 };
                 let _ = hits.try_push(hit);
             }

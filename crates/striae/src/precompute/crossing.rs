@@ -166,6 +166,7 @@ impl<'a> Crossing<'a> {
                 d,
                 in_object,
                 w: 1.0,
+                from: None,
             })
         };
         for bounce in 0..max_bounces {
@@ -304,7 +305,7 @@ mod tests {
                 -theta.cos()
             };
             let d0 = [theta.sin() * phi.cos(), theta.sin() * phi.sin(), z];
-            if let Some(e) = paths.trace(d0, h(6), key, Some(partner)) {
+            if let Some(e) = paths.trace(d0, h(6), None, key, Some(partner)) {
                 let len = (e.d[0] * e.d[0] + e.d[1] * e.d[1] + e.d[2] * e.d[2]).sqrt();
                 assert!((len - 1.0).abs() < 1e-9 && e.w == 1.0, "{e:?}");
                 left += 1;

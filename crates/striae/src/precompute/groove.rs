@@ -445,6 +445,10 @@ enum Outcome {
     Absorbed,
     /// Out of bounces, with its weight.
     Dropped(f64),
+    /// From inside, after meeting the groove, on its way up to the flat surface beside the
+    /// opening, where another groove may lie ([`GroovePaths::trace`] with `at`): the ray as it
+    /// left the last wall.
+    Surfaced(Ray),
 }
 
 /// What a surface interaction did to a path.
@@ -524,18 +528,19 @@ impl Tracer {
     /// Trace path `k` into `acc`.
     fn path(&self, k: u64, acc: &mut Acc) {
         let path_key = mix64(self.key.wrapping_add(k.wrapping_mul(GOLDEN)));
-        match self.run(self.start(k, path_key), path_key, self.s.beside) {
+        match self.run(self.start(k, path_key), path_key, self.s.beside, false) {
             Outcome::Left(ray) => self.leave(&ray, acc),
             Outcome::Missed => acc.missed += 1,
             Outcome::Absorbed => {}
-            Outcome::Dropped(w) => acc.dropped += fixed(w),
+            Outcome::Dropped(w) | Outcome::Surfaced(Ray { w, .. }) => acc.dropped += fixed(w),
         }
     }
 
     /// Follow `ray` until it leaves the groove (`beside`: a path from inside that does not meet
     /// the groove before it reaches the flat surface, or, totally reflected there, right
-    /// after, is `Missed`).
-    fn run(&self, mut ray: Ray, path_key: u64, beside: bool) -> Outcome {
+    /// after, is `Missed`; `surfacing`: one that met it and heads up to the flat surface from
+    /// below the surface, is `Surfaced`).
+    fn run(&self, mut ray: Ray, path_key: u64, beside: bool, surfacing: bool) -> Outcome {
         // Aimed beside the groove and not yet in it.
         let mut aimed = beside;
         for bounce in 0..self.s.max_bounces {
@@ -583,6 +588,9 @@ impl Tracer {
                     return Outcome::Missed;
                 }
                 _ if t_flat.is_finite() => {
+                    if surfacing && !aimed && ray.pos[1] < -SURFACING_DEPTH {
+                        return Outcome::Surfaced(ray);
+                    }
                     ray.pos = [ray.pos[0] + t_flat * d2[0], 0.0];
                     ray.skip = usize::MAX;
                     self.flat(&mut ray, u.get(2));
@@ -807,13 +815,22 @@ pub struct GroovePaths {
 }
 
 /// Where a traced path left the groove: its travel direction (unit, the groove's frame),
-/// whether it went into the object, and its weight (1: smooth walls are lossless).
+/// whether it went into the object, and its weight (1: smooth walls are lossless); `from`, for
+/// a path that surfaced ([`GroovePaths::trace`] with `at`), the point `(x, z)` of the
+/// cross-section (`z < 0`) where it left the last wall, heading up inside the object (`d.z >
+/// 0`) for the flat surface beside the opening.
 #[derive(Clone, Copy, Debug)]
 pub struct GrooveExit {
     pub d: [f64; 3],
     pub in_object: bool,
     pub w: f64,
+    pub from: Option<[f64; 2]>,
 }
+
+/// The least depth below the surface (in opening widths) from which a path that met the
+/// groove surfaces ([`GroovePaths::trace`] with `at`); one leaving a wall closer to the rim
+/// meets the flat surface there in the tracer, too close to the opening to hold another.
+const SURFACING_DEPTH: f64 = 0.02;
 
 /// Entry points a path from inside tries before it is given up: light aimed beside the
 /// opening misses the groove with probability below 1/2 wherever the band is wider than the
@@ -842,20 +859,34 @@ impl GroovePaths {
     /// `partner`, through the union of this groove and the partner crossing it
     /// ([`crate::precompute::crossing`]). `None` for a path that runs out of bounces or leaves
     /// along the surface.
+    ///
+    /// `at`, from inside and without a partner: the light crosses the surface's plane `at`
+    /// across the groove (in opening widths from its axis) rather than at a drawn place, and a
+    /// path that met the groove and heads up for the flat surface beside it stops there
+    /// ([`GrooveExit::from`]): the renderer looks the scratches up again where it surfaces
+    /// (METHOD.md 8.1, "Ours": light between grooves). The tracer's flat surface would hold
+    /// no other groove. Should the light miss the groove there, the path enters at drawn
+    /// places as without `at`.
     pub fn trace(
         &self,
         d0: [f64; 3],
         x: f64,
+        at: Option<f64>,
         key: u64,
         partner: Option<Partner>,
     ) -> Option<GrooveExit> {
         let t = &self.tracer;
         let inside = d0[2] > 0.0;
         let (start, width) = entry_band(&t.cs, d0, inside, t.s.ior);
+        let at = at.filter(|a| inside && partner.is_none() && a.is_finite());
         for attempt in 0..ENTRY_TRIES {
             let path_key = mix64(key.wrapping_add(attempt.wrapping_mul(GOLDEN)));
             let u = if attempt == 0 { x } else { t.draw(path_key, 0) };
-            let x0 = start + width * u;
+            let surfacing = attempt == 0 && at.is_some();
+            let x0 = match at {
+                Some(a) if surfacing => a,
+                _ => start + width * u,
+            };
             let end = match partner {
                 Some(p) => Crossing::new(&t.cs, t.s.ior, x0, p).run(
                     x0,
@@ -864,10 +895,12 @@ impl GroovePaths {
                     PathDraws::new(path_key),
                     t.s.max_bounces,
                 ),
-                None => self.run_2d(x0, d0, inside, path_key),
+                None => self.run_2d(x0, d0, inside, path_key, surfacing),
             };
             match end {
-                CrossingEnd::Left(e) if e.d[2] != 0.0 && (e.d[2] < 0.0) == e.in_object => {
+                CrossingEnd::Left(e)
+                    if e.from.is_some() || (e.d[2] != 0.0 && (e.d[2] < 0.0) == e.in_object) =>
+                {
                     return Some(e)
                 }
                 CrossingEnd::Missed => continue,
@@ -877,15 +910,28 @@ impl GroovePaths {
         None
     }
 
-    /// One path of the 2.5D tracer entering on the line through `(x0, 0)`.
-    fn run_2d(&self, x0: f64, d0: [f64; 3], inside: bool, path_key: u64) -> CrossingEnd {
+    /// One path of the 2.5D tracer entering on the line through `(x0, 0)` (`surfacing`: see
+    /// [`Tracer::run`]).
+    fn run_2d(
+        &self,
+        x0: f64,
+        d0: [f64; 3],
+        inside: bool,
+        path_key: u64,
+        surfacing: bool,
+    ) -> CrossingEnd {
         let t = &self.tracer;
-        match t.run(t.entry(x0, d0, inside), path_key, inside) {
-            Outcome::Left(r) => CrossingEnd::Left(GrooveExit {
+        let exit = |r: Ray, from| {
+            CrossingEnd::Left(GrooveExit {
                 d: r.d,
                 in_object: r.in_object,
                 w: r.w,
-            }),
+                from,
+            })
+        };
+        match t.run(t.entry(x0, d0, inside), path_key, inside, surfacing) {
+            Outcome::Left(r) => exit(r, None),
+            Outcome::Surfaced(r) => exit(r, Some(r.pos)),
             Outcome::Missed => CrossingEnd::Missed,
             Outcome::Absorbed | Outcome::Dropped(_) => CrossingEnd::Lost,
         }
@@ -901,7 +947,7 @@ impl GroovePaths {
         inside: bool,
         path_key: u64,
     ) -> Option<Option<GrooveExit>> {
-        match self.run_2d(x0, d0, inside, path_key) {
+        match self.run_2d(x0, d0, inside, path_key, false) {
             CrossingEnd::Left(e) => Some(Some(e)),
             CrossingEnd::Missed => Some(None),
             CrossingEnd::Lost => None,
@@ -941,6 +987,80 @@ mod tests {
 
     fn run(spec: &str, s: &GonioSettings) -> GonioOutput {
         trace_groove(&Profile::parse(spec).unwrap(), s, &|_| {}).unwrap()
+    }
+
+    /// A path from inside that enters `at` a drawn entry's place is the drawn path until it
+    /// surfaces: heading up for the flat surface beside the opening, it stops on the wall it
+    /// left, below the surface, and the drawn path goes on from there through the flat
+    /// surface alone: mirrored, or refracted into the air. Elsewhere the two are one path.
+    #[test]
+    fn surfacing_paths_stop_on_the_wall_they_leave() {
+        let ior = 1.5;
+        for spec in [
+            "round:depth=0.3,segments=8",
+            "v:depth=0.3",
+            "round:depth=0.1,segments=8",
+        ] {
+            let profile = Profile::parse(spec).unwrap();
+            let paths = GroovePaths::new(&profile, ior);
+            let cs = CrossSection::new(&profile);
+            let mut surfaced = 0;
+            for k in 0..20_000u64 {
+                let h = |i: u64| unit(mix64(k * 8 + i));
+                let theta = (42.0 + 47.0 * h(0)).to_radians();
+                let phi = 2.0 * PI * h(1);
+                let d0 = [
+                    theta.sin() * phi.cos(),
+                    theta.sin() * phi.sin(),
+                    theta.cos(),
+                ];
+                let (u, key) = (h(2), mix64(k));
+                let (start, width) = entry_band(&cs, d0, true, ior);
+                let drawn = paths.trace(d0, u, None, key, None);
+                let placed = paths.trace(d0, u, Some(start + width * u), key, None);
+                let (a, b) = match (drawn, placed) {
+                    (Some(a), Some(b)) => (a, b),
+                    (None, None) => continue,
+                    other => panic!("{spec}: {other:?}"),
+                };
+                let Some([x, z]) = b.from else {
+                    assert_eq!((a.d, a.in_object), (b.d, b.in_object), "{spec}");
+                    continue;
+                };
+                surfaced += 1;
+                assert!(
+                    b.in_object && b.d[2] > 0.0 && z < -SURFACING_DEPTH,
+                    "{spec}: {b:?}"
+                );
+                // On the profile's walls.
+                let gap = profile
+                    .points
+                    .windows(2)
+                    .map(|w| {
+                        let (e, r) = (
+                            [w[1][0] - w[0][0], w[1][1] - w[0][1]],
+                            [x - w[0][0], z - w[0][1]],
+                        );
+                        let t = ((r[0] * e[0] + r[1] * e[1]) / (e[0] * e[0] + e[1] * e[1]))
+                            .clamp(0.0, 1.0);
+                        (r[0] - t * e[0]).hypot(r[1] - t * e[1])
+                    })
+                    .fold(f64::INFINITY, f64::min);
+                assert!(gap < 1e-9, "{spec}: ({x}, {z}) is {gap} off the walls");
+                // It surfaces beside the opening.
+                let xs = x - z * b.d[0] / b.d[2];
+                assert!(xs.abs() > 0.5, "{spec}: surfaces at {xs}");
+                let want = if a.in_object {
+                    [b.d[0], b.d[1], -b.d[2]]
+                } else {
+                    let t = [ior * b.d[0], ior * b.d[1]];
+                    [t[0], t[1], (1.0 - t[0] * t[0] - t[1] * t[1]).sqrt()]
+                };
+                let off = a.d.iter().zip(want).map(|(x, y)| (x - y).abs());
+                assert!(off.fold(0.0, f64::max) < 1e-9, "{spec}: {a:?} from {b:?}");
+            }
+            assert!(surfaced > 200, "{spec}: {surfaced} paths surfaced");
+        }
     }
 
     fn theta_marginal(h: &[f64], b: usize) -> Vec<f64> {
@@ -1574,7 +1694,7 @@ mod tests {
                 let key = mix64(k ^ (i as u64) << 40);
                 let x = (k as f64 + 0.5) / n as f64;
                 let e = paths
-                    .trace(d0, x, key, None)
+                    .trace(d0, x, None, key, None)
                     .expect("a lossless path leaves");
                 assert_eq!(e.w, 1.0);
                 let up = if e.in_object { -e.d[2] } else { e.d[2] };

@@ -469,6 +469,12 @@ impl Profile {
     /// has met the groove first when this holds (METHOD.md 8.1; the light beside the opening
     /// of [`crate::precompute::groove::GonioSettings::beside`]).
     pub fn ray_meets_ridge(&self, x: f64, dx: f64, dz: f64) -> bool {
+        self.ray_meets_ridge_within(x, dx, dz, f64::INFINITY)
+    }
+
+    /// [`Self::ray_meets_ridge`] for a line that begins `max_depth` below the surface: the
+    /// walls must be met shallower than that.
+    pub fn ray_meets_ridge_within(&self, x: f64, dx: f64, dz: f64, max_depth: f64) -> bool {
         let down = dz < 0.0;
         if !down {
             return false;
@@ -485,7 +491,7 @@ impl Profile {
             let r = sub(w[0], o);
             let t = cross(r, e) / den;
             let u = cross(r, d) / den;
-            t > 1e-12 && (0.0..=1.0).contains(&u)
+            t > 1e-12 && (0.0..=1.0).contains(&u) && -t * dz < max_depth
         })
     }
 }

@@ -243,6 +243,7 @@ pub fn shade<'a>(
         rd: Some(rd),
         u_layer: Some(u_layer),
         pixel: None,
+        origin_depth: f32::INFINITY,
     };
     let (frame, bsdf) = material.shade(hit, view, &mut CoverageCache::new());
     let ctx = hit_context(hit, Some(rd), frame, wo_world, u_layer, None);
@@ -878,6 +879,9 @@ fn radiance<const DIFFERENTIALS: bool>(
     let mut differentials = PathDifferentials::new(*rd, *offset);
 
     let mut depth = 0u32;
+    // How far below the surface the ray began, where it went on from below one
+    // (`BsdfSample::from`).
+    let mut origin_depth = f32::INFINITY;
     loop {
         sampler.start_bounce(depth);
         worker.rays += 1;
@@ -908,7 +912,10 @@ fn radiance<const DIFFERENTIALS: bool>(
         let (frame, bsdf) = shade_hit::<DIFFERENTIALS>(
             scene,
             &hit,
-            wo_world,
+            Arrival {
+                wo: wo_world,
+                origin_depth,
+            },
             depth,
             sampler,
             &mut differentials,
@@ -957,12 +964,23 @@ fn radiance<const DIFFERENTIALS: bool>(
                 },
             );
         }
-        ray = Ray::new(
-            scene
-                .geometry
-                .spawn_origin(hit.p, hit.ng, hit.shape, wi_world),
-            wi_world,
-        );
+        let origin = match bs.from {
+            // The path left a groove's wall below the surface (traced glass walls seen from
+            // inside): on from there, toward the surface beside the groove, where the next hit
+            // looks the scratches up again.
+            Some(from) => {
+                origin_depth = -from.z;
+                let p = hit.p + frame.to_world(from);
+                scene.geometry.spawn_origin(p, hit.ng, hit.shape, wo_world)
+            }
+            None => {
+                origin_depth = f32::INFINITY;
+                scene
+                    .geometry
+                    .spawn_origin(hit.p, hit.ng, hit.shape, wi_world)
+            }
+        };
+        ray = Ray::new(origin, wi_world);
 
         depth += 1;
         if depth >= settings.rr_depth && !path.survives_roulette(sampler) {
@@ -1083,19 +1101,31 @@ fn emission_weight(specular: bool, prev_pdf: f32, light_pdf: impl FnOnce() -> f3
     }
 }
 
-/// The shading frame and the BSDF of the material at `hit` (not a pure emitter), seen from
-/// `wo_world` at bounce `depth`, with what the material reads of the hit worked out only where
+/// How the ray that made a hit arrived: the direction toward the viewer (world) and how far
+/// below the surface it began ([`crate::render::shading::ShadingContext::origin_depth`]).
+#[derive(Clone, Copy)]
+struct Arrival {
+    wo: Vec3,
+    origin_depth: f32,
+}
+
+/// The shading frame and the BSDF of the material at `hit` (not a pure emitter), for the ray
+/// `arrival` at bounce `depth`, with what the material reads of the hit worked out only where
 /// it reads it: `u_layer`, the footprint, and the chain of delta bounces that led here.
 #[inline(always)]
 fn shade_hit<'a, const DIFFERENTIALS: bool>(
     scene: &'a Scene,
     hit: &SurfaceHit,
-    wo_world: Vec3,
+    arrival: Arrival,
     depth: u32,
     sampler: &mut PixelSampler,
     differentials: &mut PathDifferentials,
     worker: &mut Worker,
 ) -> (Frame, Bsdf<'a>) {
+    let Arrival {
+        wo: wo_world,
+        origin_depth,
+    } = arrival;
     let material = &scene.materials[scene.geometry.shapes()[hit.shape as usize].material as usize];
     // `u_layer`: dimension 0 of the bounce's block, drawn only where the material reads it
     // (the scratched material, not glass seen from inside). Where it only breaks ties between
@@ -1134,6 +1164,7 @@ fn shade_hit<'a, const DIFFERENTIALS: bool>(
             chain,
             offset: differentials.offset,
         }),
+        origin_depth,
     };
     material.shade(hit, view, &mut worker.coverage)
 }

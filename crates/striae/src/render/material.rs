@@ -10,7 +10,7 @@ use crate::render::bsdf::{ConductorCompensation, DielectricCompensation};
 use crate::render::bsdf::{GrooveWall, LayerAlbedo, Pbr, RoughConductor, RoughDielectric};
 use crate::render::geometry::SurfaceHit;
 use crate::render::scratched::ScratchedMaterial;
-use crate::render::shading::{hit_context, shading_frame, PixelHit};
+use crate::render::shading::{hit_context, shading_frame, PixelHit, ShadingContext};
 use crate::render::texture::Texture;
 use std::sync::Arc;
 
@@ -168,6 +168,8 @@ pub struct HitView<'a> {
     pub u_layer: Option<f32>,
     /// The pixel and chain of delta bounces of a camera path ([`PixelHit`]); read only with `rd`.
     pub pixel: Option<PixelHit>,
+    /// [`crate::render::shading::ShadingContext::origin_depth`].
+    pub origin_depth: f32,
 }
 
 impl Material {
@@ -259,7 +261,10 @@ impl Material {
                 let frame = shading_frame(hit, view.wo, m.has_transmission());
                 let bsdf = match view.u_layer {
                     Some(u) => m.bsdf(
-                        &hit_context(hit, view.rd, frame, view.wo, u, view.pixel),
+                        &ShadingContext {
+                            origin_depth: view.origin_depth,
+                            ..hit_context(hit, view.rd, frame, view.wo, u, view.pixel)
+                        },
                         coverage,
                     ),
                     // Glass seen from inside: its smooth base, whatever the context.

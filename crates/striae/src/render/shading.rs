@@ -61,6 +61,11 @@ pub struct ShadingContext {
     /// footprint of the whole pixel once and share it among the pixel's samples
     /// (`layers::CoverageCache::of_pixel`; the render loop starts the cache's pixel).
     pub pixel: Option<PixelHit>,
+    /// How far below the surface (world units) the arriving ray began, for a ray that went on
+    /// from below the surface rather than from a hit ([`crate::render::bsdf::BsdfSample::from`]);
+    /// infinite for every other ray. Scratched glass seen from inside looks for grooves the ray
+    /// met beside their openings no deeper than this.
+    pub origin_depth: f32,
 }
 
 impl ShadingContext {
@@ -140,6 +145,7 @@ pub fn hit_context(
         u_layer,
         wo: wo_world,
         pixel: pixel.filter(|_| rd.is_some()),
+        origin_depth: f32::INFINITY,
     }
 }
 

@@ -116,6 +116,7 @@ impl Conductor {
             pdf: 1.0,
             delta: true,
             eta: 1.0,
+            from: None,
         })
     }
 }
@@ -207,6 +208,7 @@ impl RoughConductor {
             pdf,
             delta: false,
             eta: 1.0,
+            from: None,
         })
     }
 }

@@ -52,6 +52,7 @@ pub(super) fn mirror_sample(wo: Vec3, pdf: f32) -> BsdfSample {
         pdf,
         delta: true,
         eta: 1.0,
+        from: None,
     }
 }
 
@@ -67,6 +68,7 @@ pub(super) fn refraction_sample(wo: Vec3, cos_t: f32, eta_it: f32, pdf: f32) -> 
         pdf,
         delta: true,
         eta: eta_it,
+        from: None,
     }
 }
 
@@ -211,6 +213,7 @@ impl RoughDielectric {
                 pdf,
                 delta: false,
                 eta: 1.0,
+                from: None,
             })
         } else {
             let eta_p = eta_it;
@@ -231,6 +234,7 @@ impl RoughDielectric {
                 pdf,
                 delta: false,
                 eta: eta_p,
+                from: None,
             })
         }
     }

@@ -48,6 +48,7 @@ impl Diffuse {
             pdf,
             delta: false,
             eta: 1.0,
+            from: None,
         })
     }
 }

@@ -56,7 +56,9 @@ pub use multiscatter::{
     CompensatedConductor, CompensatedDielectric, ConductorCompensation, DielectricCompensation,
 };
 pub use pbr::{LayerAlbedo, Pbr};
-pub use scratched::{LobeShare, ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf};
+pub use scratched::{
+    GroovePlace, LobeShare, ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf,
+};
 pub use scratched_glass::{GlassWalls, ScratchedGlassBsdf, TracedGroove, WallLobeTable};
 pub use scratched_metal::ScratchedMetalBsdf;
 pub use wall::GrooveWall;
@@ -77,6 +79,12 @@ pub struct BsdfSample {
     /// Relative index of refraction `n_i / n_o` crossed by the sample (1 for reflection),
     /// used to keep Russian roulette independent of the radiance scaling at refraction.
     pub eta: f32,
+    /// Where the path goes on from, relative to the hit (local frame, world units), where it
+    /// does not go on from the hit itself: light that left a groove's wall inside the object
+    /// and heads up for the surface beside the opening, where the next hit looks the
+    /// scratches up again (traced glass walls seen from inside, METHOD.md 8.1); `wi` then
+    /// points up inside the object. `None` for every other sample.
+    pub from: Option<Vec3>,
 }
 
 impl BsdfSample {
@@ -89,6 +97,7 @@ impl BsdfSample {
             pdf,
             delta: false,
             eta: 1.0,
+            from: None,
         }
     }
 }

@@ -367,6 +367,7 @@ impl<'a> Pbr<'a> {
             pdf,
             delta: false,
             eta,
+            from: None,
         })
     }
 }

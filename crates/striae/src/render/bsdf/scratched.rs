@@ -183,7 +183,8 @@ pub enum ScratchedBase {
 /// lean along the scratch (`lean = true`, METHOD.md 8.3): its normal tilted toward `t` by an
 /// angle `alpha`, as `sin alpha` (0 without one); and where the hit lies where two scratches
 /// cross (traced glass walls, METHOD.md 8.3), the other scratch's across axis `b` in this
-/// lobe's scratch frame, `(x, y)` (zero without one).
+/// lobe's scratch frame, `(x, y)` (zero without one); and, for traced glass walls seen from
+/// inside, where the hit lies across the groove ([`GroovePlace`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ScratchLobe {
     pub coverage: f32,
@@ -191,6 +192,15 @@ pub struct ScratchLobe {
     pub sin: f32,
     pub lean: f32,
     pub cross: [f32; 2],
+    pub place: Option<GroovePlace>,
+}
+
+/// Where a hit lies across the groove of its lobe: `at` its offset from the axis along the
+/// scratch frame's `x` in opening widths, `width` the opening's width there (world units).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GroovePlace {
+    pub at: f32,
+    pub width: f32,
 }
 
 impl Default for ScratchLobe {
@@ -208,6 +218,7 @@ impl ScratchLobe {
             sin,
             lean: 0.0,
             cross: [0.0; 2],
+            place: None,
         }
     }
 
@@ -220,6 +231,11 @@ impl ScratchLobe {
             cross: [along, -across],
             ..self
         }
+    }
+
+    /// The same lobe at `place` across its groove.
+    pub fn at_place(self, place: Option<GroovePlace>) -> Self {
+        ScratchLobe { place, ..self }
     }
 
     /// The same lobe with its normal tilted toward `t` by the angle whose tangent is `tan`.
@@ -670,6 +686,7 @@ impl<'a> ScratchedBsdf<'a> {
                         pdf: base,
                         delta: true,
                         eta: 1.0,
+                        from: None,
                     });
                 }
                 let (k, _) = self.lobes.pick(u_lobe, base);
@@ -702,6 +719,7 @@ impl<'a> ScratchedBsdf<'a> {
                 pdf: pk * s.pdf as f32,
                 delta: s.delta,
                 eta: 1.0,
+                from: None,
             });
         }
         let (f, pdf) = self.eval_pdf(wo, wi);
@@ -714,6 +732,7 @@ impl<'a> ScratchedBsdf<'a> {
             pdf,
             delta: false,
             eta: 1.0,
+            from: None,
         })
     }
 

@@ -57,7 +57,7 @@
 
 use super::dielectric::{mirror_sample, refraction_sample};
 use super::scratched::CoveredLobes;
-use super::{BsdfSample, ScratchLobe};
+use super::{BsdfSample, GroovePlace, ScratchLobe};
 use crate::hash::{mix64, unit_from_u32};
 use crate::math::{Rgb, Vec2, Vec3};
 use crate::optics::fresnel_f32;
@@ -361,6 +361,7 @@ impl WallLobeTable {
             lobe: l,
             weight: radiance_factor(self.n, side, l) * total,
             pdf: m / (total * self.smooth_box * h * ct),
+            from: None,
         })
     }
 
@@ -456,6 +457,9 @@ pub(super) struct SmoothSample {
     pub weight: f32,
     /// The density of `wi` from the chosen slice; 1 for a traced path, which has none.
     pub pdf: f32,
+    /// A traced path that surfaced ([`GrooveExit::from`]): where it goes on from, relative to
+    /// the hit (scratch frame, world units, below the surface), heading up inside the object.
+    pub from: Option<Vec3>,
 }
 
 /// The groove crossing a traced one along `cross` ([`ScratchLobe::cross`]), placed from the
@@ -482,6 +486,10 @@ fn crossing_groove(cross: [f32; 2], key: u64) -> Partner {
         width: ratio.clamp(0.05, 20.0),
     }
 }
+
+/// How far up its ray a path that surfaced goes on from the wall it left, at most (in opening
+/// widths of depth; half the wall's depth there where that is less).
+const SURFACING_STEP: f64 = 0.01;
 
 /// Smooth glass walls with no table (`lobes = "traced"`, see the module notes): the groove
 /// sampled by tracing it, one path a sample.
@@ -513,14 +521,39 @@ impl TracedGroove {
     /// keyed by `u0` and `u.y`; at a crossing (`cross`, [`ScratchLobe::cross`], not zero)
     /// through the union with the other groove, its entry line at a uniform place across that
     /// groove's opening, drawn from the same stream (METHOD.md 8.3). `None` where the path is
-    /// lost.
+    /// lost. With the hit's `place` ([`ScratchLobe::place`]), light from inside enters there
+    /// and a path that surfaces beside the opening goes on from where it left the groove
+    /// ([`GroovePaths::trace`], [`SmoothSample::from`]).
     #[inline]
-    fn sample(&self, w: Vec3, u0: f32, u: Vec2, cross: [f32; 2]) -> Option<SmoothSample> {
+    fn sample(
+        &self,
+        w: Vec3,
+        u0: f32,
+        u: Vec2,
+        cross: [f32; 2],
+        place: Option<GroovePlace>,
+    ) -> Option<SmoothSample> {
         let key = mix64((u0.to_bits() as u64) << 32 | u.y.to_bits() as u64);
         let d0 = [-w.x as f64, -w.y as f64, -w.z as f64];
         let partner = (cross != [0.0; 2]).then(|| crossing_groove(cross, key));
-        let e = self.paths.trace(d0, u.x as f64, key, partner)?;
+        let at = place.map(|p| p.at as f64);
+        let e = self.paths.trace(d0, u.x as f64, at, key, partner)?;
         let wi = Vec3::new(e.d[0] as f32, e.d[1] as f32, e.d[2] as f32);
+        if let (Some([x, z]), Some(p)) = (e.from, place) {
+            // On from a step up the ray, off the wall: the hit where it surfaces searches for
+            // grooves met beside their openings no deeper than that (`origin_depth`), which
+            // leaves out the wall it left, whatever the rounding of world positions.
+            let step = (0.5 * -z).min(SURFACING_STEP);
+            let (x, z) = (x + step * e.d[0] / e.d[2], z + step);
+            // Still inside the object: a reflection's weight.
+            return Some(SmoothSample {
+                wi,
+                lobe: 0,
+                weight: e.w as f32,
+                pdf: 1.0,
+                from: Some(Vec3::new(x as f32 - p.at, 0.0, z as f32) * p.width),
+            });
+        }
         let lobe = ((wi.z > 0.0) != (w.z > 0.0)) as usize;
         let side = (w.z < 0.0) as usize;
         Some(SmoothSample {
@@ -528,6 +561,7 @@ impl TracedGroove {
             lobe,
             weight: radiance_factor(self.n, side, lobe) * e.w as f32,
             pdf: 1.0,
+            from: None,
         })
     }
 }
@@ -725,7 +759,7 @@ impl<'a> ScratchedGlassBsdf<'a> {
                 // light sampling to weigh against.
                 let w = l.wo_to_scratch(wo);
                 let s = match walls {
-                    GlassWalls::Traced(g) => g.sample(w, u0, u, l.cross),
+                    GlassWalls::Traced(g) => g.sample(w, u0, u, l.cross, l.place),
                     GlassWalls::Table(t) => t.sample_smooth(w, u0, u),
                 }?;
                 return Some(BsdfSample {
@@ -734,6 +768,7 @@ impl<'a> ScratchedGlassBsdf<'a> {
                     pdf: l.coverage * s.pdf,
                     delta: false,
                     eta: eta(s.lobe),
+                    from: s.from.map(|v| l.from_scratch(v)),
                 });
             }
         };
@@ -750,6 +785,7 @@ impl<'a> ScratchedGlassBsdf<'a> {
             pdf,
             delta: false,
             eta: eta(lobe),
+            from: None,
         })
     }
 }
@@ -758,6 +794,51 @@ impl<'a> ScratchedGlassBsdf<'a> {
 mod tests {
     use super::*;
     use crate::precompute::wall_table::WallTableParams;
+
+    /// Light from inside sampled at a placed hit ([`ScratchLobe::place`]) that surfaces goes
+    /// on from a point beside the groove's walls below the surface (the scratch's
+    /// frame turned and its width scaled into the shading frame's world units), up through the
+    /// glass to the surface beside the opening, with a reflection's weight; some of the light
+    /// does.
+    #[test]
+    fn surfaced_samples_go_on_from_inside_the_groove_to_beside_it() {
+        let profile = Profile::parse("round:depth=0.3,segments=8").unwrap();
+        let walls = GlassWalls::Traced(Arc::new(TracedGroove::new(&WallTableParams::new(
+            profile, 1.5, 0.0,
+        ))));
+        let (beta, width) = (0.7f32, 0.004f32);
+        let mut surfaced = 0;
+        for k in 0..4000 {
+            let h = |i: u64| crate::hash::unit_f32(mix64(k * 8 + i));
+            let at = h(0) - 0.5;
+            let lobe = ScratchLobe::new(1.0, beta.cos(), beta.sin())
+                .at_place(Some(GroovePlace { at, width }));
+            let bsdf = ScratchedGlassBsdf::new(1.5, &walls, &[lobe]);
+            let (t, p) = (0.75 + 0.8 * h(1), 6.3 * h(2));
+            let wo = Vec3::new(t.sin() * p.cos(), t.sin() * p.sin(), -t.cos());
+            let Some(bs) = bsdf.sample(wo, 0.999, Vec2::new(h(3), h(4))) else {
+                continue;
+            };
+            let Some(from) = bs.from else {
+                continue;
+            };
+            surfaced += 1;
+            assert!(
+                bs.wi.z > 0.0 && bs.eta == 1.0 && bs.weight == Rgb::ONE,
+                "{bs:?}"
+            );
+            let s = lobe.to_scratch(from) / width;
+            // Just off the wall it left (a step up its ray), below the surface, no deeper
+            // than the groove.
+            assert!(s.z < 0.0 && s.z > -0.3, "from {s:?}, at {at}");
+            let up = lobe.to_scratch(from + bs.wi * (-from.z / bs.wi.z)) / width;
+            assert!(
+                (up.x + at).abs() > 0.5 && up.z.abs() < 1e-4,
+                "surfaces at {up:?}"
+            );
+        }
+        assert!(surfaced > 40, "{surfaced} samples surfaced");
+    }
 
     /// The guided search ([`WallLobeTable::search`]) finds the entry a binary search of the
     /// whole slice finds, at every CDF value (ties and empty bins included) and between them,

@@ -56,6 +56,7 @@ impl GrooveWall {
                 pdf: 1.0,
                 delta: true,
                 eta: 1.0,
+                from: None,
             });
         }
         // Lambert's weight is 1, so f cos / pdf = tint F(cos_i).

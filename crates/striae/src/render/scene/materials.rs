@@ -703,6 +703,7 @@ mod tests {
             rd: None,
             u_layer: None,
             pixel: None,
+            origin_depth: f32::INFINITY,
         };
         m.shade(&hit, view, &mut crate::layers::CoverageCache::new())
             .1
@@ -818,6 +819,7 @@ mod tests {
                     rd: None,
                     u_layer: Some(0.3),
                     pixel: None,
+                    origin_depth: f32::INFINITY,
                 };
                 let mut cache = crate::layers::CoverageCache::new();
                 if let Bsdf::Scratched(b) = m.shade(&hit, view, &mut cache).1 {
@@ -859,6 +861,7 @@ mod tests {
                     rd: None,
                     u_layer: Some((i as f32 + 0.5) / 16.0),
                     pixel: None,
+                    origin_depth: f32::INFINITY,
                 };
                 let mut cache = crate::layers::CoverageCache::new();
                 if let Bsdf::ScratchedGlass(b) = m.shade(&hit, view, &mut cache).1 {

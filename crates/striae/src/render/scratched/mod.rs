@@ -23,6 +23,7 @@ use crate::maps::{DirectionFrame, ScratchMap};
 use crate::math::{Rgb, Vec3};
 use crate::precompute::groove::totally_reflected;
 use crate::render::bsdf::scratched::MAX_SCRATCH_LOBES;
+use crate::render::bsdf::GroovePlace;
 use crate::render::bsdf::{
     Bsdf, Conductor, Dielectric, GlassWalls, LobeShare, ScratchLobe, ScratchLobeTable,
     ScratchedBase, ScratchedBsdf, ScratchedGlassBsdf, ScratchedMetalBsdf, WallLobeTable,
@@ -297,6 +298,20 @@ impl ScratchedMaterial {
         self.reads_footprint() && !inside_walls
     }
 
+    /// Whether lobes seen from inside carry the hit's place across their groove
+    /// ([`ScratchLobe::place`]): traced glass walls, whose paths enter there and surface
+    /// beside the opening ([`crate::precompute::groove::GroovePaths::trace`]).
+    #[inline(always)]
+    fn places_lobes(&self) -> bool {
+        matches!(
+            (&self.model, self.base),
+            (
+                ScratchModel::DielectricWalls(GlassWalls::Traced(_)),
+                ScratchedBase::Glass { .. }
+            )
+        )
+    }
+
     /// Glass seen from inside under the seed's model, which has no scratches there
     /// (`bsdf::scratched`); dielectric walls scatter from both sides.
     #[inline]
@@ -477,9 +492,17 @@ impl ScratchedMaterial {
         lobes: &mut [ScratchLobe; MAX_SCRATCH_LOBES],
     ) -> (usize, f32, LobeShare) {
         let whole = LobeShare::default();
-        let curve_lobe = |i: usize, c: f32| {
-            let d = curves[i].direction;
-            lobe_along(ctx, [d.x as f32, d.y as f32], c)
+        let placed = inside_placed(self, ctx);
+        let curve_lobe = |i: usize, c: f32| match curves[i].axis.filter(|_| placed) {
+            Some(a) => {
+                let d = (a.end - a.start).as_vec2();
+                let place = TangentMap::new(ctx).segment_place(&a, ctx.uv.as_dvec2());
+                lobe_along(ctx, [d.x, d.y], c).at_place(place)
+            }
+            None => {
+                let d = curves[i].direction;
+                lobe_along(ctx, [d.x as f32, d.y as f32], c)
+            }
         };
         if self.mix == LayerMix::Max {
             // (`curves` come largest first.)
@@ -736,6 +759,7 @@ impl ScratchedMaterial {
             Some(_) => self.layers.capsule_mask(uv - r.reach_uv, 2.0 * r.reach_uv),
             None => self.layers.capsule_mask(uv, r.reach_uv),
         };
+        let placed = self.places_lobes();
         let layer = |reach: &RidgeReach| {
             let sc = self.ridge_met(reach, uv, maybe, profile)?;
             let lobe = if self.has_lean() {
@@ -744,7 +768,8 @@ impl ScratchedMaterial {
                 let d = sc.direction.as_vec2();
                 lobe_along(ctx, [d.x, d.y], 1.0)
             };
-            Some((lobe, 1.0))
+            let place = placed.then(|| reach.map.scratch_place(&sc, uv)).flatten();
+            Some((lobe.at_place(place), 1.0))
         };
         let curve = |reach: &RidgeReach| {
             let mut met = None;
@@ -759,7 +784,8 @@ impl ScratchedMaterial {
                 });
             met.map(|a| {
                 let d = (a.end - a.start).as_vec2();
-                (lobe_along(ctx, [d.x, d.y], 1.0), a.depth)
+                let place = placed.then(|| reach.map.segment_place(&a, uv)).flatten();
+                (lobe_along(ctx, [d.x, d.y], 1.0).at_place(place), a.depth)
             })
         };
         let met = |reach: &RidgeReach| layer(reach).or_else(|| curve(reach));
@@ -965,19 +991,117 @@ struct AxisCrossing {
 /// for a groove of depth 0.3 (in opening widths) up to 84 degrees from the normal.
 const MAX_RIDGE_TESTS: usize = 16;
 
+/// The face's texture-to-tangent-plane map `A = [a_u a_v]` at a hit (the shading frame's `s`
+/// and `t` axes) and its determinant.
+#[derive(Clone, Copy)]
+struct TangentMap {
+    au: glam::DVec2,
+    av: glam::DVec2,
+    det: f64,
+}
+
+/// Where a point lies against a groove's axis, tangent-plane units: how far along the axis
+/// from the axis's given point, its offset across (the scratch frame's `x`, `b = t x n`,
+/// METHOD.md section 1, the profile's), and the axis vector's length.
+struct AxisPlace {
+    along: f64,
+    offset: f64,
+    axis_len: f64,
+}
+
+impl TangentMap {
+    #[inline(always)]
+    fn new(ctx: &ShadingContext) -> Self {
+        let (s, t) = (ctx.frame.s, ctx.frame.t);
+        let tangent = |v: Vec3| glam::DVec2::new(v.dot(s) as f64, v.dot(t) as f64);
+        let (au, av) = (tangent(ctx.dpdu), tangent(ctx.dpdv));
+        TangentMap {
+            au,
+            av,
+            det: au.perp_dot(av),
+        }
+    }
+
+    #[inline(always)]
+    fn map(&self, v: glam::DVec2) -> glam::DVec2 {
+        self.au * v.x + self.av * v.y
+    }
+
+    /// The axis through texture point `p` along texture vector `e`: its unit direction and
+    /// across axis in the tangent plane and `|A e|`; `None` where `e` maps to nothing.
+    #[inline(always)]
+    fn axis(&self, e: glam::DVec2) -> Option<(glam::DVec2, glam::DVec2, f64)> {
+        let d = self.map(e);
+        let axis_len = d.length();
+        if axis_len.is_nan() || axis_len <= 0.0 {
+            return None;
+        }
+        let along = d / axis_len;
+        Some((along, -along.perp(), axis_len))
+    }
+
+    /// Where texture point `uv` lies against the axis through `p` along `e`.
+    #[inline(always)]
+    fn place_of(&self, p: glam::DVec2, e: glam::DVec2, uv: glam::DVec2) -> Option<AxisPlace> {
+        let (along, across, axis_len) = self.axis(e)?;
+        let v = self.map(uv - p);
+        Some(AxisPlace {
+            along: v.dot(along),
+            offset: v.dot(across),
+            axis_len,
+        })
+    }
+
+    /// Layer scratch `sc`'s groove at texture point `uv`: where it lies across the groove and
+    /// the width there, as the explicit geometry carves it (tapered, METHOD.md 8.3).
+    #[inline(always)]
+    fn scratch_place(&self, sc: &Scratch, uv: glam::DVec2) -> Option<GroovePlace> {
+        let a = self.place_of(sc.centre, sc.direction, uv)?;
+        let s = a.along / (sc.half_length * a.axis_len);
+        let half_width =
+            sc.mapped_half_axes(a.axis_len, self.det.abs()).1 * (1.0 - s * s).max(0.0).sqrt();
+        groove_place(a.offset, half_width)
+    }
+
+    /// A curve's thick segment `a` at texture point `uv` (its width linear between its ends).
+    #[inline(always)]
+    fn segment_place(
+        &self,
+        a: &crate::curves::SegmentAxis,
+        uv: glam::DVec2,
+    ) -> Option<GroovePlace> {
+        let e = a.end - a.start;
+        let p = self.place_of(a.start, e, uv)?;
+        let s = (p.along / p.axis_len).clamp(0.0, 1.0);
+        let h = a.half_widths[0] + (a.half_widths[1] - a.half_widths[0]) * s;
+        groove_place(p.offset, h * self.det.abs() * e.length() / p.axis_len)
+    }
+}
+
+/// The place `offset` across a groove of half-width `half_width` (tangent-plane units); `None`
+/// for a degenerate width.
+#[inline(always)]
+fn groove_place(offset: f64, half_width: f64) -> Option<GroovePlace> {
+    let width = 2.0 * half_width;
+    (width > 0.0 && width.is_finite()).then(|| GroovePlace {
+        at: (offset / width) as f32,
+        width: width as f32,
+    })
+}
+
 /// The ray back from a hit inside the glass, in the face's tangent plane, over the reach where
-/// it passes under the surface within the grooves' depth.
+/// it passes under the surface within the grooves' depth (no deeper than where the ray began,
+/// [`ShadingContext::origin_depth`]).
 #[derive(Clone, Copy)]
 struct RidgeReach {
     /// `wo` in the shading frame (`z < 0`).
     wo: glam::DVec3,
-    /// The face's texture-to-tangent-plane map `A = [a_u a_v]` and its determinant.
-    au: glam::DVec2,
-    av: glam::DVec2,
-    det: f64,
+    map: TangentMap,
     /// The reach as a texture vector, and how many point tests span it (random layers).
     reach_uv: glam::DVec2,
     tests: usize,
+    /// How far below the surface the ray began (world units).
+    max_depth: f64,
 }
 
 impl RidgeReach {
@@ -993,10 +1117,8 @@ impl RidgeReach {
         if !grazing {
             return None;
         }
-        let (s, t) = (ctx.frame.s, ctx.frame.t);
-        let tangent = |v: Vec3| DVec2::new(v.dot(s) as f64, v.dot(t) as f64);
-        let (au, av) = (tangent(ctx.dpdu), tangent(ctx.dpdv));
-        let det = au.perp_dot(av);
+        let map = TangentMap::new(ctx);
+        let (au, av, det) = (map.au, map.av, map.det);
         // World half-widths lie within `w sigma_min .. w sigma_max` (`A`'s singular values).
         let (e, f, g) = (au.length_squared(), au.dot(av), av.length_squared());
         let spread = ((0.5 * (e - g)).powi(2) + f * f).sqrt();
@@ -1016,20 +1138,20 @@ impl RidgeReach {
         let tests = ((reach / (narrowest * sigma_min)).ceil() as usize).clamp(1, MAX_RIDGE_TESTS);
         Some(RidgeReach {
             wo,
-            au,
-            av,
-            det,
+            map,
             reach_uv,
             tests,
+            max_depth: ctx.origin_depth as f64,
         })
     }
 
     /// The same reach after the flat surface's mirror reflection at the hit: the ray on from
-    /// the hit, `wo`'s tangent part reversed.
+    /// the hit, `wo`'s tangent part reversed, as deep as the grooves.
     fn reflected(&self) -> Self {
         RidgeReach {
             wo: glam::DVec3::new(-self.wo.x, -self.wo.y, self.wo.z),
             reach_uv: -self.reach_uv,
+            max_depth: f64::INFINITY,
             ..*self
         }
     }
@@ -1049,7 +1171,8 @@ impl RidgeReach {
             return false;
         };
         let s = c.along / (sc.half_length * c.axis_len);
-        let half_width = sc.mapped_half_axes(c.axis_len, self.det.abs()).1 * (1.0 - s * s).sqrt();
+        let half_width =
+            sc.mapped_half_axes(c.axis_len, self.map.det.abs()).1 * (1.0 - s * s).sqrt();
         self.meets_section(c.offset, c.dx, half_width, 1.0, profile)
     }
 
@@ -1073,7 +1196,7 @@ impl RidgeReach {
         }
         // A texture width `h` across the axis maps to `h |det A| |e| / |A e|` (`e` the axis).
         let h = a.half_widths[0] + (a.half_widths[1] - a.half_widths[0]) * s;
-        let half_width = h * self.det.abs() * (a.end - a.start).length() / c.axis_len;
+        let half_width = h * self.map.det.abs() * (a.end - a.start).length() / c.axis_len;
         self.meets_section(c.offset, c.dx, half_width, a.depth as f64, profile)
     }
 
@@ -1088,20 +1211,13 @@ impl RidgeReach {
         e: glam::DVec2,
         uv: glam::DVec2,
     ) -> Option<AxisCrossing> {
-        let map = |v: glam::DVec2| self.au * v.x + self.av * v.y;
-        let d = map(e);
-        let axis_len = d.length();
-        if axis_len.is_nan() || axis_len <= 0.0 {
-            return None;
-        }
-        // `across` is the scratch frame's `x`, `b = t x n` (METHOD.md section 1), the profile's.
-        let (along, across) = (d / axis_len, -(d / axis_len).perp());
-        let point = map(p - uv);
+        let (along, across, axis_len) = self.map.axis(e)?;
+        let point = self.map.map(p - uv);
         let dx = glam::DVec2::new(self.wo.x, self.wo.y).dot(across);
         if point.dot(across) * dx <= 0.0 {
             return None;
         }
-        let reach = map(self.reach_uv);
+        let reach = self.map.map(self.reach_uv);
         let t = (point.dot(across) / reach.dot(across)).clamp(0.0, 1.0);
         let t = if t.is_finite() { t } else { 0.0 };
         Some(AxisCrossing {
@@ -1128,22 +1244,33 @@ impl RidgeReach {
             return false;
         }
         let x = offset / (2.0 * half_width);
-        // A groove `depth` times as deep meets the ray `wo.z / depth` steep in the profile's units.
-        x.abs() >= 0.5 && profile.ray_meets_ridge(x, dx, self.wo.z / depth)
+        // A groove `depth` times as deep meets the ray `wo.z / depth` steep in the profile's
+        // units, and the ray's beginning lies that much shallower in them.
+        let max_depth = self.max_depth / (2.0 * half_width * depth);
+        x.abs() >= 0.5 && profile.ray_meets_ridge_within(x, dx, self.wo.z / depth, max_depth)
     }
 }
 
 /// Scratch lobe of `layer` with coverage `c` ([`lobe_along`] its direction at the hit; with
 /// `lean`, [`leaned_lobe`] of the scratch at the hit, `u` uniform in `[0, 1)` placing it).
 fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32, u: f32) -> ScratchLobe {
-    if p.has_lean() {
-        if let Some(sc) = p.layers.scratch_at(layer, ctx.uv.as_dvec2()) {
-            let along = if p.coverage == CoverageMode::Point {
+    let placed = inside_placed(p, ctx);
+    if p.has_lean() || placed {
+        let uv = ctx.uv.as_dvec2();
+        if let Some(sc) = p.layers.scratch_at(layer, uv) {
+            let along = if p.coverage == CoverageMode::Point || placed {
                 Along::Hit
             } else {
                 Along::Footprint(u)
             };
-            return leaned_lobe(p, ctx, &sc, c, along);
+            let lobe = if p.has_lean() {
+                leaned_lobe(p, ctx, &sc, c, along)
+            } else {
+                let d = sc.direction.as_vec2();
+                lobe_along(ctx, [d.x, d.y], c)
+            };
+            let place = placed.then(|| TangentMap::new(ctx).scratch_place(&sc, uv));
+            return lobe.at_place(place.flatten());
         }
     }
     let d = if p.layers.orientation() == Orientation::Random {
@@ -1154,6 +1281,13 @@ fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32, u: f3
         p.directions[layer]
     };
     lobe_along(ctx, d, c)
+}
+
+/// Whether the lobes at `ctx` carry the hit's place across their groove
+/// ([`ScratchedMaterial::places_lobes`], seen from inside).
+#[inline(always)]
+fn inside_placed(p: &ScratchedMaterial, ctx: &ShadingContext) -> bool {
+    p.places_lobes() && ctx.wo.dot(ctx.ng) <= 0.0
 }
 
 /// Scratch `sc`'s lobe with coverage `c`, its frame leaned as the tapered groove's walls lean

@@ -483,6 +483,7 @@ fn wide_layers(k: usize, seed: u64) -> LayerSet {
 fn flat_ctx(uv: Vec2, footprint: f32, wo: Vec3, u_layer: f32) -> ShadingContext {
     ShadingContext {
         pixel: None,
+        origin_depth: f32::INFINITY,
         p: Vec3::ZERO,
         uv,
         rd: Some(RayDifferential {
@@ -637,6 +638,7 @@ fn material_transmission_matches_its_bsdf() {
         rd: None,
         u_layer: Some(0.5),
         pixel: None,
+        origin_depth: f32::INFINITY,
     };
     for text in [
         "type = \"dielectric\"\nior = 1.5",
@@ -1114,6 +1116,23 @@ fn curves_meet_grazing_light_beside_their_openings() {
                     "wear {wear}, {deg} degrees, turn {turn}, x {x}"
                 );
                 met += ridge as usize;
+                if want && x * dx < 0.0 {
+                    // On the way in the ray meets the near wall this deep (world units): one
+                    // that began shallower (`origin_depth`) never met it, and under total
+                    // internal reflection the ray on from the hit runs away from the groove.
+                    let z = hw * (2.0 * x.abs() - 1.0) / (k - 0.5 / depth);
+                    for (f, met_within) in [(0.98, false), (1.02, true)] {
+                        let within = ShadingContext {
+                            origin_depth: (f * z) as f32,
+                            ..ctx
+                        };
+                        let ridge = matches!(bsdf_of(&m, &within), Bsdf::ScratchedGlass(_));
+                        assert_eq!(
+                            ridge, met_within,
+                            "wear {wear}, {deg} degrees, x {x}, f {f}"
+                        );
+                    }
+                }
                 let up = ShadingContext {
                     wo: Vec3::new(ctx.wo.x, ctx.wo.y, -ctx.wo.z),
                     ..ctx
