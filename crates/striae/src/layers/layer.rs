@@ -163,6 +163,20 @@ impl ScratchLayer {
         self.noise.nearest(self.to_noise(p))
     }
 
+    /// The scratch covering texture point `p`, if one does (the seed's layers: a feature point
+    /// within `tau` in noise space; randomly oriented ones: the nearest in its own metric,
+    /// where it covers `p`).
+    #[inline]
+    pub fn scratch_covering(&self, p: DVec2) -> Option<super::Scratch> {
+        if let Some(r) = &self.random {
+            return r
+                .nearest_scratch(p, self.index)
+                .filter(|_| r.is_scratched(p));
+        }
+        let q = self.noise.feature_within(self.to_noise(p), self.tau)?;
+        Some(self.scratch(q))
+    }
+
     /// `F1(q(p)) < tau` at an `f64` texture point.
     #[inline]
     pub fn is_scratched_at(&self, p: DVec2) -> bool {

@@ -323,6 +323,14 @@ impl LayerSet {
         Some(layer.scratch(layer.nearest_at(uv)))
     }
 
+    /// The scratch of layer `k` covering texture point `uv`, if one does
+    /// ([`Layer::scratch_covering`]; cheaper than [`Self::scratch_at`] where one does).
+    /// # Panics
+    /// If `k >= len()`.
+    pub fn scratch_covering(&self, k: usize, uv: glam::DVec2) -> Option<Scratch> {
+        self.layers[k].scratch_covering(uv)
+    }
+
     /// Calls `f` with each scratch of layer `k` (one of the seed's layers: not randomly
     /// oriented) whose ellipse comes within reach of the texture segment from `uv` to `uv + v`
     /// (a feature point within `tau` of it in noise space, as [`Self::capsule_mask`]), until

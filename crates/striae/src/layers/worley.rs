@@ -142,21 +142,29 @@ impl Worley {
     }
 
     /// Whether some feature point lies strictly closer than `r` to `q`, i.e. `F1(q) < r`
-    /// (the scratch test of METHOD.md section 5). Visits only the cells the disc of radius `r`
-    /// touches (one to four for `r <= 1/2`).
+    /// (the scratch test of METHOD.md section 5).
     #[inline]
     pub fn any_within(&self, q: DVec2, r: f64) -> bool {
+        self.feature_within(q, r).is_some()
+    }
+
+    /// A feature point strictly closer than `r` to `q` (noise space), if one is: the scratch
+    /// covering `q`. Visits only the cells the disc of radius `r` touches (one to four for `r
+    /// <= 1/2`), its own cell first.
+    #[inline]
+    pub fn feature_within(&self, q: DVec2, r: f64) -> Option<DVec2> {
         let (i, j) = (floor_i64(q.x), floor_i64(q.y));
-        let f = q - DVec2::new(i as f64, j as f64);
+        let cell = DVec2::new(i as f64, j as f64);
+        let f = q - cell;
         let r2 = r * r;
         let hit = |di: i64, dj: i64| {
             let p = DVec2::new(di as f64, dj as f64) + self.offset(i + di, j + dj);
-            (p - f).length_squared() < r2
+            ((p - f).length_squared() < r2).then_some(cell + p)
         };
         if r <= 0.5 {
             // The disc reaches at most one neighbour column and one neighbour row.
-            if hit(0, 0) {
-                return true;
+            if let Some(p) = hit(0, 0) {
+                return Some(p);
             }
             let dx = if f.x < r {
                 -1
@@ -172,13 +180,15 @@ impl Worley {
             } else {
                 0
             };
-            (dx != 0 && hit(dx, 0))
-                || (dy != 0 && hit(0, dy))
-                || (dx != 0 && dy != 0 && hit(dx, dy))
+            (dx != 0)
+                .then(|| hit(dx, 0))
+                .flatten()
+                .or_else(|| (dy != 0).then(|| hit(0, dy)).flatten())
+                .or_else(|| (dx != 0 && dy != 0).then(|| hit(dx, dy)).flatten())
         } else {
             let (i0, i1) = (floor_i64(f.x - r), floor_i64(f.x + r));
             let (j0, j1) = (floor_i64(f.y - r), floor_i64(f.y + r));
-            (j0..=j1).any(|dj| (i0..=i1).any(|di| hit(di, dj)))
+            (j0..=j1).find_map(|dj| (i0..=i1).find_map(|di| hit(di, dj)))
         }
     }
 }

@@ -1257,7 +1257,12 @@ fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32, u: f3
     let placed = inside_placed(p, ctx);
     if p.has_lean() || placed {
         let uv = ctx.uv.as_dvec2();
-        if let Some(sc) = p.layers.scratch_at(layer, uv) {
+        // (A placed hit is the point test's: a scratch covers it.)
+        let sc = match placed {
+            true => p.layers.scratch_covering(layer, uv),
+            false => None,
+        };
+        if let Some(sc) = sc.or_else(|| p.layers.scratch_at(layer, uv)) {
             let along = if p.coverage == CoverageMode::Point || placed {
                 Along::Hit
             } else {
