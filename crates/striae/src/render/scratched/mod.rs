@@ -23,9 +23,8 @@ use crate::maps::{DirectionFrame, ScratchMap};
 use crate::math::{Rgb, Vec3};
 use crate::precompute::groove::totally_reflected;
 use crate::render::bsdf::scratched::MAX_SCRATCH_LOBES;
-use crate::render::bsdf::GroovePlace;
 use crate::render::bsdf::{
-    Bsdf, Conductor, Dielectric, GlassWalls, LobeShare, ScratchLobe, ScratchLobeTable,
+    Bsdf, Conductor, Dielectric, GlassWalls, GroovePlace, LobeShare, ScratchLobe, ScratchLobeTable,
     ScratchedBase, ScratchedBsdf, ScratchedGlassBsdf, ScratchedMetalBsdf, WallLobeTable,
 };
 use crate::render::shading::ShadingContext;
@@ -1027,8 +1026,8 @@ impl TangentMap {
         self.au * v.x + self.av * v.y
     }
 
-    /// The axis through texture point `p` along texture vector `e`: its unit direction and
-    /// across axis in the tangent plane and `|A e|`; `None` where `e` maps to nothing.
+    /// An axis along texture vector `e`: its unit direction and across axis in the tangent
+    /// plane and `|A e|`; `None` where `e` maps to nothing.
     #[inline(always)]
     fn axis(&self, e: glam::DVec2) -> Option<(glam::DVec2, glam::DVec2, f64)> {
         let d = self.map(e);
@@ -1057,10 +1056,7 @@ impl TangentMap {
     #[inline(always)]
     fn scratch_place(&self, sc: &Scratch, uv: glam::DVec2) -> Option<GroovePlace> {
         let a = self.place_of(sc.centre, sc.direction, uv)?;
-        let s = a.along / (sc.half_length * a.axis_len);
-        let half_width =
-            sc.mapped_half_axes(a.axis_len, self.det.abs()).1 * (1.0 - s * s).max(0.0).sqrt();
-        groove_place(a.offset, half_width)
+        groove_place(a.offset, self.scratch_half_width(sc, a.along, a.axis_len))
     }
 
     /// A curve's thick segment `a` at texture point `uv` (its width linear between its ends).
@@ -1070,11 +1066,27 @@ impl TangentMap {
         a: &crate::curves::SegmentAxis,
         uv: glam::DVec2,
     ) -> Option<GroovePlace> {
-        let e = a.end - a.start;
-        let p = self.place_of(a.start, e, uv)?;
+        let p = self.place_of(a.start, a.end - a.start, uv)?;
         let s = (p.along / p.axis_len).clamp(0.0, 1.0);
+        groove_place(p.offset, self.segment_half_width(a, s, p.axis_len))
+    }
+
+    /// Layer scratch `sc`'s half-width (tangent-plane units) `along` its axis from its centre,
+    /// the axis vector `axis_len` long there: tapered as the explicit geometry carves it
+    /// (METHOD.md 8.3); NaN beyond its ends.
+    #[inline(always)]
+    fn scratch_half_width(&self, sc: &Scratch, along: f64, axis_len: f64) -> f64 {
+        let s = along / (sc.half_length * axis_len);
+        sc.mapped_half_axes(axis_len, self.det.abs()).1 * (1.0 - s * s).sqrt()
+    }
+
+    /// A curve's thick segment `a`'s half-width at `s` in `[0, 1]` along it (linear between
+    /// its ends): a texture width `h` across the axis maps to `h |det A| |e| / |A e|` (`e` the
+    /// axis, `|A e| = axis_len`).
+    #[inline(always)]
+    fn segment_half_width(&self, a: &crate::curves::SegmentAxis, s: f64, axis_len: f64) -> f64 {
         let h = a.half_widths[0] + (a.half_widths[1] - a.half_widths[0]) * s;
-        groove_place(p.offset, h * self.det.abs() * e.length() / p.axis_len)
+        h * self.det.abs() * (a.end - a.start).length() / axis_len
     }
 }
 
@@ -1170,9 +1182,7 @@ impl RidgeReach {
         let Some(c) = self.axis_crossing(sc.centre, sc.direction, uv) else {
             return false;
         };
-        let s = c.along / (sc.half_length * c.axis_len);
-        let half_width =
-            sc.mapped_half_axes(c.axis_len, self.map.det.abs()).1 * (1.0 - s * s).sqrt();
+        let half_width = self.map.scratch_half_width(sc, c.along, c.axis_len);
         self.meets_section(c.offset, c.dx, half_width, 1.0, profile)
     }
 
@@ -1194,9 +1204,7 @@ impl RidgeReach {
         if !(0.0..=1.0).contains(&s) {
             return false;
         }
-        // A texture width `h` across the axis maps to `h |det A| |e| / |A e|` (`e` the axis).
-        let h = a.half_widths[0] + (a.half_widths[1] - a.half_widths[0]) * s;
-        let half_width = h * self.map.det.abs() * (a.end - a.start).length() / c.axis_len;
+        let half_width = self.map.segment_half_width(a, s, c.axis_len);
         self.meets_section(c.offset, c.dx, half_width, a.depth as f64, profile)
     }
 
