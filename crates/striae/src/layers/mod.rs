@@ -324,7 +324,7 @@ impl LayerSet {
     }
 
     /// The scratch of layer `k` covering texture point `uv`, if one does
-    /// ([`Layer::scratch_covering`]; cheaper than [`Self::scratch_at`] where one does).
+    /// ([`layer::ScratchLayer::scratch_covering`]; cheaper than [`Self::scratch_at`] where one does).
     /// # Panics
     /// If `k >= len()`.
     pub fn scratch_covering(&self, k: usize, uv: glam::DVec2) -> Option<Scratch> {

@@ -180,11 +180,16 @@ impl Worley {
             } else {
                 0
             };
-            (dx != 0)
-                .then(|| hit(dx, 0))
-                .flatten()
-                .or_else(|| (dy != 0).then(|| hit(0, dy)).flatten())
-                .or_else(|| (dx != 0 && dy != 0).then(|| hit(dx, dy)).flatten())
+            let column = if dx != 0 { hit(dx, 0) } else { None };
+            let row = || if dy != 0 { hit(0, dy) } else { None };
+            let corner = || {
+                if dx != 0 && dy != 0 {
+                    hit(dx, dy)
+                } else {
+                    None
+                }
+            };
+            column.or_else(row).or_else(corner)
         } else {
             let (i0, i1) = (floor_i64(f.x - r), floor_i64(f.x + r));
             let (j0, j1) = (floor_i64(f.y - r), floor_i64(f.y + r));

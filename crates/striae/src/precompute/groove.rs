@@ -882,11 +882,8 @@ impl GroovePaths {
         for attempt in 0..ENTRY_TRIES {
             let path_key = mix64(key.wrapping_add(attempt.wrapping_mul(GOLDEN)));
             let u = if attempt == 0 { x } else { t.draw(path_key, 0) };
-            let surfacing = attempt == 0 && at.is_some();
-            let x0 = match at {
-                Some(a) if surfacing => a,
-                _ => start + width * u,
-            };
+            let placed = at.filter(|_| attempt == 0);
+            let x0 = placed.unwrap_or(start + width * u);
             let end = match partner {
                 Some(p) => Crossing::new(&t.cs, t.s.ior, x0, p).run(
                     x0,
@@ -895,7 +892,7 @@ impl GroovePaths {
                     PathDraws::new(path_key),
                     t.s.max_bounces,
                 ),
-                None => self.run_2d(x0, d0, inside, path_key, surfacing),
+                None => self.run_2d(x0, d0, inside, path_key, placed.is_some()),
             };
             match end {
                 CrossingEnd::Left(e)

@@ -761,12 +761,7 @@ impl ScratchedMaterial {
         let placed = self.places_lobes();
         let layer = |reach: &RidgeReach| {
             let sc = self.ridge_met(reach, uv, maybe, profile)?;
-            let lobe = if self.has_lean() {
-                leaned_lobe(self, ctx, &sc, 1.0, Along::Hit)
-            } else {
-                let d = sc.direction.as_vec2();
-                lobe_along(ctx, [d.x, d.y], 1.0)
-            };
+            let lobe = scratch_lobe(self, ctx, &sc, 1.0, Along::Hit);
             let place = placed.then(|| reach.map.scratch_place(&sc, uv)).flatten();
             Some((lobe.at_place(place), 1.0))
         };
@@ -1266,22 +1261,16 @@ fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32, u: f3
     if p.has_lean() || placed {
         let uv = ctx.uv.as_dvec2();
         // (A placed hit is the point test's: a scratch covers it.)
-        let sc = match placed {
-            true => p.layers.scratch_covering(layer, uv),
-            false => None,
-        };
+        let sc = placed
+            .then(|| p.layers.scratch_covering(layer, uv))
+            .flatten();
         if let Some(sc) = sc.or_else(|| p.layers.scratch_at(layer, uv)) {
             let along = if p.coverage == CoverageMode::Point || placed {
                 Along::Hit
             } else {
                 Along::Footprint(u)
             };
-            let lobe = if p.has_lean() {
-                leaned_lobe(p, ctx, &sc, c, along)
-            } else {
-                let d = sc.direction.as_vec2();
-                lobe_along(ctx, [d.x, d.y], c)
-            };
+            let lobe = scratch_lobe(p, ctx, &sc, c, along);
             let place = placed.then(|| TangentMap::new(ctx).scratch_place(&sc, uv));
             return lobe.at_place(place.flatten());
         }
@@ -1301,6 +1290,22 @@ fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32, u: f3
 #[inline(always)]
 fn inside_placed(p: &ScratchedMaterial, ctx: &ShadingContext) -> bool {
     p.places_lobes() && ctx.wo.dot(ctx.ng) <= 0.0
+}
+
+/// Scratch `sc`'s lobe with coverage `c`: along its direction, leaned where the material asks
+/// it ([`leaned_lobe`]).
+fn scratch_lobe(
+    p: &ScratchedMaterial,
+    ctx: &ShadingContext,
+    sc: &Scratch,
+    c: f32,
+    along: Along,
+) -> ScratchLobe {
+    if p.has_lean() {
+        return leaned_lobe(p, ctx, sc, c, along);
+    }
+    let d = sc.direction.as_vec2();
+    lobe_along(ctx, [d.x, d.y], c)
 }
 
 /// Scratch `sc`'s lobe with coverage `c`, its frame leaned as the tapered groove's walls lean
