@@ -305,7 +305,7 @@ mod tests {
                 -theta.cos()
             };
             let d0 = [theta.sin() * phi.cos(), theta.sin() * phi.sin(), z];
-            if let Some(e) = paths.trace(d0, h(6), None, key, Some(partner)) {
+            if let Some(e) = paths.trace(d0, h(6), None, key, Some(partner), 0.0) {
                 let len = (e.d[0] * e.d[0] + e.d[1] * e.d[1] + e.d[2] * e.d[2]).sqrt();
                 assert!((len - 1.0).abs() < 1e-9 && e.w == 1.0, "{e:?}");
                 left += 1;

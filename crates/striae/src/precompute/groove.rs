@@ -411,6 +411,9 @@ struct Ray {
     /// The segment last hit (skipped by the next query), `usize::MAX` for none.
     skip: usize,
     w: f64,
+    /// The rate `W'` at which the groove's width changes along its axis (`y`), where the path
+    /// runs: 0 for the extruded groove ([`Tracer::wall_normal`]).
+    taper: f64,
 }
 
 /// Where entry points start on the line `z = 0` and the width they cover, for light along
@@ -522,6 +525,7 @@ impl Tracer {
             in_object,
             skip: usize::MAX,
             w: 1.0,
+            taper: 0.0,
         }
     }
 
@@ -625,12 +629,11 @@ impl Tracer {
 
     /// A wall hit at `ray.pos` on segment `seg`.
     fn wall(&self, ray: &mut Ray, seg: usize, u: Draws) -> Scatter {
-        let sg = &self.cs.segs[seg];
-        let mut n = [sg.n[0], 0.0, sg.n[1]];
+        let mut n = self.wall_normal(seg, ray.taper);
         // The media follow the path's state; `n` is turned to face the ray.
         let from_air = !ray.in_object;
         if dot(ray.d, n) > 0.0 {
-            n = [-n[0], 0.0, -n[2]];
+            n = [-n[0], -n[1], -n[2]];
         }
         // `n` faces the incoming ray; `x` completes the frame (x, y, n).
         let x = [n[2], 0.0, -n[0]];
@@ -647,7 +650,11 @@ impl Tracer {
             (GrooveWalls::Specular, None) => {
                 ray.w *= self.s.fresnel_law.reflectance(cos_i);
                 let c = 2.0 * cos_i;
-                ray.d = [ray.d[0] + c * n[0], ray.d[1], ray.d[2] + c * n[2]];
+                ray.d = [
+                    ray.d[0] + c * n[0],
+                    ray.d[1] + c * n[1],
+                    ray.d[2] + c * n[2],
+                ];
             }
             (GrooveWalls::Dielectric, None) => {
                 let (n1, n2) = if from_air {
@@ -663,6 +670,27 @@ impl Tracer {
             (walls, Some(ggx)) => return self.rough(ray, &ggx, walls, x, n, from_air, u),
         }
         Scatter::On
+    }
+
+    /// The unit normal of wall segment `seg` (the segment's side) where the groove's width
+    /// changes at the rate `taper` (`W'`, opening widths per unit length along `y`; the
+    /// groove scaled about the opening's centre, its depth in proportion): the wall `n . p =
+    /// c` of the cross-section at width 1 is `n . p = c W(y)` along the groove, whose normal
+    /// tilts along the axis by `-c W'` (METHOD.md 8.3, tapered ends; `lean = true`): for a V of
+    /// depth `d` every wall point alike (`tan = d W'` off the surface's normal), for other
+    /// profiles more where the wall lies farther from the centre. To first order in `W'`: the
+    /// path's few widths along the groove leave its width as it was. Only smooth walls, which
+    /// need no frame about `n`, are traced with a taper ([`GroovePaths`]).
+    #[inline]
+    fn wall_normal(&self, seg: usize, taper: f64) -> [f64; 3] {
+        let sg = &self.cs.segs[seg];
+        if taper == 0.0 {
+            return [sg.n[0], 0.0, sg.n[1]];
+        }
+        let c = sg.n[0] * sg.p[0] + sg.n[1] * sg.p[1];
+        let n = [sg.n[0], -taper * c, sg.n[1]];
+        let len = dot(n, n).sqrt();
+        [n[0] / len, n[1] / len, n[2] / len]
     }
 
     /// Smooth dielectric interface of normal `n` (facing the ray), relative index
@@ -874,6 +902,7 @@ impl GroovePaths {
         at: Option<f64>,
         key: u64,
         partner: Option<Partner>,
+        taper: f64,
     ) -> Option<GrooveExit> {
         let t = &self.tracer;
         let inside = d0[2] > 0.0;
@@ -892,7 +921,7 @@ impl GroovePaths {
                     PathDraws::new(path_key),
                     t.s.max_bounces,
                 ),
-                None => self.run_2d(x0, d0, inside, path_key, placed.is_some()),
+                None => self.run_2d(x0, d0, inside, path_key, placed.is_some(), taper),
             };
             match end {
                 CrossingEnd::Left(e)
@@ -916,6 +945,7 @@ impl GroovePaths {
         inside: bool,
         path_key: u64,
         surfacing: bool,
+        taper: f64,
     ) -> CrossingEnd {
         let t = &self.tracer;
         let exit = |r: Ray, from| {
@@ -926,7 +956,11 @@ impl GroovePaths {
                 from,
             })
         };
-        match t.run(t.entry(x0, d0, inside), path_key, inside, surfacing) {
+        let ray = Ray {
+            taper,
+            ..t.entry(x0, d0, inside)
+        };
+        match t.run(ray, path_key, inside, surfacing) {
             Outcome::Left(r) => exit(r, None),
             Outcome::Surfaced(r) => exit(r, Some(r.pos)),
             Outcome::Missed => CrossingEnd::Missed,
@@ -944,7 +978,7 @@ impl GroovePaths {
         inside: bool,
         path_key: u64,
     ) -> Option<Option<GrooveExit>> {
-        match self.run_2d(x0, d0, inside, path_key, false) {
+        match self.run_2d(x0, d0, inside, path_key, false, 0.0) {
             CrossingEnd::Left(e) => Some(Some(e)),
             CrossingEnd::Missed => Some(None),
             CrossingEnd::Lost => None,
@@ -1013,8 +1047,8 @@ mod tests {
                 ];
                 let (u, key) = (h(2), mix64(k));
                 let (start, width) = entry_band(&cs, d0, true, ior);
-                let drawn = paths.trace(d0, u, None, key, None);
-                let placed = paths.trace(d0, u, Some(start + width * u), key, None);
+                let drawn = paths.trace(d0, u, None, key, None, 0.0);
+                let placed = paths.trace(d0, u, Some(start + width * u), key, None, 0.0);
                 let (a, b) = match (drawn, placed) {
                     (Some(a), Some(b)) => (a, b),
                     (None, None) => continue,
@@ -1691,7 +1725,7 @@ mod tests {
                 let key = mix64(k ^ (i as u64) << 40);
                 let x = (k as f64 + 0.5) / n as f64;
                 let e = paths
-                    .trace(d0, x, None, key, None)
+                    .trace(d0, x, None, key, None, 0.0)
                     .expect("a lossless path leaves");
                 assert_eq!(e.w, 1.0);
                 let up = if e.in_object { -e.d[2] } else { e.d[2] };

@@ -246,6 +246,17 @@ impl ScratchLobe {
         }
     }
 
+    /// The same lobe without its lean: its frame the extruded groove's.
+    pub fn unleaned(self) -> Self {
+        ScratchLobe { lean: 0.0, ..self }
+    }
+
+    /// `tan alpha` of the lean (0 without one).
+    pub fn lean_tan(&self) -> f32 {
+        let (c, s) = self.lean_cos_sin();
+        s / c
+    }
+
     #[inline]
     fn has_lean(&self) -> bool {
         self.lean != 0.0

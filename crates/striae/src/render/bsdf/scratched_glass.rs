@@ -57,7 +57,7 @@
 
 use super::dielectric::{mirror_sample, refraction_sample};
 use super::scratched::CoveredLobes;
-use super::{BsdfSample, GroovePlace, ScratchLobe};
+use super::{BsdfSample, ScratchLobe};
 use crate::hash::{mix64, unit_from_u32};
 use crate::math::{Rgb, Vec2, Vec3};
 use crate::optics::fresnel_f32;
@@ -504,6 +504,18 @@ pub struct TracedGroove {
 }
 
 impl TracedGroove {
+    /// The rate `W'` at which `lobe`'s groove widens along its axis, from the lean its frame
+    /// was given (`tan alpha = 2 A W'`, [`crate::render::scratched::ScratchedMaterial::with_lean`]):
+    /// the tracer leans each wall by it ([`GroovePaths::trace`]).
+    fn taper(&self, lobe: &ScratchLobe) -> f64 {
+        let tan = lobe.lean_tan() as f64;
+        if tan == 0.0 {
+            0.0
+        } else {
+            tan / (2.0 * self.profile.area())
+        }
+    }
+
     /// The groove of `params` (smooth dielectric walls).
     pub fn new(params: &WallTableParams) -> Self {
         let profile = params.profile.clone();
@@ -530,14 +542,15 @@ impl TracedGroove {
         w: Vec3,
         u0: f32,
         u: Vec2,
-        cross: [f32; 2],
-        place: Option<GroovePlace>,
+        lobe: &ScratchLobe,
+        taper: f64,
     ) -> Option<SmoothSample> {
+        let (cross, place) = (lobe.cross, lobe.place);
         let key = mix64((u0.to_bits() as u64) << 32 | u.y.to_bits() as u64);
         let d0 = [-w.x as f64, -w.y as f64, -w.z as f64];
         let partner = (cross != [0.0; 2]).then(|| crossing_groove(cross, key));
         let at = place.map(|p| p.at as f64);
-        let e = self.paths.trace(d0, u.x as f64, at, key, partner)?;
+        let e = self.paths.trace(d0, u.x as f64, at, key, partner, taper)?;
         let wi = Vec3::new(e.d[0] as f32, e.d[1] as f32, e.d[2] as f32);
         if let (Some([x, z]), Some(p)) = (e.from, place) {
             // On from a step up the ray, off the wall: the hit where it surfaces searches for
@@ -757,9 +770,14 @@ impl<'a> ScratchedGlassBsdf<'a> {
             walls => {
                 // Smooth walls: a traced path, or the one-slice estimate (module notes); no
                 // light sampling to weigh against.
+                // A traced groove leans its walls, not its frame ([`TracedGroove::sample`]).
+                let (l, taper) = match walls {
+                    GlassWalls::Traced(g) => (&l.unleaned(), g.taper(l)),
+                    GlassWalls::Table(_) => (l, 0.0),
+                };
                 let w = l.wo_to_scratch(wo);
                 let s = match walls {
-                    GlassWalls::Traced(g) => g.sample(w, u0, u, l.cross, l.place),
+                    GlassWalls::Traced(g) => g.sample(w, u0, u, l, taper),
                     GlassWalls::Table(t) => t.sample_smooth(w, u0, u),
                 }?;
                 return Some(BsdfSample {
