@@ -2,6 +2,8 @@
 //! a lobe takes the lean, and the turn of its frame. A scratch's groove narrows toward its tips,
 //! its walls leaning toward its middle by `tan alpha = 2 A |W'(s)|` (`A` the profile's
 //! [`crate::precompute::profile::Profile::area`]), exactly so for a V; the seed's extruded groove has none.
+//! Traced glass walls take the rate `W'` back from the lobe and lean each wall by it
+//! ([`crate::precompute::groove::GroovePaths::trace`]'s `taper`).
 
 use crate::layers::Scratch;
 use crate::render::bsdf::ScratchLobe;

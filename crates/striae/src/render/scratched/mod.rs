@@ -246,7 +246,8 @@ impl ScratchedMaterial {
     /// shrinks toward its tips, its depth in proportion, leans its walls toward its middle by
     /// `tan alpha = 2 A |W'(s)|` (`A` the profile's [`crate::precompute::profile::Profile::area`]): exactly
     /// for a V, whose walls all lean alike, and on average over the opening for other
-    /// profiles. The seed's extruded groove has no lean.
+    /// profiles; traced glass walls lean each wall by its own lean instead, the frame
+    /// unturned. The seed's extruded groove has no lean.
     pub fn with_lean(mut self, on: bool) -> Self {
         self.lean = if on {
             2.0 * self.model.profile().area()
