@@ -1020,6 +1020,54 @@ mod tests {
         trace_groove(&Profile::parse(spec).unwrap(), s, &|_| {}).unwrap()
     }
 
+    /// A tapered groove's walls ([`Tracer::wall_normal`]) are unit normals that tilt along the
+    /// axis as the scaled cross-section has them: for a V every wall by `tan = d W'` (twice
+    /// its area times `W'`, the lean the renderer's lobes carry,
+    /// [`crate::render::bsdf::scratched_glass::TracedGroove`]), toward the wider end for the
+    /// side facing the air; for a round groove more toward the rims; none without a taper.
+    #[test]
+    fn tapered_walls_tilt_as_the_scaled_cross_section() {
+        let taper = 0.07;
+        for spec in ["v:depth=0.3", "v:depth=1.2", "round:depth=0.3,segments=8"] {
+            let p = profile(spec);
+            let t = Tracer::new(&p, &GonioSettings::default());
+            let mut tilts = Vec::new();
+            for seg in 0..t.cs.segs.len() {
+                assert_eq!(t.wall_normal(seg, 0.0)[1], 0.0, "{spec}");
+                let n = t.wall_normal(seg, taper);
+                assert!((dot(n, n) - 1.0).abs() < 1e-12, "{spec}: {n:?}");
+                // The normal facing the air (up), its tilt along the axis against the surface.
+                let n = if n[2] < 0.0 { n.map(|x| -x) } else { n };
+                tilts.push(n[1] / n[2]);
+                // The wall of the cross-section scaled by 1 + taper dy, finite differences.
+                let sg = &t.cs.segs[seg];
+                let mid = [sg.p[0] + 0.5 * sg.e[0], sg.p[1] + 0.5 * sg.e[1]];
+                let dy = 1e-6;
+                let moved = [mid[0] * (1.0 + taper * dy), mid[1] * (1.0 + taper * dy)];
+                // The point `mid` moved along y lies on the wall: the normal is orthogonal to the
+                // step from `mid` to it.
+                let step = [moved[0] - mid[0], dy, moved[1] - mid[1]];
+                assert!(
+                    dot(n, step).abs() < 1e-9 * dy.max(1e-12) / 1e-6,
+                    "{spec}: {n:?}"
+                );
+            }
+            if spec.starts_with('v') {
+                for tilt in &tilts {
+                    assert!(
+                        (tilt - 2.0 * p.area() * taper).abs() < 1e-12,
+                        "{spec}: {tilts:?}"
+                    );
+                }
+            } else {
+                let (lo, hi) = tilts
+                    .iter()
+                    .fold((f64::MAX, f64::MIN), |(a, b), &x| (a.min(x), b.max(x)));
+                assert!(lo > 0.0 && hi > 1.5 * lo, "{spec}: {tilts:?}");
+            }
+        }
+    }
+
     /// A path from inside that enters `at` a drawn entry's place is the drawn path until it
     /// surfaces: heading up for the flat surface beside the opening, it stops on the wall it
     /// left, below the surface, and the drawn path goes on from there through the flat

@@ -530,12 +530,13 @@ impl TracedGroove {
 
     /// One path through the groove for light arriving along `-w` (`w` toward the viewer,
     /// scratch frame, as a table is read): `u.x` the entry point, the bounces from a stream
-    /// keyed by `u0` and `u.y`; at a crossing (`cross`, [`ScratchLobe::cross`], not zero)
+    /// keyed by `u0` and `u.y`; at a crossing (`lobe`'s [`ScratchLobe::cross`], not zero)
     /// through the union with the other groove, its entry line at a uniform place across that
     /// groove's opening, drawn from the same stream (METHOD.md 8.3). `None` where the path is
-    /// lost. With the hit's `place` ([`ScratchLobe::place`]), light from inside enters there
-    /// and a path that surfaces beside the opening goes on from where it left the groove
-    /// ([`GroovePaths::trace`], [`SmoothSample::from`]).
+    /// lost. With the hit's place (`lobe`'s [`ScratchLobe::place`]), light from inside enters
+    /// there and a path that surfaces beside the opening goes on from where it left the groove
+    /// ([`GroovePaths::trace`], [`SmoothSample::from`]). The walls lean by `taper`
+    /// ([`Self::taper`]; `lobe` and `w` in the unleaned frame).
     #[inline]
     fn sample(
         &self,
@@ -812,6 +813,7 @@ impl<'a> ScratchedGlassBsdf<'a> {
 mod tests {
     use super::*;
     use crate::precompute::wall_table::WallTableParams;
+    use crate::render::bsdf::GroovePlace;
 
     /// Light from inside sampled at a placed hit ([`ScratchLobe::place`]) that surfaces goes
     /// on from a point beside the groove's walls below the surface (the scratch's
