@@ -808,9 +808,8 @@ fn the_traced_groove_leans_its_walls_as_a_tapered_groove_does() {
     let (g, at) = GrooveOnFace::find(&s, 0.2);
     let (centre, width) = g.width(&s, at);
     assert!((width - 0.05).abs() < 0.002, "{width}");
-    // The rate along `g.along`, its sign from the widths 0.05 either side.
+    // Which way along `g.along` it widens, from the widths 0.05 either side.
     let grows = g.width(&s, at + 0.05).1 > g.width(&s, at - 0.05).1;
-    let taper = if grows { 0.05 } else { -0.05 };
     let mut rng = Pcg64::seed_from_u64(22);
     for (theta, psi) in [
         (50.0f32, 45.0f32),
