@@ -771,16 +771,16 @@ impl<'a> ScratchedGlassBsdf<'a> {
             walls => {
                 // Smooth walls: a traced path, or the one-slice estimate (module notes); no
                 // light sampling to weigh against.
-                // A traced groove leans its walls, not its frame ([`TracedGroove::sample`]).
-                let (l, taper) = match walls {
-                    GlassWalls::Traced(g) => (&l.unleaned(), g.taper(l)),
-                    GlassWalls::Table(_) => (l, 0.0),
+                let (l, s) = match walls {
+                    GlassWalls::Traced(g) => {
+                        // A traced groove leans its walls, not its frame.
+                        let frame = l.unleaned();
+                        let w = frame.wo_to_scratch(wo);
+                        (frame, g.sample(w, u0, u, &frame, g.taper(l)))
+                    }
+                    GlassWalls::Table(t) => (*l, t.sample_smooth(l.wo_to_scratch(wo), u0, u)),
                 };
-                let w = l.wo_to_scratch(wo);
-                let s = match walls {
-                    GlassWalls::Traced(g) => g.sample(w, u0, u, l, taper),
-                    GlassWalls::Table(t) => t.sample_smooth(w, u0, u),
-                }?;
+                let s = s?;
                 return Some(BsdfSample {
                     wi: l.wi_from_scratch(s.wi)?,
                     weight: Rgb::splat(s.weight),

@@ -1256,7 +1256,7 @@ impl RidgeReach {
 }
 
 /// Scratch lobe of `layer` with coverage `c` ([`lobe_along`] its direction at the hit; with
-/// `lean`, [`leaned_lobe`] of the scratch at the hit, `u` uniform in `[0, 1)` placing it).
+/// `lean`, [`scratch_lobe`] of the scratch at the hit, `u` uniform in `[0, 1)` placing it).
 fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32, u: f32) -> ScratchLobe {
     let placed = inside_placed(p, ctx);
     if p.has_lean() || placed {
@@ -1293,8 +1293,8 @@ fn inside_placed(p: &ScratchedMaterial, ctx: &ShadingContext) -> bool {
     p.places_lobes() && ctx.wo.dot(ctx.ng) <= 0.0
 }
 
-/// Scratch `sc`'s lobe with coverage `c`: along its direction, leaned where the material asks
-/// it ([`leaned_lobe`]).
+/// Scratch `sc`'s lobe with coverage `c`: along its direction, and where the material asks it,
+/// leaned as the tapered groove's walls lean where `along` places it ([`lean::leaned`]).
 fn scratch_lobe(
     p: &ScratchedMaterial,
     ctx: &ShadingContext,
@@ -1302,30 +1302,13 @@ fn scratch_lobe(
     c: f32,
     along: Along,
 ) -> ScratchLobe {
-    if p.has_lean() {
-        return leaned_lobe(p, ctx, sc, c, along);
-    }
     let d = sc.direction.as_vec2();
-    lobe_along(ctx, [d.x, d.y], c)
-}
-
-/// Scratch `sc`'s lobe with coverage `c`, its frame leaned as the tapered groove's walls lean
-/// where `along` places it ([`lean::leaned`]).
-fn leaned_lobe(
-    p: &ScratchedMaterial,
-    ctx: &ShadingContext,
-    sc: &Scratch,
-    c: f32,
-    along: Along,
-) -> ScratchLobe {
-    let d = sc.direction;
-    lean::leaned(
-        lobe_along(ctx, [d.x as f32, d.y as f32], c),
-        p.lean,
-        ctx,
-        sc,
-        along,
-    )
+    let lobe = lobe_along(ctx, [d.x, d.y], c);
+    if p.has_lean() {
+        lean::leaned(lobe, p.lean, ctx, sc, along)
+    } else {
+        lobe
+    }
 }
 
 /// Scratch lobe of texture direction `d` with coverage `c`: `t = d.x dP/du + d.y dP/dv` in the
