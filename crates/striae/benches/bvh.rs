@@ -1,6 +1,7 @@
 //! Rays per second of `Geometry::intersect` (closest hit) and `Geometry::occluded` (any hit) on
 //! the Utah teapot tessellated at 64 x 64 quads per patch (~260k triangles), for the 8-wide BVH
-//! and obvhs' binary BVH, with coherent camera rays and incoherent random rays. Single-threaded.
+//! with each triangle test (`TriangleTest`) and obvhs' binary BVH, with coherent camera rays and
+//! incoherent random rays. Single-threaded.
 //!
 //! Time is the benchmark thread's **CPU time** (`/proc/thread-self/schedstat`), not wall time:
 //! the development machine is shared by several engineers compiling at once, and wall time there
@@ -15,7 +16,9 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Through
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use striae::math::{Ray, Vec2, Vec3};
-use striae::render::geometry::{BvhKind, Geometry, Shape, ShapeGeometry, TriangleMesh};
+use striae::render::geometry::{
+    BvhKind, Geometry, Shape, ShapeGeometry, TriangleMesh, TriangleTest,
+};
 use striae::sampling::square_to_uniform_sphere;
 
 const SUBDIVISIONS: u32 = 64;
@@ -134,7 +137,12 @@ fn bench(c: &mut Criterion<ThreadCpuTime>) {
         _ => unreachable!(),
     };
     let mut geometries = Vec::new();
-    for kind in [BvhKind::Bvh8, BvhKind::Bvh2] {
+    for (kind, test) in [
+        (BvhKind::Bvh8, TriangleTest::Fast),
+        (BvhKind::Bvh8, TriangleTest::Watertight),
+        (BvhKind::Bvh2, TriangleTest::Watertight),
+    ] {
+        let name = format!("{kind:?}-{test:?}");
         // Single-threaded build, so the thread's CPU time is the build's.
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(1)
@@ -142,15 +150,15 @@ fn bench(c: &mut Criterion<ThreadCpuTime>) {
             .unwrap();
         let (g, cpu_ns, wall) = pool.install(|| {
             let (cpu, wall) = (thread_cpu_ns(), Instant::now());
-            let g = Geometry::with_bvh(shapes.clone(), kind);
+            let g = Geometry::with_bvh(shapes.clone(), kind, test);
             (g, thread_cpu_ns() - cpu, wall.elapsed())
         });
         eprintln!(
-            "{kind:?}: built over {triangles} triangles in {:.0} ms cpu ({:.0} ms wall, one thread)",
+            "{name}: built over {triangles} triangles in {:.0} ms cpu ({:.0} ms wall, one thread)",
             cpu_ns as f64 / 1e6,
             wall.as_secs_f64() * 1e3
         );
-        geometries.push((kind, g));
+        geometries.push((name, g));
     }
     for (name, rays) in [
         ("coherent", coherent_rays()),
@@ -167,16 +175,12 @@ fn bench(c: &mut Criterion<ThreadCpuTime>) {
         group.throughput(Throughput::Elements(rays.len() as u64));
         group.sample_size(10);
         for (kind, g) in &geometries {
-            group.bench_with_input(
-                BenchmarkId::new("intersect", format!("{kind:?}")),
-                &rays,
-                |b, rays| b.iter(|| rays.iter().filter(|r| g.intersect(r).is_some()).count()),
-            );
-            group.bench_with_input(
-                BenchmarkId::new("occluded", format!("{kind:?}")),
-                &rays,
-                |b, rays| b.iter(|| rays.iter().filter(|r| g.occluded(r)).count()),
-            );
+            group.bench_with_input(BenchmarkId::new("intersect", kind), &rays, |b, rays| {
+                b.iter(|| rays.iter().filter(|r| g.intersect(r).is_some()).count())
+            });
+            group.bench_with_input(BenchmarkId::new("occluded", kind), &rays, |b, rays| {
+                b.iter(|| rays.iter().filter(|r| g.occluded(r)).count())
+            });
         }
         group.finish();
     }

@@ -362,14 +362,54 @@ fn image_is_bit_identical_across_thread_counts() {
 }
 
 #[test]
+fn fast_and_watertight_triangle_tests_render_the_glass_teapot_alike() {
+    // The same samples through both triangle tests (`render.watertight`): the hits differ in
+    // their last bits, and paths part only where a ray meets a triangle's edge within rounding,
+    // so nearly every pixel is the same to 1e-4 and the image means agree far below the noise.
+    let smooth = include_str!("../scenes/glass-teapot.toml");
+    let o = Overrides {
+        spp: Some(16),
+        resolution: Some((64, 48)),
+        ..Overrides::default()
+    };
+    let render = |text: &str| {
+        let s = Scene::parse(text, Path::new("t.toml"), Path::new("."), &o).unwrap();
+        render_with_threads(&s, 2).0
+    };
+    let fast = render(smooth);
+    let watertight = render(&smooth.replace("[render]\n", "[render]\nwatertight = true\n"));
+    let same = fast
+        .pixels
+        .iter()
+        .zip(&watertight.pixels)
+        .filter(|(a, b)| (**a - **b).abs().max_element() <= 1e-4 * (1.0 + a.max_element()))
+        .count();
+    eprintln!("{same} of {} pixels agree", fast.pixels.len());
+    assert!(
+        same * 10 >= fast.pixels.len() * 9,
+        "{same} of {} pixels",
+        fast.pixels.len()
+    );
+    assert!(same < fast.pixels.len(), "the switch changed nothing");
+    let mean = |img: &Image| {
+        img.pixels
+            .iter()
+            .map(|p| p.element_sum() as f64)
+            .sum::<f64>()
+    };
+    let (a, b) = (mean(&fast), mean(&watertight));
+    assert!((a / b - 1.0).abs() < 1e-3, "means {a} and {b}");
+}
+
+#[test]
 fn simd_and_portable_render_loops_give_the_same_image() {
     // The render loop is compiled three times (AVX-512 and AVX2 + FMA where the CPU has them,
     // portable everywhere); all must give the same image bit for bit (on a CPU without
     // AVX-512 or AVX2, `Auto` and `Avx2` fall back to a narrower copy). The default scene
     // (scratched glass under a sun: the loop that carries ray differentials), the smooth glass
     // teapot (a textured diffuse floor, an area light, the sky) and one with rough and smooth
-    // metal, rough glass and a sphere light cover both loops, the BVH, the triangle and
-    // sphere tests and the BSDFs.
+    // metal, rough glass and a sphere light cover both loops, the BVH, both triangle tests,
+    // the sphere test and the BSDFs.
     let rough = r#"
         [render]
         width = 24
@@ -422,7 +462,13 @@ fn simd_and_portable_render_loops_give_the_same_image() {
         sampler: None,
     };
     let smooth = include_str!("../scenes/glass-teapot.toml");
-    for text in [striae::render::scene::DEFAULT_SCENE, smooth, rough] {
+    let watertight = smooth.replace("[render]\n", "[render]\nwatertight = true\n");
+    for text in [
+        striae::render::scene::DEFAULT_SCENE,
+        smooth,
+        rough,
+        &watertight,
+    ] {
         let s = Scene::parse(text, Path::new("t.toml"), Path::new("."), &o).unwrap();
         let (a, _) = render_with(&s, &|_| {}, Simd::Auto);
         let (b, _) = render_with(&s, &|_| {}, Simd::Avx2);

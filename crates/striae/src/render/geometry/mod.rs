@@ -25,7 +25,7 @@ pub mod transform;
 
 use std::path::PathBuf;
 
-pub use bvh::{BvhKind, Geometry};
+pub use bvh::{BvhKind, Geometry, TriangleTest};
 pub use bvh8::PACKET;
 pub use mesh::TriangleMesh;
 pub use transform::Transform;

@@ -48,6 +48,9 @@ pub struct RenderSection {
     /// `"sobol"` (default) or `"independent"` (`sampler::SamplerKind`).
     #[serde(default = "default_sampler")]
     pub sampler: String,
+    /// The watertight ray/triangle test instead of the fast one (`geometry::TriangleTest`).
+    #[serde(default)]
+    pub watertight: bool,
 }
 
 fn default_width() -> u32 {
@@ -80,6 +83,7 @@ impl Default for RenderSection {
             seed: 0,
             exposure: 0.0,
             sampler: default_sampler(),
+            watertight: false,
         }
     }
 }

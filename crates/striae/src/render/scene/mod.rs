@@ -19,7 +19,7 @@ pub mod scratches;
 use crate::math::Vec3;
 use crate::render::camera::{CameraError, PerspectiveCamera};
 use crate::render::envmap::EnvMap;
-use crate::render::geometry::{Geometry, Shape, ShapeGeometry, TriangleMesh};
+use crate::render::geometry::{Geometry, Shape, ShapeGeometry, TriangleMesh, TriangleTest};
 use crate::render::lights::{Environment, Light};
 use crate::render::material::Material;
 use crate::render::sampler::SamplerKind;
@@ -52,6 +52,9 @@ pub struct RenderSettings {
     pub exposure: f32,
     /// The random numbers' kind.
     pub sampler: SamplerKind,
+    /// The ray/triangle test (`render.watertight`; explicit scratch geometry is always
+    /// watertight).
+    pub triangles: TriangleTest,
 }
 
 /// Command-line values that replace the scene file's.
@@ -448,7 +451,7 @@ fn build(f: SceneFile, file: &Path, base: &Path, o: &Overrides) -> Result<Scene,
                 ));
                 g
             }
-            None => Geometry::new(shapes),
+            None => Geometry::with_triangles(shapes, settings.triangles),
         },
         absorbing: materials.iter().any(|m| m.absorption().is_some()),
         materials,
@@ -564,6 +567,11 @@ fn render_settings(
         seed: o.seed.unwrap_or(r.seed),
         exposure: r.exposure,
         sampler,
+        triangles: if r.watertight {
+            TriangleTest::Watertight
+        } else {
+            TriangleTest::Fast
+        },
     };
     if settings.spp == 0 || settings.spp > crate::render::sampler::MAX_SPP {
         return Err(invalid(
