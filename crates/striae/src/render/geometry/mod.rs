@@ -7,8 +7,8 @@
 //!   [`teapot`] tessellates Newell's 32 Bezier patches with per-vertex uv and tangents.
 //! * [`sphere`]: the analytic sphere.
 //! * [`carve`]: explicit scratch grooves carved into planar faces (METHOD.md 8.3).
-//! * [`bvh`]: [`Geometry`], the BVH (an 8-wide SSE BVH, `bvh8`, by default) with the watertight
-//!   ray-triangle test.
+//! * [`bvh`]: [`Geometry`], the BVH (an 8-wide SSE BVH, `bvh8`, by default) with the fast or the
+//!   watertight ray-triangle test ([`TriangleTest`]).
 //! * [`uv_footprint`]: texture-space footprint of a pixel from ray differentials (pbrt-v4).
 
 // `!(x > y)` is used on purpose: it is also true for NaN.
