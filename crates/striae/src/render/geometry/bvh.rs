@@ -19,7 +19,8 @@
 //!   needs one cross product per triangle (`FastTri4`). Two triangles sharing an edge compute
 //!   their barycentrics with different rounding, so a ray aimed at the edge itself can pass
 //!   between them: `closed_mesh_leaks_only_where_aimed_at_its_edges` states how often.
-//!   The glass teapot renders in 8 % less time than with the watertight test (`BENCHMARKS.md`).
+//!   The glass teapot renders in 7 % less CPU time than with the watertight test on one thread,
+//!   2-5 % less on two (`BENCHMARKS.md`).
 
 use std::time::Duration;
 
@@ -576,8 +577,7 @@ impl Geometry {
         };
         // Primitives in BVH order: traversal indexes them directly.
         let prims: Vec<Prim> = order.iter().map(|&i| prims[i as usize]).collect();
-        let is_bvh8 = matches!(accel, Accel::Bvh8(_));
-        let fast = is_bvh8 && triangles == TriangleTest::Fast;
+        let fast = matches!(accel, Accel::Bvh8(_)) && triangles == TriangleTest::Fast;
         let fast4 = if fast {
             let block =
                 |b: &[Prim]| FastTri4::new(b.iter().map(|p| (p.prim != SPHERE).then_some(p.v)));
