@@ -5,7 +5,7 @@
 //! comparison with Mitsuba 3, BENCHMARKS.md)
 //! runs at 128 x 96 x 4 spp with the default render loop (the widest copy the CPU runs), its
 //! AVX2 copy (`Simd::Avx2`: what a CPU without AVX-512 runs) and its portable copy
-//! (`Simd::Portable`: no AVX2). Run:
+//! (`Simd::Portable`: no AVX2), and with the watertight triangle test. Run:
 //! `cargo bench -p striae --bench render`.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
@@ -62,6 +62,19 @@ fn bench_render(c: &mut Criterion) {
             b.iter(|| render_with(&smooth, &|_| {}, simd))
         });
     }
+    // The same with the watertight triangle test (`render.watertight`; the default is the fast
+    // one).
+    let watertight = Scene::parse(
+        &include_str!("../scenes/glass-teapot.toml")
+            .replace("[render]\n", "[render]\nwatertight = true\n"),
+        Path::new("glass-teapot.toml"),
+        Path::new("."),
+        &o,
+    )
+    .unwrap();
+    g.bench_function("smooth_glass_teapot_128x96_4spp_auto_watertight", |b| {
+        b.iter(|| render(&watertight, &|_| {}))
+    });
     g.finish();
 
     let mut g = c.benchmark_group("sampler");
