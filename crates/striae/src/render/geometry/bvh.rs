@@ -5,22 +5,27 @@
 //! at once (`Tri4`); obvhs' binary BVH itself is the reference it is tested against
 //! ([`BvhKind::Bvh2`]) and the fallback for trees too deep for the 8-wide traversal's stack.
 //!
-//! Triangles are intersected by one of two tests ([`TriangleTest`]):
+//! The leaves' triangles take Moeller and Trumbore's test (1997, "Fast, Minimum Storage
+//! Ray/Triangle Intersection") in the form of Embree's `Triangle4` leaves: each block stores
+//! `v0`, both edges from it and their cross product, so a ray needs one cross product per
+//! triangle (`FastTri4`), in one of two forms ([`TriangleTest`]):
 //!
+//! * **Fast** (the default), as Embree's default mode: two triangles sharing an edge compute
+//!   their edge values with different rounding, so a ray aimed at the edge itself can pass
+//!   between them (`closed_mesh_leaks_only_where_aimed_at_its_edges` states how often).
 //! * **Watertight** (`render.watertight = true`, and always for explicit scratch geometry): the
-//!   test of Woop, Benthin and Wald (2013, "Watertight Ray/Triangle Intersection", JCGT 2(1)), in
-//!   the form of pbrt-v4's `Triangle::Intersect`: the vertices are translated to the ray origin,
-//!   permuted so the ray's dominant axis is `z` and sheared so the ray is `+z`; the 2D edge
-//!   functions are then evaluated identically (up to sign) for both triangles sharing an edge,
-//!   and recomputed in `f64` when one is exactly zero, so a ray never slips between them.
-//! * **Fast** (the default): Moeller and Trumbore's test (1997, "Fast, Minimum Storage
-//!   Ray/Triangle Intersection") in the form of Embree's `Triangle4` leaves in its default
-//!   mode: each leaf block stores `v0`, both edges from it and their cross product, so a ray
-//!   needs one cross product per triangle (`FastTri4`). Two triangles sharing an edge compute
-//!   their barycentrics with different rounding, so a ray aimed at the edge itself can pass
-//!   between them: `closed_mesh_leaks_only_where_aimed_at_its_edges` states how often.
-//!   The glass teapot renders in 7 % less CPU time than with the watertight test on one thread,
-//!   2-5 % less on two (`BENCHMARKS.md`).
+//!   same test guarded by a bound on its rounding. Its three edge values are, in exact
+//!   arithmetic, the Pluecker values `d . ((p - o) x (q - o))` of the edges `p q`, which two
+//!   triangles sharing an edge have with opposite signs; where one lies within its bound of
+//!   zero the block is decided by those values in `f64`, taken from each edge's endpoints in
+//!   one fixed order ([`exact_hit`]), so that both triangles see one value. Every sign either
+//!   path takes is then the exact one, and a ray never slips between triangles.
+//!
+//! The glass teapot renders in 7 % less CPU time with the fast form than with Woop, Benthin and
+//! Wald's watertight test (2013, JCGT 2(1)), 4 % less with the watertight form (one thread,
+//! `BENCHMARKS.md`). Woop's test, in the form of pbrt-v4's `Triangle::Intersect`
+//! ([`WatertightRay`]), remains for the binary BVH, the scalar leaves (carved faces) and the
+//! brute-force oracle of the tests.
 
 use std::time::Duration;
 
@@ -50,8 +55,9 @@ struct Prim {
 
 const SPHERE: u32 = u32::MAX;
 
-/// Per-ray constants of the watertight test: the ray's dominant axis `kz` (with `kx`, `ky`
-/// the next two axes cyclically) and the shear.
+/// Per-ray constants of Woop, Benthin and Wald's watertight test (the binary BVH's, the scalar
+/// leaves' and the oracle's): the ray's dominant axis `kz` (with `kx`, `ky` the next two axes
+/// cyclically) and the shear.
 ///
 /// Departure from pbrt-v4: pbrt swaps `kx` and `ky` when `d[kz] < 0` to keep the determinant's
 /// sign; the test is two-sided, and swapping only negates every edge function, `det` and the
@@ -156,138 +162,20 @@ impl WatertightRay {
     }
 }
 
-/// Four triangles of a [`Bvh8`] leaf block as structure of arrays: `v[vertex][axis]` holds
-/// that coordinate of the four triangles, so [`WatertightRay::intersect4`] tests them at once.
+/// The vertices of a [`Bvh8`] leaf block's four triangles as structure of arrays:
+/// `v[vertex][axis]` holds that coordinate of the four triangles (what [`exact_hit`] decides
+/// from where the guarded fast test is not sure).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(16))]
 struct Tri4 {
     v: [[Vec4; 3]; 3],
 }
 
-impl WatertightRay {
-    /// [`WatertightRay::intersect_axis`] for the four triangles of `tri` at once (SSE): the
-    /// same operations lane by lane, so `t`, `b1` and `b2` are bit-for-bit the scalar ones.
-    /// Returns `(lane, t, b1, b2)` of the closest hit with `t` in `(0, t_max)`, the lowest lane
-    /// on a tie (as testing the lanes in order would). When an edge function is exactly zero
-    /// in some lane the block is retested lane by lane with the scalar test (its `f64` path).
-    #[inline(always)]
-    fn intersect4<const KZ: usize>(
-        &self,
-        tri: &Tri4,
-        t_max: f32,
-    ) -> Option<(usize, f32, f32, f32)> {
-        let mask = self.hits4::<KZ>(tri, t_max);
-        let (valid, t, e1, e2, inv_det) = match mask {
-            Hits4::None => return None,
-            Hits4::Exact => return self.intersect4_scalar::<KZ>(tri, t_max),
-            Hits4::Some {
-                valid,
-                t,
-                e1,
-                e2,
-                inv_det,
-            } => (valid, t, e1, e2, inv_det),
-        };
-        let tm = Vec4::select(valid, t, Vec4::INFINITY);
-        let t_min = tm.min_element();
-        let lane = tm.cmpeq(Vec4::splat(t_min)).bitmask().trailing_zeros() as usize;
-        Some((
-            lane,
-            t[lane],
-            e1[lane] * inv_det[lane],
-            e2[lane] * inv_det[lane],
-        ))
-    }
-
-    /// Whether any triangle of `tri` is hit with `t` in `(0, t_max)`.
-    #[inline(always)]
-    fn occluded4<const KZ: usize>(&self, tri: &Tri4, t_max: f32) -> bool {
-        match self.hits4::<KZ>(tri, t_max) {
-            Hits4::None => false,
-            Hits4::Exact => self.intersect4_scalar::<KZ>(tri, t_max).is_some(),
-            Hits4::Some { .. } => true,
-        }
-    }
-
-    /// The lanes of `tri` tested one by one with [`WatertightRay::intersect_axis`].
-    #[inline(never)]
-    fn intersect4_scalar<const KZ: usize>(
-        &self,
-        tri: &Tri4,
-        mut t_max: f32,
-    ) -> Option<(usize, f32, f32, f32)> {
-        let vertex = |k: usize, lane: usize| {
-            Vec3::new(tri.v[k][0][lane], tri.v[k][1][lane], tri.v[k][2][lane])
-        };
-        let mut best = None;
-        for lane in 0..BLOCK {
-            if let Some((t, b1, b2)) =
-                self.intersect_axis::<KZ>(vertex(0, lane), vertex(1, lane), vertex(2, lane), t_max)
-            {
-                t_max = t;
-                best = Some((lane, t, b1, b2));
-            }
-        }
-        best
-    }
-
-    /// The vectorised body of [`WatertightRay::intersect4`].
-    #[inline(always)]
-    fn hits4<const KZ: usize>(&self, tri: &Tri4, t_max: f32) -> Hits4 {
-        let (kx, ky) = ((KZ + 1) % 3, (KZ + 2) % 3);
-        let o = self.o;
-        let (ox, oy, oz) = (Vec4::splat(o[kx]), Vec4::splat(o[ky]), Vec4::splat(o[KZ]));
-        let (sx, sy, sz) = (
-            Vec4::splat(self.sx),
-            Vec4::splat(self.sy),
-            Vec4::splat(self.sz),
-        );
-        let v = &tri.v;
-        let (az, bz, cz) = (v[0][KZ] - oz, v[1][KZ] - oz, v[2][KZ] - oz);
-        let ax = (v[0][kx] - ox) + sx * az;
-        let ay = (v[0][ky] - oy) + sy * az;
-        let bx = (v[1][kx] - ox) + sx * bz;
-        let by = (v[1][ky] - oy) + sy * bz;
-        let cx = (v[2][kx] - ox) + sx * cz;
-        let cy = (v[2][ky] - oy) + sy * cz;
-        let e0 = bx * cy - by * cx;
-        let e1 = cx * ay - cy * ax;
-        let e2 = ax * by - ay * bx;
-        let zero = Vec4::ZERO;
-        if (e0.cmpeq(zero) | e1.cmpeq(zero) | e2.cmpeq(zero)).any() {
-            return Hits4::Exact;
-        }
-        let neg = e0.cmplt(zero) | e1.cmplt(zero) | e2.cmplt(zero);
-        let pos = e0.cmpgt(zero) | e1.cmpgt(zero) | e2.cmpgt(zero);
-        let det = e0 + e1 + e2;
-        let t_scaled = e0 * (sz * az) + e1 * (sz * bz) + e2 * (sz * cz);
-        let limit = Vec4::splat(t_max) * det;
-        let behind_neg = det.cmplt(zero) & (t_scaled.cmpge(zero) | t_scaled.cmplt(limit));
-        let behind_pos = det.cmpgt(zero) & (t_scaled.cmple(zero) | t_scaled.cmpgt(limit));
-        let mut valid = !((neg & pos) | det.cmpeq(zero) | behind_neg | behind_pos);
-        if !valid.any() {
-            return Hits4::None;
-        }
-        let inv_det = Vec4::ONE / det;
-        let t = t_scaled * inv_det;
-        valid &= t.cmpgt(zero) & t.cmplt(Vec4::splat(t_max));
-        if !valid.any() {
-            return Hits4::None;
-        }
-        Hits4::Some {
-            valid,
-            t,
-            e1,
-            e2,
-            inv_det,
-        }
-    }
-}
-
 /// Four triangles of a [`Bvh8`] leaf block for the fast test ([`TriangleTest::Fast`]), as
 /// structure of arrays (`[axis]` rows of four lanes): the first vertex `v0`, the edges
-/// `a = v1 - v0`, `b = v2 - v0` and the unnormalised normal `n = a x b` (Embree's `Triangle4`).
-/// A padded lane or a sphere's lane holds zeros: `n = 0` is never hit.
+/// `a = v1 - v0`, `b = v2 - v0`, the unnormalised normal `n = a x b` (Embree's `Triangle4`) and
+/// each lane's largest edge component (for the rounding bound). A padded lane or a sphere's lane
+/// holds zeros: `n = 0` is never hit.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(16))]
 struct FastTri4 {
@@ -295,7 +183,22 @@ struct FastTri4 {
     a: [Vec4; 3],
     b: [Vec4; 3],
     n: [Vec4; 3],
+    size: Vec4,
 }
+
+/// What [`FastTri4::hits`] found.
+enum FastHits {
+    None,
+    /// A lane's edge value lies within its rounding bound of zero: the exact test decides.
+    Uncertain,
+    /// The lanes hit, with each lane's `t`, `b1`, `b2`.
+    Some(glam::BVec4A, Vec4, Vec4, Vec4),
+}
+
+/// Bound on the fast test's rounding of an edge value, in units of `eps |d| |o - v0| size` (the
+/// operations' error, stored edges' rounding included, is at most 42 of them; the margin covers
+/// the third edge's extra terms).
+const EDGE_ROUNDING: f32 = 64.0 * f32::EPSILON;
 
 impl FastTri4 {
     /// The block holding the triangles `tris` (at most [`BLOCK`]; `None` for a lane without one).
@@ -305,6 +208,7 @@ impl FastTri4 {
             a: [Vec4::ZERO; 3],
             b: [Vec4::ZERO; 3],
             n: [Vec4::ZERO; 3],
+            size: Vec4::ZERO,
         };
         for (lane, tri) in tris.enumerate() {
             let Some([p0, p1, p2]) = tri else { continue };
@@ -316,34 +220,62 @@ impl FastTri4 {
                 block.b[axis][lane] = b[axis];
                 block.n[axis][lane] = n[axis];
             }
+            block.size[lane] = a.abs().max(b.abs()).max_element();
         }
         block
     }
 
     /// `(lane, t, b1, b2)` of the closest hit along `o + t d` with `t` in `(0, t_max)`, the
-    /// lowest lane on a tie; `b1`, `b2` weight `v1`, `v2`.
-    ///
-    /// With `O = o - v0`, `R = d x O` and `den = d . n`, Cramer's rule gives
-    /// `t = -(O . n) / den`, `b1 = (b . R) / den`, `b2 = -(a . R) / den`; all three are taken
-    /// with the sign of `den` (a two-sided test) and compared before the one division.
+    /// lowest lane on a tie; `b1`, `b2` weight `v1`, `v2`. With `GUARD` (the watertight test)
+    /// a block the fast test is not sure of is decided by `exact` ([`Tri4::closest_exact`]).
     #[inline(always)]
-    fn closest(&self, o: Vec3, d: Vec3, t_max: f32) -> Option<(usize, f32, f32, f32)> {
-        let (valid, t, b1, b2) = self.hits(o, d, t_max)?;
+    fn closest<const GUARD: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        t_max: f32,
+        exact: impl FnOnce() -> Option<(usize, f32, f32, f32)>,
+    ) -> Option<(usize, f32, f32, f32)> {
+        let (valid, t, b1, b2) = match self.hits::<GUARD>(o, d, t_max) {
+            FastHits::None => return None,
+            FastHits::Uncertain => return exact(),
+            FastHits::Some(valid, t, b1, b2) => (valid, t, b1, b2),
+        };
         let tm = Vec4::select(valid, t, Vec4::INFINITY);
         let t_min = tm.min_element();
         let lane = tm.cmpeq(Vec4::splat(t_min)).bitmask().trailing_zeros() as usize;
         Some((lane, t[lane], b1[lane], b2[lane]))
     }
 
-    /// Whether any triangle of the block is hit with `t` in `(0, t_max)`.
+    /// Whether any triangle of the block is hit with `t` in `(0, t_max)`; `exact` as in
+    /// [`Self::closest`].
     #[inline(always)]
-    fn any(&self, o: Vec3, d: Vec3, t_max: f32) -> bool {
-        self.hits(o, d, t_max).is_some()
+    fn any<const GUARD: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        t_max: f32,
+        exact: impl FnOnce() -> bool,
+    ) -> bool {
+        match self.hits::<GUARD>(o, d, t_max) {
+            FastHits::None => false,
+            FastHits::Uncertain => exact(),
+            FastHits::Some(..) => true,
+        }
     }
 
-    /// The lanes hit, with each lane's `t`, `b1`, `b2`; `None` when no lane is.
+    /// Moeller-Trumbore on the four lanes. With `O = o - v0`, `R = d x O` and `den = d . n`,
+    /// Cramer's rule gives `t = -(O . n) / den`, `b1 = (b . R) / den`, `b2 = -(a . R) / den`;
+    /// all are taken with the sign of `den` (a two-sided test) and compared before the one
+    /// division. In exact arithmetic `b . R`, `-(a . R)` and `den - b . R + a . R` are the
+    /// Pluecker values of the edges `v2 v0`, `v0 v1` and `v1 v2` ([`edge_value`]), which a
+    /// neighbour sharing the edge computes with the opposite sign; where one lies within its
+    /// rounding bound ([`EDGE_ROUNDING`]) of zero on a lane that may be hit, the block is
+    /// `Uncertain` (with `GUARD`). Every sign the test then decides is the exact one, so it never
+    /// disagrees with a neighbour's decision, exact or fast: no ray slips between them. Without
+    /// `GUARD` the signs are taken as computed, and a ray through an edge may find neither.
     #[inline(always)]
-    fn hits(&self, o: Vec3, d: Vec3, t_max: f32) -> Option<(glam::BVec4A, Vec4, Vec4, Vec4)> {
+    fn hits<const GUARD: bool>(&self, o: Vec3, d: Vec3, t_max: f32) -> FastHits {
         let [ox, oy, oz] = [0, 1, 2].map(|k| Vec4::splat(o[k]) - self.v0[k]);
         let [dx, dy, dz] = [0, 1, 2].map(|k| Vec4::splat(d[k]));
         let (rx, ry, rz) = (dy * oz - dz * oy, dz * ox - dx * oz, dx * oy - dy * ox);
@@ -354,49 +286,118 @@ impl FastTri4 {
         let abs_den = den * sign;
         let u = (b[0] * rx + b[1] * ry + b[2] * rz) * sign;
         let v = -(a[0] * rx + a[1] * ry + a[2] * rz) * sign;
+        let w = abs_den - (u + v);
         let t_den = -(ox * n[0] + oy * n[1] + oz * n[2]) * sign;
-        let valid = den.cmpne(zero)
-            & u.cmpge(zero)
-            & v.cmpge(zero)
-            & (u + v).cmple(abs_den)
-            & t_den.cmpgt(zero)
-            & t_den.cmplt(abs_den * Vec4::splat(t_max));
+        let ahead = t_den.cmpgt(zero) & t_den.cmplt(abs_den * Vec4::splat(t_max));
+        if GUARD {
+            let scale = Vec4::splat(EDGE_ROUNDING * d.abs().max_element()) * self.size;
+            let bound = scale * ox.abs().max(oy.abs()).max(oz.abs());
+            let bound_w = bound + bound + scale * self.size;
+            let near = u.abs().cmplt(bound) | v.abs().cmplt(bound) | w.abs().cmplt(bound_w);
+            if (near & ahead).any() {
+                return FastHits::Uncertain;
+            }
+        }
+        let valid = ahead & den.cmpne(zero) & u.cmpge(zero) & v.cmpge(zero) & w.cmpge(zero);
         if !valid.any() {
-            return None;
+            return FastHits::None;
         }
         let inv_den = Vec4::ONE / abs_den;
         let t = t_den * inv_den;
         let valid = valid & t.cmpgt(zero) & t.cmplt(Vec4::splat(t_max));
-        valid.any().then(|| (valid, t, u * inv_den, v * inv_den))
+        if !valid.any() {
+            return FastHits::None;
+        }
+        FastHits::Some(valid, t, u * inv_den, v * inv_den)
     }
 }
 
-/// Which ray/triangle test a [`Geometry`]'s 8-wide BVH runs at its triangle leaves (module
-/// documentation). Spheres, the binary BVH and explicit scratch geometry always take the
-/// watertight test.
+impl Tri4 {
+    /// The block holding the triangles `tris` (at most [`BLOCK`]; `None` for a lane without one).
+    fn new(tris: impl Iterator<Item = Option<[Vec3; 3]>>) -> Self {
+        let mut block = Tri4 {
+            v: [[Vec4::ZERO; 3]; 3],
+        };
+        for (lane, tri) in tris.enumerate() {
+            for (k, p) in tri.into_iter().flatten().enumerate() {
+                for axis in 0..3 {
+                    block.v[k][axis][lane] = p[axis];
+                }
+            }
+        }
+        block
+    }
+
+    /// Lane `lane`'s vertices.
+    fn vertices(&self, lane: usize) -> [Vec3; 3] {
+        [0, 1, 2].map(|k| Vec3::new(self.v[k][0][lane], self.v[k][1][lane], self.v[k][2][lane]))
+    }
+
+    /// The closest hit of the block's lanes by [`exact_hit`] (the fast test's fallback, out of
+    /// line: it runs for a few blocks in ten thousand).
+    #[inline(never)]
+    fn closest_exact(&self, o: Vec3, d: Vec3, mut t_max: f32) -> Option<(usize, f32, f32, f32)> {
+        let mut best = None;
+        for lane in 0..BLOCK {
+            if let Some((t, b1, b2)) = exact_hit(o, d, self.vertices(lane), t_max) {
+                t_max = t;
+                best = Some((lane, t, b1, b2));
+            }
+        }
+        best
+    }
+}
+
+/// The Pluecker value `d . ((p - o) x (q - o))` of the edge `p q` for the ray `o + t d`, in
+/// `f64` (the differences of `f32` coordinates and their products are exact there) and from the
+/// endpoints in one fixed order, so that the two triangles sharing the edge get the same
+/// magnitude with opposite signs, bit for bit.
+fn edge_value(o: Vec3, d: Vec3, p: Vec3, q: Vec3) -> f64 {
+    let key = |v: Vec3| {
+        v.to_array()
+            .map(|x| x.to_bits() as i32 ^ ((x.to_bits() as i32 >> 31) & 0x7fff_ffff))
+    };
+    let (x, y, sign) = if key(p) <= key(q) {
+        (p, q, 1.0)
+    } else {
+        (q, p, -1.0)
+    };
+    let (o, d) = (o.as_dvec3(), d.as_dvec3());
+    sign * d.dot((x.as_dvec3() - o).cross(y.as_dvec3() - o))
+}
+
+/// `(t, b1, b2)` of the hit of `o + t d` with the triangle `(p0, p1, p2)` for `t` in
+/// `(0, t_max)`, decided by the signs of its three edges' exact values ([`edge_value`]): a ray
+/// on an edge hits both triangles that share it, never neither.
+fn exact_hit(o: Vec3, d: Vec3, [p0, p1, p2]: [Vec3; 3], t_max: f32) -> Option<(f32, f32, f32)> {
+    let (e01, e12, e20) = (
+        edge_value(o, d, p0, p1),
+        edge_value(o, d, p1, p2),
+        edge_value(o, d, p2, p0),
+    );
+    if (e01 < 0.0 || e12 < 0.0 || e20 < 0.0) && (e01 > 0.0 || e12 > 0.0 || e20 > 0.0) {
+        return None;
+    }
+    let den = e01 + e12 + e20;
+    if den == 0.0 {
+        return None;
+    }
+    let n = (p1 - p0).as_dvec3().cross((p2 - p0).as_dvec3());
+    let t = ((p0.as_dvec3() - o.as_dvec3()).dot(n) / d.as_dvec3().dot(n)) as f32;
+    (t > 0.0 && t < t_max).then(|| (t, (e20 / den) as f32, (e01 / den) as f32))
+}
+
+/// Which form of the ray/triangle test a [`Geometry`]'s 8-wide BVH runs at its triangle leaves
+/// (module documentation).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum TriangleTest {
     /// Moeller-Trumbore on precomputed edges (Embree's default mode): may let a ray aimed at a
     /// shared edge or vertex through.
     #[default]
     Fast,
-    /// Woop, Benthin and Wald's watertight test: no ray slips between triangles that share an
-    /// edge.
+    /// The same, with the blocks near an edge decided exactly: no ray slips between triangles
+    /// that share an edge.
     Watertight,
-}
-
-/// What [`WatertightRay::hits4`] found.
-enum Hits4 {
-    None,
-    /// An edge function is exactly zero in some lane: decide with the scalar test.
-    Exact,
-    Some {
-        valid: glam::BVec4A,
-        t: Vec4,
-        e1: Vec4,
-        e2: Vec4,
-        inv_det: Vec4,
-    },
 }
 
 /// Which hierarchy [`Geometry`] traverses.
@@ -430,11 +431,11 @@ pub struct Geometry {
     shapes: Vec<Shape>,
     /// Primitives in BVH order; for [`BvhKind::Bvh8`] `BLOCK` per leaf block (padded).
     prims: Vec<Prim>,
-    /// The triangles of `prims` as blocks of four ([`BvhKind::Bvh8`] with
-    /// [`TriangleTest::Watertight`] only).
-    tri4: Vec<Tri4>,
-    /// The same for [`TriangleTest::Fast`].
+    /// The triangles of `prims` as blocks of four for the fast test ([`BvhKind::Bvh8`] only).
     fast4: Vec<FastTri4>,
+    /// Their vertices, where the watertight test decides from them ([`TriangleTest::Watertight`]).
+    tri4: Vec<Tri4>,
+    triangles: TriangleTest,
     /// Number of distinct primitives.
     prim_count: usize,
     accel: Accel,
@@ -485,8 +486,9 @@ impl Geometry {
 
     /// Builds the BVH over `shapes`, some of them carved by explicit scratch grooves whose
     /// hits `carve` filters ([`Carve::rejects`]). Their triangles go to scalar leaves, where
-    /// each hit is tested before it counts; the rest take the watertight test too, since the
-    /// grooves' walls are the reference the scratch model is measured against.
+    /// each hit is tested before it counts (Woop's test); the rest take the watertight form of
+    /// the fast test ([`TriangleTest::Watertight`]), since the grooves' walls are the reference
+    /// the scratch model is measured against.
     pub fn with_carve(shapes: Vec<Shape>, carve: Carve) -> Geometry {
         Geometry::build(
             shapes,
@@ -528,8 +530,9 @@ impl Geometry {
             return Geometry {
                 shapes,
                 prims,
-                tri4: Vec::new(),
                 fast4: Vec::new(),
+                tri4: Vec::new(),
+                triangles,
                 prim_count,
                 accel: Accel::None,
                 carve,
@@ -577,40 +580,26 @@ impl Geometry {
         };
         // Primitives in BVH order: traversal indexes them directly.
         let prims: Vec<Prim> = order.iter().map(|&i| prims[i as usize]).collect();
-        let fast = matches!(accel, Accel::Bvh8(_)) && triangles == TriangleTest::Fast;
-        let fast4 = if fast {
-            let block =
-                |b: &[Prim]| FastTri4::new(b.iter().map(|p| (p.prim != SPHERE).then_some(p.v)));
-            prims.chunks(BLOCK).map(block).collect()
-        } else {
-            Vec::new()
+        // Leaf blocks of four for the 8-wide BVH, a sphere's lane left empty (zero).
+        let bvh8 = matches!(accel, Accel::Bvh8(_));
+        let blocks = || {
+            let triangle = |p: &Prim| (p.prim != SPHERE).then_some(p.v);
+            prims.chunks(BLOCK).map(move |b| b.iter().map(triangle))
         };
-        let tri4 = match accel {
-            Accel::Bvh8(_) if !fast => prims
-                .chunks(BLOCK)
-                .map(|block| {
-                    let mut tri = Tri4 {
-                        v: [[Vec4::ZERO; 3]; 3],
-                    };
-                    for (lane, p) in block.iter().enumerate() {
-                        if p.prim != SPHERE {
-                            for k in 0..3 {
-                                for a in 0..3 {
-                                    tri.v[k][a][lane] = p.v[k][a];
-                                }
-                            }
-                        }
-                    }
-                    tri
-                })
-                .collect(),
+        let fast4 = match bvh8 {
+            true => blocks().map(FastTri4::new).collect(),
+            false => Vec::new(),
+        };
+        let tri4 = match (bvh8, triangles) {
+            (true, TriangleTest::Watertight) => blocks().map(Tri4::new).collect(),
             _ => Vec::new(),
         };
         Geometry {
             shapes,
             prims,
-            tri4,
             fast4,
+            tri4,
+            triangles,
             prim_count,
             accel,
             carve,
@@ -1016,11 +1005,15 @@ impl<const KZ: usize> ClosestLeaf for Bvh8Leaves<'_, KZ> {
                     *t_max = t;
                 }
             }
-        } else if let Some((lane, t, b1, b2)) = match self.geometry.fast4.get(leaf.block) {
-            Some(block) => block.closest(self.ray.o, self.ray.d, *t_max),
-            None => self
-                .wray
-                .intersect4::<KZ>(&self.geometry.tri4[leaf.block], *t_max),
+        } else if let Some((lane, t, b1, b2)) = {
+            let (o, d, g) = (self.ray.o, self.ray.d, self.geometry);
+            let (fast, block) = (&g.fast4[leaf.block], leaf.block);
+            match g.triangles {
+                TriangleTest::Fast => fast.closest::<false>(o, d, *t_max, || None),
+                TriangleTest::Watertight => {
+                    fast.closest::<true>(o, d, *t_max, || g.tri4[block].closest_exact(o, d, *t_max))
+                }
+            }
         } {
             self.best = Some((first + lane, t, b1, b2));
             *t_max = t;
@@ -1039,11 +1032,13 @@ impl<const KZ: usize> AnyLeaf for Bvh8Leaves<'_, KZ> {
                     .is_some()
             })
         } else {
-            match self.geometry.fast4.get(leaf.block) {
-                Some(block) => block.any(self.ray.o, self.ray.d, t_max),
-                None => self
-                    .wray
-                    .occluded4::<KZ>(&self.geometry.tri4[leaf.block], t_max),
+            let (o, d, g) = (self.ray.o, self.ray.d, self.geometry);
+            let (fast, block) = (&g.fast4[leaf.block], leaf.block);
+            match g.triangles {
+                TriangleTest::Fast => fast.any::<false>(o, d, t_max, || false),
+                TriangleTest::Watertight => fast.any::<true>(o, d, t_max, || {
+                    g.tri4[block].closest_exact(o, d, t_max).is_some()
+                }),
             }
         }
     }
@@ -1101,111 +1096,6 @@ mod tri4_tests {
     use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64;
 
-    /// The scalar test over the four lanes in order (a later lane must be strictly closer), as
-    /// the leaves were tested before `Tri4`.
-    fn scalar_lanes<const KZ: usize>(
-        w: &WatertightRay,
-        tris: &[[Vec3; 3]; 4],
-        mut t_max: f32,
-    ) -> Option<(usize, f32, f32, f32)> {
-        let mut best = None;
-        for (lane, [a, b, c]) in tris.iter().enumerate() {
-            if let Some((t, b1, b2)) = w.intersect_axis::<KZ>(*a, *b, *c, t_max) {
-                t_max = t;
-                best = Some((lane, t, b1, b2));
-            }
-        }
-        best
-    }
-
-    fn pack(tris: &[[Vec3; 3]; 4]) -> Tri4 {
-        let mut tri = Tri4 {
-            v: [[Vec4::ZERO; 3]; 3],
-        };
-        for (lane, t) in tris.iter().enumerate() {
-            for (k, p) in t.iter().enumerate() {
-                for a in 0..3 {
-                    tri.v[k][a][lane] = p[a];
-                }
-            }
-        }
-        tri
-    }
-
-    fn check<const KZ: usize>(w: &WatertightRay, tris: &[[Vec3; 3]; 4], t_max: f32) -> bool {
-        let tri = pack(tris);
-        let simd = w.intersect4::<KZ>(&tri, t_max);
-        let scalar = scalar_lanes::<KZ>(w, tris, t_max);
-        let bits = |r: Option<(usize, f32, f32, f32)>| {
-            r.map(|(l, t, b1, b2)| (l, t.to_bits(), b1.to_bits(), b2.to_bits()))
-        };
-        assert_eq!(bits(simd), bits(scalar), "{tris:?} {w:?}");
-        assert_eq!(w.occluded4::<KZ>(&tri, t_max), scalar.is_some());
-        matches!(w.hits4::<KZ>(&tri, t_max), Hits4::Exact)
-    }
-
-    #[test]
-    fn four_triangle_test_equals_the_scalar_test_bit_for_bit() {
-        // Random triangles and rays, and triangles and rays on a small integer grid with
-        // axis-aligned or diagonal directions, where edge functions are often exactly zero (the
-        // scalar f64 fallback) and several lanes tie (shared vertices and edges, duplicates).
-        let mut rng = Pcg64::seed_from_u64(11);
-        let (mut exact, mut hits) = (0, 0);
-        for k in 0..20_000 {
-            let grid = k % 2 == 0;
-            let point = |rng: &mut Pcg64| {
-                if grid {
-                    Vec3::new(
-                        rng.random_range(-2..=2) as f32,
-                        rng.random_range(-2..=2) as f32,
-                        rng.random_range(-2..=2) as f32,
-                    )
-                } else {
-                    Vec3::new(rng.random(), rng.random(), rng.random()) * 4.0 - 2.0
-                }
-            };
-            let mut tris = [[Vec3::ZERO; 3]; 4];
-            for t in tris.iter_mut() {
-                *t = [point(&mut rng), point(&mut rng), point(&mut rng)];
-            }
-            if k % 3 == 0 {
-                tris[2] = tris[1]; // a duplicate (padding) lane ties exactly
-            }
-            let o = point(&mut rng) * 2.0;
-            let d = if grid {
-                let axis = [Vec3::X, Vec3::Y, Vec3::Z, Vec3::ONE][rng.random_range(0..4)];
-                if rng.random::<bool>() {
-                    axis
-                } else {
-                    -axis
-                }
-            } else {
-                point(&mut rng)
-            };
-            if d == Vec3::ZERO {
-                continue;
-            }
-            let ray = Ray::new(o, d.normalize());
-            let w = WatertightRay::new(&ray);
-            let t_max = if k % 5 == 0 { 3.0 } else { f32::INFINITY };
-            let was_exact = match w.kz {
-                0 => check::<0>(&w, &tris, t_max),
-                1 => check::<1>(&w, &tris, t_max),
-                _ => check::<2>(&w, &tris, t_max),
-            };
-            exact += was_exact as u32;
-            hits += match w.kz {
-                0 => scalar_lanes::<0>(&w, &tris, t_max),
-                1 => scalar_lanes::<1>(&w, &tris, t_max),
-                _ => scalar_lanes::<2>(&w, &tris, t_max),
-            }
-            .is_some() as u32;
-        }
-        // Both paths were exercised.
-        assert!(exact > 100, "{exact} blocks took the exact path");
-        assert!(hits > 500, "{hits} hits");
-    }
-
     /// `(t, b1, b2)` of the ray `o + t d` in the plane of triangle `(p0, p1, p2)` by Cramer's
     /// rule in `f64` (the barycentrics may be negative: the point may lie outside).
     fn plane_hit_f64(o: Vec3, d: Vec3, [p0, p1, p2]: [Vec3; 3]) -> Option<(f64, f64, f64)> {
@@ -1225,10 +1115,11 @@ mod tri4_tests {
 
     #[test]
     fn fast_test_finds_the_exact_hit_away_from_the_edges() {
-        // Random blocks of four triangles and random rays: every lane whose exact (f64) hit lies
-        // inside its triangle and inside (0, t_max) by a margin of 1e-4 must be found, the
-        // closest with the exact t and barycentrics to 1e-5; a block whose lanes all miss by that
-        // margin must be missed. Lanes within the margin of an edge may go either way.
+        // Random blocks of four triangles and random rays, both forms of the test (unguarded,
+        // and guarded with its exact fallback): every lane whose exact (f64) hit lies inside its
+        // triangle and inside (0, t_max) by a margin of 1e-4 must be found, the closest with the
+        // exact t and barycentrics to 1e-5; a block whose lanes all miss by that margin must be
+        // missed. Lanes within the margin of an edge may go either way.
         let mut rng = Pcg64::seed_from_u64(17);
         let (mut hits, mut misses) = (0, 0);
         for k in 0..40_000 {
@@ -1240,6 +1131,7 @@ mod tri4_tests {
                 *tri = Some([point(&mut rng), point(&mut rng), point(&mut rng)]);
             }
             let block = FastTri4::new(tris.iter().copied());
+            let exact = Tri4::new(tris.iter().copied());
             let o = point(&mut rng) * 2.0;
             let d = (point(&mut rng) - o).normalize();
             let t_max = if k % 5 == 0 { 3.0 } else { f32::INFINITY };
@@ -1259,27 +1151,33 @@ mod tri4_tests {
                     expected = Some((lane, t, b1, b2));
                 }
             }
-            let got = block.closest(o, d, t_max);
-            assert_eq!(block.any(o, d, t_max), got.is_some());
+            let fast = block.closest::<false>(o, d, t_max, || None);
+            assert_eq!(block.any::<false>(o, d, t_max, || false), fast.is_some());
+            let fallback = || exact.closest_exact(o, d, t_max);
+            let guarded = block.closest::<true>(o, d, t_max, fallback);
+            let any = block.any::<true>(o, d, t_max, || fallback().is_some());
+            assert_eq!(any, guarded.is_some());
             if ambiguous {
                 continue;
             }
-            match (got, expected) {
-                (None, None) => misses += 1,
-                (Some((lane, t, b1, b2)), Some((l, te, b1e, b2e))) => {
-                    hits += 1;
-                    assert_eq!(lane, l, "{tris:?} {o} {d}");
-                    let close = |x: f32, e: f64| (x as f64 - e).abs() < 1e-5 * (1.0 + e.abs());
-                    assert!(
-                        close(t, te) && close(b1, b1e) && close(b2, b2e),
-                        "{tris:?} {o} {d}"
-                    );
+            for got in [fast, guarded] {
+                match (got, expected) {
+                    (None, None) => misses += 1,
+                    (Some((lane, t, b1, b2)), Some((l, te, b1e, b2e))) => {
+                        hits += 1;
+                        assert_eq!(lane, l, "{tris:?} {o} {d}");
+                        let close = |x: f32, e: f64| (x as f64 - e).abs() < 1e-5 * (1.0 + e.abs());
+                        assert!(
+                            close(t, te) && close(b1, b1e) && close(b2, b2e),
+                            "{tris:?} {o} {d}"
+                        );
+                    }
+                    (got, expected) => panic!("{got:?} against {expected:?}: {tris:?} {o} {d}"),
                 }
-                (got, expected) => panic!("{got:?} against {expected:?}: {tris:?} {o} {d}"),
             }
         }
         assert!(
-            hits > 5_000 && misses > 5_000,
+            hits > 10_000 && misses > 10_000,
             "{hits} hits, {misses} misses"
         );
     }

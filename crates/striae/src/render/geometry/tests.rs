@@ -113,13 +113,22 @@ fn ray_triangle_matches_analytic_answer() {
     );
 }
 
-/// Rays shot at a closed UV sphere: `(aimed, aimed_misses, random, random_misses)`. Aimed rays
-/// go at a vertex (one in four) or a point of an edge, from inside (near the centre) or from
-/// outside, and are tested with `intersect`; random ones go from inside in uniform directions
-/// and are tested with `intersect` and `occluded`. The only way out of a closed surface is
-/// through it, so every miss is a leak.
-fn leaks(triangles: TriangleTest, aimed: usize, random: usize) -> (usize, usize, usize, usize) {
-    let mesh = uv_sphere_mesh(24, 37, 1.3);
+/// Rays shot at a closed UV sphere of radius `1.3 scale` centred at `centre`:
+/// `(aimed, aimed_misses, random, random_misses)`. Aimed rays go at a vertex (one in four) or a
+/// point of an edge, from inside (near the centre) or from outside (about `far` away), and are
+/// tested with `intersect`; random ones go from inside in uniform directions and are tested
+/// with `intersect` and `occluded`. The only way out of a closed surface is through it, so
+/// every miss is a leak.
+fn leaks(
+    triangles: TriangleTest,
+    (centre, scale, far): (Vec3, f32, f32),
+    aimed: usize,
+    random: usize,
+) -> (usize, usize, usize, usize) {
+    let place = Transform::scale(Vec3::splat(scale))
+        .unwrap()
+        .then(&Transform::translate(centre).unwrap());
+    let mesh = uv_sphere_mesh(24, 37, 1.3).transformed(&place).unwrap();
     let geometry =
         Geometry::with_triangles(vec![shape(ShapeGeometry::Mesh(mesh.clone()))], triangles);
     let mut rng = Pcg64::seed_from_u64(7);
@@ -136,16 +145,17 @@ fn leaks(triangles: TriangleTest, aimed: usize, random: usize) -> (usize, usize,
             a.lerp(b, rng.random::<f32>())
         };
         let origin = if k % 2 == 0 {
-            0.3 * random_unit(&mut rng)
+            centre + 0.3 * scale * random_unit(&mut rng)
         } else {
-            target + 4.0 * (target.normalize() + 0.8 * random_unit(&mut rng))
+            target + far * ((target - centre).normalize() + 0.8 * random_unit(&mut rng))
         };
         let ray = Ray::new(origin, (target - origin).normalize());
         aimed_misses += geometry.intersect(&ray).is_none() as usize;
     }
     let mut random_misses = 0;
     for _ in 0..random {
-        let ray = Ray::new(0.3 * random_unit(&mut rng), random_unit(&mut rng));
+        let origin = centre + 0.3 * scale * random_unit(&mut rng);
+        let ray = Ray::new(origin, random_unit(&mut rng));
         random_misses += (geometry.intersect(&ray).is_none() || !geometry.occluded(&ray)) as usize;
     }
     (aimed, aimed_misses, random, random_misses)
@@ -153,16 +163,23 @@ fn leaks(triangles: TriangleTest, aimed: usize, random: usize) -> (usize, usize,
 
 #[test]
 fn closed_mesh_is_watertight_at_shared_edges_and_vertices() {
-    let (aimed, aimed_misses, random, random_misses) =
-        leaks(TriangleTest::Watertight, 40_000, 20_000);
-    assert_eq!(
-        aimed_misses, 0,
-        "{aimed_misses} of {aimed} rays aimed at edges slipped through"
-    );
-    assert_eq!(
-        random_misses, 0,
-        "{random_misses} of {random} random rays slipped through"
-    );
+    // The watertight test (the fast test, guarded) on the sphere as it is, seen from far away,
+    // small and far from the world's origin (large `o - v0` against small edges: its rounding
+    // bound at its widest), and tiny.
+    for placement in [
+        (Vec3::ZERO, 1.0, 4.0),
+        (Vec3::ZERO, 1.0, 500.0),
+        (Vec3::new(1000.0, -2000.0, 500.0), 0.05, 50.0),
+        (Vec3::new(3.0, 1.0, -2.0), 0.01, 5.0),
+    ] {
+        let (aimed, aimed_misses, random, random_misses) =
+            leaks(TriangleTest::Watertight, placement, 40_000, 20_000);
+        assert_eq!(
+            (aimed_misses, random_misses),
+            (0, 0),
+            "{placement:?}: {aimed_misses} of {aimed} rays aimed at edges and {random_misses} of {random} random rays slipped through"
+        );
+    }
 }
 
 #[test]
@@ -170,7 +187,8 @@ fn closed_mesh_leaks_only_where_aimed_at_its_edges() {
     // What the fast test gives up (`TriangleTest::Fast`): of rays aimed exactly at a shared
     // edge or vertex, some pass between the triangles (3.4 % measured; at most 5 % allowed), but
     // rays in random directions, which meet an edge only by chance, do not leak.
-    let (aimed, aimed_misses, random, random_misses) = leaks(TriangleTest::Fast, 40_000, 200_000);
+    let (aimed, aimed_misses, random, random_misses) =
+        leaks(TriangleTest::Fast, (Vec3::ZERO, 1.0, 4.0), 40_000, 200_000);
     let share = aimed_misses as f64 / aimed as f64;
     eprintln!("fast test: {aimed_misses} of {aimed} aimed rays leak, {random_misses} of {random} random ones");
     assert!(
@@ -213,42 +231,35 @@ fn test_scene() -> Vec<Shape> {
     ]
 }
 
-/// Compares `intersect` and `occluded` of both BVH kinds, with the watertight triangle test,
-/// with brute force (the same test) over `rays`: the same hits bit for bit.
+/// Compares `intersect` and `occluded` of the binary BVH (whose leaves take Woop, Benthin and
+/// Wald's test, as brute force does) with brute force over `rays`: the same hits bit for bit.
 fn check_against_brute_force(shapes: &[Shape], rays: &[Ray]) -> usize {
+    let geometry = Geometry::with_bvh(shapes.to_vec(), BvhKind::Bvh2, TriangleTest::Watertight);
     let mut hits = 0;
-    for kind in [BvhKind::Bvh8, BvhKind::Bvh2] {
-        let geometry = Geometry::with_bvh(shapes.to_vec(), kind, TriangleTest::Watertight);
-        hits = 0;
-        for ray in rays {
-            let bvh = geometry.intersect(ray);
-            let brute = intersect_brute_force(shapes, ray);
-            match (bvh, brute) {
-                (None, None) => {}
-                (Some(h), Some((t, s, p))) => {
-                    hits += 1;
-                    assert_eq!(h.t, t, "{kind:?} ray {ray:?}");
-                    assert_eq!((h.shape, h.prim), (s, p), "{kind:?} ray {ray:?}");
-                    assert!(h.t > 0.0 && h.t < ray.t_max);
-                    assert!((h.p - ray.at(h.t)).length() < 1e-4 * (1.0 + h.t * ray.d.length()));
-                    for v in [h.p, h.ng, h.ns, h.dpdu, h.dpdv] {
-                        assert!(v.is_finite());
-                    }
-                    assert!(h.uv.is_finite());
-                    assert!(
-                        (h.ng.length() - 1.0).abs() < 1e-4
-                            && (h.ns.length() - 1.0).abs() < 1e-4
-                            && h.ng.dot(h.ns) >= 0.0
-                    );
+    for ray in rays {
+        let bvh = geometry.intersect(ray);
+        let brute = intersect_brute_force(shapes, ray);
+        match (bvh, brute) {
+            (None, None) => {}
+            (Some(h), Some((t, s, p))) => {
+                hits += 1;
+                assert_eq!(h.t, t, "ray {ray:?}");
+                assert_eq!((h.shape, h.prim), (s, p), "ray {ray:?}");
+                assert!(h.t > 0.0 && h.t < ray.t_max);
+                assert!((h.p - ray.at(h.t)).length() < 1e-4 * (1.0 + h.t * ray.d.length()));
+                for v in [h.p, h.ng, h.ns, h.dpdu, h.dpdv] {
+                    assert!(v.is_finite());
                 }
-                (a, b) => panic!("{kind:?}: bvh {a:?} vs brute force {b:?} for {ray:?}"),
+                assert!(h.uv.is_finite());
+                assert!(
+                    (h.ng.length() - 1.0).abs() < 1e-4
+                        && (h.ns.length() - 1.0).abs() < 1e-4
+                        && h.ng.dot(h.ns) >= 0.0
+                );
             }
-            assert_eq!(
-                geometry.occluded(ray),
-                brute.is_some(),
-                "{kind:?} ray {ray:?}"
-            );
+            (a, b) => panic!("bvh {a:?} vs brute force {b:?} for {ray:?}"),
         }
+        assert_eq!(geometry.occluded(ray), brute.is_some(), "ray {ray:?}");
     }
     hits
 }
@@ -271,12 +282,16 @@ fn random_rays(rng: &mut Pcg64, n: usize, centre: Vec3, radius: f32) -> Vec<Ray>
         .collect()
 }
 
-/// Compares `intersect` and `occluded` of the 8-wide BVH with the fast triangle test with
-/// brute force (watertight) over `rays`: the same primitive with `t` and the hit point within
-/// rounding, but for at most one ray in 2,000 (a ray through an edge may find either triangle,
-/// or slip through); returns the number of rays that hit.
-fn check_fast_against_brute_force(shapes: &[Shape], rays: &[Ray]) -> usize {
-    let geometry = Geometry::with_triangles(shapes.to_vec(), TriangleTest::Fast);
+/// Compares `intersect` and `occluded` of the 8-wide BVH with the triangle test `triangles`
+/// with brute force (Woop, Benthin and Wald's test) over `rays`: the same primitive with `t`
+/// within rounding, but for at most one ray in 2,000 (a ray through an edge may find either
+/// triangle, or with the fast test slip through); returns the number of rays that hit.
+fn check_bvh8_against_brute_force(
+    shapes: &[Shape],
+    rays: &[Ray],
+    triangles: TriangleTest,
+) -> usize {
+    let geometry = Geometry::with_triangles(shapes.to_vec(), triangles);
     let (mut hits, mut differ) = (0, 0);
     for ray in rays {
         let fast = geometry.intersect(ray);
@@ -314,7 +329,9 @@ fn bvh_closest_hit_equals_brute_force_and_occlusion_agrees() {
         hits > 2500,
         "only {hits} hits: the test scene is not exercised"
     );
-    assert!(check_fast_against_brute_force(&shapes, &rays) > 2500);
+    for triangles in [TriangleTest::Fast, TriangleTest::Watertight] {
+        assert!(check_bvh8_against_brute_force(&shapes, &rays, triangles) > 2500);
+    }
 }
 
 #[test]
@@ -332,17 +349,18 @@ fn bvh_closest_hit_equals_brute_force_on_the_teapot() {
     }
     let hits = check_against_brute_force(&shapes, &rays);
     assert!(hits > 1000, "only {hits} hits");
-    assert!(check_fast_against_brute_force(&shapes, &rays) > 1000);
+    for triangles in [TriangleTest::Fast, TriangleTest::Watertight] {
+        assert!(check_bvh8_against_brute_force(&shapes, &rays, triangles) > 1000);
+    }
 }
 
 #[test]
 fn packets_of_rays_find_what_single_rays_find() {
     // Packets as a pinhole camera makes them: up to PACKET rays from one origin through
     // jittered points of one "pixel" around a random target, some with a short `t_max`. Every
-    // ray's hit must be bit for bit the single-ray query's, with either triangle test, and
-    // agree with brute force (with the watertight test; the fast one is checked against brute
-    // force in `check_fast_against_brute_force`). Packets whose directions straddle an axis,
-    // or whose origins differ, fall back to single rays.
+    // ray's hit must be bit for bit the single-ray query's, with either triangle test (which
+    // `check_bvh8_against_brute_force` compares with brute force). Packets whose directions
+    // straddle an axis, or whose origins differ, fall back to single rays.
     let teapot = vec![shape(ShapeGeometry::Mesh(TriangleMesh::teapot(6)))];
     let scenes = [
         ("test scene", test_scene(), Vec3::ZERO),
@@ -401,14 +419,6 @@ fn packets_of_rays_find_what_single_rays_find() {
                     format!("{single:?}"),
                     "{name}: packet {k} ray {ray:?}"
                 );
-                if triangles == TriangleTest::Watertight {
-                    let brute = intersect_brute_force(shapes, ray);
-                    assert_eq!(
-                        got.map(|h| (h.t, h.shape, h.prim)),
-                        brute,
-                        "{name}: {ray:?}"
-                    );
-                }
                 hits += got.is_some() as usize;
             }
         }
