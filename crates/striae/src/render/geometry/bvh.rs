@@ -171,7 +171,7 @@ struct Tri4 {
     v: [[Vec4; 3]; 3],
 }
 
-/// Four triangles of a [`Bvh8`] leaf block for the fast test ([`TriangleTest::Fast`]), as
+/// Four triangles of a [`Bvh8`] leaf block for the fast test in either form ([`TriangleTest`]), as
 /// structure of arrays (`[axis]` rows of four lanes): the first vertex `v0`, the edges
 /// `a = v1 - v0`, `b = v2 - v0`, the unnormalised normal `n = a x b` (Embree's `Triangle4`) and
 /// each lane's largest edge component (for the rounding bound). A padded lane or a sphere's lane
@@ -195,9 +195,10 @@ enum FastHits {
     Some(glam::BVec4A, Vec4, Vec4, Vec4),
 }
 
-/// Bound on the fast test's rounding of an edge value, in units of `eps |d| |o - v0| size` (the
-/// operations' error, stored edges' rounding included, is at most 42 of them; the margin covers
-/// the third edge's extra terms).
+/// Bound on the fast test's rounding of an edge value, in units of `eps |d| |o - v0| size`
+/// (largest components; for the third edge twice this, plus this with `size` for `|o - v0|`).
+/// A first-order count of the operations' errors, the stored edges' and normal's rounding
+/// included, gives about 42 units for an edge and 96 for the third; 64 leaves a margin.
 const EDGE_ROUNDING: f32 = 64.0 * f32::EPSILON;
 
 impl FastTri4 {
