@@ -650,7 +650,7 @@ impl Geometry {
         obvhs::ray::Ray::new(Vec3A::from(ray.o), d, 0.0, ray.t_max)
     }
 
-    #[inline]
+    #[inline(always)]
     fn hit_prim(
         &self,
         wray: &WatertightRay,
@@ -667,52 +667,18 @@ impl Geometry {
         }
     }
 
-    /// Primitive `id` for a ray of dominant axis `KZ`.
-    #[inline(always)]
-    fn hit_prim_axis<const KZ: usize>(
-        &self,
-        wray: &WatertightRay,
-        ray: &Ray,
-        id: usize,
-        t_max: f32,
-    ) -> Option<(f32, f32, f32)> {
-        let p = &self.prims[id];
-        if p.prim == SPHERE {
-            intersect_sphere(p.v[0], p.v[1].x, ray, t_max).map(|t| (t, 0.0, 0.0))
-        } else {
-            wray.intersect_axis::<KZ>(p.v[0], p.v[1], p.v[2], t_max)
-                .filter(|h| !self.carved_away(p, ray, h.0))
-        }
-    }
-
     /// Closest hit in the [`Bvh8`]: `(primitive, t, b1, b2)`.
     #[inline(always)]
-    fn closest_bvh8<const KZ: usize>(
-        &self,
-        bvh: &Bvh8,
-        wray: &WatertightRay,
-        ray: &Ray,
-    ) -> Option<(usize, f32, f32, f32)> {
-        let mut test = Bvh8Leaves::<KZ> {
-            geometry: self,
-            wray,
-            ray,
-            best: None,
-        };
+    fn closest_bvh8(&self, bvh: &Bvh8, ray: &Ray) -> Option<(usize, f32, f32, f32)> {
+        let mut test = Bvh8Leaves::new(self, ray);
         bvh.closest(ray.o, ray.d, ray.t_max, &mut test);
         test.best
     }
 
     /// Any hit in the [`Bvh8`].
     #[inline(always)]
-    fn occluded_bvh8<const KZ: usize>(&self, bvh: &Bvh8, wray: &WatertightRay, ray: &Ray) -> bool {
-        let mut test = Bvh8Leaves::<KZ> {
-            geometry: self,
-            wray,
-            ray,
-            best: None,
-        };
-        bvh.any(ray.o, ray.d, ray.t_max, &mut test)
+    fn occluded_bvh8(&self, bvh: &Bvh8, ray: &Ray) -> bool {
+        bvh.any(ray.o, ray.d, ray.t_max, &mut Bvh8Leaves::new(self, ray))
     }
 
     /// Closest hit with `t` in `(0, ray.t_max)`. Inlined into the caller (the render loop is
@@ -723,23 +689,19 @@ impl Geometry {
         let Accel::Bvh8(bvh) = &self.accel else {
             return self.intersect_obvhs(ray);
         };
-        self.intersect_bvh8(bvh, &WatertightRay::new(ray), ray)
+        self.intersect_bvh8(bvh, ray)
     }
 
-    /// [`Geometry::intersect`] in the [`Bvh8`] with the ray's watertight constants `wray`.
+    /// [`Geometry::intersect`] in the [`Bvh8`].
     #[inline(always)]
-    fn intersect_bvh8(&self, bvh: &Bvh8, wray: &WatertightRay, ray: &Ray) -> Option<SurfaceHit> {
-        let (id, t, b1, b2) = match wray.kz {
-            0 => self.closest_bvh8::<0>(bvh, wray, ray),
-            1 => self.closest_bvh8::<1>(bvh, wray, ray),
-            _ => self.closest_bvh8::<2>(bvh, wray, ray),
-        }?;
+    fn intersect_bvh8(&self, bvh: &Bvh8, ray: &Ray) -> Option<SurfaceHit> {
+        let (id, t, b1, b2) = self.closest_bvh8(bvh, ray)?;
         Some(self.surface_hit(ray, id, t, b1, b2))
     }
 
     /// The closest hits of `rays` (at most [`PACKET`]) into `hits` (cleared first), as
     /// [`Geometry::intersect`] finds them (but for exact ties in `t`, see `bvh8`). Rays that
-    /// share their origin, their dominant axis and the signs of their directions (a pixel's
+    /// share their origin and the signs of their directions (a pixel's
     /// camera rays through a pinhole) are traversed as one packet ([`Bvh8::closest_packet`]),
     /// other rays one by one. (The hits go to the caller's array rather than being returned:
     /// a returned array of 32 hits, 2.7 KB, is copied several times on its way out; in place,
@@ -765,60 +727,37 @@ impl Geometry {
         assert!(rays.len() <= PACKET);
         hits.clear();
         if let (Accel::Bvh8(bvh), 2..) = (&self.accel, rays.len()) {
-            // (Loops of `push` rather than `collect` / `extend` here and below: those are
-            // compiled out of line, where the render loop's copy loses its target features.)
-            let mut wrays = ArrayVec::<WatertightRay, PACKET>::new();
-            for ray in rays {
-                wrays.push(WatertightRay::new(ray));
-            }
             let origin = rays[0].o.to_array().map(f32::to_bits);
-            let kz = wrays[0].kz;
             let shared = rays
                 .iter()
-                .zip(&wrays)
-                .all(|(r, w)| w.kz == kz && r.o.to_array().map(f32::to_bits) == origin);
-            let traced = match kz {
-                _ if !shared => false,
-                0 => self.closest_packet::<0>(bvh, &wrays, rays, hits),
-                1 => self.closest_packet::<1>(bvh, &wrays, rays, hits),
-                _ => self.closest_packet::<2>(bvh, &wrays, rays, hits),
-            };
+                .all(|r| r.o.to_array().map(f32::to_bits) == origin);
+            let traced = shared && self.closest_packet(bvh, rays, hits);
             if !traced {
-                self.intersect_each(rays, &wrays, hits);
+                self.intersect_each(rays, hits);
             }
             return traced;
         }
-        self.intersect_each(rays, &[], hits);
+        self.intersect_each(rays, hits);
         false
     }
 
     /// [`Geometry::intersect`] of each ray (out of line: [`Geometry::intersect_coherent`]'s
-    /// fallback, for rays that are no packet), with the rays' watertight constants where the
-    /// packet attempt already made them (`wrays`, else empty).
+    /// fallback, for rays that are no packet).
     #[inline(never)]
-    fn intersect_each(
-        &self,
-        rays: &[Ray],
-        wrays: &[WatertightRay],
-        hits: &mut ArrayVec<Option<SurfaceHit>, PACKET>,
-    ) {
-        match &self.accel {
-            Accel::Bvh8(bvh) if wrays.len() == rays.len() => hits.extend(
-                rays.iter()
-                    .zip(wrays)
-                    .map(|(ray, wray)| self.intersect_bvh8(bvh, wray, ray)),
-            ),
-            _ => hits.extend(rays.iter().map(|ray| self.intersect(ray))),
+    fn intersect_each(&self, rays: &[Ray], hits: &mut ArrayVec<Option<SurfaceHit>, PACKET>) {
+        // (A loop of `push` rather than `extend`: that is compiled out of line, where the
+        // render loop's copy loses its target features.)
+        for ray in rays {
+            hits.push(self.intersect(ray));
         }
     }
 
-    /// [`Geometry::intersect_coherent`]'s packet of rays of dominant axis `KZ` with one origin,
-    /// into `hits`; false (and `hits` left empty) when their directions' signs differ.
+    /// [`Geometry::intersect_coherent`]'s packet of rays with one origin, into `hits`; false
+    /// (and `hits` left empty) when their directions' signs differ.
     #[inline(always)]
-    fn closest_packet<const KZ: usize>(
+    fn closest_packet(
         &self,
         bvh: &Bvh8,
-        wrays: &[WatertightRay],
         rays: &[Ray],
         hits: &mut ArrayVec<Option<SurfaceHit>, PACKET>,
     ) -> bool {
@@ -827,14 +766,8 @@ impl Geometry {
         };
         let mut dirs = ArrayVec::<Vec3, PACKET>::new();
         let mut largest = f32::NEG_INFINITY;
-        for (ray, wray) in rays.iter().zip(wrays) {
-            let leaves = Bvh8Leaves::<KZ> {
-                geometry: self,
-                wray,
-                ray,
-                best: None,
-            };
-            packet.rays.push((leaves, ray.t_max));
+        for ray in rays {
+            packet.rays.push((Bvh8Leaves::new(self, ray), ray.t_max));
             dirs.push(ray.d);
             largest = largest.max(ray.t_max);
         }
@@ -861,13 +794,7 @@ impl Geometry {
         let mut hit = obvhs::ray::RayHit::none();
         match &self.accel {
             Accel::None => return None,
-            Accel::Bvh8(bvh) => {
-                best = match wray.kz {
-                    0 => self.closest_bvh8::<0>(bvh, &wray, ray),
-                    1 => self.closest_bvh8::<1>(bvh, &wray, ray),
-                    _ => self.closest_bvh8::<2>(bvh, &wray, ray),
-                };
-            }
+            Accel::Bvh8(bvh) => best = self.closest_bvh8(bvh, ray),
             Accel::Bvh2(bvh) => {
                 bvh.ray_traverse(Self::obvhs_ray(ray), &mut hit, |_, id| {
                     match self.hit_prim(&wray, ray, id, t_max) {
@@ -892,12 +819,7 @@ impl Geometry {
         let Accel::Bvh8(bvh) = &self.accel else {
             return self.occluded_obvhs(ray);
         };
-        let wray = WatertightRay::new(ray);
-        match wray.kz {
-            0 => self.occluded_bvh8::<0>(bvh, &wray, ray),
-            1 => self.occluded_bvh8::<1>(bvh, &wray, ray),
-            _ => self.occluded_bvh8::<2>(bvh, &wray, ray),
-        }
+        self.occluded_bvh8(bvh, ray)
     }
 
     /// [`Geometry::occluded`] for both kinds of hierarchy.
@@ -914,11 +836,7 @@ impl Geometry {
         match &self.accel {
             Accel::None => false,
             Accel::Bvh2(bvh) => !bvh.ray_traverse_miss(Self::obvhs_ray(ray), |_, id| test(id)),
-            Accel::Bvh8(bvh) => match wray.kz {
-                0 => self.occluded_bvh8::<0>(bvh, &wray, ray),
-                1 => self.occluded_bvh8::<1>(bvh, &wray, ray),
-                _ => self.occluded_bvh8::<2>(bvh, &wray, ray),
-            },
+            Accel::Bvh8(bvh) => self.occluded_bvh8(bvh, ray),
         }
     }
 
@@ -983,25 +901,44 @@ impl Geometry {
     }
 }
 
-/// The primitive tests of [`Geometry`]'s [`Bvh8`] for a ray of dominant axis `KZ`, with the
-/// closest hit so far `(primitive, t, b1, b2)`.
-struct Bvh8Leaves<'a, const KZ: usize> {
+/// The primitive tests of [`Geometry`]'s [`Bvh8`] for a ray, with the closest hit so far
+/// `(primitive, t, b1, b2)`.
+struct Bvh8Leaves<'a> {
     geometry: &'a Geometry,
-    wray: &'a WatertightRay,
     ray: &'a Ray,
+    /// The ray's constants for Woop's test, made at its first scalar leaf (spheres, carved
+    /// faces).
+    wray: Option<WatertightRay>,
     best: Option<(usize, f32, f32, f32)>,
 }
 
-impl<const KZ: usize> ClosestLeaf for Bvh8Leaves<'_, KZ> {
+impl<'a> Bvh8Leaves<'a> {
+    #[inline(always)]
+    fn new(geometry: &'a Geometry, ray: &'a Ray) -> Self {
+        Bvh8Leaves {
+            geometry,
+            ray,
+            wray: None,
+            best: None,
+        }
+    }
+
+    /// Primitive `id` of a scalar leaf, before `t_max`.
+    #[inline(always)]
+    fn scalar(&mut self, id: usize, t_max: f32) -> Option<(f32, f32, f32)> {
+        let ray = self.ray;
+        let wray = self.wray.get_or_insert_with(|| WatertightRay::new(ray));
+        self.geometry.hit_prim(wray, ray, id, t_max)
+    }
+}
+
+impl ClosestLeaf for Bvh8Leaves<'_> {
     #[inline(always)]
     fn closest(&mut self, leaf: Leaf, t_max: &mut f32) {
         let first = BLOCK * leaf.block;
         if leaf.scalar {
             for id in first..first + leaf.count {
-                if let Some((t, b1, b2)) = self
-                    .geometry
-                    .hit_prim_axis::<KZ>(self.wray, self.ray, id, *t_max)
-                {
+                if let Some((t, b1, b2)) = self.scalar(id, *t_max) {
                     self.best = Some((id, t, b1, b2));
                     *t_max = t;
                 }
@@ -1022,16 +959,12 @@ impl<const KZ: usize> ClosestLeaf for Bvh8Leaves<'_, KZ> {
     }
 }
 
-impl<const KZ: usize> AnyLeaf for Bvh8Leaves<'_, KZ> {
+impl AnyLeaf for Bvh8Leaves<'_> {
     #[inline(always)]
     fn any(&mut self, leaf: Leaf, t_max: f32) -> bool {
         let first = BLOCK * leaf.block;
         if leaf.scalar {
-            (first..first + leaf.count).any(|id| {
-                self.geometry
-                    .hit_prim_axis::<KZ>(self.wray, self.ray, id, t_max)
-                    .is_some()
-            })
+            (first..first + leaf.count).any(|id| self.scalar(id, t_max).is_some())
         } else {
             let (o, d, g) = (self.ray.o, self.ray.d, self.geometry);
             let (fast, block) = (&g.fast4[leaf.block], leaf.block);
@@ -1047,11 +980,11 @@ impl<const KZ: usize> AnyLeaf for Bvh8Leaves<'_, KZ> {
 
 /// The primitive tests of a packet ([`Bvh8::closest_packet`]): each ray's own
 /// [`Bvh8Leaves`], with its own closest `t`.
-struct PacketLeaves<'a, const KZ: usize> {
-    rays: ArrayVec<(Bvh8Leaves<'a, KZ>, f32), PACKET>,
+struct PacketLeaves<'a> {
+    rays: ArrayVec<(Bvh8Leaves<'a>, f32), PACKET>,
 }
 
-impl<const KZ: usize> ClosestLeaf for PacketLeaves<'_, KZ> {
+impl ClosestLeaf for PacketLeaves<'_> {
     /// Every ray tests the leaf against its own closest `t`; `t_max` becomes the largest.
     #[inline(always)]
     fn closest(&mut self, leaf: Leaf, t_max: &mut f32) {
