@@ -605,8 +605,9 @@ fn render_tile_sums_observed(
     // One worker per thread, and every tile a job of its own (`with_max_len(1)`): rayon's
     // adaptive splitting otherwise hands each thread runs of tiles that cannot be stolen once
     // begun, and where the costly tiles bunch up (a teapot in the middle of the film) one thread
-    // finished 0.1-0.3 s before the other (the built-in scene at 2 threads: 1.84 s where its
-    // 3.4 CPU-seconds allow 1.72). The image does not depend on which worker renders a tile.
+    // can finish 0.1-0.3 s before the other (the built-in scene at 2 threads: 1.97 s wall for
+    // 3.61 CPU-s, against 1.79 s balanced). The image does not depend on which worker renders a
+    // tile.
     let workers: Vec<std::sync::Mutex<Worker>> = (0..rayon::current_num_threads())
         .map(|_| Default::default())
         .collect();

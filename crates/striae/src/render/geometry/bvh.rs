@@ -21,8 +21,8 @@
 //!   one fixed order ([`exact_hit`]), so that both triangles see one value. Every sign either
 //!   path takes is then the exact one, and a ray never slips between triangles.
 //!
-//! The glass teapot renders in 7 % less CPU time with the fast form than with Woop, Benthin and
-//! Wald's watertight test (2013, JCGT 2(1)), 4 % less with the watertight form (one thread,
+//! The glass teapot renders in 11 % less CPU time with the fast form than with Woop, Benthin and
+//! Wald's watertight test (2013, JCGT 2(1)), 8 % less with the watertight form (one thread,
 //! `BENCHMARKS.md`). Woop's test, in the form of pbrt-v4's `Triangle::Intersect`
 //! ([`WatertightRay`]), remains for the binary BVH, the scalar leaves (carved faces) and the
 //! brute-force oracle of the tests.
