@@ -163,6 +163,7 @@ fn scene_with(
         seed,
         max_depth,
         sampler,
+        lanes: None,
     };
     load_scene(kind, source, &overrides)
 }

@@ -24,6 +24,7 @@ fn bench_render(c: &mut Criterion) {
             seed: Some(0),
             max_depth: None,
             sampler: None,
+            lanes: None,
         };
         let scene = Scene::parse(
             striae::render::scene::DEFAULT_SCENE,
@@ -44,6 +45,7 @@ fn bench_render(c: &mut Criterion) {
         seed: Some(0),
         max_depth: None,
         sampler: None,
+        lanes: None,
     };
     let smooth = Scene::parse(
         include_str!("../scenes/glass-teapot.toml"),

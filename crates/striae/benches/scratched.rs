@@ -56,6 +56,7 @@ fn bench(c: &mut Criterion) {
         seed: Some(1),
         max_depth: None,
         sampler: None,
+        lanes: None,
     };
     let mut g = c.benchmark_group("scratched");
     g.sample_size(10);

@@ -344,6 +344,7 @@ fn image_is_bit_identical_across_thread_counts() {
         seed: Some(7),
         max_depth: None,
         sampler: None,
+        lanes: None,
     };
     let s = Scene::parse(text, Path::new("default.toml"), Path::new("."), &o).unwrap();
     let a = assert_bit_identical_across_thread_counts(&s);
@@ -464,6 +465,7 @@ fn simd_and_portable_render_loops_give_the_same_image() {
         seed: Some(3),
         max_depth: None,
         sampler: None,
+        lanes: None,
     };
     let smooth = include_str!("../scenes/glass-teapot.toml");
     let watertight = smooth.replace("[render]\n", "[render]\nwatertight = true\n");

@@ -392,6 +392,7 @@ fn scratched_renders_are_bit_identical_across_thread_counts() {
         seed: Some(3),
         max_depth: None,
         sampler: None,
+        lanes: None,
     };
     let s = Scene::parse(PLATE, Path::new("plate.toml"), Path::new("."), &o).unwrap();
     let a = assert_bit_identical_across_thread_counts(&s);
@@ -466,6 +467,7 @@ fn pixel_footprint_coverage_equals_supersampled_point_coverage() {
             seed: Some(seed),
             max_depth: None,
             sampler: None,
+            lanes: None,
         };
         let s = Scene::parse(&text, Path::new("plate.toml"), Path::new("."), &o).unwrap();
         render_with_threads(&s, 2).0

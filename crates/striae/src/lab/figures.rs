@@ -470,6 +470,7 @@ fn render_figures(
         seed: None,
         max_depth: None,
         sampler: None,
+        lanes: None,
     };
     let mut jobs: Vec<(String, String, &str, String)> = FIGURE_SCENES
         .iter()
@@ -635,6 +636,7 @@ mod tests {
                 seed: None,
                 max_depth: None,
                 sampler: None,
+                lanes: None,
             };
             let scene = Scene::parse(text, Path::new(name), Path::new("."), &o)
                 .unwrap_or_else(|e| panic!("{name}: {e}"));

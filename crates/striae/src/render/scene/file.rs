@@ -51,6 +51,9 @@ pub struct RenderSection {
     /// The watertight ray/triangle test instead of the fast one (`geometry::TriangleTest`).
     #[serde(default)]
     pub watertight: bool,
+    /// The lane render loop instead of the one-path loop (`integrator::lanes`).
+    #[serde(default)]
+    pub lanes: bool,
 }
 
 fn default_width() -> u32 {
@@ -84,6 +87,7 @@ impl Default for RenderSection {
             exposure: 0.0,
             sampler: default_sampler(),
             watertight: false,
+            lanes: false,
         }
     }
 }

@@ -55,6 +55,8 @@ pub struct RenderSettings {
     /// The ray/triangle test (`render.watertight`; explicit scratch geometry is always
     /// watertight).
     pub triangles: TriangleTest,
+    /// The lane render loop (`render.lanes`, `integrator::lanes`) instead of the one-path loop.
+    pub lanes: bool,
 }
 
 /// Command-line values that replace the scene file's.
@@ -65,6 +67,7 @@ pub struct Overrides {
     pub seed: Option<u64>,
     pub max_depth: Option<u32>,
     pub sampler: Option<SamplerKind>,
+    pub lanes: Option<bool>,
 }
 
 impl Overrides {
@@ -572,6 +575,7 @@ fn render_settings(
         } else {
             TriangleTest::Fast
         },
+        lanes: o.lanes.unwrap_or(r.lanes),
     };
     if settings.spp == 0 || settings.spp > crate::render::sampler::MAX_SPP {
         return Err(invalid(

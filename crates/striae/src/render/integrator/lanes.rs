@@ -1,0 +1,256 @@
+//! The lane render loop (`render.lanes = true`): [`LANES`] paths of a tile in flight at once,
+//! advanced stage by stage, as Mitsuba 3's wavefront and pbrt-v4's `WavefrontPathIntegrator`
+//! do over whole images. A step traces every path's ray (new paths' camera rays together, in
+//! packets where they share the pinhole), lands every path on its hit ([`Path::land`], the
+//! one-path loop's own vertex), then tests every deferred shadow ray; a path that ends makes
+//! room for the tile's next sample (path regeneration), so the lanes stay full until the tile
+//! runs out.
+//!
+//! Each path runs the same operations as in the one-path loop, and the samples of a pixel are
+//! summed in sample order (a short reorder queue holds samples that finish early), so the image
+//! is the one-path loop's bit for bit where no material reads the pixel's footprint. Where one
+//! does (the scratched material seen from outside), a pixel's samples share its cached
+//! footprints (`layers::CoverageCache::of_pixel`) in the order they reach them, which here is
+//! not sample order: the lanes then hold one pixel's samples at a time, and the image agrees
+//! with the one-path loop's within noise (test `lane_loop_renders_every_scene_as_the_one_path_loop`).
+
+use super::path::{camera_sample, CameraHit, CameraSample, Path, ShadowTest};
+use super::{Worker, PACKET_MIN_SPP};
+use crate::math::{Ray, Rgb};
+use crate::render::geometry::{SurfaceHit, PACKET};
+use crate::render::scene::Scene;
+use arrayvec::ArrayVec;
+use std::collections::VecDeque;
+
+/// Paths in flight at once.
+pub const LANES: usize = 16;
+
+/// A lane: its path, and which of the tile's samples it is ([`Work::sample`]); `None` when
+/// the lane is free.
+struct Lane {
+    path: Path,
+    item: Option<u64>,
+}
+
+/// The samples of a tile, numbered pixel by pixel (row by row), samples in order within a
+/// pixel: the order the one-path loop runs them in.
+struct Work {
+    x0: u32,
+    y0: u32,
+    width: u32,
+    /// The film's width.
+    film_width: u32,
+    /// Samples per pixel in this pass, and the first one's index.
+    n: u32,
+    first: u32,
+    total: u64,
+}
+
+impl Work {
+    /// The pixel `(x, y)` (its index on the film) and the sample index of item `item`.
+    fn sample(&self, item: u64) -> ((u32, u32), u64, u32) {
+        let pixel = (item / self.n as u64) as u32;
+        let s = self.first + (item % self.n as u64) as u32;
+        let (x, y) = (self.x0 + pixel % self.width, self.y0 + pixel / self.width);
+        ((x, y), y as u64 * self.film_width as u64 + x as u64, s)
+    }
+
+    /// The tile's pixel (row by row) of item `item`.
+    fn pixel(&self, item: u64) -> usize {
+        (item / self.n as u64) as usize
+    }
+}
+
+/// The tile's camera samples in order, with their closest hits traced as the one-path loop
+/// traces them: in packets of up to [`PACKET`] of a pixel's samples through a pinhole (from
+/// [`PACKET_MIN_SPP`] samples a pixel), else by their paths' first step.
+struct CameraQueue {
+    samples: ArrayVec<CameraSample, PACKET>,
+    hits: ArrayVec<Option<SurfaceHit>, PACKET>,
+    rays: ArrayVec<Ray, PACKET>,
+    /// The item of `samples[0]`, and how many were taken.
+    first: u64,
+    taken: usize,
+    packets: bool,
+}
+
+impl CameraQueue {
+    /// Item `item`'s camera sample and, where it was traced in a packet, its closest hit.
+    #[inline(always)]
+    fn take<const DIFFERENTIALS: bool>(
+        &mut self,
+        scene: &Scene,
+        work: &Work,
+        item: u64,
+    ) -> (CameraSample, CameraHit) {
+        if !self.packets {
+            let ((x, y), pixel_index, s) = work.sample(item);
+            let sample = camera_sample::<DIFFERENTIALS>(scene, (x, y), pixel_index, s);
+            return (sample, CameraHit::Untraced);
+        }
+        if self.taken == self.samples.len() {
+            // The next chunk: up to `PACKET` samples, not past the pixel's last.
+            let in_pixel = (item % work.n as u64) as u32;
+            let n = (work.n - in_pixel).min(PACKET as u32) as u64;
+            self.samples.clear();
+            self.rays.clear();
+            for item in item..item + n {
+                let ((x, y), pixel_index, s) = work.sample(item);
+                let sample = camera_sample::<DIFFERENTIALS>(scene, (x, y), pixel_index, s);
+                self.rays.push(sample.ray);
+                self.samples.push(sample);
+            }
+            scene
+                .geometry
+                .intersect_coherent(&self.rays, &mut self.hits);
+            self.first = item;
+            self.taken = 0;
+        }
+        debug_assert_eq!(item, self.first + self.taken as u64);
+        let k = self.taken;
+        self.taken += 1;
+        // (The chunk's samples are taken once each, in order: a copy, then never read again.)
+        (self.samples[k].clone(), CameraHit::Traced(self.hits[k]))
+    }
+}
+
+/// The per-pixel sums of the tile's samples, each pixel's added in sample order as in the
+/// one-path loop: a sample that finishes before an earlier one waits in a queue.
+struct Sums {
+    sums: Vec<Rgb>,
+    /// The samples from item `base` on: `None` while running.
+    waiting: VecDeque<Option<Rgb>>,
+    base: u64,
+}
+
+impl Sums {
+    /// Item `item` started (items start in order).
+    fn start(&mut self, item: u64) {
+        debug_assert_eq!(item, self.base + self.waiting.len() as u64);
+        self.waiting.push_back(None);
+    }
+
+    /// Item `item` finished with radiance `l`; the finished run at the front is summed.
+    fn finish(&mut self, item: u64, l: Rgb, work: &Work, worker: &mut Worker) {
+        self.waiting[(item - self.base) as usize] = Some(l);
+        while let Some(Some(l)) = self.waiting.front().copied() {
+            self.waiting.pop_front();
+            if l.is_finite() {
+                self.sums[work.pixel(self.base)] += l;
+            } else {
+                worker.nonfinite += 1;
+            }
+            self.base += 1;
+        }
+    }
+}
+
+/// The sums of the samples `first..end` of the tile `[x0, y0, x1, y1)`'s pixels (row by row),
+/// as [`super::render_pixel`] gives them.
+#[inline(always)]
+pub(super) fn render_tile<const DIFFERENTIALS: bool>(
+    scene: &Scene,
+    [x0, y0, x1, y1]: [u32; 4],
+    (first, end): (u32, u32),
+    worker: &mut Worker,
+) -> Vec<Rgb> {
+    let pixels = ((x1 - x0) * (y1 - y0)) as usize;
+    let work = Work {
+        x0,
+        y0,
+        width: x1 - x0,
+        film_width: scene.camera.resolution().0,
+        n: end - first,
+        first,
+        total: pixels as u64 * (end - first) as u64,
+    };
+    let mut sums = Sums {
+        sums: vec![Rgb::ZERO; pixels],
+        waiting: VecDeque::with_capacity(4 * LANES),
+        base: 0,
+    };
+    let mut cameras = CameraQueue {
+        samples: ArrayVec::new(),
+        hits: ArrayVec::new(),
+        rays: ArrayVec::new(),
+        first: 0,
+        taken: 0,
+        packets: end - first >= PACKET_MIN_SPP && scene.camera.is_pinhole(),
+    };
+    let mut lanes = ArrayVec::<Lane, LANES>::new();
+    let mut next = 0u64;
+    // The pixel whose footprints the coverage cache holds (with `DIFFERENTIALS`).
+    let mut pixel = usize::MAX;
+    let mut hits: [Option<SurfaceHit>; LANES] = [None; LANES];
+    let mut traced = [false; LANES];
+    let mut shadows: [Option<ShadowTest>; LANES] = [None; LANES];
+    loop {
+        // Regeneration: each free lane takes the tile's next sample. With differentials, a
+        // pixel's samples share its footprints: the next pixel starts once the lanes are empty.
+        for i in 0..LANES {
+            if next == work.total || lanes.get(i).is_some_and(|lane| lane.item.is_some()) {
+                continue;
+            }
+            if DIFFERENTIALS && work.pixel(next) != pixel {
+                if lanes.iter().any(|lane| lane.item.is_some()) {
+                    break;
+                }
+                pixel = work.pixel(next);
+                worker.coverage.start_pixel();
+            }
+            let (sample, camera_hit) = cameras.take::<DIFFERENTIALS>(scene, &work, next);
+            (hits[i], traced[i]) = match camera_hit {
+                CameraHit::Traced(hit) => (hit, true),
+                CameraHit::Untraced => (None, false),
+            };
+            match lanes.get_mut(i) {
+                Some(lane) => lane.path.restart(sample),
+                None => lanes.push(Lane {
+                    path: Path::new(sample),
+                    item: None,
+                }),
+            }
+            lanes[i].item = Some(next);
+            sums.start(next);
+            next += 1;
+        }
+        if lanes.iter().all(|lane| lane.item.is_none()) {
+            break;
+        }
+
+        // Closest hits of the rays not traced yet.
+        for (i, lane) in lanes.iter().enumerate() {
+            if lane.item.is_some() && !std::mem::take(&mut traced[i]) {
+                hits[i] = scene.geometry.intersect(&lane.path.ray);
+            }
+        }
+
+        // Every path's vertex; the shadow rays they leave; the light of those unoccluded;
+        // the paths that ended.
+        let mut ended = [false; LANES];
+        for (i, lane) in lanes.iter_mut().enumerate() {
+            if lane.item.is_some() {
+                let landing = lane
+                    .path
+                    .land::<DIFFERENTIALS, true>(scene, hits[i], worker);
+                shadows[i] = landing.shadow;
+                ended[i] = !landing.goes_on;
+            }
+        }
+        for (lane, shadow) in lanes.iter_mut().zip(&mut shadows) {
+            if let Some(test) = shadow.take() {
+                if !scene.geometry.occluded(&test.ray) {
+                    lane.path.l += test.radiance;
+                }
+            }
+        }
+        for (lane, &ended) in lanes.iter_mut().zip(&ended) {
+            if ended {
+                let item = lane.item.take().expect("only a running lane ends");
+                sums.finish(item, lane.path.l, &work, worker);
+            }
+        }
+    }
+    debug_assert!(sums.waiting.is_empty());
+    sums.sums
+}

@@ -1,0 +1,147 @@
+//! The lane render loop (`render.lanes`, `integrator::lanes`) against the one-path loop, the
+//! reference: on every shipped scene, the same image bit for bit where no material reads the
+//! pixel's footprint, and the same mean within noise where one does; the same image for any
+//! thread count and in every compiled copy of the loop.
+
+mod common;
+
+use common::{assert_bit_identical_across_thread_counts, render_with_threads};
+use std::path::{Path, PathBuf};
+use striae::render::film::Image;
+use striae::render::integrator::{render_with, Simd};
+use striae::render::material::Material;
+use striae::render::scene::{Overrides, Scene};
+
+const SCENES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes");
+
+fn shipped_scenes() -> Vec<PathBuf> {
+    let mut paths: Vec<PathBuf> = std::fs::read_dir(SCENES)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    paths.sort();
+    paths
+}
+
+/// The scene at `path` at `res`, `spp`, in the lane loop or the one-path loop.
+fn load(path: &Path, res: (u32, u32), spp: u32, lanes: bool) -> Scene {
+    let o = Overrides {
+        spp: Some(spp),
+        resolution: Some(res),
+        lanes: Some(lanes),
+        ..Overrides::default()
+    };
+    Scene::load(path, &o).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+fn bits(img: &Image) -> Vec<[u32; 3]> {
+    img.pixels
+        .iter()
+        .map(|p| p.to_array().map(f32::to_bits))
+        .collect()
+}
+
+/// How many standard errors the mean of `a - b` over pixels and channels lies from 0.
+fn mean_difference_in_sigmas(a: &Image, b: &Image) -> f64 {
+    let d: Vec<f64> = a
+        .pixels
+        .iter()
+        .zip(&b.pixels)
+        .flat_map(|(x, y)| (*x - *y).to_array().map(f64::from))
+        .collect();
+    let n = d.len() as f64;
+    let mean = d.iter().sum::<f64>() / n;
+    let var = d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    if var == 0.0 {
+        return 0.0;
+    }
+    mean / (var / n).sqrt()
+}
+
+#[test]
+fn lane_loop_renders_every_shipped_scene_as_the_one_path_loop() {
+    let (mut identical, mut within_noise, mut lit) = (0, 0, 0);
+    for path in shipped_scenes() {
+        // A full tile and a cut one with packets of camera rays (8 spp), and odd sizes below
+        // the packet threshold (3 spp), where every path traces its own camera ray.
+        for (res, spp) in [((40, 24), 8), ((19, 13), 3)] {
+            let (one, lanes) = (load(&path, res, spp, false), load(&path, res, spp, true));
+            let (a, sa) = render_with_threads(&one, 2);
+            let (b, sb) = render_with_threads(&lanes, 2);
+            let name = path.file_name().unwrap().to_string_lossy();
+            lit += a.pixels.iter().any(|p| p.max_element() > 0.0) as usize;
+            if one.materials.iter().any(Material::reads_footprint) {
+                // A pixel's samples share its cached footprints in the order they reach
+                // them: not sample order in the lanes, so the images differ within noise.
+                let z = mean_difference_in_sigmas(&a, &b);
+                assert!(
+                    z.abs() < 4.0,
+                    "{name} at {spp} spp: means {z:.2} sigma apart"
+                );
+                within_noise += 1;
+            } else {
+                assert!(bits(&a) == bits(&b), "{name} at {spp} spp: images differ");
+                assert_eq!(sa.rays, sb.rays, "{name}: ray counts");
+                assert_eq!(sa.nonfinite, sb.nonfinite, "{name}: non-finite samples");
+                identical += 1;
+            }
+        }
+    }
+    // Both kinds of scene are among the shipped ones, and nearly every image shows something
+    // (a black image proves nothing; a halo can miss every pixel of the smallest film).
+    assert!(
+        identical >= 10 && within_noise >= 4,
+        "{identical} and {within_noise}"
+    );
+    assert!(
+        lit + 2 >= identical + within_noise,
+        "{lit} images not black"
+    );
+}
+
+#[test]
+fn lane_loop_follows_a_thin_lens_and_sample_ranges_as_the_one_path_loop() {
+    // A thin lens's camera rays share no origin (no packets); one sample a pixel leaves lanes
+    // idle at a tile's end.
+    let teapot = include_str!("../scenes/glass-teapot.toml").replace(
+        "fov = 30.0",
+        "fov = 30.0\naperture_radius = 0.05\nfocus_distance = 6.0",
+    );
+    for spp in [1, 6] {
+        let scene = |lanes| {
+            let o = Overrides {
+                spp: Some(spp),
+                resolution: Some((36, 20)),
+                lanes: Some(lanes),
+                ..Overrides::default()
+            };
+            Scene::parse(&teapot, Path::new("lens.toml"), Path::new("."), &o).unwrap()
+        };
+        let (a, _) = render_with_threads(&scene(false), 2);
+        let (b, _) = render_with_threads(&scene(true), 2);
+        assert!(bits(&a) == bits(&b), "thin lens at {spp} spp");
+    }
+}
+
+#[test]
+fn lane_loop_images_do_not_depend_on_threads_or_the_compiled_copy() {
+    // The built-in scene reads footprints (scratched glass seen from outside): the lanes hold
+    // one pixel's samples at a time there; the glass teapot does not.
+    let o = Overrides {
+        spp: Some(6),
+        resolution: Some((40, 30)),
+        seed: Some(5),
+        lanes: Some(true),
+        ..Overrides::default()
+    };
+    let teapot = include_str!("../scenes/glass-teapot.toml");
+    for text in [striae::render::scene::DEFAULT_SCENE, teapot] {
+        let s = Scene::parse(text, Path::new("t.toml"), Path::new("."), &o).unwrap();
+        assert!(s.settings.lanes);
+        let a = assert_bit_identical_across_thread_counts(&s);
+        let (b, _) = render_with(&s, &|_| {}, Simd::Avx2);
+        let (c, _) = render_with(&s, &|_| {}, Simd::Portable);
+        assert!(bits(&a) == bits(&b) && bits(&a) == bits(&c));
+    }
+}
