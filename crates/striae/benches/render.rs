@@ -5,7 +5,8 @@
 //! comparison with Mitsuba 3, BENCHMARKS.md)
 //! runs at 128 x 96 x 4 spp with the default render loop (the widest copy the CPU runs), its
 //! AVX2 copy (`Simd::Avx2`: what a CPU without AVX-512 runs) and its portable copy
-//! (`Simd::Portable`: no AVX2), and with the watertight triangle test. Run:
+//! (`Simd::Portable`: no AVX2), with the watertight triangle test and in the lane loop. Also a
+//! pixel's camera numbers one sample at a time and in lanes. Run:
 //! `cargo bench -p striae --bench render`.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
@@ -77,6 +78,20 @@ fn bench_render(c: &mut Criterion) {
     g.bench_function("smooth_glass_teapot_128x96_4spp_auto_watertight", |b| {
         b.iter(|| render(&watertight, &|_| {}))
     });
+    // The same in the lane loop (`render.lanes`).
+    let lanes = Scene::parse(
+        include_str!("../scenes/glass-teapot.toml"),
+        Path::new("glass-teapot.toml"),
+        Path::new("."),
+        &Overrides {
+            lanes: Some(true),
+            ..o
+        },
+    )
+    .unwrap();
+    g.bench_function("smooth_glass_teapot_128x96_4spp_auto_lanes", |b| {
+        b.iter(|| render(&lanes, &|_| {}))
+    });
     g.finish();
 
     let mut g = c.benchmark_group("sampler");
@@ -95,6 +110,28 @@ fn bench_render(c: &mut Criterion) {
             })
         });
     }
+    // A pixel's camera numbers for 32 samples: one sample at a time and in lanes.
+    g.throughput(Throughput::Elements(32));
+    g.bench_function("camera_dimensions_32_samples_one_at_a_time", |b| {
+        let mut i = 0u64;
+        b.iter(|| {
+            i = i.wrapping_add(1);
+            let mut acc = 0.0f32;
+            for s in 0..32 {
+                let mut p = PixelSampler::with_kind(SamplerKind::Sobol, i, s, 1);
+                acc += p.next_1d() + p.next_1d() + p.next_1d() + p.next_1d();
+            }
+            acc
+        })
+    });
+    g.bench_function("camera_dimensions_32_samples_lanes", |b| {
+        let mut i = 0u64;
+        b.iter(|| {
+            i = i.wrapping_add(1);
+            let (_, numbers) = PixelSampler::sobol_camera_lanes(i, 0, 1);
+            numbers.iter().flatten().sum::<f32>()
+        })
+    });
     g.finish();
 }
 

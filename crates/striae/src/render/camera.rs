@@ -199,6 +199,30 @@ impl PerspectiveCamera {
         self.ray_through(film, lens)
     }
 
+    /// The lane form of [`Self::generate_ray_only`] for a pinhole ([`Self::is_pinhole`]): the
+    /// world directions of the rays through the film positions `(x[k], y[k])`, bit for bit
+    /// the one-ray form's (the same operations in the same order, one over all the lanes at
+    /// each step; test `pinhole_lanes_equal_one_ray_at_a_time`). The rays start at
+    /// [`Self::position`].
+    #[inline(always)]
+    pub fn pinhole_directions<const L: usize>(&self, x: &[f32; L], y: &[f32; L]) -> [[f32; L]; 3] {
+        let (w, h) = (self.width as f32, self.height as f32);
+        let mut out = [[0.0f32; L]; 3];
+        for k in 0..L {
+            // `camera_dir`, `Vec3::normalize` (times the reciprocal of the length), then
+            // `Frame::to_world`.
+            let sx = (2.0 * x[k] / w - 1.0) * self.tan_half_x;
+            let sy = (1.0 - 2.0 * y[k] / h) * self.tan_half_y;
+            let r = 1.0 / ((sx * sx) + (sy * sy) + (1.0 * 1.0)).sqrt();
+            let (nx, ny, nz) = (sx * r, sy * r, 1.0 * r);
+            let f = &self.frame;
+            for (a, o) in out.iter_mut().enumerate() {
+                o[k] = f.s[a] * nx + f.t[a] * ny + f.n[a] * nz;
+            }
+        }
+        out
+    }
+
     /// The film position a world direction from the camera centre projects to, if it is in
     /// front of the camera (used by tests to check the conventions).
     pub fn project(&self, dir: Vec3) -> Option<Vec2> {
@@ -218,6 +242,24 @@ impl PerspectiveCamera {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pinhole_lanes_equal_one_ray_at_a_time() {
+        let c = cam(0.0);
+        let x: [f32; 8] = std::array::from_fn(|k| k as f32 * 13.37 + 0.25);
+        let y: [f32; 8] = std::array::from_fn(|k| 47.9 - k as f32 * 5.1);
+        let d = c.pinhole_directions(&x, &y);
+        for k in 0..8 {
+            let ray = c.generate_ray_only(Vec2::new(x[k], y[k]), Vec2::splat(0.3));
+            assert_eq!(ray.o, c.position());
+            let lane = [d[0][k], d[1][k], d[2][k]];
+            assert_eq!(
+                lane.map(f32::to_bits),
+                ray.d.to_array().map(f32::to_bits),
+                "lane {k}"
+            );
+        }
+    }
 
     fn cam(lens: f32) -> PerspectiveCamera {
         PerspectiveCamera::new(

@@ -14,7 +14,7 @@
 //! not sample order: the lanes then hold one pixel's samples at a time, and the image agrees
 //! with the one-path loop's within noise (test `lane_loop_renders_every_scene_as_the_one_path_loop`).
 
-use super::path::{camera_sample, CameraHit, CameraSample, Path, ShadowTest};
+use super::path::{camera_sample, camera_samples, CameraHit, CameraSample, Path, ShadowTest};
 use super::{Worker, PACKET_MIN_SPP};
 use crate::math::{Ray, Rgb};
 use crate::render::geometry::{SurfaceHit, PACKET};
@@ -91,15 +91,16 @@ impl CameraQueue {
         if self.taken == self.samples.len() {
             // The next chunk: up to `PACKET` samples, not past the pixel's last.
             let in_pixel = (item % work.n as u64) as u32;
-            let n = (work.n - in_pixel).min(PACKET as u32) as u64;
-            self.samples.clear();
-            self.rays.clear();
-            for item in item..item + n {
-                let ((x, y), pixel_index, s) = work.sample(item);
-                let sample = camera_sample::<DIFFERENTIALS>(scene, (x, y), pixel_index, s);
-                self.rays.push(sample.ray);
-                self.samples.push(sample);
-            }
+            let n = (work.n - in_pixel).min(PACKET as u32) as usize;
+            let ((x, y), pixel_index, s) = work.sample(item);
+            camera_samples::<DIFFERENTIALS>(
+                scene,
+                (x, y),
+                pixel_index,
+                (s, n),
+                &mut self.samples,
+                &mut self.rays,
+            );
             scene
                 .geometry
                 .intersect_coherent(&self.rays, &mut self.hits);

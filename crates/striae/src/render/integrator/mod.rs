@@ -15,7 +15,7 @@
 //!   Mitsuba handle by flipping or by geometric-side checks).
 //! * **Ray differentials** start at the camera and are carried to every hit
 //!   (`shading::spawn_differentials`); their texture-space footprint reaches the material in
-//!   the [`ShadingContext`]. They are worked out lazily ([`PathDifferentials`]): a bounce is
+//!   the [`ShadingContext`]. They are worked out lazily (`path::PathDifferentials`): a bounce is
 //!   recorded, and the records are turned into differentials only when a later hit reads its
 //!   footprint (the scratched material seen from outside), with the same operations, so the
 //!   image is the same as if every bounce were worked out. In a scene where no material
@@ -29,6 +29,12 @@
 //!   (`sampler::PixelSampler`), tiles are rendered in parallel by rayon and written to fixed
 //!   places, so the image does not depend on the thread count.
 //! * A sample whose radiance is not finite (NaN or infinite) is counted as black, and counted.
+//! * **Two loops, one path**: a path's vertex is one function (`path::Path::land`) that two
+//!   render loops drive: the one-path loop (the default and the reference: each pixel's
+//!   samples one after another, a path from its camera ray to its end) and the lane loop
+//!   (`render.lanes`, [`lanes`]: [`LANES`] paths of a tile in flight, each stage run for all
+//!   of them, the structure the SIMD forms of the stages are to fill). They give the same
+//!   image bit for bit wherever no material reads a pixel's footprint (`tests/lanes.rs`).
 
 mod lanes;
 mod path;
@@ -36,7 +42,7 @@ mod path;
 pub use lanes::LANES;
 
 pub use path::offset_normals;
-use path::{camera_sample, CameraHit, CameraSample, DeferredBounce, Path};
+use path::{camera_sample, camera_samples, CameraHit, CameraSample, DeferredBounce, Path};
 
 use crate::layers::CoverageCache;
 use crate::math::{Ray, RayDifferential, Rgb, Vec2, Vec3};
@@ -667,13 +673,14 @@ fn render_pixel<const DIFFERENTIALS: bool>(
     let mut first = start;
     while first < end {
         let n = (end - first).min(PACKET as u32);
-        samples.clear();
-        rays.clear();
-        for s in first..first + n {
-            let sample = camera_sample::<DIFFERENTIALS>(scene, (x, y), pixel_index, s);
-            rays.push(sample.ray);
-            samples.push(sample);
-        }
+        camera_samples::<DIFFERENTIALS>(
+            scene,
+            (x, y),
+            pixel_index,
+            (first, n as usize),
+            &mut samples,
+            &mut rays,
+        );
         scene.geometry.intersect_coherent(&rays, &mut hits);
         for (sample, hit) in samples.drain(..).zip(&hits) {
             let l = radiance::<DIFFERENTIALS>(scene, sample, CameraHit::Traced(*hit), worker);

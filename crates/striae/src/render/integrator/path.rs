@@ -9,13 +9,16 @@
 use super::Worker;
 use crate::math::{Frame, Ray, RayDifferential, Rgb, Vec2, Vec3};
 use crate::render::bsdf::{Bsdf, BsdfSample};
-use crate::render::geometry::{Geometry, SurfaceHit};
+use crate::render::geometry::{Geometry, SurfaceHit, PACKET};
 use crate::render::material::HitView;
-use crate::render::sampler::{PixelSampler, LOBE_DIM};
+use crate::render::sampler::{PixelSampler, SamplerKind, CAMERA_LANES, LOBE_DIM};
 use crate::render::scene::{Scene, NO_MATERIAL};
 use crate::render::shading::{footprint_dp, spawn_differentials, PixelHit};
 use crate::sampling::power_heuristic;
+use arrayvec::ArrayVec;
 use std::mem::MaybeUninit;
+
+const _: () = assert!(PACKET <= CAMERA_LANES);
 
 /// The shading normals at the starts of a delta bounce's offset rays
 /// ([`spawn_differentials`]): the bounce's normal `n` (the frame's, which may be flipped to
@@ -200,6 +203,53 @@ pub(super) fn camera_sample<const DIFFERENTIALS: bool>(
         ray,
         rd,
         offset,
+    }
+}
+
+/// Samples `first..first + n` (`n` at most [`PACKET`]) of pixel `(x, y)` (index
+/// `pixel_index`) up to their camera rays, into `samples`, and the rays into `rays` (both
+/// cleared first): what [`camera_sample`] makes of each, bit for bit. Through a pinhole, with
+/// Sobol numbers and no differentials, in lanes: the numbers of all of them at once
+/// ([`PixelSampler::sobol_camera_lanes`]), then their rays
+/// ([`crate::render::camera::PerspectiveCamera::pinhole_directions`]).
+#[inline(always)]
+pub(super) fn camera_samples<const DIFFERENTIALS: bool>(
+    scene: &Scene,
+    (x, y): (u32, u32),
+    pixel_index: u64,
+    (first, n): (u32, usize),
+    samples: &mut ArrayVec<CameraSample, PACKET>,
+    rays: &mut ArrayVec<Ray, PACKET>,
+) {
+    samples.clear();
+    rays.clear();
+    let lanes =
+        !DIFFERENTIALS && scene.camera.is_pinhole() && scene.settings.sampler == SamplerKind::Sobol;
+    if !lanes {
+        for s in first..first + n as u32 {
+            let sample = camera_sample::<DIFFERENTIALS>(scene, (x, y), pixel_index, s);
+            rays.push(sample.ray);
+            samples.push(sample);
+        }
+        return;
+    }
+    let (samplers, numbers) =
+        PixelSampler::sobol_camera_lanes(pixel_index, first, scene.settings.seed);
+    let film_x = numbers[0].map(|u| x as f32 + u);
+    let film_y = numbers[1].map(|u| y as f32 + u);
+    let d = scene.camera.pinhole_directions(&film_x, &film_y);
+    for (k, sampler) in samplers.into_iter().take(n).enumerate() {
+        let ray = Ray::new(
+            scene.camera.position(),
+            Vec3::new(d[0][k], d[1][k], d[2][k]),
+        );
+        rays.push(ray);
+        samples.push(CameraSample {
+            sampler,
+            ray,
+            rd: RayDifferential::along(&ray),
+            offset: Vec2::ZERO,
+        });
     }
 }
 
