@@ -25,11 +25,17 @@ use std::collections::VecDeque;
 /// Paths in flight at once.
 pub const LANES: usize = 16;
 
-/// A lane: its path, and which of the tile's samples it is ([`Work::sample`]); `None` when
-/// the lane is free.
-struct Lane {
-    path: Path,
-    item: Option<u64>,
+/// Every lane's bit.
+const ALL_LANES: u32 = (1 << LANES) - 1;
+
+/// The lanes whose bits are set in `mask`, lowest first.
+#[inline(always)]
+fn lanes_of(mut mask: u32) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        let i = mask.trailing_zeros() as usize;
+        mask &= mask.wrapping_sub(1);
+        (i < 32).then_some(i)
+    })
 }
 
 /// The samples of a tile, numbered pixel by pixel (row by row), samples in order within a
@@ -178,79 +184,77 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool>(
         taken: 0,
         packets: end - first >= PACKET_MIN_SPP && scene.camera.is_pinhole(),
     };
-    let mut lanes = ArrayVec::<Lane, LANES>::new();
+    let mut lanes = ArrayVec::<Path, LANES>::new();
+    let mut items = [0u64; LANES];
     let mut next = 0u64;
     // The pixel whose footprints the coverage cache holds (with `DIFFERENTIALS`).
     let mut pixel = usize::MAX;
     let mut hits: [Option<SurfaceHit>; LANES] = [None; LANES];
-    let mut traced = [false; LANES];
     let mut shadows: [Option<ShadowTest>; LANES] = [None; LANES];
+    // Lanes as bits: running a path; whose hit came with the camera ray's packet.
+    let (mut running, mut traced) = (0u32, 0u32);
     loop {
         // Regeneration: each free lane takes the tile's next sample. With differentials, a
         // pixel's samples share its footprints: the next pixel starts once the lanes are empty.
-        for i in 0..LANES {
-            if next == work.total || lanes.get(i).is_some_and(|lane| lane.item.is_some()) {
-                continue;
+        // (The lowest free lane is at most the number of lanes made so far.)
+        for i in lanes_of(!running & ALL_LANES) {
+            if next == work.total {
+                break;
             }
             if DIFFERENTIALS && work.pixel(next) != pixel {
-                if lanes.iter().any(|lane| lane.item.is_some()) {
+                if running != 0 {
                     break;
                 }
                 pixel = work.pixel(next);
                 worker.coverage.start_pixel();
             }
             let (sample, camera_hit) = cameras.take::<DIFFERENTIALS>(scene, &work, next);
-            (hits[i], traced[i]) = match camera_hit {
-                CameraHit::Traced(hit) => (hit, true),
-                CameraHit::Untraced => (None, false),
-            };
-            match lanes.get_mut(i) {
-                Some(lane) => lane.path.restart(sample),
-                None => lanes.push(Lane {
-                    path: Path::new(sample),
-                    item: None,
-                }),
+            if let CameraHit::Traced(hit) = camera_hit {
+                hits[i] = hit;
+                traced |= 1 << i;
             }
-            lanes[i].item = Some(next);
+            match lanes.get_mut(i) {
+                Some(path) => path.restart(sample),
+                None => lanes.push(Path::new(sample)),
+            }
+            items[i] = next;
+            running |= 1 << i;
             sums.start(next);
             next += 1;
         }
-        if lanes.iter().all(|lane| lane.item.is_none()) {
+        if running == 0 {
             break;
         }
 
         // Closest hits of the rays not traced yet.
-        for (i, lane) in lanes.iter().enumerate() {
-            if lane.item.is_some() && !std::mem::take(&mut traced[i]) {
-                hits[i] = scene.geometry.intersect(&lane.path.ray);
-            }
+        for i in lanes_of(running & !traced) {
+            hits[i] = scene.geometry.intersect(&lanes[i].ray);
         }
+        traced = 0;
 
         // Every path's vertex; the shadow rays they leave; the light of those unoccluded;
         // the paths that ended.
-        let mut ended = [false; LANES];
-        for (i, lane) in lanes.iter_mut().enumerate() {
-            if lane.item.is_some() {
-                let landing = lane
-                    .path
-                    .land::<DIFFERENTIALS, true>(scene, hits[i], worker);
+        let (mut shadowed, mut ended) = (0u32, 0u32);
+        for i in lanes_of(running) {
+            let landing = lanes[i].land::<DIFFERENTIALS, true>(scene, hits[i], worker);
+            if landing.shadow.is_some() {
                 shadows[i] = landing.shadow;
-                ended[i] = !landing.goes_on;
+                shadowed |= 1 << i;
+            }
+            ended |= (!landing.goes_on as u32) << i;
+        }
+        for i in lanes_of(shadowed) {
+            let test = shadows[i]
+                .take()
+                .expect("a lane marked shadowed has its test");
+            if !scene.geometry.occluded(&test.ray) {
+                lanes[i].l += test.radiance;
             }
         }
-        for (lane, shadow) in lanes.iter_mut().zip(&mut shadows) {
-            if let Some(test) = shadow.take() {
-                if !scene.geometry.occluded(&test.ray) {
-                    lane.path.l += test.radiance;
-                }
-            }
+        for i in lanes_of(ended) {
+            sums.finish(items[i], lanes[i].l, &work, worker);
         }
-        for (lane, &ended) in lanes.iter_mut().zip(&ended) {
-            if ended {
-                let item = lane.item.take().expect("only a running lane ends");
-                sums.finish(item, lane.path.l, &work, worker);
-            }
-        }
+        running &= !ended;
     }
     debug_assert!(sums.waiting.is_empty());
     sums.sums
