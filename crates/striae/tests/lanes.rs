@@ -7,8 +7,9 @@ mod common;
 
 use common::{assert_bit_identical_across_thread_counts, render_with_threads};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
 use striae::render::film::Image;
-use striae::render::integrator::{render_with, Simd};
+use striae::render::integrator::{render_tile_sums, render_with, tile_count, Simd};
 use striae::render::material::Material;
 use striae::render::scene::{Overrides, Scene};
 
@@ -122,6 +123,28 @@ fn lane_loop_follows_a_thin_lens_and_sample_ranges_as_the_one_path_loop() {
         let (b, _) = render_with_threads(&scene(true), 2);
         assert!(bits(&a) == bits(&b), "thin lens at {spp} spp");
     }
+    // A part of the samples (`render_tile_sums`, as `parts` renders them): samples 3..40 of
+    // every tile, through the pinhole (packets of camera rays that start mid-pixel).
+    let o = |lanes| Overrides {
+        spp: Some(40),
+        resolution: Some((36, 20)),
+        lanes: Some(lanes),
+        ..Overrides::default()
+    };
+    let pinhole = include_str!("../scenes/glass-teapot.toml");
+    let sums = |lanes| {
+        let s = Scene::parse(pinhole, Path::new("t.toml"), Path::new("."), &o(lanes)).unwrap();
+        let tiles: Vec<u32> = (0..tile_count(36, 20)).collect();
+        let never = AtomicBool::new(false);
+        let (sums, _) = render_tile_sums(&s, &tiles, 3..40, &|_| {}, &never, Simd::Auto).unwrap();
+        sums.concat()
+    };
+    let (a, b) = (sums(false), sums(true));
+    assert!(a.iter().any(|p| p.max_element() > 0.0));
+    assert!(a
+        .iter()
+        .zip(&b)
+        .all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits)));
 }
 
 #[test]
