@@ -12,7 +12,7 @@
 //! does (the scratched material seen from outside), a pixel's samples share its cached
 //! footprints (`layers::CoverageCache::of_pixel`) in the order they reach them, which here is
 //! not sample order: the lanes then hold one pixel's samples at a time, and the image agrees
-//! with the one-path loop's within noise (test `lane_loop_renders_every_scene_as_the_one_path_loop`).
+//! with the one-path loop's within noise (`tests/lanes.rs`).
 
 use super::path::{camera_sample, camera_samples, CameraHit, CameraSample, Path, ShadowTest};
 use super::{Worker, PACKET_MIN_SPP};
@@ -244,11 +244,10 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool>(
             ended |= (!landing.goes_on as u32) << i;
         }
         for i in lanes_of(shadowed) {
-            let test = shadows[i]
-                .take()
-                .expect("a lane marked shadowed has its test");
-            if !scene.geometry.occluded(&test.ray) {
-                lanes[i].l += test.radiance;
+            if let Some(test) = shadows[i].take() {
+                if !scene.geometry.occluded(&test.ray) {
+                    lanes[i].l += test.radiance;
+                }
             }
         }
         for i in lanes_of(ended) {

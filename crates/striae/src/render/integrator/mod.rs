@@ -32,7 +32,7 @@
 //! * **Two loops, one path**: a path's vertex is one function (`path::Path::land`) that two
 //!   render loops drive: the one-path loop (the default and the reference: each pixel's
 //!   samples one after another, a path from its camera ray to its end) and the lane loop
-//!   (`render.lanes`, [`lanes`]: [`LANES`] paths of a tile in flight, each stage run for all
+//!   (`render.lanes`, `lanes`: [`LANES`] paths of a tile in flight, each stage run for all
 //!   of them, the structure the SIMD forms of the stages are to fill). They give the same
 //!   image bit for bit wherever no material reads a pixel's footprint (`tests/lanes.rs`).
 

@@ -211,7 +211,8 @@ pub(super) fn camera_sample<const DIFFERENTIALS: bool>(
 /// cleared first): what [`camera_sample`] makes of each, bit for bit. Through a pinhole, with
 /// Sobol numbers and no differentials, in lanes: the numbers of all of them at once
 /// ([`PixelSampler::sobol_camera_lanes`]), then their rays
-/// ([`crate::render::camera::PerspectiveCamera::pinhole_directions`]).
+/// ([`crate::render::camera::PerspectiveCamera::pinhole_directions`]). (With differentials the
+/// lane form ran slower, code layout: `BENCHMARKS.md`, "Camera samples in lanes".)
 #[inline(always)]
 pub(super) fn camera_samples<const DIFFERENTIALS: bool>(
     scene: &Scene,
@@ -839,6 +840,55 @@ mod tests {
     /// and on the teapot's interpolated normals, for reflection and refraction at many
     /// angles. The locally flat rule (the hit's normal for every offset ray, `None`) misses
     /// the curvature's whole effect there.
+    /// A pixel's camera samples made together ([`camera_samples`], in lanes through a pinhole
+    /// with Sobol numbers) equal those made one at a time ([`camera_sample`]): rays, offsets,
+    /// differentials and the streams' next numbers, bit for bit, for whole and cut chunks and
+    /// for every kind of camera sample the render loops make.
+    #[test]
+    fn camera_samples_made_together_equal_one_at_a_time() {
+        use crate::render::scene::{Overrides, Scene};
+        let teapot = include_str!("../../../scenes/glass-teapot.toml");
+        let lens = teapot.replace("fov = 30.0", "fov = 30.0\naperture_radius = 0.05");
+        let independent = teapot.replace("seed = 0", "seed = 0\nsampler = \"independent\"");
+        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+        for text in [teapot, &lens, &independent] {
+            let o = Overrides::default();
+            let scene =
+                Scene::parse(text, std::path::Path::new("t.toml"), ".".as_ref(), &o).unwrap();
+            for (x, y, first, n) in [(3, 5, 0, PACKET), (400, 300, 96, 7)] {
+                let pixel = y as u64 * 512 + x as u64;
+                let (mut together, mut rays) = (ArrayVec::new(), ArrayVec::new());
+                camera_samples::<false>(
+                    &scene,
+                    (x, y),
+                    pixel,
+                    (first, n),
+                    &mut together,
+                    &mut rays,
+                );
+                let mut with_rd = ArrayVec::new();
+                camera_samples::<true>(&scene, (x, y), pixel, (first, n), &mut with_rd, &mut rays);
+                assert_eq!(together.len(), n);
+                for (k, (a, b)) in together.into_iter().zip(with_rd).enumerate() {
+                    let s = first + k as u32;
+                    for (mut got, mut want) in [
+                        (a, camera_sample::<false>(&scene, (x, y), pixel, s)),
+                        (b, camera_sample::<true>(&scene, (x, y), pixel, s)),
+                    ] {
+                        assert_eq!(bits(got.ray.o), bits(want.ray.o));
+                        assert_eq!(bits(got.ray.d), bits(want.ray.d), "sample {s}");
+                        assert_eq!(bits(got.rd.rx_d), bits(want.rd.rx_d));
+                        assert_eq!(bits(got.rd.ry_d), bits(want.rd.ry_d));
+                        assert_eq!(got.offset, want.offset);
+                        got.sampler.start_bounce(1);
+                        want.sampler.start_bounce(1);
+                        assert_eq!(got.sampler.next_1d(), want.sampler.next_1d());
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn delta_bounce_differentials_follow_neighbour_rays_on_curved_surfaces() {
         let shapes = [
