@@ -3,6 +3,7 @@ forms of a scene, progress, Ctrl-C and errors."""
 
 import subprocess
 import sys
+import signal
 import threading
 import _thread
 import time
@@ -125,12 +126,18 @@ def test_errors_carry_the_cli_message(tmp_path):
 
 def test_ctrl_c_stops_a_render():
     big = SCENE.replace("width = 70", "width = 640").replace("height = 40", "height = 480")
-    timer = threading.Timer(0.5, _thread.interrupt_main)
-    start = time.monotonic()
-    timer.start()
-    with pytest.raises(KeyboardInterrupt):
-        striae.render(big, spp=256, threads=1)
-    assert time.monotonic() - start < 20
+    # Python's own Ctrl-C handler: a shell that starts the tests in the background has them
+    # ignore SIGINT, and `interrupt_main` then does nothing.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        timer = threading.Timer(0.5, _thread.interrupt_main)
+        start = time.monotonic()
+        timer.start()
+        with pytest.raises(KeyboardInterrupt):
+            striae.render(big, spp=256, threads=1)
+        assert time.monotonic() - start < 20
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def test_part_files_are_read_as_the_cli_reads_them(tmp_path):
