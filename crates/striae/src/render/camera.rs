@@ -206,18 +206,13 @@ impl PerspectiveCamera {
     /// [`Self::position`].
     #[inline(always)]
     pub fn pinhole_directions<const L: usize>(&self, x: &[f32; L], y: &[f32; L]) -> [[f32; L]; 3] {
-        let (w, h) = (self.width as f32, self.height as f32);
         let mut out = [[0.0f32; L]; 3];
         for k in 0..L {
-            // `camera_dir`, `Vec3::normalize` (times the reciprocal of the length), then
-            // `Frame::to_world`.
-            let sx = (2.0 * x[k] / w - 1.0) * self.tan_half_x;
-            let sy = (1.0 - 2.0 * y[k] / h) * self.tan_half_y;
-            let r = 1.0 / ((sx * sx) + (sy * sy) + (1.0 * 1.0)).sqrt();
-            let (nx, ny, nz) = (sx * r, sy * r, 1.0 * r);
-            let f = &self.frame;
-            for (a, o) in out.iter_mut().enumerate() {
-                o[k] = f.s[a] * nx + f.t[a] * ny + f.n[a] * nz;
+            // `ray_through`'s pinhole direction, lane by lane.
+            let d = self.camera_dir(Vec2::new(x[k], y[k])).normalize();
+            let d = self.frame.to_world(d);
+            for (o, c) in out.iter_mut().zip(d.to_array()) {
+                o[k] = c;
             }
         }
         out

@@ -195,35 +195,26 @@ impl PixelSampler {
     /// `first..first + CAMERA_LANES` of pixel `pixel_index` under `seed` (each index clamped
     /// as [`Self::with_kind`] clamps it), each past its [`CAMERA_DIMS`] camera dimensions, and
     /// those numbers. Bit for bit what `with_kind(SamplerKind::Sobol, ..)` and four
-    /// [`Self::next_1d`] give (test `camera_lanes_equal_one_sample_at_a_time`), worked out as
-    /// one operation over all the samples at each step, which the render loop's SIMD copies
-    /// run 8 or 16 samples at a time: the index shuffle, the Sobol point of the first set
-    /// (every direction row masked by its bit of the index, as `sobol_int4_rev` XORs the rows
-    /// of the set bits) and its Owen scramble.
+    /// [`Self::next_1d`] give (test `camera_lanes_equal_one_sample_at_a_time`): each stream is
+    /// `with_kind`'s, and the numbers are worked out as one operation over all the samples at
+    /// each step, which the render loop's SIMD copies run 8 or 16 samples at a time: the Sobol
+    /// point of the first set (every direction row masked by its bit of the index, as
+    /// `sobol_int4_rev` XORs the rows of the set bits) and its Owen scramble.
     #[inline(always)]
     pub fn sobol_camera_lanes(
         pixel_index: u64,
         first: u32,
         seed: u64,
     ) -> ([PixelSampler; CAMERA_LANES], [[f32; CAMERA_LANES]; 4]) {
-        use sobol_burley::parts::{hash, hash_int4, owen_scramble_rev, sobol_int4_rev, Int4};
+        use sobol_burley::parts::{owen_scramble_rev, sobol_int4_rev, u32_to_f32_norm};
         const L: usize = CAMERA_LANES;
-        let pixel_seed = splitmix64(splitmix64(seed) ^ pixel_index);
-        let seed32 = pixel_seed as u32;
-        let samples: [u32; L] = std::array::from_fn(|k| (first + k as u32).min(MAX_SPP - 1));
-        let index_scramble = hash(seed32 ^ 0x79c68e4a);
-        let mut index = [0u32; L];
-        for (i, s) in index.iter_mut().zip(&samples) {
-            *i = owen_scramble_rev(s.reverse_bits(), index_scramble);
-        }
+        let mut samplers: [PixelSampler; L] = std::array::from_fn(|k| {
+            PixelSampler::with_kind(SamplerKind::Sobol, pixel_index, first + k as u32, seed)
+        });
+        let index = samplers.each_ref().map(|s| s.shuffled_rev_index);
         // Set 0's direction rows (of the index's top 16 bits) and scrambles, as `sobol_set`.
         let rows: [[u32; 4]; 16] = std::array::from_fn(|b| sobol_int4_rev(1 << (31 - b), 0).into());
-        let scramble: [u32; 4] = hash_int4(
-            Int4::from([seed32.wrapping_mul(0x9c8f2d3b); 4])
-                ^ Int4::from([0; 4])
-                ^ [0x912f69ba, 0x174f18ab, 0x691e72ca, 0xb40cc1b8].into(),
-        )
-        .into();
+        let scramble: [u32; 4] = set_scramble(samplers[0].seed, 0).into();
         let mut numbers = [[0.0f32; L]; 4];
         for (d, out) in numbers.iter_mut().enumerate() {
             let mut point = [0u32; L];
@@ -233,20 +224,14 @@ impl PixelSampler {
                 }
             }
             for (o, p) in out.iter_mut().zip(&point) {
-                let n = owen_scramble_rev(*p, scramble[d]).reverse_bits();
-                *o = f32::from_bits((n >> 9) | 0x3f800000) - 1.0;
+                *o = u32_to_f32_norm(owen_scramble_rev(*p, scramble[d]).reverse_bits());
             }
         }
-        let samplers = std::array::from_fn(|k| PixelSampler {
-            kind: SamplerKind::Sobol,
-            seed: seed32,
-            key: pixel_seed.wrapping_add((samples[k] as u64) << 32),
-            shuffled_rev_index: index[k],
-            sample_index: samples[k],
-            dimension: CAMERA_DIMS,
-            cached_set: 0,
-            cached: [0, 1, 2, 3].map(|d| numbers[d][k]),
-        });
+        for (k, sampler) in samplers.iter_mut().enumerate() {
+            sampler.dimension = CAMERA_DIMS;
+            sampler.cached_set = 0;
+            sampler.cached = [0, 1, 2, 3].map(|d| numbers[d][k]);
+        }
         (samplers, numbers)
     }
 }
@@ -263,16 +248,21 @@ fn shuffle_rev_index(sample_index: u32, seed: u32) -> u32 {
 /// `cached_4d_sets_equal_single_dimensions`).
 #[inline]
 fn sobol_set(shuffled_rev_index: u32, set: u32, seed: u32) -> [f32; 4] {
-    use sobol_burley::parts::{hash_int4, owen_scramble_int4_rev, sobol_int4_rev, Int4};
+    use sobol_burley::parts::{owen_scramble_int4_rev, sobol_int4_rev};
     let sobol = sobol_int4_rev(shuffled_rev_index, set);
-    let scramble: Int4 = {
-        let seed: Int4 = [seed.wrapping_mul(0x9c8f2d3b); 4].into();
-        let set: Int4 = [set; 4].into();
-        seed ^ set ^ [0x912f69ba, 0x174f18ab, 0x691e72ca, 0xb40cc1b8].into()
-    };
-    owen_scramble_int4_rev(sobol, hash_int4(scramble))
+    owen_scramble_int4_rev(sobol, set_scramble(seed, set))
         .reverse_bits()
         .to_f32_norm()
+}
+
+/// The Owen scrambles of the four dimensions of set `set` under `seed` (of
+/// `sobol_burley::sample_4d`, verbatim).
+#[inline(always)]
+fn set_scramble(seed: u32, set: u32) -> sobol_burley::parts::Int4 {
+    use sobol_burley::parts::{hash_int4, Int4};
+    let seed: Int4 = [seed.wrapping_mul(0x9c8f2d3b); 4].into();
+    let set: Int4 = [set; 4].into();
+    hash_int4(seed ^ set ^ [0x912f69ba, 0x174f18ab, 0x691e72ca, 0xb40cc1b8].into())
 }
 
 #[cfg(test)]

@@ -14,9 +14,11 @@
 //! not sample order: the lanes then hold one pixel's samples at a time, and the image agrees
 //! with the one-path loop's within noise (`tests/lanes.rs`).
 
-use super::path::{camera_sample, camera_samples, CameraHit, CameraSample, Path, ShadowTest};
-use super::{Worker, PACKET_MIN_SPP};
-use crate::math::{Ray, Rgb};
+use super::path::{
+    camera_packet, camera_sample, traces_camera_packets, CameraHit, CameraSample, Path, ShadowTest,
+};
+use super::Worker;
+use crate::math::Rgb;
 use crate::render::geometry::{SurfaceHit, PACKET};
 use crate::render::scene::Scene;
 use arrayvec::ArrayVec;
@@ -68,12 +70,11 @@ impl Work {
 }
 
 /// The tile's camera samples in order, with their closest hits traced as the one-path loop
-/// traces them: in packets of up to [`PACKET`] of a pixel's samples through a pinhole (from
-/// [`PACKET_MIN_SPP`] samples a pixel), else by their paths' first step.
+/// traces them: in packets of up to [`PACKET`] of a pixel's samples where the pass does
+/// (`traces_camera_packets`), else by their paths' first step.
 struct CameraQueue {
     samples: ArrayVec<CameraSample, PACKET>,
     hits: ArrayVec<Option<SurfaceHit>, PACKET>,
-    rays: ArrayVec<Ray, PACKET>,
     /// The item of `samples[0]`, and how many were taken.
     first: u64,
     taken: usize,
@@ -96,20 +97,17 @@ impl CameraQueue {
         }
         if self.taken == self.samples.len() {
             // The next chunk: up to `PACKET` samples, not past the pixel's last.
-            let in_pixel = (item % work.n as u64) as u32;
-            let n = (work.n - in_pixel).min(PACKET as u32) as usize;
             let ((x, y), pixel_index, s) = work.sample(item);
-            camera_samples::<DIFFERENTIALS>(
+            let n = (work.first + work.n - s).min(PACKET as u32) as usize;
+            let chunk = (s, n);
+            camera_packet::<DIFFERENTIALS>(
                 scene,
                 (x, y),
                 pixel_index,
-                (s, n),
+                chunk,
                 &mut self.samples,
-                &mut self.rays,
+                &mut self.hits,
             );
-            scene
-                .geometry
-                .intersect_coherent(&self.rays, &mut self.hits);
             self.first = item;
             self.taken = 0;
         }
@@ -179,10 +177,9 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool>(
     let mut cameras = CameraQueue {
         samples: ArrayVec::new(),
         hits: ArrayVec::new(),
-        rays: ArrayVec::new(),
         first: 0,
         taken: 0,
-        packets: end - first >= PACKET_MIN_SPP && scene.camera.is_pinhole(),
+        packets: traces_camera_packets(scene, end - first),
     };
     let mut lanes = ArrayVec::<Path, LANES>::new();
     let mut items = [0u64; LANES];

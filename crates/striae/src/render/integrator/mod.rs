@@ -42,7 +42,10 @@ mod path;
 pub use lanes::LANES;
 
 pub use path::offset_normals;
-use path::{camera_sample, camera_samples, CameraHit, CameraSample, DeferredBounce, Path};
+use path::{
+    camera_packet, camera_sample, traces_camera_packets, CameraHit, CameraSample, DeferredBounce,
+    Path,
+};
 
 use crate::layers::CoverageCache;
 use crate::math::{Ray, RayDifferential, Rgb, Vec2, Vec3};
@@ -628,16 +631,11 @@ fn render_tile_body<const DIFFERENTIALS: bool>(
     out
 }
 
-/// Pixels with at least this many samples trace their camera rays in packets (through a
-/// pinhole): at 4 spp packets are 4-7 % faster, at 2 spp neither faster nor slower (glass
-/// teapot and smooth close-up, whole process).
-const PACKET_MIN_SPP: u32 = 4;
-
 /// The sum of the samples `first..end` of pixel `(x, y)` (box filter: uniform positions in the
 /// pixel), added in sample order; divided by the spp, the pixel's value when they are all of
-/// them. From [`PACKET_MIN_SPP`] samples on, in chunks of up to [`PACKET`]: a chunk's camera
-/// rays are traced together (`Geometry::intersect_coherent`), then its paths run one after
-/// another, in sample order. The hits are the same, so the image is too.
+/// them. Where the pass traces packets (`path::traces_camera_packets`), in chunks of up to
+/// [`PACKET`]: a chunk's camera rays are traced together (`path::camera_packet`), then its
+/// paths run one after another, in sample order. The hits are the same, so the image is too.
 #[inline(always)]
 fn render_pixel<const DIFFERENTIALS: bool>(
     scene: &Scene,
@@ -657,8 +655,7 @@ fn render_pixel<const DIFFERENTIALS: bool>(
             worker.nonfinite += 1;
         }
     };
-    // (A thin lens's rays share no origin: no packet.)
-    if end - start < PACKET_MIN_SPP || !scene.camera.is_pinhole() {
+    if !traces_camera_packets(scene, end - start) {
         for s in start..end {
             let sample = camera_sample::<DIFFERENTIALS>(scene, (x, y), pixel_index, s);
             let l = radiance::<DIFFERENTIALS>(scene, sample, CameraHit::Untraced, worker);
@@ -668,20 +665,12 @@ fn render_pixel<const DIFFERENTIALS: bool>(
     }
     // (`ArrayVec`s: only what a chunk holds is written.)
     let mut samples = ArrayVec::<CameraSample, PACKET>::new();
-    let mut rays = ArrayVec::<Ray, PACKET>::new();
     let mut hits = ArrayVec::<Option<SurfaceHit>, PACKET>::new();
     let mut first = start;
     while first < end {
         let n = (end - first).min(PACKET as u32);
-        camera_samples::<DIFFERENTIALS>(
-            scene,
-            (x, y),
-            pixel_index,
-            (first, n as usize),
-            &mut samples,
-            &mut rays,
-        );
-        scene.geometry.intersect_coherent(&rays, &mut hits);
+        let chunk = (first, n as usize);
+        camera_packet::<DIFFERENTIALS>(scene, (x, y), pixel_index, chunk, &mut samples, &mut hits);
         for (sample, hit) in samples.drain(..).zip(&hits) {
             let l = radiance::<DIFFERENTIALS>(scene, sample, CameraHit::Traced(*hit), worker);
             add(l, worker);
