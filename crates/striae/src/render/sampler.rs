@@ -211,7 +211,12 @@ impl PixelSampler {
         let mut samplers: [PixelSampler; L] = std::array::from_fn(|k| {
             PixelSampler::with_kind(SamplerKind::Sobol, pixel_index, first + k as u32, seed)
         });
-        let index = samplers.each_ref().map(|s| s.shuffled_rev_index);
+        // (Loops, not `[T; N]::map`: that stays an out-of-line call compiled for baseline
+        // x86-64, outside the render loop's SIMD copies.)
+        let mut index = [0u32; L];
+        for (i, sampler) in index.iter_mut().zip(&samplers) {
+            *i = sampler.shuffled_rev_index;
+        }
         // Set 0's direction rows (of the index's top 16 bits) and scrambles, as `sobol_set`.
         let rows: [[u32; 4]; 16] = std::array::from_fn(|b| sobol_int4_rev(1 << (31 - b), 0).into());
         let scramble: [u32; 4] = set_scramble(samplers[0].seed, 0).into();
@@ -230,7 +235,7 @@ impl PixelSampler {
         for (k, sampler) in samplers.iter_mut().enumerate() {
             sampler.dimension = CAMERA_DIMS;
             sampler.cached_set = 0;
-            sampler.cached = [0, 1, 2, 3].map(|d| numbers[d][k]);
+            sampler.cached = [numbers[0][k], numbers[1][k], numbers[2][k], numbers[3][k]];
         }
         (samplers, numbers)
     }

@@ -244,8 +244,12 @@ pub(super) fn camera_packet<const DIFFERENTIALS: bool>(
     if lanes {
         let (samplers, numbers) =
             PixelSampler::sobol_camera_lanes(pixel_index, first, scene.settings.seed);
-        let film_x = numbers[0].map(|u| x as f32 + u);
-        let film_y = numbers[1].map(|u| y as f32 + u);
+        // (A loop, not `[T; N]::map`, which stays an out-of-line call compiled for baseline
+        // x86-64, outside the render loop's SIMD copies.)
+        let (mut film_x, mut film_y) = ([0.0; CAMERA_LANES], [0.0; CAMERA_LANES]);
+        for (k, (fx, fy)) in film_x.iter_mut().zip(&mut film_y).enumerate() {
+            (*fx, *fy) = (x as f32 + numbers[0][k], y as f32 + numbers[1][k]);
+        }
         let d = scene.camera.pinhole_directions(&film_x, &film_y);
         for (k, sampler) in samplers.into_iter().take(n).enumerate() {
             let ray = Ray::new(
