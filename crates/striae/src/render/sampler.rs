@@ -211,8 +211,8 @@ impl PixelSampler {
         let mut samplers: [PixelSampler; L] = std::array::from_fn(|k| {
             PixelSampler::with_kind(SamplerKind::Sobol, pixel_index, first + k as u32, seed)
         });
-        // (Loops, not `[T; N]::map`: that stays an out-of-line call compiled for baseline
-        // x86-64, outside the render loop's SIMD copies.)
+        // (A loop here and a written-out array below, not `[T; N]::map`: that stays an
+        // out-of-line call compiled for baseline x86-64, outside the render loop's SIMD copies.)
         let mut index = [0u32; L];
         for (i, sampler) in index.iter_mut().zip(&samplers) {
             *i = sampler.shuffled_rev_index;
