@@ -126,6 +126,11 @@ struct Sums {
     /// The samples from item `base` on: `None` while running.
     waiting: VecDeque<Option<Rgb>>,
     base: u64,
+    /// Item `base`'s pixel (row by row in the tile) and its place among the pixel's `n`
+    /// samples, counted rather than divided out of `base` ([`Work::pixel`]).
+    base_pixel: usize,
+    base_sample: u32,
+    n: u32,
 }
 
 impl Sums {
@@ -136,16 +141,22 @@ impl Sums {
     }
 
     /// Item `item` finished with radiance `l`; the finished run at the front is summed.
-    fn finish(&mut self, item: u64, l: Rgb, work: &Work, worker: &mut Worker) {
+    #[inline(always)]
+    fn finish(&mut self, item: u64, l: Rgb, worker: &mut Worker) {
         self.waiting[(item - self.base) as usize] = Some(l);
         while let Some(Some(l)) = self.waiting.front().copied() {
             self.waiting.pop_front();
             if l.is_finite() {
-                self.sums[work.pixel(self.base)] += l;
+                self.sums[self.base_pixel] += l;
             } else {
                 worker.nonfinite += 1;
             }
             self.base += 1;
+            self.base_sample += 1;
+            if self.base_sample == self.n {
+                self.base_sample = 0;
+                self.base_pixel += 1;
+            }
         }
     }
 }
@@ -173,6 +184,9 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool>(
         sums: vec![Rgb::ZERO; pixels],
         waiting: VecDeque::with_capacity(4 * LANES),
         base: 0,
+        base_pixel: 0,
+        base_sample: 0,
+        n: end - first,
     };
     let mut cameras = CameraQueue {
         samples: ArrayVec::new(),
@@ -248,7 +262,7 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool>(
             }
         }
         for i in lanes_of(ended) {
-            sums.finish(items[i], lanes[i].l, &work, worker);
+            sums.finish(items[i], lanes[i].l, worker);
         }
         running &= !ended;
     }
