@@ -18,7 +18,10 @@
 //! `CAMERA_DIMS + k * BOUNCE_DIMS ..`, so the same random number drives the same decision on
 //! every sample (pbrt-v4's `Sampler` discipline). Past the 256 dimensions `sobol_burley`
 //! provides, the dimension wraps and the seed is re-hashed, which gives an independent (still
-//! Owen-scrambled, no longer stratified against the earlier dimensions) stream.
+//! Owen-scrambled, no longer stratified against the earlier dimensions) stream. The Sobol
+//! numbers of two bounces (four 4-dimension sets) are worked out together, once the first is
+//! read ([`sobol_quad`]): the sets share the sample's index, so its bits are walked once for
+//! 16 dimensions, and their scrambles run 16 wide in the render loop's SIMD copies.
 
 use crate::hash::splitmix64;
 use crate::math::Vec2;
@@ -85,11 +88,13 @@ pub struct PixelSampler {
     shuffled_rev_index: u32,
     sample_index: u32,
     dimension: u32,
-    /// The last 4-dimension set drawn (`dimension / 4`, `u32::MAX` for none) and its values:
-    /// `sobol_burley::sample_4d` computes four dimensions for about the cost of one, and gives
-    /// exactly what four calls of `sample` would.
-    cached_set: u32,
-    cached: [f32; 4],
+    /// The numbers last worked out and which: a quad of sets `q` ([`sobol_quad`], all 16
+    /// values), or one 4-dimension set `s` (`SINGLE | s`, its values first; the camera's,
+    /// and sets past the quads: `sobol_burley::sample_4d` computes four dimensions for about
+    /// the cost of one, and gives exactly what four calls of `sample` would); `u32::MAX` for
+    /// none.
+    cached_key: u32,
+    cached: [f32; QUAD_DIMS],
 }
 
 impl PixelSampler {
@@ -116,8 +121,8 @@ impl PixelSampler {
             },
             sample_index,
             dimension: 0,
-            cached_set: u32::MAX,
-            cached: [0.0; 4],
+            cached_key: u32::MAX,
+            cached: [0.0; QUAD_DIMS],
         }
     }
 
@@ -153,18 +158,28 @@ impl PixelSampler {
         let d = self.dimension;
         self.dimension += 1;
         let set = d / 4;
-        if set != self.cached_set {
-            // `NUM_DIMENSIONS` is a multiple of 4, so a set never straddles the wrap.
-            let n = sobol_burley::NUM_DIMENSIONS;
-            self.cached = if d < n {
-                sobol_set(self.shuffled_rev_index, set, self.seed)
+        let (key, at) = if (1..=QUADS * QUAD_SETS).contains(&set) {
+            ((set - 1) / QUAD_SETS, (d - CAMERA_DIMS) % QUAD_DIMS as u32)
+        } else {
+            (SINGLE | set, d % 4)
+        };
+        if key != self.cached_key {
+            if key & SINGLE == 0 {
+                self.cached = sobol_quad(self.shuffled_rev_index, key, self.seed);
             } else {
-                let seed = splitmix64(self.seed as u64 ^ ((d / n) as u64) << 32) as u32;
-                sobol_burley::sample_4d(self.sample_index, (d % n) / 4, seed)
-            };
-            self.cached_set = set;
+                // `NUM_DIMENSIONS` is a multiple of 4, so a set never straddles the wrap.
+                let n = sobol_burley::NUM_DIMENSIONS;
+                let values = if d < n {
+                    sobol_set(self.shuffled_rev_index, set, self.seed)
+                } else {
+                    let seed = splitmix64(self.seed as u64 ^ ((d / n) as u64) << 32) as u32;
+                    sobol_burley::sample_4d(self.sample_index, (d % n) / 4, seed)
+                };
+                self.cached[..4].copy_from_slice(&values);
+            }
+            self.cached_key = key;
         }
-        self.cached[(d % 4) as usize]
+        self.cached[at as usize]
     }
 
     /// The next number in `[0, 1)`, hashed from the pixel, the sample and the dimension
@@ -234,8 +249,13 @@ impl PixelSampler {
         }
         for (k, sampler) in samplers.iter_mut().enumerate() {
             sampler.dimension = CAMERA_DIMS;
-            sampler.cached_set = 0;
-            sampler.cached = [numbers[0][k], numbers[1][k], numbers[2][k], numbers[3][k]];
+            sampler.cached_key = SINGLE;
+            sampler.cached[..4].copy_from_slice(&[
+                numbers[0][k],
+                numbers[1][k],
+                numbers[2][k],
+                numbers[3][k],
+            ]);
         }
         (samplers, numbers)
     }
@@ -260,6 +280,89 @@ fn sobol_set(shuffled_rev_index: u32, set: u32, seed: u32) -> [f32; 4] {
         .to_f32_norm()
 }
 
+/// The key bit of a single set's numbers in [`PixelSampler`]'s cache.
+const SINGLE: u32 = 1 << 31;
+/// Dimensions in a quad of sets ([`sobol_quad`]).
+const QUAD_SETS: u32 = 4;
+const QUAD_DIMS: usize = 4 * QUAD_SETS as usize;
+/// The quads within `sobol_burley`'s dimensions: sets `1..=4 * QUADS`.
+const QUADS: u32 = (sobol_burley::NUM_DIMENSION_SETS_4D - 1) / QUAD_SETS;
+
+/// Every quad's direction rows, `[quad][bit][dimension]`: row `b` of a dimension is what
+/// `sobol_int4_rev` XORs in for bit `31 - b` of the (reversed) index.
+static QUAD_ROWS: std::sync::LazyLock<Vec<[[u32; QUAD_DIMS]; 16]>> =
+    std::sync::LazyLock::new(|| {
+        use sobol_burley::parts::sobol_int4_rev;
+        (0..QUADS)
+            .map(|q| {
+                std::array::from_fn(|b| {
+                    let mut row = [0u32; QUAD_DIMS];
+                    for k in 0..QUAD_SETS {
+                        let set: [u32; 4] =
+                            sobol_int4_rev(1 << (31 - b), 1 + QUAD_SETS * q + k).into();
+                        row[4 * k as usize..4 * k as usize + 4].copy_from_slice(&set);
+                    }
+                    row
+                })
+            })
+            .collect()
+    });
+
+/// Sets `1 + 4q .. 5 + 4q` of a sample (the dimension blocks of bounces `2q` and `2q + 1`),
+/// each what [`sobol_set`] gives, worked out together: the index's bits are walked once for
+/// all 16 dimensions, and the scrambles run 16 wide (in the render loop's SIMD copies).
+#[inline(always)]
+fn sobol_quad(shuffled_rev_index: u32, q: u32, seed: u32) -> [f32; QUAD_DIMS] {
+    use sobol_burley::parts::{hash, owen_scramble_rev, u32_to_f32_norm};
+    let rows = &QUAD_ROWS[q as usize];
+    let mut point = [0u32; QUAD_DIMS];
+    // (The index's top 16 bits, as `sobol_int4_rev`: row `b` for each set bit `31 - b`.)
+    let mut index = shuffled_rev_index & 0xffff_0000;
+    while index != 0 {
+        let b = index.leading_zeros();
+        for (p, r) in point.iter_mut().zip(&rows[b as usize]) {
+            *p ^= r;
+        }
+        index &= !(0x8000_0000 >> b);
+    }
+    let seed = seed.wrapping_mul(0x9c8f2d3b);
+    let mut out = [0.0f32; QUAD_DIMS];
+    for (i, (o, p)) in out.iter_mut().zip(&point).enumerate() {
+        // (`set_scramble`'s key of the lane's set and dimension.)
+        let set = 1 + QUAD_SETS * q + (i / 4) as u32;
+        let scramble = hash(seed ^ set ^ LANE_SALT[i]);
+        *o = u32_to_f32_norm(reverse_bits(owen_scramble_rev(*p, scramble)));
+    }
+    out
+}
+
+/// `u32::reverse_bits` by shifts and masks (as `sobol_burley`'s `Int4::reverse_bits`), which
+/// the render loop's copies run 8 or 16 wide: the instruction x86 lacks would leave a scalar
+/// loop.
+#[inline(always)]
+fn reverse_bits(mut n: u32) -> u32 {
+    n = ((n >> 1) & 0x5555_5555) | ((n & 0x5555_5555) << 1);
+    n = ((n >> 2) & 0x3333_3333) | ((n & 0x3333_3333) << 2);
+    n = ((n >> 4) & 0x0f0f_0f0f) | ((n & 0x0f0f_0f0f) << 4);
+    n = ((n >> 8) & 0x00ff_00ff) | ((n & 0x00ff_00ff) << 8);
+    n.rotate_left(16)
+}
+
+/// `sobol_burley::sample_4d`'s salts of a set's four dimensions.
+const SET_SALT: [u32; 4] = [0x912f69ba, 0x174f18ab, 0x691e72ca, 0xb40cc1b8];
+
+/// [`SET_SALT`] for each dimension of a quad (a table: indexed `i % 4`, the loop over a quad's
+/// dimensions does not run 16 wide).
+const LANE_SALT: [u32; QUAD_DIMS] = {
+    let mut salt = [0u32; QUAD_DIMS];
+    let mut i = 0;
+    while i < QUAD_DIMS {
+        salt[i] = SET_SALT[i % 4];
+        i += 1;
+    }
+    salt
+};
+
 /// The Owen scrambles of the four dimensions of set `set` under `seed` (of
 /// `sobol_burley::sample_4d`, verbatim).
 #[inline(always)]
@@ -267,7 +370,7 @@ fn set_scramble(seed: u32, set: u32) -> sobol_burley::parts::Int4 {
     use sobol_burley::parts::{hash_int4, Int4};
     let seed: Int4 = [seed.wrapping_mul(0x9c8f2d3b); 4].into();
     let set: Int4 = [set; 4].into();
-    hash_int4(seed ^ set ^ [0x912f69ba, 0x174f18ab, 0x691e72ca, 0xb40cc1b8].into())
+    hash_int4(seed ^ set ^ SET_SALT.into())
 }
 
 #[cfg(test)]
@@ -344,7 +447,11 @@ mod tests {
         for i in [0u32, 1, 17, 1000] {
             let mut s = PixelSampler::new(123, i, 9);
             let seed = s.seed;
-            for &d in &[0u32, 1, 2, 3, 4, 9, 5, 6, 2, 255, 256, 257, 300, 4, 1000] {
+            // (Across quads of sets and out of the last one: sets 1-4 hold dimensions 4-19,
+            // sets 57-60 end at 243, set 61 is single.)
+            for &d in &[
+                0u32, 1, 2, 3, 4, 9, 5, 6, 2, 19, 20, 36, 243, 244, 255, 256, 257, 300, 4, 1000,
+            ] {
                 s.dimension = d;
                 let got = s.next_1d();
                 let seed_d = if d < n {
@@ -358,6 +465,32 @@ mod tests {
                     "sample {i} dim {d}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn quads_equal_their_sets() {
+        // Each quad's numbers are its four sets' (`sobol_burley::sample_4d`'s operations, as
+        // `sobol_set`), bit for bit, for indices with few and many bits set and several seeds.
+        for (i, seed) in [(0u32, 0u32), (1, 7), (MAX_SPP - 1, 3), (12345, 0xdead_beef)] {
+            let index = shuffle_rev_index(i, seed);
+            for q in 0..QUADS {
+                let quad = sobol_quad(index, q, seed);
+                for k in 0..QUAD_SETS {
+                    let set = 1 + QUAD_SETS * q + k;
+                    assert_eq!(
+                        sobol_set(index, set, seed),
+                        sobol_burley::sample_4d(i, set, seed)
+                    );
+                    for (j, u) in sobol_set(index, set, seed).iter().enumerate() {
+                        let v = quad[4 * k as usize + j];
+                        assert_eq!(u.to_bits(), v.to_bits(), "sample {i}, set {set}, dim {j}");
+                    }
+                }
+            }
+        }
+        for n in [0u32, 1, 0x8000_0000, 0x1234_5678, 0xdead_beef, u32::MAX] {
+            assert_eq!(reverse_bits(n), n.reverse_bits());
         }
     }
 
