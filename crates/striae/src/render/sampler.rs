@@ -18,10 +18,10 @@
 //! `CAMERA_DIMS + k * BOUNCE_DIMS ..`, so the same random number drives the same decision on
 //! every sample (pbrt-v4's `Sampler` discipline). Past the 256 dimensions `sobol_burley`
 //! provides, the dimension wraps and the seed is re-hashed, which gives an independent (still
-//! Owen-scrambled, no longer stratified against the earlier dimensions) stream. The Sobol
-//! numbers of two bounces (four 4-dimension sets) are worked out together, once the first is
-//! read ([`sobol_quad`]): the sets share the sample's index, so its bits are walked once for
-//! 16 dimensions, and their scrambles run 16 wide in the render loop's SIMD copies.
+//! Owen-scrambled, no longer stratified against the earlier dimensions) stream. A bounce's
+//! Sobol numbers (its block: two 4-dimension sets) are worked out together once the first is
+//! read ([`sobol_block`]): the sets share the sample's index, so its bits are walked once for
+//! both, and their scrambles run 8 wide in the render loop's SIMD copies.
 
 use crate::hash::splitmix64;
 use crate::math::Vec2;
@@ -88,13 +88,13 @@ pub struct PixelSampler {
     shuffled_rev_index: u32,
     sample_index: u32,
     dimension: u32,
-    /// The numbers last worked out and which: a quad of sets `q` ([`sobol_quad`], all 16
-    /// values), or one 4-dimension set `s` (`SINGLE | s`, its values first; the camera's,
-    /// and sets past the quads: `sobol_burley::sample_4d` computes four dimensions for about
-    /// the cost of one, and gives exactly what four calls of `sample` would); `u32::MAX` for
+    /// The numbers last worked out and which: bounce `k`'s block ([`sobol_block`], all 8
+    /// values), or one 4-dimension set `s` (`SINGLE | s`, its values first: the camera's, and
+    /// sets past the blocks; `sobol_burley::sample_4d` computes four dimensions for about the
+    /// cost of one, and gives exactly what four calls of `sample` would); `u32::MAX` for
     /// none.
     cached_key: u32,
-    cached: [f32; QUAD_DIMS],
+    cached: [f32; BLOCK_DIMS],
 }
 
 impl PixelSampler {
@@ -122,7 +122,7 @@ impl PixelSampler {
             sample_index,
             dimension: 0,
             cached_key: u32::MAX,
-            cached: [0.0; QUAD_DIMS],
+            cached: [0.0; BLOCK_DIMS],
         }
     }
 
@@ -158,14 +158,17 @@ impl PixelSampler {
         let d = self.dimension;
         self.dimension += 1;
         let set = d / 4;
-        let (key, at) = if (1..=QUADS * QUAD_SETS).contains(&set) {
-            ((set - 1) / QUAD_SETS, (d - CAMERA_DIMS) % QUAD_DIMS as u32)
+        let (key, at) = if (1..=2 * BLOCKS).contains(&set) {
+            (
+                (d - CAMERA_DIMS) / BOUNCE_DIMS,
+                (d - CAMERA_DIMS) % BOUNCE_DIMS,
+            )
         } else {
             (SINGLE | set, d % 4)
         };
         if key != self.cached_key {
             if key & SINGLE == 0 {
-                self.cached = sobol_quad(self.shuffled_rev_index, key, self.seed);
+                self.cached = sobol_block(self.shuffled_rev_index, key, self.seed);
             } else {
                 // `NUM_DIMENSIONS` is a multiple of 4, so a set never straddles the wrap.
                 let n = sobol_burley::NUM_DIMENSIONS;
@@ -282,40 +285,36 @@ fn sobol_set(shuffled_rev_index: u32, set: u32, seed: u32) -> [f32; 4] {
 
 /// The key bit of a single set's numbers in [`PixelSampler`]'s cache.
 const SINGLE: u32 = 1 << 31;
-/// Dimensions in a quad of sets ([`sobol_quad`]).
-const QUAD_SETS: u32 = 4;
-const QUAD_DIMS: usize = 4 * QUAD_SETS as usize;
-/// The quads within `sobol_burley`'s dimensions: sets `1..=4 * QUADS`.
-const QUADS: u32 = (sobol_burley::NUM_DIMENSION_SETS_4D - 1) / QUAD_SETS;
+/// The bounces whose blocks [`sobol_block`] works out: those within `sobol_burley`'s
+/// dimensions (sets `1..=2 * BLOCKS`).
+const BLOCKS: u32 = (sobol_burley::NUM_DIMENSION_SETS_4D - 1) / 2;
+/// The numbers in a block.
+const BLOCK_DIMS: usize = BOUNCE_DIMS as usize;
 
-/// Every quad's direction rows, `[quad][bit][dimension]`: row `b` of a dimension is what
+/// Every block's direction rows, `[bounce][bit][dimension]`: row `b` of a dimension is what
 /// `sobol_int4_rev` XORs in for bit `31 - b` of the (reversed) index.
-static QUAD_ROWS: std::sync::LazyLock<Vec<[[u32; QUAD_DIMS]; 16]>> =
+static BLOCK_ROWS: std::sync::LazyLock<Vec<[[u32; BLOCK_DIMS]; 16]>> =
     std::sync::LazyLock::new(|| {
         use sobol_burley::parts::sobol_int4_rev;
-        (0..QUADS)
-            .map(|q| {
+        (0..BLOCKS)
+            .map(|k| {
                 std::array::from_fn(|b| {
-                    let mut row = [0u32; QUAD_DIMS];
-                    for k in 0..QUAD_SETS {
-                        let set: [u32; 4] =
-                            sobol_int4_rev(1 << (31 - b), 1 + QUAD_SETS * q + k).into();
-                        row[4 * k as usize..4 * k as usize + 4].copy_from_slice(&set);
-                    }
-                    row
+                    let a: [u32; 4] = sobol_int4_rev(1 << (31 - b), 1 + 2 * k).into();
+                    let c: [u32; 4] = sobol_int4_rev(1 << (31 - b), 2 + 2 * k).into();
+                    [a[0], a[1], a[2], a[3], c[0], c[1], c[2], c[3]]
                 })
             })
             .collect()
     });
 
-/// Sets `1 + 4q .. 5 + 4q` of a sample (the dimension blocks of bounces `2q` and `2q + 1`),
-/// each what [`sobol_set`] gives, worked out together: the index's bits are walked once for
-/// all 16 dimensions, and the scrambles run 16 wide (in the render loop's SIMD copies).
+/// The Sobol numbers of bounce `k`'s block (sets `1 + 2k` and `2 + 2k`), each what
+/// [`sobol_set`] gives, worked out together: the index's bits are walked once for both sets,
+/// and the scrambles run 8 wide (in the render loop's SIMD copies).
 #[inline(always)]
-fn sobol_quad(shuffled_rev_index: u32, q: u32, seed: u32) -> [f32; QUAD_DIMS] {
+fn sobol_block(shuffled_rev_index: u32, k: u32, seed: u32) -> [f32; BLOCK_DIMS] {
     use sobol_burley::parts::{hash, owen_scramble_rev, u32_to_f32_norm};
-    let rows = &QUAD_ROWS[q as usize];
-    let mut point = [0u32; QUAD_DIMS];
+    let rows = &BLOCK_ROWS[k as usize];
+    let mut point = [0u32; BLOCK_DIMS];
     // (The index's top 16 bits, as `sobol_int4_rev`: row `b` for each set bit `31 - b`.)
     let mut index = shuffled_rev_index & 0xffff_0000;
     while index != 0 {
@@ -326,10 +325,10 @@ fn sobol_quad(shuffled_rev_index: u32, q: u32, seed: u32) -> [f32; QUAD_DIMS] {
         index &= !(0x8000_0000 >> b);
     }
     let seed = seed.wrapping_mul(0x9c8f2d3b);
-    let mut out = [0.0f32; QUAD_DIMS];
+    let mut out = [0.0f32; BLOCK_DIMS];
     for (i, (o, p)) in out.iter_mut().zip(&point).enumerate() {
         // (`set_scramble`'s key of the lane's set and dimension.)
-        let set = 1 + QUAD_SETS * q + (i / 4) as u32;
+        let set = 1 + 2 * k + (i / 4) as u32;
         let scramble = hash(seed ^ set ^ LANE_SALT[i]);
         *o = u32_to_f32_norm(reverse_bits(owen_scramble_rev(*p, scramble)));
     }
@@ -351,12 +350,12 @@ fn reverse_bits(mut n: u32) -> u32 {
 /// `sobol_burley::sample_4d`'s salts of a set's four dimensions.
 const SET_SALT: [u32; 4] = [0x912f69ba, 0x174f18ab, 0x691e72ca, 0xb40cc1b8];
 
-/// [`SET_SALT`] for each dimension of a quad (a table: indexed `i % 4`, the loop over a quad's
-/// dimensions does not run 16 wide).
-const LANE_SALT: [u32; QUAD_DIMS] = {
-    let mut salt = [0u32; QUAD_DIMS];
+/// [`SET_SALT`] for each dimension of a block (a table: indexed `i % 4`, the loop over a
+/// block's dimensions does not run 8 wide).
+const LANE_SALT: [u32; BLOCK_DIMS] = {
+    let mut salt = [0u32; BLOCK_DIMS];
     let mut i = 0;
-    while i < QUAD_DIMS {
+    while i < BLOCK_DIMS {
         salt[i] = SET_SALT[i % 4];
         i += 1;
     }
@@ -447,10 +446,10 @@ mod tests {
         for i in [0u32, 1, 17, 1000] {
             let mut s = PixelSampler::new(123, i, 9);
             let seed = s.seed;
-            // (Across quads of sets and out of the last one: sets 1-4 hold dimensions 4-19,
-            // sets 57-60 end at 243, set 61 is single.)
+            // (Across bounces' blocks and out of the last one: bounce 0's holds dimensions
+            // 4-11, bounce 30's ends at 251, set 63 is single.)
             for &d in &[
-                0u32, 1, 2, 3, 4, 9, 5, 6, 2, 19, 20, 36, 243, 244, 255, 256, 257, 300, 4, 1000,
+                0u32, 1, 2, 3, 4, 9, 5, 6, 2, 11, 12, 36, 251, 252, 255, 256, 257, 300, 4, 1000,
             ] {
                 s.dimension = d;
                 let got = s.next_1d();
@@ -469,21 +468,19 @@ mod tests {
     }
 
     #[test]
-    fn quads_equal_their_sets() {
-        // Each quad's numbers are its four sets' (`sobol_burley::sample_4d`'s operations, as
-        // `sobol_set`), bit for bit, for indices with few and many bits set and several seeds.
+    fn blocks_equal_their_sets() {
+        // Each bounce's block holds its two sets' numbers (`sobol_burley::sample_4d`'s
+        // operations, as `sobol_set`), bit for bit, for indices with few and many bits set and
+        // several seeds.
         for (i, seed) in [(0u32, 0u32), (1, 7), (MAX_SPP - 1, 3), (12345, 0xdead_beef)] {
             let index = shuffle_rev_index(i, seed);
-            for q in 0..QUADS {
-                let quad = sobol_quad(index, q, seed);
-                for k in 0..QUAD_SETS {
-                    let set = 1 + QUAD_SETS * q + k;
-                    assert_eq!(
-                        sobol_set(index, set, seed),
-                        sobol_burley::sample_4d(i, set, seed)
-                    );
-                    for (j, u) in sobol_set(index, set, seed).iter().enumerate() {
-                        let v = quad[4 * k as usize + j];
+            for k in 0..BLOCKS {
+                let block = sobol_block(index, k, seed);
+                for (h, set) in [1 + 2 * k, 2 + 2 * k].into_iter().enumerate() {
+                    let values = sobol_set(index, set, seed);
+                    assert_eq!(values, sobol_burley::sample_4d(i, set, seed));
+                    for (j, u) in values.iter().enumerate() {
+                        let v = block[4 * h + j];
                         assert_eq!(u.to_bits(), v.to_bits(), "sample {i}, set {set}, dim {j}");
                     }
                 }
