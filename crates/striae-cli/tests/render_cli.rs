@@ -35,6 +35,7 @@ fn bad_render_flags_name_the_flag_and_write_nothing() {
         ("--threads", "-2"),
         ("--res", "100000x100000"),
         ("--exposure", "1e30"),
+        ("--lanes", "maybe"),
     ] {
         let (ok, err) = striae(&["render", flag, value, "-q"], &out);
         assert!(!ok, "{flag} {value} should fail");
@@ -179,6 +180,33 @@ fn glass_sphere(dir: &Path, spp: u32) -> std::path::PathBuf {
     );
     std::fs::write(&scene, text).unwrap();
     scene
+}
+
+/// `--lanes` (the lane loop), `--lanes false` (the one-path loop) and no flag (here the lane
+/// loop: glass alone) write the same image byte for byte.
+#[test]
+fn either_render_loop_writes_the_same_image() {
+    let dir = std::env::temp_dir().join(format!("striae-lanes-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = glass_sphere(&dir, 5);
+    let scene = scene.to_str().unwrap();
+    let mut images = Vec::new();
+    for (i, flags) in [
+        &["--lanes"][..],
+        &["--lanes", "false"],
+        &["--lanes", "true"],
+        &[],
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let out = dir.join(format!("l{i}"));
+        let (ok, err) = striae(&[&["render", scene, "-q"][..], flags].concat(), &out);
+        assert!(ok, "{flags:?}: {err}");
+        images.push(std::fs::read(out.with_extension("exr")).unwrap());
+    }
+    assert!(images.iter().all(|x| *x == images[0]));
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `striae render --tile I/N` for I in 0..3 and `striae merge` give the EXR of the whole

@@ -37,10 +37,11 @@ pub struct Args {
     /// `render.sampler`).
     #[arg(long, value_parser = parse_sampler)]
     pub sampler: Option<SamplerKind>,
-    /// Run the lane render loop: many paths in flight at once, stage by stage (overrides
-    /// `render.lanes`).
-    #[arg(long)]
-    pub lanes: bool,
+    /// The lane render loop (`--lanes`, `--lanes true`: many paths in flight at once, stage by
+    /// stage) or the one-path loop (`--lanes false`), instead of the one the scene picks
+    /// (overrides `render.lanes`).
+    #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
+    pub lanes: Option<bool>,
     /// PNG preview exposure in stops, within +-126 (overrides `render.exposure`).
     #[arg(long, allow_hyphen_values = true, value_parser = parse_exposure)]
     pub exposure: Option<f32>,
@@ -187,7 +188,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         seed: args.seed,
         max_depth: args.max_depth,
         sampler: args.sampler,
-        lanes: args.lanes.then_some(true),
+        lanes: args.lanes,
     };
     striae::render::integrator::LoopCopy::env_cap().map_err(anyhow::Error::msg)?;
     super::print_library_messages(args.quiet);

@@ -185,6 +185,29 @@ impl PixelSampler {
         self.cached[at as usize]
     }
 
+    /// The numbers of dimensions `1..BOUNCE_DIMS` of bounce `depth`'s block, each what
+    /// [`Self::seek`]`(depth, 1)` and [`Self::next_1d`] in turn give (test
+    /// `bounce_numbers_equal_one_at_a_time`), from one look at the block where it is Sobol's;
+    /// the stream is left past the block.
+    #[inline(always)]
+    pub fn bounce_numbers(&mut self, depth: u32) -> [f32; BOUNCE_DIMS as usize - 1] {
+        let mut u = [0.0; BOUNCE_DIMS as usize - 1];
+        if self.kind == SamplerKind::Sobol && depth < BLOCKS {
+            if self.cached_key != depth {
+                self.cached = sobol_block(self.shuffled_rev_index, depth, self.seed);
+                self.cached_key = depth;
+            }
+            u.copy_from_slice(&self.cached[1..]);
+            self.seek(depth + 1, 0);
+            return u;
+        }
+        self.seek(depth, 1);
+        for x in &mut u {
+            *x = self.next_1d();
+        }
+        u
+    }
+
     /// The next number in `[0, 1)`, hashed from the pixel, the sample and the dimension
     /// whatever the kind (what [`Self::next_1d`] gives for the independent kind): for a choice
     /// that gains nothing from stratification, such as breaking a rare tie, at the cost of one
@@ -488,6 +511,30 @@ mod tests {
         }
         for n in [0u32, 1, 0x8000_0000, 0x1234_5678, 0xdead_beef, u32::MAX] {
             assert_eq!(reverse_bits(n), n.reverse_bits());
+        }
+    }
+
+    #[test]
+    fn bounce_numbers_equal_one_at_a_time() {
+        // Both kinds, in and past the blocks, with the cache holding another block, the same
+        // block or a single set, and the stream left where the single draws leave it.
+        for kind in [SamplerKind::Sobol, SamplerKind::Independent] {
+            for (pixel, sample) in [(0u64, 0u32), (17, 5), (40_000, MAX_SPP - 1)] {
+                let mut a = PixelSampler::with_kind(kind, pixel, sample, 9);
+                let mut b = a.clone();
+                for depth in [0, 1, 1, 5, BLOCKS - 1, BLOCKS, BLOCKS + 4, 2] {
+                    let lanes = a.bounce_numbers(depth);
+                    b.seek(depth, 1);
+                    for (j, u) in lanes.iter().enumerate() {
+                        assert_eq!(u.to_bits(), b.next_1d().to_bits(), "{kind:?} {depth} {j}");
+                    }
+                    assert_eq!(a.next_1d().to_bits(), b.next_1d().to_bits());
+                    // (Leaves a single set or another block in the cache.)
+                    a.seek(depth + 3, 2);
+                    b.seek(depth + 3, 2);
+                    assert_eq!(a.next_1d().to_bits(), b.next_1d().to_bits());
+                }
+            }
         }
     }
 

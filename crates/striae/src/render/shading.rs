@@ -156,16 +156,28 @@ pub fn hit_context(
 /// once, in its final frame.
 #[inline(always)]
 pub fn shading_frame(hit: &SurfaceHit, wo_world: Vec3, transmits: bool) -> Frame {
-    let (mut ng, mut ns) = (hit.ng, hit.ns);
+    shading_frame_of(hit.ng, hit.ns, hit.dpdu, wo_world, transmits)
+}
+
+/// [`shading_frame`] of a hit's geometric normal `hit_ng`, shading normal `hit_ns` and `dP/du`.
+#[inline(always)]
+pub fn shading_frame_of(
+    hit_ng: Vec3,
+    hit_ns: Vec3,
+    dpdu: Vec3,
+    wo_world: Vec3,
+    transmits: bool,
+) -> Frame {
+    let (mut ng, mut ns) = (hit_ng, hit_ns);
     if !transmits && wo_world.dot(ng) < 0.0 {
         // Opaque surfaces are two-sided: shade on wo's side.
         ng = -ng;
         ns = -ns;
     }
     let guarded = guard_shading_normal(ns, ng, wo_world);
-    // `hit.ns` itself where the guard left it equal (a zero's sign aside), as before.
-    let n = if guarded != hit.ns { guarded } else { hit.ns };
-    Frame::from_normal_tangent(n, hit.dpdu)
+    // `hit_ns` itself where the guard left it equal (a zero's sign aside), as before.
+    let n = if guarded != hit_ns { guarded } else { hit_ns };
+    Frame::from_normal_tangent(n, dpdu)
 }
 
 /// `dP/dx`, `dP/dy`, `du/dx`, `dv/dx`, `du/dy`, `dv/dy` at a hit from the ray's differentials

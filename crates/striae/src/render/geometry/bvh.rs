@@ -621,11 +621,16 @@ impl Geometry {
     /// [`super::CARVED_OFFSET`] on explicit scratch geometry.
     #[inline(always)]
     pub fn spawn_origin(&self, p: Vec3, ng: Vec3, shape: u32, dir: Vec3) -> Vec3 {
-        let rel = match &self.carve {
+        super::offset_origin_by(p, ng, dir, self.spawn_offset(shape))
+    }
+
+    /// The relative offset [`Self::spawn_origin`] gives rays leaving `shape`.
+    #[inline(always)]
+    pub fn spawn_offset(&self, shape: u32) -> f32 {
+        match &self.carve {
             Some(c) if c.is_carved(shape) => super::CARVED_OFFSET,
             _ => super::OFFSET,
-        };
-        super::offset_origin_by(p, ng, dir, rel)
+        }
     }
 
     /// The explicit scratch geometry, if the scene has any.

@@ -1,10 +1,10 @@
-//! The lane render loop (`render.lanes = true`): [`LANES`] paths of a tile in flight at once,
-//! advanced stage by stage, as Mitsuba 3's wavefront and pbrt-v4's `WavefrontPathIntegrator`
-//! do over whole images. A step traces every path's ray (new paths' camera rays together, in
-//! packets where they share the pinhole), lands every path on its hit ([`Path::land`], the
-//! one-path loop's own vertex), then tests every deferred shadow ray; a path that ends makes
-//! room for the tile's next sample (path regeneration), so the lanes stay full until the tile
-//! runs out.
+//! The lane render loop (`render.lanes`, [`super::runs_lanes`]): [`LANES`] paths of a tile in
+//! flight at once, advanced stage by stage, as Mitsuba 3's wavefront and pbrt-v4's
+//! `WavefrontPathIntegrator` do over whole images. A step traces every path's ray (new paths'
+//! camera rays together, in packets where they share the pinhole), lands every path on its hit
+//! (the vertices `lane_vertex` takes in SIMD lanes, the others by [`Path::land`], the one-path
+//! loop's own vertex), then tests every deferred shadow ray; a path that ends makes room for the
+//! tile's next sample (path regeneration), so the lanes stay full until the tile runs out.
 //!
 //! Each path runs the same operations as in the one-path loop, and the samples of a pixel are
 //! summed in sample order (a short reorder queue holds samples that finish early), so the image
@@ -14,6 +14,7 @@
 //! not sample order: the lanes then hold one pixel's samples at a time, and the image agrees
 //! with the one-path loop's within noise (`tests/lanes.rs`).
 
+use super::lane_vertex::{self, Lanes};
 use super::path::{
     camera_packet, camera_sample, traces_camera_packets, CameraHit, CameraSample, Path, ShadowTest,
 };
@@ -204,6 +205,8 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool>(
     let mut shadows: [Option<ShadowTest>; LANES] = [None; LANES];
     // Lanes as bits: running a path; whose hit came with the camera ray's packet.
     let (mut running, mut traced) = (0u32, 0u32);
+    let plain_lanes = lane_vertex::applies(scene);
+    let mut vertices = Lanes::new();
     loop {
         // Regeneration: each free lane takes the tile's next sample. With differentials, a
         // pixel's samples share its footprints: the next pixel starts once the lanes are empty.
@@ -243,16 +246,36 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool>(
         }
         traced = 0;
 
-        // Every path's vertex; the shadow rays they leave; the light of those unoccluded;
-        // the paths that ended.
-        let (mut shadowed, mut ended) = (0u32, 0u32);
+        // Every path's vertex: those of plain materials in lanes (`lane_vertex`), the others
+        // one by one; the shadow rays they leave; the light of those unoccluded; the paths
+        // that ended.
+        let (mut shadowed, mut ended, mut plain) = (0u32, 0u32, 0u32);
         for i in lanes_of(running) {
+            if let Some(hit) = hits[i].as_ref().filter(|_| plain_lanes) {
+                let path = &mut lanes[i];
+                if let Some(kind) = lane_vertex::takes(scene, hit, path.depth, path.ray.d) {
+                    vertices.gather(i, scene, path, hit, kind);
+                    plain |= 1 << i;
+                    continue;
+                }
+            }
             let landing = lanes[i].land::<DIFFERENTIALS, true>(scene, hits[i], worker);
             if landing.shadow.is_some() {
                 shadows[i] = landing.shadow;
                 shadowed |= 1 << i;
             }
             ended |= (!landing.goes_on as u32) << i;
+        }
+        if plain != 0 {
+            vertices.run();
+            for i in lanes_of(plain) {
+                let hit = hits[i].as_ref().expect("a plain vertex has a hit");
+                let path = &mut lanes[i];
+                let goes_on =
+                    vertices.scatter::<DIFFERENTIALS>(i, scene, path, hit, worker, &mut shadows[i]);
+                shadowed |= (shadows[i].is_some() as u32) << i;
+                ended |= (!goes_on as u32) << i;
+            }
         }
         for i in lanes_of(shadowed) {
             if let Some(test) = shadows[i].take() {

@@ -285,13 +285,13 @@ pub(super) struct Path {
     pub ray: Ray,
     /// Radiance gathered so far.
     pub l: Rgb,
-    state: PathState,
+    pub state: PathState,
     differentials: PathDifferentials,
     /// Segments traced so far.
-    depth: u32,
+    pub depth: u32,
     /// How far below the surface the ray began, where it went on from below one
     /// (`BsdfSample::from`).
-    origin_depth: f32,
+    pub origin_depth: f32,
 }
 
 /// Light sampled at a vertex whose shadow ray is not tested yet: `radiance` counts once `ray`
@@ -336,6 +336,20 @@ impl Path {
             depth: 0,
             origin_depth: f32::INFINITY,
         }
+    }
+
+    /// The numbers [`Self::land`] reads at the path's bounce on a material that reads no hit
+    /// context, from the dimensions it reads them from: light choice, light position (2), BSDF
+    /// lobe, BSDF direction (2), Russian roulette (for the lane vertex, `lane_vertex`).
+    #[inline(always)]
+    pub fn bounce_numbers(&mut self) -> [f32; 7] {
+        self.sampler.bounce_numbers(self.depth)
+    }
+
+    /// Record a bounce for the differentials a later hit may read.
+    #[inline(always)]
+    pub fn push_bounce(&mut self, geometry: &Geometry, bounce: DeferredBounce) {
+        self.differentials.push(geometry, bounce);
     }
 
     /// One vertex of the path: its ray met `hit` (`None`: it escaped). Counts the emission
@@ -476,13 +490,13 @@ impl Path {
 /// What a path carries from vertex to vertex: its throughput `beta`, the product of the
 /// squared relative indices it crossed (to keep Russian roulette independent of radiance
 /// scaling at refraction), and what the MIS weight of the next emitter hit needs.
-struct PathState {
-    beta: Rgb,
-    eta_scale: f32,
+pub(super) struct PathState {
+    pub beta: Rgb,
+    pub eta_scale: f32,
     /// The last bounce was a delta lobe (the camera counts as one): emitters hit count fully.
-    specular: bool,
+    pub specular: bool,
     /// The BSDF sampling pdf of the last bounce.
-    prev_pdf: f32,
+    pub prev_pdf: f32,
 }
 
 impl PathState {
@@ -654,7 +668,7 @@ fn shade_hit<'a, const DIFFERENTIALS: bool>(
 
 /// The probability of next-event estimation choosing a given light (uniform; 0 without lights).
 #[inline(always)]
-fn light_select_pdf(scene: &Scene) -> f32 {
+pub(super) fn light_select_pdf(scene: &Scene) -> f32 {
     match scene.lights.len() {
         0 => 0.0,
         n => 1.0 / n as f32,

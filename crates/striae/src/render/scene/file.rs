@@ -51,9 +51,10 @@ pub struct RenderSection {
     /// The watertight ray/triangle test instead of the fast one (`geometry::TriangleTest`).
     #[serde(default)]
     pub watertight: bool,
-    /// The lane render loop instead of the one-path loop (`integrator::lanes`).
+    /// The lane render loop (`true`) or the one-path loop (`false`) instead of the one
+    /// `integrator::runs_lanes` picks.
     #[serde(default)]
-    pub lanes: bool,
+    pub lanes: Option<bool>,
 }
 
 fn default_width() -> u32 {
@@ -87,7 +88,7 @@ impl Default for RenderSection {
             exposure: 0.0,
             sampler: default_sampler(),
             watertight: false,
-            lanes: false,
+            lanes: None,
         }
     }
 }
