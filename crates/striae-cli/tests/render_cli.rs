@@ -182,8 +182,8 @@ fn glass_sphere(dir: &Path, spp: u32) -> std::path::PathBuf {
     scene
 }
 
-/// `--lanes` (the lane loop), `--lanes false` (the one-path loop) and no flag (here the lane
-/// loop: glass alone) write the same image byte for byte.
+/// `--lanes` and `--lanes true` (the lane loop), `--lanes false` and no flag (the one-path
+/// loop) write the same image byte for byte.
 #[test]
 fn either_render_loop_writes_the_same_image() {
     let dir = std::env::temp_dir().join(format!("striae-lanes-cli-{}", std::process::id()));

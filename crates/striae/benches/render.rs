@@ -39,8 +39,7 @@ fn bench_render(c: &mut Criterion) {
             b.iter(|| render(&scene, &|_| {}))
         });
     }
-    // The smooth glass teapot (the lane loop, its default), with each compiled copy of the
-    // render loop.
+    // The smooth glass teapot, with each compiled copy of the render loop.
     let o = Overrides {
         spp: Some(4),
         resolution: Some((128, 96)),
@@ -79,19 +78,19 @@ fn bench_render(c: &mut Criterion) {
     g.bench_function("smooth_glass_teapot_128x96_4spp_auto_watertight", |b| {
         b.iter(|| render(&watertight, &|_| {}))
     });
-    // The same in the one-path loop (`render.lanes = false`).
-    let one_path = Scene::parse(
+    // The same in the lane loop (`render.lanes`).
+    let lanes = Scene::parse(
         include_str!("../scenes/glass-teapot.toml"),
         Path::new("glass-teapot.toml"),
         Path::new("."),
         &Overrides {
-            lanes: Some(false),
+            lanes: Some(true),
             ..o
         },
     )
     .unwrap();
-    g.bench_function("smooth_glass_teapot_128x96_4spp_auto_one_path", |b| {
-        b.iter(|| render(&one_path, &|_| {}))
+    g.bench_function("smooth_glass_teapot_128x96_4spp_auto_lanes", |b| {
+        b.iter(|| render(&lanes, &|_| {}))
     });
     g.finish();
 

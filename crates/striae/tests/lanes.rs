@@ -9,7 +9,7 @@ use common::{assert_bit_identical_across_thread_counts, render_with_threads};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use striae::render::film::Image;
-use striae::render::integrator::{render_tile_sums, render_with, runs_lanes, tile_count, Simd};
+use striae::render::integrator::{render_tile_sums, render_with, tile_count, Simd};
 use striae::render::material::Material;
 use striae::render::scene::{Overrides, Scene};
 
@@ -25,12 +25,12 @@ fn shipped_scenes() -> Vec<PathBuf> {
     paths
 }
 
-/// The scene at `path` at `res`, `spp`, in the lane loop, the one-path loop or the default's.
-fn load(path: &Path, res: (u32, u32), spp: u32, lanes: Option<bool>) -> Scene {
+/// The scene at `path` at `res`, `spp`, in the lane loop or the one-path loop.
+fn load(path: &Path, res: (u32, u32), spp: u32, lanes: bool) -> Scene {
     let o = Overrides {
         spp: Some(spp),
         resolution: Some(res),
-        lanes,
+        lanes: Some(lanes),
         ..Overrides::default()
     };
     Scene::load(path, &o).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
@@ -67,10 +67,7 @@ fn lane_loop_renders_every_shipped_scene_as_the_one_path_loop() {
         // A full tile and a cut one with packets of camera rays (8 spp), and odd sizes below
         // the packet threshold (3 spp), where every path traces its own camera ray.
         for (res, spp) in [((40, 24), 8), ((19, 13), 3)] {
-            let (one, lanes) = (
-                load(&path, res, spp, Some(false)),
-                load(&path, res, spp, Some(true)),
-            );
+            let (one, lanes) = (load(&path, res, spp, false), load(&path, res, spp, true));
             let (a, sa) = render_with_threads(&one, 2);
             let (b, sb) = render_with_threads(&lanes, 2);
             let name = path.file_name().unwrap().to_string_lossy();
@@ -116,27 +113,17 @@ fn scratched_glass_seen_from_inside_runs_in_lanes_bit_for_bit() {
         let o = Overrides {
             spp: Some(8),
             resolution: Some((40, 24)),
-            lanes,
+            lanes: Some(lanes),
             ..Overrides::default()
         };
         Scene::parse(&text, Path::new("point.toml"), Path::new(SCENES), &o).unwrap()
     };
-    let one = scene(Some(false));
+    let one = scene(false);
     assert!(!one.materials.iter().any(Material::reads_footprint));
-    // Not every material has a lane vertex: the one-path loop by default.
-    assert!(!runs_lanes(&scene(None)));
     let (a, sa) = render_with_threads(&one, 2);
-    let (b, sb) = render_with_threads(&scene(Some(true)), 2);
+    let (b, sb) = render_with_threads(&scene(true), 2);
     assert!(a.pixels.iter().any(|p| p.max_element() > 0.0));
     assert!(bits(&a) == bits(&b) && sa.rays == sb.rays);
-}
-
-#[test]
-fn the_lane_loop_renders_by_default_where_every_vertex_runs_in_lanes() {
-    let default = |name: &str| runs_lanes(&load(&Path::new(SCENES).join(name), (8, 8), 1, None));
-    // Glass, gold and a diffuse floor; scratched glass (reads the footprint); glTF's material.
-    assert!(default("glass-teapot.toml") && default("metal-teapot.toml"));
-    assert!(!default("glass-teapot-setting1.toml") && !default("pbr.toml"));
 }
 
 #[test]
@@ -199,7 +186,7 @@ fn lane_loop_images_do_not_depend_on_threads_or_the_compiled_copy() {
     let teapot = include_str!("../scenes/glass-teapot.toml");
     for text in [striae::render::scene::DEFAULT_SCENE, teapot] {
         let s = Scene::parse(text, Path::new("t.toml"), Path::new("."), &o).unwrap();
-        assert_eq!(s.settings.lanes, Some(true));
+        assert!(s.settings.lanes);
         let a = assert_bit_identical_across_thread_counts(&s);
         let (b, _) = render_with(&s, &|_| {}, Simd::Avx2);
         let (c, _) = render_with(&s, &|_| {}, Simd::Portable);

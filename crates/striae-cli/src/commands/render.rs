@@ -38,8 +38,7 @@ pub struct Args {
     #[arg(long, value_parser = parse_sampler)]
     pub sampler: Option<SamplerKind>,
     /// The lane render loop (`--lanes`, `--lanes true`: many paths in flight at once, stage by
-    /// stage) or the one-path loop (`--lanes false`), instead of the one the scene picks
-    /// (overrides `render.lanes`).
+    /// stage) or the one-path loop (`--lanes false`; overrides `render.lanes`).
     #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
     pub lanes: Option<bool>,
     /// PNG preview exposure in stops, within +-126 (overrides `render.exposure`).

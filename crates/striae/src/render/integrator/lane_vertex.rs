@@ -92,20 +92,6 @@ impl Soa3 {
     }
 }
 
-/// Whether every vertex of `scene` runs in lanes and the lane loop gives the one-path loop's
-/// image bit for bit: no material reads the pixel's footprint, and each is one [`takes`]
-/// takes (emitters without a material end their paths, as escapes do, in `land`).
-pub(super) fn covers(scene: &Scene) -> bool {
-    applies(scene)
-        && scene.materials.iter().all(|m| match m {
-            Material::Diffuse { .. } => true,
-            Material::Dielectric { roughness, .. } | Material::Conductor { roughness, .. } => {
-                *roughness == 0.0
-            }
-            _ => false,
-        })
-}
-
 /// Whether a scene's plain vertices may run in lanes at all: `land` attenuates by absorption
 /// before anything else, which the lanes do not.
 #[inline(always)]

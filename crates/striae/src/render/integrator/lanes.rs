@@ -1,4 +1,4 @@
-//! The lane render loop (`render.lanes`, [`super::runs_lanes`]): [`LANES`] paths of a tile in
+//! The lane render loop (`render.lanes = true`): [`LANES`] paths of a tile in
 //! flight at once, advanced stage by stage, as Mitsuba 3's wavefront and pbrt-v4's
 //! `WavefrontPathIntegrator` do over whole images. A step traces every path's ray (new paths'
 //! camera rays together, in packets where they share the pinhole), lands every path on its hit

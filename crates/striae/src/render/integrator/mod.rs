@@ -35,9 +35,7 @@
 //!   `lanes`: [`LANES`] paths of a tile in flight, each stage run for all of them), which runs
 //!   the vertices of diffuse, smooth dielectric and smooth conductor surfaces in SIMD lanes
 //!   (`lane_vertex`, `land`'s operations as selects, bit for bit). They give the same image bit
-//!   for bit wherever no material reads a pixel's footprint (`tests/lanes.rs`); the lane loop
-//!   renders where `render.lanes` asks for it and, by default, the scenes whose every vertex it
-//!   runs in lanes ([`runs_lanes`]).
+//!   for bit wherever no material reads a pixel's footprint (`tests/lanes.rs`).
 
 mod lane_vertex;
 mod lanes;
@@ -62,16 +60,6 @@ use crate::render::shading::{hit_context, ShadingContext};
 use arrayvec::ArrayVec;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-
-/// Whether `scene` renders in the lane loop: as `render.lanes` says, and where it says nothing,
-/// where the lane loop gives the one-path loop's image bit for bit and runs every vertex in
-/// lanes ([`lane_vertex::covers`]), which makes it the faster loop (`BENCHMARKS.md`).
-pub fn runs_lanes(scene: &Scene) -> bool {
-    scene
-        .settings
-        .lanes
-        .unwrap_or_else(|| lane_vertex::covers(scene))
-}
 
 /// Side of a square tile of pixels, the unit of parallel work.
 pub const TILE: u32 = 16;
@@ -632,7 +620,7 @@ fn render_tile_body<const DIFFERENTIALS: bool>(
     samples: (u32, u32),
     worker: &mut Worker,
 ) -> Vec<Rgb> {
-    if runs_lanes(scene) {
+    if scene.settings.lanes {
         return lanes::render_tile::<DIFFERENTIALS>(scene, rect, samples, worker);
     }
     let [x0, y0, x1, y1] = rect;

@@ -51,10 +51,9 @@ pub struct RenderSection {
     /// The watertight ray/triangle test instead of the fast one (`geometry::TriangleTest`).
     #[serde(default)]
     pub watertight: bool,
-    /// The lane render loop (`true`) or the one-path loop (`false`) instead of the one
-    /// `integrator::runs_lanes` picks.
+    /// The lane render loop instead of the one-path loop (`integrator::lanes`).
     #[serde(default)]
-    pub lanes: Option<bool>,
+    pub lanes: bool,
 }
 
 fn default_width() -> u32 {
@@ -88,7 +87,7 @@ impl Default for RenderSection {
             exposure: 0.0,
             sampler: default_sampler(),
             watertight: false,
-            lanes: None,
+            lanes: false,
         }
     }
 }

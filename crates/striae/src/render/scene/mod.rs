@@ -55,9 +55,8 @@ pub struct RenderSettings {
     /// The ray/triangle test (`render.watertight`; explicit scratch geometry is always
     /// watertight).
     pub triangles: TriangleTest,
-    /// The lane render loop (`render.lanes = true`, `integrator::lanes`) or the one-path loop
-    /// (`false`); `None`: the loop [`crate::render::integrator::runs_lanes`] picks.
-    pub lanes: Option<bool>,
+    /// The lane render loop (`render.lanes`, `integrator::lanes`) instead of the one-path loop.
+    pub lanes: bool,
 }
 
 /// Command-line values that replace the scene file's.
@@ -576,7 +575,7 @@ fn render_settings(
         } else {
             TriangleTest::Fast
         },
-        lanes: o.lanes.or(r.lanes),
+        lanes: o.lanes.unwrap_or(r.lanes),
     };
     if settings.spp == 0 || settings.spp > crate::render::sampler::MAX_SPP {
         return Err(invalid(
