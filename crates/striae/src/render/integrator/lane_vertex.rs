@@ -14,7 +14,7 @@
 //! 3. **Scatter**, lane by lane: the path's new ray and state, its deferred shadow test.
 //!
 //! Each lane runs the operations of `land` on the same numbers, so the image is `land`'s bit
-//! for bit (`tests/lanes.rs` on every shipped scene; [`tests`] lane by lane).
+//! for bit (`tests/lanes.rs` on every shipped scene; `lane_vertex_equals_land` lane by lane).
 
 // `!(x > 0.0)` is meant: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -50,11 +50,10 @@ pub(super) enum Kind {
 #[inline(always)]
 pub(super) fn takes(scene: &Scene, hit: &SurfaceHit, depth: u32, d: Vec3) -> Option<Kind> {
     let shape = &scene.geometry.shapes()[hit.shape as usize];
-    let max_depth = match scene.settings.max_depth {
-        0 => u32::MAX,
-        d => d,
-    };
-    if shape.material == NO_MATERIAL || shape.area_light.is_some() || depth + 2 > max_depth {
+    if shape.material == NO_MATERIAL
+        || shape.area_light.is_some()
+        || depth + 2 > super::path::max_depth(scene)
+    {
         return None;
     }
     match &scene.materials[shape.material as usize] {
@@ -116,8 +115,8 @@ pub(super) struct Lanes {
     /// Russian roulette after this bounce, with this number.
     roulette: [bool; LANES],
     u_roulette: [f32; LANES],
-    // Diffuse: the reflectance, the cosine-weighted direction, the light sample (`pdf_light`
-    // with the light's choice; 0 where there is none).
+    // Diffuse: the reflectance, the cosine-weighted direction, the light sample where there is
+    // one (`has_light`; `pdf_light` with the light's choice).
     reflectance: Soa3,
     cosine_dir: Soa3,
     light_wi: Soa3,

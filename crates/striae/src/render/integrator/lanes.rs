@@ -1,10 +1,10 @@
-//! The lane render loop (`render.lanes = true`): [`LANES`] paths of a tile in
-//! flight at once, advanced stage by stage, as Mitsuba 3's wavefront and pbrt-v4's
-//! `WavefrontPathIntegrator` do over whole images. A step traces every path's ray (new paths'
-//! camera rays together, in packets where they share the pinhole), lands every path on its hit
-//! (the vertices `lane_vertex` takes in SIMD lanes, the others by [`Path::land`], the one-path
-//! loop's own vertex), then tests every deferred shadow ray; a path that ends makes room for the
-//! tile's next sample (path regeneration), so the lanes stay full until the tile runs out.
+//! The lane render loop (`render.lanes = true`): [`LANES`] paths of a tile in flight at once,
+//! advanced stage by stage, as Mitsuba 3's wavefront and pbrt-v4's `WavefrontPathIntegrator` do
+//! over whole images. A step traces every path's ray (new paths' camera rays together, in packets
+//! where they share the pinhole), lands every path on its hit (the vertices `lane_vertex` takes in
+//! SIMD lanes, the others by [`Path::land`], the one-path loop's own vertex), then tests every
+//! deferred shadow ray; a path that ends makes room for the tile's next sample (path regeneration),
+//! so the lanes stay full until the tile runs out.
 //!
 //! Each path runs the same operations as in the one-path loop, and the samples of a pixel are
 //! summed in sample order (a short reorder queue holds samples that finish early), so the image

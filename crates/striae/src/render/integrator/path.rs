@@ -371,11 +371,7 @@ impl Path {
         let shapes = scene.geometry.shapes();
         let n_lights = scene.lights.len();
         let light_select_pdf = light_select_pdf(scene);
-        let max_depth = if settings.max_depth == 0 {
-            u32::MAX
-        } else {
-            settings.max_depth
-        };
+        let max_depth = max_depth(scene);
         let (ray, depth, sampler) = (self.ray, self.depth, &mut self.sampler);
         sampler.start_bounce(depth);
         worker.rays += 1;
@@ -664,6 +660,15 @@ fn shade_hit<'a, const DIFFERENTIALS: bool>(
         origin_depth,
     };
     material.shade(hit, view, &mut worker.coverage)
+}
+
+/// The most segments a path may have (`render.max_depth`, 0 for no limit).
+#[inline(always)]
+pub(super) fn max_depth(scene: &Scene) -> u32 {
+    match scene.settings.max_depth {
+        0 => u32::MAX,
+        d => d,
+    }
 }
 
 /// The probability of next-event estimation choosing a given light (uniform; 0 without lights).
