@@ -35,7 +35,6 @@ fn bad_render_flags_name_the_flag_and_write_nothing() {
         ("--threads", "-2"),
         ("--res", "100000x100000"),
         ("--exposure", "1e30"),
-        ("--lanes", "maybe"),
     ] {
         let (ok, err) = striae(&["render", flag, value, "-q"], &out);
         assert!(!ok, "{flag} {value} should fail");
@@ -182,8 +181,8 @@ fn glass_sphere(dir: &Path, spp: u32) -> std::path::PathBuf {
     scene
 }
 
-/// `--lanes` and `--lanes true` (the lane loop), `--lanes false` and no flag (the one-path
-/// loop) write the same image byte for byte.
+/// `--lanes` and `--lanes=true` (the lane loop), `--lanes=false` and no flag (the one-path
+/// loop) write the same image byte for byte; `--lanes` before the scene leaves it the scene.
 #[test]
 fn either_render_loop_writes_the_same_image() {
     let dir = std::env::temp_dir().join(format!("striae-lanes-cli-{}", std::process::id()));
@@ -191,21 +190,28 @@ fn either_render_loop_writes_the_same_image() {
     let scene = glass_sphere(&dir, 5);
     let scene = scene.to_str().unwrap();
     let mut images = Vec::new();
-    for (i, flags) in [
-        &["--lanes"][..],
-        &["--lanes", "false"],
-        &["--lanes", "true"],
-        &[],
+    for (i, args) in [
+        ["--lanes", scene],
+        [scene, "--lanes=false"],
+        [scene, "--lanes=true"],
+        [scene, "--spp=5"],
     ]
     .into_iter()
     .enumerate()
     {
         let out = dir.join(format!("l{i}"));
-        let (ok, err) = striae(&[&["render", scene, "-q"][..], flags].concat(), &out);
-        assert!(ok, "{flags:?}: {err}");
+        let (ok, err) = striae(&[&["render", "-q"][..], &args].concat(), &out);
+        assert!(ok, "{args:?}: {err}");
         images.push(std::fs::read(out.with_extension("exr")).unwrap());
     }
     assert!(images.iter().all(|x| *x == images[0]));
+    let out = dir.join("bad");
+    let (ok, err) = striae(&["render", scene, "--lanes=maybe", "-q"], &out);
+    assert!(
+        !ok && err.contains("--lanes") && err.contains("maybe"),
+        "{err}"
+    );
+    assert!(!out.with_extension("exr").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
 

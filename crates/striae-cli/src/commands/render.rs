@@ -37,9 +37,16 @@ pub struct Args {
     /// `render.sampler`).
     #[arg(long, value_parser = parse_sampler)]
     pub sampler: Option<SamplerKind>,
-    /// The lane render loop (`--lanes`, `--lanes true`: many paths in flight at once, stage by
-    /// stage) or the one-path loop (`--lanes false`; overrides `render.lanes`).
-    #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
+    /// The lane render loop (`--lanes`, `--lanes=true`: many paths in flight at once, stage by
+    /// stage) or the one-path loop (`--lanes=false`; overrides `render.lanes`). The value takes
+    /// `=`, so that `--lanes SCENE` still reads the scene.
+    #[arg(
+        long,
+        num_args = 0..=1,
+        require_equals = true,
+        default_missing_value = "true",
+        value_name = "BOOL"
+    )]
     pub lanes: Option<bool>,
     /// PNG preview exposure in stops, within +-126 (overrides `render.exposure`).
     #[arg(long, allow_hyphen_values = true, value_parser = parse_exposure)]
