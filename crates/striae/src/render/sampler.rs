@@ -166,23 +166,32 @@ impl PixelSampler {
         } else {
             (SINGLE | set, d % 4)
         };
+        if key & SINGLE == 0 {
+            return self.block(key)[at as usize];
+        }
         if key != self.cached_key {
-            if key & SINGLE == 0 {
-                self.cached = sobol_block(self.shuffled_rev_index, key, self.seed);
+            // `NUM_DIMENSIONS` is a multiple of 4, so a set never straddles the wrap.
+            let n = sobol_burley::NUM_DIMENSIONS;
+            let values = if d < n {
+                sobol_set(self.shuffled_rev_index, set, self.seed)
             } else {
-                // `NUM_DIMENSIONS` is a multiple of 4, so a set never straddles the wrap.
-                let n = sobol_burley::NUM_DIMENSIONS;
-                let values = if d < n {
-                    sobol_set(self.shuffled_rev_index, set, self.seed)
-                } else {
-                    let seed = splitmix64(self.seed as u64 ^ ((d / n) as u64) << 32) as u32;
-                    sobol_burley::sample_4d(self.sample_index, (d % n) / 4, seed)
-                };
-                self.cached[..4].copy_from_slice(&values);
-            }
+                let seed = splitmix64(self.seed as u64 ^ ((d / n) as u64) << 32) as u32;
+                sobol_burley::sample_4d(self.sample_index, (d % n) / 4, seed)
+            };
+            self.cached[..4].copy_from_slice(&values);
             self.cached_key = key;
         }
         self.cached[at as usize]
+    }
+
+    /// Bounce `k`'s block (`k < BLOCKS`), worked out unless the cache holds it.
+    #[inline(always)]
+    fn block(&mut self, k: u32) -> &[f32; BLOCK_DIMS] {
+        if self.cached_key != k {
+            self.cached = sobol_block(self.shuffled_rev_index, k, self.seed);
+            self.cached_key = k;
+        }
+        &self.cached
     }
 
     /// The numbers of dimensions `1..BOUNCE_DIMS` of bounce `depth`'s block, each what
@@ -193,11 +202,7 @@ impl PixelSampler {
     pub fn bounce_numbers(&mut self, depth: u32) -> [f32; BOUNCE_DIMS as usize - 1] {
         let mut u = [0.0; BOUNCE_DIMS as usize - 1];
         if self.kind == SamplerKind::Sobol && depth < BLOCKS {
-            if self.cached_key != depth {
-                self.cached = sobol_block(self.shuffled_rev_index, depth, self.seed);
-                self.cached_key = depth;
-            }
-            u.copy_from_slice(&self.cached[1..]);
+            u.copy_from_slice(&self.block(depth)[1..]);
             self.seek(depth + 1, 0);
             return u;
         }

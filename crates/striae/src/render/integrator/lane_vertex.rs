@@ -20,7 +20,10 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use super::lanes::LANES;
-use super::path::{DeferredBounce, Path, ShadowTest};
+use super::path::{
+    chosen_light, light_select_pdf, max_depth, shadow_t_max, survival_probability, DeferredBounce,
+    Path, ShadowTest,
+};
 use super::Worker;
 use crate::math::{reflect_z, Ray, Rgb, Vec2, Vec3};
 use crate::optics::fresnel_f32;
@@ -50,10 +53,7 @@ pub(super) enum Kind {
 #[inline(always)]
 pub(super) fn takes(scene: &Scene, hit: &SurfaceHit, depth: u32, d: Vec3) -> Option<Kind> {
     let shape = &scene.geometry.shapes()[hit.shape as usize];
-    if shape.material == NO_MATERIAL
-        || shape.area_light.is_some()
-        || depth + 2 > super::path::max_depth(scene)
-    {
+    if shape.material == NO_MATERIAL || shape.area_light.is_some() || depth + 2 > max_depth(scene) {
         return None;
     }
     match &scene.materials[shape.material as usize] {
@@ -226,15 +226,14 @@ impl Lanes {
                 self.cosine_dir
                     .set(i, square_to_cosine_hemisphere(Vec2::new(u_dir_x, u_dir_y)));
                 // Next-event estimation's light (`direct_light`).
-                let n_lights = scene.lights.len();
-                if n_lights > 0 {
-                    let index = ((u_choice * n_lights as f32) as usize).min(n_lights - 1);
+                if !scene.lights.is_empty() {
                     let u_light = Vec2::new(u_light_x, u_light_y);
-                    if let Some(ls) = scene.lights[index].sample_li(hit.p, u_light, shapes) {
+                    let light = chosen_light(scene, u_choice);
+                    if let Some(ls) = light.sample_li(hit.p, u_light, shapes) {
                         self.light_wi.set(i, ls.wi);
                         self.light_dist[i] = ls.dist;
                         self.light_radiance.set(i, ls.radiance);
-                        self.pdf_light[i] = super::path::light_select_pdf(scene) * ls.pdf;
+                        self.pdf_light[i] = light_select_pdf(scene) * ls.pdf;
                         self.light_delta[i] = ls.delta;
                         self.has_light[i] = true;
                     }
@@ -284,12 +283,7 @@ impl Lanes {
         let wi = frame.to_local(light_wi);
         let f = diffuse_eval(self.reflectance.get(i), wo, wi) * wi.z.abs();
         let shadow_o = offset_origin_by(p, ng, light_wi, self.rel[i]);
-        let dist = self.light_dist[i];
-        self.shadow_t_max[i] = if dist.is_finite() {
-            (dist - (shadow_o - p).length()) * (1.0 - 1e-3)
-        } else {
-            f32::INFINITY
-        };
+        self.shadow_t_max[i] = shadow_t_max(self.light_dist[i], shadow_o, p);
         self.shadow_o.set(i, shadow_o);
         let w = if self.light_delta[i] {
             1.0
@@ -347,7 +341,7 @@ impl Lanes {
         self.origin
             .set(i, offset_origin_by(p, ng, wi_world, self.rel[i]));
         // `PathState::survives_roulette`.
-        let q = (beta * eta_scale).max_element().min(0.95);
+        let q = survival_probability(beta, eta_scale);
         let survives = self.u_roulette[i] < q;
         self.goes_on[i] = self.scattered[i] && (!self.roulette[i] || survives);
         self.beta

@@ -10,6 +10,7 @@ use super::Worker;
 use crate::math::{Frame, Ray, RayDifferential, Rgb, Vec2, Vec3};
 use crate::render::bsdf::{Bsdf, BsdfSample};
 use crate::render::geometry::{Geometry, SurfaceHit, PACKET};
+use crate::render::lights::Light;
 use crate::render::material::HitView;
 use crate::render::sampler::{PixelSampler, SamplerKind, CAMERA_LANES, LOBE_DIM};
 use crate::render::scene::{Scene, NO_MATERIAL};
@@ -573,7 +574,7 @@ impl PathState {
     /// divide the throughput by it.
     #[inline(always)]
     fn survives_roulette(&mut self, sampler: &mut PixelSampler) -> bool {
-        let q = (self.beta * self.eta_scale).max_element().min(0.95);
+        let q = survival_probability(self.beta, self.eta_scale);
         if !(sampler.next_1d() < q) {
             return false;
         }
@@ -662,6 +663,31 @@ fn shade_hit<'a, const DIFFERENTIALS: bool>(
     material.shade(hit, view, &mut worker.coverage)
 }
 
+/// Russian roulette's survival probability for throughput `beta` and the radiance scaling
+/// `eta_scale` crossed: `min(max(beta eta_scale), 0.95)`.
+#[inline(always)]
+pub(super) fn survival_probability(beta: Rgb, eta_scale: f32) -> f32 {
+    (beta * eta_scale).max_element().min(0.95)
+}
+
+/// The light next-event estimation chooses with `u_choice` (uniformly; the scene has one).
+#[inline(always)]
+pub(super) fn chosen_light(scene: &Scene, u_choice: f32) -> &Light {
+    let n_lights = scene.lights.len();
+    &scene.lights[((u_choice * n_lights as f32) as usize).min(n_lights - 1)]
+}
+
+/// The length of a shadow ray from `origin` (spawned off the hit `p`) to a light sample
+/// `dist` from `p`, a little short of it; unbounded toward a light at infinity.
+#[inline(always)]
+pub(super) fn shadow_t_max(dist: f32, origin: Vec3, p: Vec3) -> f32 {
+    if dist.is_finite() {
+        (dist - (origin - p).length()) * (1.0 - 1e-3)
+    } else {
+        f32::INFINITY
+    }
+}
+
 /// The most segments a path may have (`render.max_depth`, 0 for no limit).
 #[inline(always)]
 pub(super) fn max_depth(scene: &Scene) -> u32 {
@@ -705,13 +731,10 @@ fn direct_light<const DEFER_SHADOW: bool>(
 ) -> Option<ShadowTest> {
     let (hit, frame, wo, bsdf) = (v.hit, v.frame, v.wo, v.bsdf);
     let shapes = scene.geometry.shapes();
-    let n_lights = scene.lights.len();
     let light_select_pdf = light_select_pdf(scene);
     let u_choice = sampler.next_1d();
     let u_light = sampler.next_2d();
-    let index = ((u_choice * n_lights as f32) as usize).min(n_lights - 1);
-    let light = &scene.lights[index];
-    let ls = light.sample_li(hit.p, u_light, shapes)?;
+    let ls = chosen_light(scene, u_choice).sample_li(hit.p, u_light, shapes)?;
     let wi = frame.to_local(ls.wi);
     let (f, pdf_bsdf) = bsdf.eval_for_light(wo, wi, ls.delta);
     let f = f * wi.z.abs();
@@ -719,11 +742,7 @@ fn direct_light<const DEFER_SHADOW: bool>(
         return None;
     }
     let origin = scene.geometry.spawn_origin(hit.p, hit.ng, hit.shape, ls.wi);
-    let t_max = if ls.dist.is_finite() {
-        (ls.dist - (origin - hit.p).length()) * (1.0 - 1e-3)
-    } else {
-        f32::INFINITY
-    };
+    let t_max = shadow_t_max(ls.dist, origin, hit.p);
     worker.rays += 1;
     let shadow = Ray {
         o: origin,
