@@ -636,16 +636,22 @@ impl GrooveOnFace {
 
 /// What light from inside does after meeting a groove's walls: how much of it ends out in the
 /// air, back in the glass below the critical angle (free to leave by the far face) or beyond it
-/// (trapped by the flat faces), and the parts along the groove of the directions of the light
-/// that is not trapped.
+/// (trapped by the flat faces), in which directions across the groove, and the parts along the
+/// groove of the directions of the light that is not trapped.
 #[derive(Default)]
 struct Exits {
     class: [usize; 3],
+    /// Per class, the direction's angle in the groove's cross-section (`atan2(up, across)`) in
+    /// [`ANGLE_BINS`] bins.
+    angle: [[usize; ANGLE_BINS]; 3],
     along: Vec<f64>,
 }
 
+/// Bins of [`Exits::angle`]: 15 degrees each.
+const ANGLE_BINS: usize = 24;
+
 impl Exits {
-    fn add(&mut self, inside: bool, up: f32, along: f32) {
+    fn add(&mut self, inside: bool, [across, along, up]: [f32; 3]) {
         // Trapped beyond the critical angle: |up| below cos(asin(1 / 1.5)).
         let critical = (1.0f32 - 1.0 / 2.25).sqrt();
         let k = match (inside, up.abs() < critical) {
@@ -654,6 +660,8 @@ impl Exits {
             (true, false) => 2,
         };
         self.class[k] += 1;
+        let turn = (up.atan2(across) / std::f32::consts::TAU + 0.5) * ANGLE_BINS as f32;
+        self.angle[k][(turn as usize).min(ANGLE_BINS - 1)] += 1;
         if k < 2 {
             self.along.push(along as f64);
         }
@@ -686,6 +694,32 @@ impl Exits {
             );
         }
     }
+
+    /// Whether both send their light in the same directions across the groove: a two-sample
+    /// chi-square over the [`ANGLE_BINS`] of every class (bins with a count), below its 0.9999
+    /// quantile (Wilson-Hilferty).
+    fn assert_directions_alike(&self, other: &Exits, what: &str) {
+        let (na, nb) = (self.shares().1, other.shares().1);
+        let (mut chi2, mut dof) = (0.0, 0usize);
+        for k in 0..3 {
+            for b in 0..ANGLE_BINS {
+                let (x, y) = (self.angle[k][b] as f64, other.angle[k][b] as f64);
+                if x + y > 0.0 {
+                    let d = x / na - y / nb;
+                    chi2 += d * d / (x / (na * na) + y / (nb * nb));
+                    dof += 1;
+                }
+            }
+        }
+        let n = dof.max(1) as f64;
+        let q = n * (1.0 - 2.0 / (9.0 * n) + 3.719 * (2.0 / (9.0 * n)).sqrt()).powi(3);
+        assert!(
+            chi2 < q,
+            "{what}: directions differ, chi-square {chi2:.1} over {dof} bins (limit {q:.1}): {:?} against {:?}",
+            self.angle,
+            other.angle
+        );
+    }
 }
 
 /// Rays travelling along `d` (world) from inside the box of [`explicit_grooves`], aimed at
@@ -716,15 +750,15 @@ fn explicit_exits(
         for _ in 0..100 {
             let Some(h) = geometry.intersect(&Ray::new(o, dir)) else {
                 if met && !inside {
-                    exits.add(false, dir.y, dir.dot(g.along));
+                    exits.add(false, [dir.dot(g.across), dir.dot(g.along), dir.y]);
                 }
                 break;
             };
             // Back in the bulk, past the groove's depth or well beside it.
             let off = (h.p.dot(g.across) - centre).abs();
-            if inside && (off > 0.15 || h.p.y < 0.15) {
+            if inside && (off > 0.45 || h.p.y < 0.15) {
                 if met {
-                    exits.add(true, dir.y, dir.dot(g.along));
+                    exits.add(true, [dir.dot(g.across), dir.dot(g.along), dir.y]);
                 }
                 break;
             }
@@ -756,7 +790,7 @@ fn traced_exits(d: [f64; 3], taper: f64, rng: &mut impl rand::Rng, paths: usize)
     let mut exits = Exits::default();
     for _ in 0..paths {
         if let Some(e) = groove.trace(d, rng.random(), None, rng.random::<u64>(), None, taper) {
-            exits.add(e.in_object, e.d[2] as f32, e.d[1] as f32);
+            exits.add(e.in_object, e.d.map(|x| x as f32));
         }
     }
     exits
@@ -764,9 +798,11 @@ fn traced_exits(d: [f64; 3], taper: f64, rng: &mut impl rand::Rng, paths: usize)
 
 /// The exact groove (`precompute::groove::GroovePaths`, the renderer's traced lobe) leaves light
 /// from inside the glass as its explicit geometry does: rays aimed from inside at a straight V
-/// groove carved into a thick box end out in the air, back in the glass below the critical
-/// angle or beyond it, in the tracer's shares within noise, below the ridges' angle (50
-/// degrees: only through the opening) and above it (70: beside the opening too).
+/// groove carved into a thick box, over a band wide enough to hold all the light that meets it
+/// (beside the opening too), end out in the air, back in the glass below the critical angle or
+/// beyond it, in the tracer's shares and in its directions across the groove within noise,
+/// from 45 to 85 degrees and at 45 to 90 degrees to the groove (light travelling nearer along
+/// it reaches the box's ends).
 #[test]
 fn the_traced_groove_leaves_light_from_inside_as_its_explicit_geometry_does() {
     use rand::SeedableRng;
@@ -778,14 +814,18 @@ fn the_traced_groove_leaves_light_from_inside_as_its_explicit_geometry_does() {
     // 0.04 wide in the world (the face is 2 across).
     assert!((width - 0.04).abs() < 0.002, "{width}");
     let mut rng = Pcg64::seed_from_u64(21);
-    for (theta, psi) in [(50.0f32, 60.0f32), (70.0, 80.0)] {
-        let (t, p) = (theta.to_radians(), psi.to_radians());
-        // Travel in the groove's frame: across, along, up.
-        let d_groove = [t.sin() * p.sin(), t.sin() * p.cos(), t.cos()];
-        let d = g.across * d_groove[0] + g.along * d_groove[1] + Vec3::Y * d_groove[2];
-        let explicit = explicit_exits(&s, &g, (0.0, 0.5), (centre, 0.04), d, &mut rng, 60_000);
-        let traced = traced_exits(d_groove.map(|x| x as f64), 0.0, &mut rng, 60_000);
-        explicit.assert_alike(&traced, &format!("{theta} degrees, psi {psi}"));
+    for theta in [45.0f32, 60.0, 75.0, 85.0] {
+        for psi in [45.0f32, 75.0, 90.0] {
+            let (t, p) = (theta.to_radians(), psi.to_radians());
+            // Travel in the groove's frame: across, along, up.
+            let d_groove = [t.sin() * p.sin(), t.sin() * p.cos(), t.cos()];
+            let d = g.across * d_groove[0] + g.along * d_groove[1] + Vec3::Y * d_groove[2];
+            let explicit = explicit_exits(&s, &g, (0.0, 0.5), (centre, 0.25), d, &mut rng, 160_000);
+            let traced = traced_exits(d_groove.map(|x| x as f64), 0.0, &mut rng, 60_000);
+            let what = format!("{theta} degrees, psi {psi}");
+            explicit.assert_alike(&traced, &what);
+            explicit.assert_directions_alike(&traced, &what);
+        }
     }
 }
 
