@@ -12,12 +12,9 @@
 
 use std::error::Error;
 use std::path::Path;
-use striae::math::{Rgb, Vec2};
+use striae::math::{luminance, Vec2};
 use striae::render::scene::{Overrides, Scene};
-
-fn luminance(c: Rgb) -> f64 {
-    (0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z) as f64
-}
+use striae::render::texture::RgbImage;
 
 /// Whether each pixel (row by row) sees only the up-facing face.
 fn face_mask(scene: &Scene) -> (usize, usize, Vec<bool>) {
@@ -50,22 +47,6 @@ fn face_mask(scene: &Scene) -> (usize, usize, Vec<bool>) {
     (w, h, mask)
 }
 
-fn read_exr(path: &Path, w: usize, h: usize) -> Result<Vec<Rgb>, Box<dyn Error>> {
-    let image = exr::prelude::read_first_rgba_layer_from_file(
-        path,
-        |res, _| (res.width(), vec![Rgb::ZERO; res.width() * res.height()]),
-        |(width, px): &mut (usize, Vec<Rgb>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-            px[pos.y() * *width + pos.x()] = Rgb::new(r, g, b)
-        },
-    )
-    .map_err(|e| format!("{}: {e}", path.display()))?;
-    let (width, pixels) = image.layer_data.channel_data.pixels;
-    if width != w || pixels.len() != w * h {
-        return Err(format!("{}: not the scene's {w} x {h} pixels", path.display()).into());
-    }
-    Ok(pixels)
-}
-
 fn main() -> Result<(), Box<dyn Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.len() < 2 {
@@ -80,13 +61,18 @@ fn main() -> Result<(), Box<dyn Error>> {
     println!("{n} of {} pixels see only the up-facing face", w * h);
     println!("image, mean, face mean");
     for image in &args[1..] {
-        let pixels = read_exr(Path::new(image), w, h)?;
-        let all = pixels.iter().map(|&c| luminance(c)).sum::<f64>() / pixels.len() as f64;
-        let face = pixels
+        let img = RgbImage::load(Path::new(image), None).map_err(|e| e.to_string())?;
+        if (img.width, img.height) != (w, h) {
+            return Err(format!("{image}: not the scene's {w} x {h} pixels").into());
+        }
+        let lum = |c| luminance(c) as f64;
+        let all = img.pixels.iter().map(|&c| lum(c)).sum::<f64>() / img.pixels.len() as f64;
+        let face = img
+            .pixels
             .iter()
             .zip(&mask)
             .filter(|(_, &m)| m)
-            .map(|(&c, _)| luminance(c))
+            .map(|(&c, _)| lum(c))
             .sum::<f64>()
             / n.max(1) as f64;
         println!("{image}, {all:.6}, {face:.6}");

@@ -37,8 +37,9 @@ fn render(text: &str, file: &Path, spp: Option<u32>, seed: u64) -> Result<Image,
     Ok(image)
 }
 
+/// [`striae::math::luminance`] as `f64`, for sums over an image.
 fn luminance(c: striae::math::Rgb) -> f64 {
-    (0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z) as f64
+    striae::math::luminance(c) as f64
 }
 
 /// Block means of the luminance, row by row.
