@@ -51,26 +51,11 @@ fn pieces(q: &[DVec2; 4]) -> arrayvec::ArrayVec<arrayvec::ArrayVec<DVec2, 4>, 2>
 /// The area of `poly` (convex, counter-clockwise, at most 4 vertices) inside the quad `q`
 /// (counter-clockwise).
 pub fn clipped_area(poly: &[DVec2; 4], q: &[DVec2; 4]) -> f64 {
-    clipped_area_centroid(poly, q).0
+    pieces(q).iter().map(|c| clip_convex(poly, c)).sum()
 }
 
-/// [`clipped_area`] and the centroid of that part of `poly` (`poly`'s first corner where it
-/// is empty).
-pub fn clipped_area_centroid(poly: &[DVec2; 4], q: &[DVec2; 4]) -> (f64, DVec2) {
-    let (area, moment) = pieces(q)
-        .iter()
-        .map(|c| clip_convex(poly, c))
-        .fold((0.0, DVec2::ZERO), |(a, m), (ca, cm)| (a + ca, m + cm));
-    if area > 0.0 {
-        (area, moment / area)
-    } else {
-        (0.0, poly[0])
-    }
-}
-
-/// The area of `poly` inside the convex counter-clockwise polygon `clipper`, and its first
-/// moment (the area times its centroid).
-fn clip_convex(poly: &[DVec2; 4], clipper: &[DVec2]) -> (f64, DVec2) {
+/// The area of `poly` inside the convex counter-clockwise polygon `clipper`.
+fn clip_convex(poly: &[DVec2; 4], clipper: &[DVec2]) -> f64 {
     let mut cur: Poly = poly.iter().copied().collect();
     let n = clipper.len();
     for i in 0..n {
@@ -92,25 +77,15 @@ fn clip_convex(poly: &[DVec2; 4], clipper: &[DVec2]) -> (f64, DVec2) {
             }
         }
         if next.len() < 3 {
-            return (0.0, DVec2::ZERO);
+            return 0.0;
         }
         cur = next;
     }
-    // The shoelace sums, taken about the first vertex (less round-off far from the origin).
-    let o = cur[0];
-    let (mut twice, mut moment) = (0.0, DVec2::ZERO);
+    let mut twice = 0.0;
     for k in 0..cur.len() {
-        let (p, q) = (cur[k] - o, cur[(k + 1) % cur.len()] - o);
-        let c = p.perp_dot(q);
-        twice += c;
-        moment += (p + q) * c;
+        twice += cur[k].perp_dot(cur[(k + 1) % cur.len()]);
     }
-    if twice > 0.0 {
-        let area = 0.5 * twice;
-        (area, (o + moment / (3.0 * twice)) * area)
-    } else {
-        (0.0, DVec2::ZERO)
-    }
+    (0.5 * twice).max(0.0)
 }
 
 /// Whether point `p` lies in the quad `q` (counter-clockwise, boundary included).
@@ -132,39 +107,6 @@ mod tests {
             DVec2::new(hi, hi),
             DVec2::new(lo, hi),
         ]
-    }
-
-    #[test]
-    fn clipped_parts_have_their_centroids() {
-        // The square [0, 2]^2 inside [1, 3] x [0, 1]: the rectangle [1, 2] x [0, 1].
-        let poly = square(0.0, 2.0);
-        let q = [
-            DVec2::new(1.0, 0.0),
-            DVec2::new(3.0, 0.0),
-            DVec2::new(3.0, 1.0),
-            DVec2::new(1.0, 1.0),
-        ];
-        let (a, c) = clipped_area_centroid(&poly, &q);
-        assert!((a - 1.0).abs() < 1e-12, "{a}");
-        assert!((c - DVec2::new(1.5, 0.5)).length() < 1e-12, "{c}");
-        // A triangle (a quad with a vertex on an edge): the square lies in it whole; the
-        // larger square clipped to it is the triangle, centroid at a third of its legs.
-        let tri = [
-            DVec2::new(0.0, 0.0),
-            DVec2::new(4.0, 0.0),
-            DVec2::new(0.0, 4.0),
-            DVec2::new(0.0, 2.0),
-        ];
-        let (a, c) = clipped_area_centroid(&poly, &tri);
-        assert!((a - 4.0).abs() < 1e-12, "{a}");
-        assert!((c - DVec2::new(1.0, 1.0)).length() < 1e-12, "{c}");
-        let big = square(0.0, 4.0);
-        let (a, c) = clipped_area_centroid(&big, &tri);
-        assert!((a - 8.0).abs() < 1e-12, "{a}");
-        assert!(
-            (c - DVec2::new(4.0 / 3.0, 4.0 / 3.0)).length() < 1e-12,
-            "{c}"
-        );
     }
 
     #[test]

@@ -252,11 +252,6 @@ pub struct CurveHit {
     pub depth: f32,
     /// The point test's segment ([`CurveSet::at_point`]): where the hit lies across it.
     pub axis: Option<SegmentAxis>,
-    /// A footprint's: a point of the curve's opening within it (texture space; the centroid of
-    /// the part of the footprint the segment of `direction` covers), where light the curve's
-    /// lobe sends on leaves from (METHOD.md 9.1). `None` from the point test, and where the
-    /// hit itself lies in the curve ([`CurveSet::directed_at`]).
-    pub at: Option<DVec2>,
 }
 
 /// The curves a footprint meets, at most [`MAX_CURVE_HITS`].
@@ -382,7 +377,6 @@ impl CurveSet {
             if let Some(h) = hits.iter_mut().find(|h| h.curve == p.curve) {
                 h.direction = p.direction;
                 h.depth = p.depth;
-                h.at = None;
             }
         }
         hits
@@ -530,7 +524,6 @@ impl CurveSet {
                     direction: seg.tangent,
                     depth: seg.depth,
                     axis: Some(seg.axis()),
-                    at: None,
                 };
                 let _ = hits.try_push(hit);
             }
@@ -540,8 +533,7 @@ impl CurveSet {
 
     /// The share of the footprint `{uv + s a + t b : s, t in [-1/2, 1/2]}` each curve's opening
     /// covers (exact: the footprint clipped by every thick segment, METHOD.md 9.1), with one
-    /// segment's direction per curve drawn in proportion to its share by `u` in `[0, 1)`, and the
-    /// centroid of that segment's share ([`CurveHit::at`]). A
+    /// segment's direction per curve drawn in proportion to its share by `u` in `[0, 1)`. A
     /// degenerate footprint, or one spanning more than [`MAX_QUERY_CELLS`] grid cells, takes
     /// the point test ([`Self::at_point`]). Beyond [`MAX_CURVE_HITS`] curves the smallest are
     /// dropped.
@@ -592,7 +584,7 @@ impl CurveSet {
         }
         let mut acc: arrayvec::ArrayVec<Acc, { 4 * MAX_CURVE_HITS }> = arrayvec::ArrayVec::new();
         self.for_segments_in(lo, hi, cells, |seg| {
-            let (s, centroid) = clip::clipped_area_centroid(&poly, &seg.quad);
+            let s = clip::clipped_area(&poly, &seg.quad);
             if s <= 0.0 {
                 return;
             }
@@ -625,7 +617,6 @@ impl CurveSet {
                 entry.u /= p;
                 entry.hit.direction = seg.tangent;
                 entry.hit.depth = seg.depth;
-                entry.hit.at = Some(centroid);
             } else {
                 entry.u = (entry.u - p) / (1.0 - p);
             }

@@ -51,53 +51,6 @@ fn a_straight_scratch_covers_its_rectangle() {
         .is_empty());
 }
 
-/// A footprint's curves say where their light leaves from: a point of the curve's opening
-/// inside the footprint (the centroid of the drawn segment's share), off the hit where the hit
-/// lies beside the curve; none where the hit lies in it (the point test's place is the hit's).
-#[test]
-fn a_footprint_places_each_curve_on_its_opening() {
-    let s = set(&[
-        Polyline::uniform(vec![DVec2::new(0.2, 0.5), DVec2::new(0.8, 0.5)], 0.01),
-        Polyline::uniform(vec![DVec2::new(0.52, 0.2), DVec2::new(0.56, 0.8)], 0.005),
-    ]);
-    let (a, b) = (DVec2::new(0.12, 0.02), DVec2::new(-0.01, 0.1));
-    for (uv, u) in [
-        (DVec2::new(0.5, 0.53), 0.1),
-        (DVec2::new(0.55, 0.47), 0.7),
-        (DVec2::new(0.49, 0.52), 0.4),
-        // In the horizontal scratch, beside the other.
-        (DVec2::new(0.6, 0.505), 0.2),
-    ] {
-        let hits = s.directed_at(s.footprint(uv, a, b, u), uv);
-        assert_eq!(hits.len(), 2, "{uv}");
-        for h in &hits {
-            let inside = s.at_point(uv).iter().any(|p| p.curve == h.curve);
-            match h.at {
-                Some(at) => {
-                    assert!(!inside, "{uv}: the hit lies in curve {}", h.curve);
-                    assert!(
-                        s.at_point(at).iter().any(|p| p.curve == h.curve),
-                        "{uv}: {at} is not in curve {}",
-                        h.curve
-                    );
-                    // Within the footprint.
-                    let m = glam::DMat2::from_cols(a, b).inverse() * (at - uv);
-                    assert!(
-                        m.abs().max_element() <= 0.5 + 1e-9,
-                        "{uv}: {at} off the footprint"
-                    );
-                }
-                None => assert!(inside, "{uv}: curve {} is placed nowhere", h.curve),
-            }
-        }
-    }
-    // The point test places nothing.
-    assert!(s
-        .at_point(DVec2::new(0.5, 0.5))
-        .iter()
-        .all(|h| h.at.is_none()));
-}
-
 #[test]
 fn circle_coverage_matches_the_annulus_and_a_brute_force_count() {
     // A circle of radius 0.3, width 0.02, flattened finely: the annulus' area over a

@@ -83,10 +83,7 @@ pub struct BsdfSample {
     /// does not go on from the hit itself: light that left a groove's wall inside the object
     /// and heads up for the surface beside the opening, where the next hit looks the
     /// scratches up again (traced glass walls seen from inside, METHOD.md 8.1); `wi` then
-    /// points up inside the object. Or, `z = 0`, a point of the covering scratch on the
-    /// surface where footprint coverage found the hit beside it ([`ScratchLobe::spawn`]):
-    /// light leaving a groove is not independent of that groove. `None` for every other
-    /// sample.
+    /// points up inside the object. `None` for every other sample.
     pub from: Option<Vec3>,
 }
 

@@ -193,10 +193,6 @@ pub struct ScratchLobe {
     pub lean: f32,
     pub cross: [f32; 2],
     pub place: Option<GroovePlace>,
-    /// Where light the lobe sends on leaves from, relative to the hit (shading frame's tangent
-    /// plane, world units): a point of the covering scratch where footprint coverage found the
-    /// hit beside it (METHOD.md 9.1); `None`: the hit.
-    pub spawn: Option<[f32; 2]>,
 }
 
 /// Where a hit lies across the groove of its lobe: `at` its offset from the axis along the
@@ -223,7 +219,6 @@ impl ScratchLobe {
             lean: 0.0,
             cross: [0.0; 2],
             place: None,
-            spawn: None,
         }
     }
 

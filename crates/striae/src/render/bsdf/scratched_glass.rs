@@ -787,10 +787,7 @@ impl<'a> ScratchedGlassBsdf<'a> {
                     pdf: l.coverage * s.pdf,
                     delta: false,
                     eta: eta(s.lobe),
-                    from: s
-                        .from
-                        .map(|v| l.from_scratch(v))
-                        .or(l.spawn.map(|o| Vec3::new(o[0], o[1], 0.0))),
+                    from: s.from.map(|v| l.from_scratch(v)),
                 });
             }
         };

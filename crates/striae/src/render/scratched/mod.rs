@@ -501,11 +501,7 @@ impl ScratchedMaterial {
             }
             None => {
                 let d = curves[i].direction;
-                let lobe = lobe_along(ctx, [d.x as f32, d.y as f32], c);
-                ScratchLobe {
-                    spawn: curves[i].at.map(|at| tangent_offset(ctx, at)),
-                    ..lobe
-                }
+                lobe_along(ctx, [d.x as f32, d.y as f32], c)
             }
         };
         if self.mix == LayerMix::Max {
@@ -1328,14 +1324,6 @@ fn lobe_along(ctx: &ShadingContext, d: [f32; 2], c: f32) -> ScratchLobe {
         (1.0, 0.0)
     };
     ScratchLobe::new(c, cos, sin)
-}
-
-/// The texture point `at` relative to the hit, in the shading frame's tangent plane (world
-/// units, to first order in the offset).
-fn tangent_offset(ctx: &ShadingContext, at: glam::DVec2) -> [f32; 2] {
-    let d = (at - ctx.uv.as_dvec2()).as_vec2();
-    let w: Vec3 = ctx.dpdu * d.x + ctx.dpdv * d.y;
-    [w.dot(ctx.frame.s), w.dot(ctx.frame.t)]
 }
 
 /// A uniform in `[0, 1)` hashed from `u`'s bits and `salt`: a further number from one already
