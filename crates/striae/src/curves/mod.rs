@@ -507,6 +507,38 @@ impl CurveSet {
         found
     }
 
+    /// The point of curve `curve` nearest to `uv` among its segments whose bounds meet the box
+    /// `uv +- reach`, moved across the axis by `across` (in `[-1, 1]`) of the half-width there:
+    /// where a footprint's path goes on from (`render::scratched`, METHOD.md section 6). `None`
+    /// where no segment of the curve comes within the box.
+    pub fn nearest_point(&self, curve: u32, uv: DVec2, reach: DVec2, across: f64) -> Option<DVec2> {
+        let (lo, hi) = (uv - reach, uv + reach);
+        if self.outside(lo, hi) {
+            return None;
+        }
+        let mut best: Option<(f64, DVec2)> = None;
+        self.for_segments_in(lo, hi, self.cells_of(lo, hi), |seg| {
+            if seg.curve != curve {
+                return;
+            }
+            let axis = seg.axis();
+            let d = axis.end - axis.start;
+            let len2 = d.length_squared();
+            let t = if len2 > 0.0 {
+                ((uv - axis.start).dot(d) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let [w0, w1] = axis.half_widths;
+            let p = axis.start + t * d + seg.tangent.perp() * (across * (w0 + t * (w1 - w0)));
+            let dist = p.distance_squared(uv);
+            if best.is_none_or(|(b, _)| dist < b) {
+                best = Some((dist, p));
+            }
+        });
+        best.map(|(_, p)| p)
+    }
+
     /// The curves whose opening holds texture point `uv` (coverage 1 each, the direction of the
     /// segment holding it): `coverage = "point"`, and the point test behind a too-large
     /// footprint.

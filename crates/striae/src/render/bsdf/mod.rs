@@ -83,7 +83,9 @@ pub struct BsdfSample {
     /// does not go on from the hit itself: light that left a groove's wall inside the object
     /// and heads up for the surface beside the opening, where the next hit looks the
     /// scratches up again (traced glass walls seen from inside, METHOD.md 8.1); `wi` then
-    /// points up inside the object. `None` for every other sample.
+    /// points up inside the object. On the surface (`z = 0`): the point of the covering
+    /// scratch a footprint's lobe goes on from ([`ScratchLobe::spawn`]). `None` for every other
+    /// sample.
     pub from: Option<Vec3>,
 }
 

@@ -184,7 +184,9 @@ pub enum ScratchedBase {
 /// angle `alpha`, as `sin alpha` (0 without one); and where the hit lies where two scratches
 /// cross (traced glass walls, METHOD.md 8.3), the other scratch's across axis `b` in this
 /// lobe's scratch frame, `(x, y)` (zero without one); and, for traced glass walls seen from
-/// inside, where the hit lies across the groove ([`GroovePlace`]).
+/// inside, where the hit lies across the groove ([`GroovePlace`]); and, for glass walls, where
+/// a path its groove sends on goes on from: `spawn`, an offset from the hit in the shading
+/// plane (world units along the frame's `s` and `t`; zero: the hit itself).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ScratchLobe {
     pub coverage: f32,
@@ -193,6 +195,7 @@ pub struct ScratchLobe {
     pub lean: f32,
     pub cross: [f32; 2],
     pub place: Option<GroovePlace>,
+    pub spawn: [f32; 2],
 }
 
 /// Where a hit lies across the groove of its lobe: `at` its offset from the axis along the
@@ -219,6 +222,24 @@ impl ScratchLobe {
             lean: 0.0,
             cross: [0.0; 2],
             place: None,
+            spawn: [0.0; 2],
+        }
+    }
+
+    /// The same lobe with its paths going on from `spawn` (see the type).
+    pub fn spawned_at(self, spawn: [f32; 2]) -> Self {
+        ScratchLobe { spawn, ..self }
+    }
+
+    /// Where a sample of this lobe goes on from ([`crate::render::bsdf::BsdfSample::from`]):
+    /// `from` (below a groove's wall) shifted to the lobe's spawn point, or that point on the
+    /// surface, or (neither) the hit.
+    #[inline]
+    pub fn going_on_from(&self, from: Option<Vec3>) -> Option<Vec3> {
+        let spawn = Vec3::new(self.spawn[0], self.spawn[1], 0.0);
+        match from {
+            Some(v) => Some(self.from_scratch(v) + spawn),
+            None => (self.spawn != [0.0; 2]).then_some(spawn),
         }
     }
 

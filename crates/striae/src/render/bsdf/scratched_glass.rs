@@ -787,7 +787,7 @@ impl<'a> ScratchedGlassBsdf<'a> {
                     pdf: l.coverage * s.pdf,
                     delta: false,
                     eta: eta(s.lobe),
-                    from: s.from.map(|v| l.from_scratch(v)),
+                    from: l.going_on_from(s.from),
                 });
             }
         };
@@ -804,7 +804,7 @@ impl<'a> ScratchedGlassBsdf<'a> {
             pdf,
             delta: false,
             eta: eta(lobe),
-            from: None,
+            from: l.going_on_from(None),
         })
     }
 }

@@ -463,6 +463,12 @@ impl Path {
             // The path left a groove's wall below the surface (traced glass walls seen from
             // inside): on from there, toward the surface beside the groove, where the next hit
             // looks the scratches up again.
+            // A footprint's lobe: on from the covering scratch's point, on the surface.
+            Some(from) if from.z == 0.0 => {
+                self.origin_depth = f32::INFINITY;
+                let p = hit.p + frame.to_world(from);
+                scene.geometry.spawn_origin(p, hit.ng, hit.shape, wi_world)
+            }
             Some(from) => {
                 self.origin_depth = -from.z;
                 let p = hit.p + frame.to_world(from);

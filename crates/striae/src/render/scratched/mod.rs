@@ -312,6 +312,26 @@ impl ScratchedMaterial {
         )
     }
 
+    /// Whether a curve's lobe at this hit sends its paths on from the covering curve
+    /// ([`curve_spawn`]): glass with dielectric walls seen from outside, its coverage a
+    /// footprint's share (`coverage` other than `"point"`), where the hit mostly lies beside the
+    /// scratch. Light a groove sends into the glass is not independent of that groove (trapped
+    /// light running along a line meets it again from inside), so it goes on from where the
+    /// point test's hit would lie: with it, footprint coverage renders the oblique line pairs
+    /// as the point test does (docs/fidelity.md, "Crossings").
+    #[inline]
+    fn spawns_on_curves(&self, ctx: &ShadingContext) -> bool {
+        self.coverage != CoverageMode::Point
+            && matches!(
+                (&self.model, self.base),
+                (
+                    ScratchModel::DielectricWalls(_),
+                    ScratchedBase::Glass { .. }
+                )
+            )
+            && ctx.wo.dot(ctx.ng) > 0.0
+    }
+
     /// Glass seen from inside under the seed's model, which has no scratches there
     /// (`bsdf::scratched`); dielectric walls scatter from both sides.
     #[inline]
@@ -493,6 +513,7 @@ impl ScratchedMaterial {
     ) -> (usize, f32, LobeShare) {
         let whole = LobeShare::default();
         let placed = inside_placed(self, ctx);
+        let spawns = self.spawns_on_curves(ctx);
         let curve_lobe = |i: usize, c: f32| match curves[i].axis.filter(|_| placed) {
             Some(a) => {
                 let d = (a.end - a.start).as_vec2();
@@ -501,7 +522,11 @@ impl ScratchedMaterial {
             }
             None => {
                 let d = curves[i].direction;
-                lobe_along(ctx, [d.x as f32, d.y as f32], c)
+                let lobe = lobe_along(ctx, [d.x as f32, d.y as f32], c);
+                match self.curves.as_ref().filter(|_| spawns) {
+                    Some(set) => lobe.spawned_at(curve_spawn(set, curves[i].curve, ctx)),
+                    None => lobe,
+                }
             }
         };
         if self.mix == LayerMix::Max {
@@ -1289,6 +1314,31 @@ fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32, u: f3
 /// Whether the lobes at `ctx` carry the hit's place across their groove
 /// ([`ScratchedMaterial::places_lobes`], seen from inside).
 #[inline(always)]
+/// Where the lobe of curve `curve`, covering the footprint of the hit `ctx`, sends its paths on
+/// from ([`ScratchLobe::spawn`]): the curve's point nearest to the hit within the footprint's
+/// reach ([`CurveSet::nearest_point`]), moved across its opening by a uniform hashed from
+/// `ctx.u_layer`, as an offset in the shading plane; zero (the hit) where no segment of the
+/// curve comes within reach.
+fn curve_spawn(set: &CurveSet, curve: u32, ctx: &ShadingContext) -> [f32; 2] {
+    let (a, b) = ctx.footprint_uv();
+    let reach = (a.abs() + b.abs()).as_dvec2();
+    let uv = ctx.uv.as_dvec2();
+    let across = 2.0 * rehashed(ctx.u_layer, 0x7370_6177) as f64 - 1.0;
+    match set.nearest_point(curve, uv, reach, across) {
+        Some(q) => {
+            let dq = (q - uv).as_vec2();
+            let w = ctx.dpdu * dq.x + ctx.dpdv * dq.y;
+            let offset = [w.dot(ctx.frame.s), w.dot(ctx.frame.t)];
+            if offset.iter().all(|x| x.is_finite()) {
+                offset
+            } else {
+                [0.0; 2]
+            }
+        }
+        None => [0.0; 2],
+    }
+}
+
 fn inside_placed(p: &ScratchedMaterial, ctx: &ShadingContext) -> bool {
     p.places_lobes() && ctx.wo.dot(ctx.ng) <= 0.0
 }

@@ -1549,3 +1549,78 @@ fn crossed_by_gives_the_partner_axis_in_the_scratch_frame() {
         }
     }
 }
+
+/// Under footprint coverage a curve's lobe on glass with dielectric walls sends its paths on
+/// from the curve, not from the hit beside it (`curve_spawn`): every lobe sample from a hit
+/// whose footprint the line crosses goes on from a point in the line's opening, level with the
+/// hit along the line; the base's samples, and every sample under `coverage = "point"`, go on
+/// from the hit.
+#[test]
+fn footprint_lobes_go_on_from_the_covering_curve() {
+    use crate::curves::{CurveSet, Polyline};
+    use glam::DVec2;
+    let profile = Profile::parse("v:depth=0.3").unwrap();
+    let walls = coarse_glass_walls(&profile);
+    let angle = 0.4f64;
+    let (axis, across) = (DVec2::from_angle(angle), DVec2::from_angle(angle).perp());
+    let line = Polyline::uniform(
+        vec![
+            DVec2::splat(0.5) - 0.45 * axis,
+            DVec2::splat(0.5) + 0.45 * axis,
+        ],
+        0.01,
+    );
+    let curves = Arc::new(CurveSet::new(&[line], DVec2::ONE).unwrap());
+    let material = |coverage| {
+        ScratchedMaterial::with_model(
+            ScratchedBase::Glass { eta: 1.5 },
+            Rgb::ONE,
+            ScratchModel::DielectricWalls(walls.clone()),
+            LayerSet::none(),
+            LayerMix::Union,
+            coverage,
+        )
+        .with_curves(Some(curves.clone()))
+    };
+    let (footprint, point) = (
+        material(CoverageMode::Footprint),
+        material(CoverageMode::Point),
+    );
+    let mut rng = Pcg64::seed_from_u64(5);
+    let (mut lobes, mut bases) = (0, 0);
+    for _ in 0..4000 {
+        // Beside the line or on it, within the footprint (0.1 across) of the line.
+        let off = rng.random_range(-0.04..0.04);
+        let uv = DVec2::splat(0.5) + across * off + axis * rng.random_range(-0.2..0.2);
+        let wo = dir(rng.random_range(0.0..80.0), rng.random_range(0.0..360.0));
+        let ctx = flat_ctx(uv.as_vec2(), 0.1, wo, rng.random());
+        let u = Vec2::new(rng.random(), rng.random());
+        let Some(s) = bsdf_of(&footprint, &ctx).sample(wo, rng.random(), u) else {
+            continue;
+        };
+        if s.delta {
+            assert_eq!(s.from, None, "a base sample goes on from the hit");
+            bases += 1;
+            continue;
+        }
+        let from = s.from.expect("a lobe sample goes on from the curve");
+        assert_eq!(from.z, 0.0);
+        let q = uv + DVec2::new(from.x as f64, from.y as f64);
+        assert!(!curves.at_point(q).is_empty(), "{uv} + {from} off the line");
+        assert!(
+            (q - uv).dot(axis).abs() < 1e-6,
+            "not level with the hit: {uv} {q}"
+        );
+        lobes += 1;
+        // The point test's hit on the line goes on from itself.
+        if !curves.at_point(uv).is_empty() {
+            if let Some(s) = bsdf_of(&point, &ctx).sample(wo, rng.random(), u) {
+                assert_eq!(s.from, None);
+            }
+        }
+    }
+    assert!(
+        lobes > 200 && bases > 200,
+        "{lobes} lobe and {bases} base samples"
+    );
+}
