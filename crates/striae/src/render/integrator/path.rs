@@ -460,15 +460,15 @@ impl Path {
             );
         }
         let origin = match bs.from {
-            // The path left a groove's wall below the surface (traced glass walls seen from
-            // inside): on from there, toward the surface beside the groove, where the next hit
-            // looks the scratches up again.
             // A footprint's lobe: on from the covering scratch's point, on the surface.
             Some(from) if from.z == 0.0 => {
                 self.origin_depth = f32::INFINITY;
                 let p = hit.p + frame.to_world(from);
                 scene.geometry.spawn_origin(p, hit.ng, hit.shape, wi_world)
             }
+            // The path left a groove's wall below the surface (traced glass walls seen from
+            // inside): on from there, toward the surface beside the groove, where the next hit
+            // looks the scratches up again.
             Some(from) => {
                 self.origin_depth = -from.z;
                 let p = hit.p + frame.to_world(from);

@@ -12,7 +12,9 @@
 //! Where no layer covers the footprint the BSDF is the base itself, at no extra cost; glass seen
 //! from inside skips the layer queries (its scratches are on the outer side, `bsdf::scratched`).
 //! Curves (METHOD.md 9.1, [`crate::curves`]) and a painted map (9.5, [`crate::maps`]) add
-//! candidate lobes beside the layers', which `layer_mix` combines alike ([`ScratchedMaterial::bsdf`]).
+//! candidate lobes beside the layers', which `layer_mix` combines alike ([`ScratchedMaterial::bsdf`]);
+//! on glass with dielectric walls a curve's lobe at a footprint's hit sends its paths on from
+//! the curve itself ([`curve_spawn`]).
 
 use crate::curves::{CurveHits, CurveSet};
 use crate::layers::cache::PixelKey;
@@ -1314,6 +1316,10 @@ fn lobe(p: &ScratchedMaterial, ctx: &ShadingContext, layer: usize, c: f32, u: f3
 /// Whether the lobes at `ctx` carry the hit's place across their groove
 /// ([`ScratchedMaterial::places_lobes`], seen from inside).
 #[inline(always)]
+fn inside_placed(p: &ScratchedMaterial, ctx: &ShadingContext) -> bool {
+    p.places_lobes() && ctx.wo.dot(ctx.ng) <= 0.0
+}
+
 /// Where the lobe of curve `curve`, covering the footprint of the hit `ctx`, sends its paths on
 /// from ([`ScratchLobe::spawn`]): the curve's point nearest to the hit within the footprint's
 /// reach ([`CurveSet::nearest_point`]), moved across its opening by a uniform hashed from
@@ -1337,10 +1343,6 @@ fn curve_spawn(set: &CurveSet, curve: u32, ctx: &ShadingContext) -> [f32; 2] {
         }
         None => [0.0; 2],
     }
-}
-
-fn inside_placed(p: &ScratchedMaterial, ctx: &ShadingContext) -> bool {
-    p.places_lobes() && ctx.wo.dot(ctx.ng) <= 0.0
 }
 
 /// Scratch `sc`'s lobe with coverage `c`: along its direction, and where the material asks it,
