@@ -1332,11 +1332,9 @@ fn curve_spawn(set: &CurveSet, curve: u32, ctx: &ShadingContext) -> [f32; 2] {
     let across = 2.0 * rehashed(ctx.u_layer, 0x7370_6177) as f64 - 1.0;
     match set.nearest_point(curve, uv, reach, across) {
         Some(q) => {
-            let dq = (q - uv).as_vec2();
-            let w = ctx.dpdu * dq.x + ctx.dpdv * dq.y;
-            let offset = [w.dot(ctx.frame.s), w.dot(ctx.frame.t)];
-            if offset.iter().all(|x| x.is_finite()) {
-                offset
+            let offset = TangentMap::new(ctx).map(q - uv).as_vec2();
+            if offset.is_finite() {
+                offset.to_array()
             } else {
                 [0.0; 2]
             }
