@@ -268,6 +268,16 @@ pub struct SegmentAxis {
     pub depth: f32,
 }
 
+impl SegmentAxis {
+    /// The half-width across the axis at `s` in `[0, 1]` along it (linear between its ends;
+    /// texture space).
+    #[inline(always)]
+    pub fn half_width_at(&self, s: f64) -> f64 {
+        let [w0, w1] = self.half_widths;
+        w0 + (w1 - w0) * s
+    }
+}
+
 /// A set of scratch curves with a uniform grid over their segments in texture space.
 #[derive(Clone, Debug)]
 pub struct CurveSet {
@@ -529,8 +539,7 @@ impl CurveSet {
             } else {
                 0.0
             };
-            let [w0, w1] = axis.half_widths;
-            let p = axis.start + t * d + seg.tangent.perp() * (across * (w0 + t * (w1 - w0)));
+            let p = axis.start + t * d + seg.tangent.perp() * (across * axis.half_width_at(t));
             let dist = p.distance_squared(uv);
             if best.is_none_or(|(b, _)| dist < b) {
                 best = Some((dist, p));

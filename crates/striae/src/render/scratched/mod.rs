@@ -1108,8 +1108,7 @@ impl TangentMap {
     /// axis, `|A e| = axis_len`).
     #[inline(always)]
     fn segment_half_width(&self, a: &crate::curves::SegmentAxis, s: f64, axis_len: f64) -> f64 {
-        let h = a.half_widths[0] + (a.half_widths[1] - a.half_widths[0]) * s;
-        h * self.det.abs() * (a.end - a.start).length() / axis_len
+        a.half_width_at(s) * self.det.abs() * (a.end - a.start).length() / axis_len
     }
 }
 
