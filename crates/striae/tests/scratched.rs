@@ -738,57 +738,74 @@ fn explicit_exits(
     rng: &mut impl rand::Rng,
     rays: usize,
 ) -> Exits {
-    use striae::math::{reflect, Ray, Vec3};
-    use striae::optics::fresnel::dielectric;
-    use striae::render::shading::refract_dir;
-    let geometry = &s.geometry;
+    use striae::math::Vec3;
     let mut exits = Exits::default();
     for _ in 0..rays {
         let aim = g.along * (at + rng.random_range(-half_along..half_along))
             + g.across * (centre + rng.random_range(-half_across..half_across))
             + Vec3::Y * 0.2;
-        let from_inside = d.y > 0.0;
-        let (mut o, mut dir) = (aim - d * (0.05 / d.y.abs()), d);
-        let (mut inside, mut met) = (from_inside, false);
-        for _ in 0..100 {
-            let Some(h) = geometry.intersect(&Ray::new(o, dir)) else {
-                if met && !inside {
-                    exits.add(false, [dir.dot(g.across), dir.dot(g.along), dir.y]);
-                }
-                break;
-            };
-            // Back in the bulk: past the groove's depth, well beside it, or far along it
-            // (trapped light running toward the box's ends, taken as the flat top face
-            // mirrors it: heading down).
-            let off = (h.p.dot(g.across) - centre).abs();
-            let far_along = (h.p - aim).dot(g.along).abs() > 0.45;
-            if inside && (off > 0.45 || far_along || h.p.y < 0.15) {
-                if met {
-                    let up = if far_along { -dir.y.abs() } else { dir.y };
-                    exits.add(true, [dir.dot(g.across), dir.dot(g.along), up]);
-                }
-                break;
-            }
-            if !(from_inside || met || h.shape != 0) {
-                break;
-            }
-            met |= h.shape != 0;
-            // `n` faces the ray; the Fresnel cosine is signed by the side of the glass.
-            let n = if dir.dot(h.ng) < 0.0 { h.ng } else { -h.ng };
-            let cos_i = -dir.dot(n) as f64;
-            let f = dielectric(if inside { -cos_i } else { cos_i }, 1.5);
-            let refracted = refract_dir(dir, n, (1.0 / f.eta_it) as f32);
-            match refracted.filter(|_| rng.random::<f32>() >= f.r as f32) {
-                Some(t) => {
-                    dir = t.normalize();
-                    inside = !inside;
-                }
-                None => dir = reflect(-dir, n),
-            }
-            o = geometry.spawn_origin(h.p, h.ng, h.shape, dir);
-        }
+        let o = aim - d * (0.05 / d.y.abs());
+        explicit_path(s, g, centre, (o, aim), d, d.y > 0.0, rng, &mut exits);
     }
     exits
+}
+
+/// One ray of [`explicit_exits`] from `o` along `d`, inside the glass or not (`from_inside`),
+/// into `exits`; `aim`, the place on the top face it is aimed at.
+#[allow(clippy::too_many_arguments)]
+fn explicit_path(
+    s: &Scene,
+    g: &GrooveOnFace,
+    centre: f32,
+    (o, aim): (striae::math::Vec3, striae::math::Vec3),
+    d: striae::math::Vec3,
+    from_inside: bool,
+    rng: &mut impl rand::Rng,
+    exits: &mut Exits,
+) {
+    use striae::math::{reflect, Ray};
+    use striae::optics::fresnel::dielectric;
+    use striae::render::shading::refract_dir;
+    let geometry = &s.geometry;
+    let (mut o, mut dir) = (o, d);
+    let (mut inside, mut met) = (from_inside, false);
+    for _ in 0..100 {
+        let Some(h) = geometry.intersect(&Ray::new(o, dir)) else {
+            if met && !inside {
+                exits.add(false, [dir.dot(g.across), dir.dot(g.along), dir.y]);
+            }
+            return;
+        };
+        // Back in the bulk: past the groove's depth, well beside it, or far along it
+        // (trapped light running toward the box's ends, taken as the flat top face
+        // mirrors it: heading down).
+        let off = (h.p.dot(g.across) - centre).abs();
+        let far_along = (h.p - aim).dot(g.along).abs() > 0.45;
+        if inside && (off > 0.45 || far_along || h.p.y < 0.15) {
+            if met {
+                let up = if far_along { -dir.y.abs() } else { dir.y };
+                exits.add(true, [dir.dot(g.across), dir.dot(g.along), up]);
+            }
+            return;
+        }
+        if !(from_inside || met || h.shape != 0) {
+            return;
+        }
+        met |= h.shape != 0;
+        // `n` faces the ray; the Fresnel cosine is signed by the side of the glass.
+        let n = if dir.dot(h.ng) < 0.0 { h.ng } else { -h.ng };
+        let cos_i = -dir.dot(n) as f64;
+        let f = dielectric(if inside { -cos_i } else { cos_i }, 1.5);
+        let refracted = refract_dir(dir, n, (1.0 / f.eta_it) as f32);
+        match refracted.filter(|_| rng.random::<f32>() >= f.r as f32) {
+            Some(t) => {
+                dir = t.normalize();
+                inside = !inside;
+            }
+            None => dir = reflect(-dir, n),
+        }
+        o = geometry.spawn_origin(h.p, h.ng, h.shape, dir);
+    }
 }
 
 /// The exact groove's [`Exits`] for light travelling along `d` (its frame: across, along, up)
@@ -796,7 +813,7 @@ fn explicit_exits(
 fn traced_exits(d: [f64; 3], taper: f64, rng: &mut impl rand::Rng, paths: usize) -> Exits {
     use striae::precompute::groove::GroovePaths;
     use striae::precompute::profile::Profile;
-    let groove = GroovePaths::new(&Profile::parse("v:depth=0.3").unwrap(), 1.5);
+    let groove = GroovePaths::new(&Profile::parse("v:depth=0.3").unwrap(), 1.3);
     let mut exits = Exits::default();
     for _ in 0..paths {
         if let Some(e) = groove.trace(d, rng.random(), None, rng.random::<u64>(), None, taper) {
@@ -833,6 +850,89 @@ fn the_traced_groove_leaves_light_from_inside_as_its_explicit_geometry_does() {
             let explicit = explicit_exits(&s, &g, (0.0, 0.3), (centre, 0.25), d, &mut rng, 160_000);
             let traced = traced_exits(d_groove.map(|x| x as f64), 0.0, &mut rng, 60_000);
             let what = format!("{theta} degrees, psi {psi}");
+            explicit.assert_alike(&traced, &what);
+            explicit.assert_directions_alike(&traced, &what);
+        }
+    }
+}
+
+/// The exact groove meets light falling past it inside the glass (light another groove sent
+/// down below the surface, METHOD.md 8.3; `GroovePaths::trace_from`, which the renderer
+/// traces it with) as its explicit geometry does: rays starting beside the straight V groove
+/// of [`the_traced_groove_leaves_light_from_inside_as_its_explicit_geometry_does`], within its
+/// depth and its reach, heading down across it at 75 to 85 degrees from the normal and at 45
+/// to 90 degrees to it, meet it in the same share and leave it back in the glass below the
+/// critical angle or beyond it in the same shares and directions across the groove, within
+/// noise. (Such light meets a V's wall beyond the critical angle: the groove mirrors it, more
+/// steeply down.)
+#[test]
+fn the_traced_groove_meets_light_falling_past_it_as_its_explicit_geometry_does() {
+    use rand::{Rng, SeedableRng};
+    use rand_pcg::Pcg64;
+    use striae::math::Vec3;
+    use striae::precompute::crossing::CrossingEnd;
+    use striae::precompute::groove::GroovePaths;
+    use striae::precompute::profile::Profile;
+    let mut rng = Pcg64::seed_from_u64(24);
+    let rays = 60_000;
+    let s = explicit_grooves("[{ points = [[0.0, 0.5], [1.0, 0.5]], width = 0.02 }]");
+    let (g, at) = GrooveOnFace::find(&s, 0.3);
+    // The groove's width as carved (the polyline's `width` is its half-width); the rays'
+    // measure of it is 0.5 % short.
+    let (centre, width) = (g.width(&s, at).0, 0.04);
+    let groove = GroovePaths::new(&Profile::parse("v:depth=0.3").unwrap(), 1.5);
+    for theta in [75.0f32, 80.0, 85.0] {
+        for psi in [45.0f32, 90.0] {
+            let (t, p) = (theta.to_radians(), psi.to_radians());
+            // Travel in the groove's frame: across, along, up (down). (A line across the
+            // groove steeper than its walls, 31 degrees below the horizontal, passes under it.)
+            let d_groove = [t.sin() * p.sin(), t.sin() * p.cos(), -t.cos()];
+            let d = g.across * d_groove[0] + g.along * d_groove[1] + Vec3::Y * d_groove[2];
+            // Starts (in opening widths from the axis, below the surface) from which the line
+            // meets the groove: beside the opening, within its depth, and above its deepest
+            // point when it gets there (falling `slope` a width across), by a twelfth of its
+            // depth.
+            let slope = -d_groove[2] / d_groove[0];
+            let deep = 0.275;
+            let top = (0.5 * slope - deep).max(-deep);
+            let start = |rng: &mut Pcg64| {
+                // (Not at the surface, where an explicit ray would start on the flat face.)
+                let z = top * (0.1 + 0.9 * rng.random::<f32>());
+                let far = (-deep - z) / slope;
+                [far + (-0.5 - far) * rng.random::<f32>(), z]
+            };
+            let (mut explicit, mut traced) = (Exits::default(), Exits::default());
+            let (mut met_explicit, mut met_traced) = (0usize, 0usize);
+            for _ in 0..rays {
+                let [x, z] = start(&mut rng);
+                let o =
+                    g.along * at + g.across * (centre + x * width) + Vec3::Y * (0.2 + z * width);
+                let before = explicit.shares().1;
+                explicit_path(&s, &g, centre, (o, o), d, true, &mut rng, &mut explicit);
+                met_explicit += (explicit.shares().1 > before) as usize;
+            }
+            for _ in 0..rays {
+                let [x, z] = start(&mut rng);
+                let dg = d_groove.map(|v| v as f64);
+                match groove.trace_from([x as f64, z as f64], dg, rng.random(), 0.0, false) {
+                    CrossingEnd::Left(e) => {
+                        met_traced += 1;
+                        traced.add(e.in_object, e.d.map(|v| v as f32));
+                    }
+                    CrossingEnd::Missed => {}
+                    CrossingEnd::Lost => met_traced += 1,
+                }
+            }
+            let what = format!("falling at {theta} degrees, psi {psi}");
+            let (a, b) = (
+                met_explicit as f64 / rays as f64,
+                met_traced as f64 / rays as f64,
+            );
+            let sigma = (0.5 * (a + b) * (1.0 - 0.5 * (a + b)) * 2.0 / rays as f64).sqrt();
+            assert!(
+                (a - b).abs() <= 4.0 * sigma + 2e-3,
+                "{what}: met {a} against {b}"
+            );
             explicit.assert_alike(&traced, &what);
             explicit.assert_directions_alike(&traced, &what);
         }

@@ -29,12 +29,13 @@ pub struct Partner {
     pub width: f64,
 }
 
-/// How a traced path ended.
+/// How a traced path ended (of a crossing, or of one groove,
+/// [`crate::precompute::groove::GroovePaths::trace_from`]).
 #[derive(Clone, Copy, Debug)]
-pub(crate) enum CrossingEnd {
+pub enum CrossingEnd {
     /// With nothing ahead: into the air (up) or the bulk (down).
     Left(GrooveExit),
-    /// From inside, meeting neither groove.
+    /// From inside, meeting no groove.
     Missed,
     /// Out of bounces.
     Lost,

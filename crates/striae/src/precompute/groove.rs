@@ -844,9 +844,11 @@ pub struct GroovePaths {
 
 /// Where a traced path left the groove: its travel direction (unit, the groove's frame),
 /// whether it went into the object, and its weight (1: smooth walls are lossless); `from`, for
-/// a path that surfaced ([`GroovePaths::trace`] with `at`), the point `(x, z)` of the
-/// cross-section (`z < 0`) where it left the last wall, heading up inside the object (`d.z >
-/// 0`) for the flat surface beside the opening.
+/// a path traced at a place ([`GroovePaths::trace`] with `at`, [`GroovePaths::trace_from`])
+/// that left the last wall inside the object, the point `(x, z)` of the cross-section (`z <
+/// 0`) where it left it: heading up (`d.z > 0`) for the flat surface beside the opening (it
+/// surfaced), or down (`d.z < 0`) into the bulk, passing under the surface within reach of
+/// other grooves (METHOD.md 8.1, "Ours": light between grooves).
 #[derive(Clone, Copy, Debug)]
 pub struct GrooveExit {
     pub d: [f64; 3],
@@ -948,24 +950,38 @@ impl GroovePaths {
         taper: f64,
     ) -> CrossingEnd {
         let t = &self.tracer;
-        let exit = |r: Ray, from| {
-            CrossingEnd::Left(GrooveExit {
-                d: r.d,
-                in_object: r.in_object,
-                w: r.w,
-                from,
-            })
-        };
         let ray = Ray {
             taper,
             ..t.entry(x0, d0, inside)
         };
-        match t.run(ray, path_key, inside, surfacing) {
-            Outcome::Left(r) => exit(r, None),
-            Outcome::Surfaced(r) => exit(r, Some(r.pos)),
-            Outcome::Missed => CrossingEnd::Missed,
-            Outcome::Absorbed | Outcome::Dropped(_) => CrossingEnd::Lost,
-        }
+        end_of(t.run(ray, path_key, inside, surfacing), surfacing)
+    }
+
+    /// One path of light inside the object travelling down along `d0` (unit, 3D, the
+    /// groove's frame, `d0.z < 0`) from the point `start` (`(x, z)`, `z <= 0`, beside the
+    /// groove, in opening widths from its axis), its bounces drawn from the stream `key`: light
+    /// another groove sent down under this one ([`GrooveExit::from`]). `Missed` where the line
+    /// passes the groove. With `surfacing` (the renderer's), a path that meets it and heads up
+    /// for the flat surface beside it stops there, and one that leaves down into the bulk gives
+    /// where it left, as [`Self::trace`] with `at`; without, the tracer's flat surface, which
+    /// holds no other groove, turns it back.
+    pub fn trace_from(
+        &self,
+        start: [f64; 2],
+        d0: [f64; 3],
+        key: u64,
+        taper: f64,
+        surfacing: bool,
+    ) -> CrossingEnd {
+        let ray = Ray {
+            pos: start,
+            d: d0,
+            in_object: true,
+            skip: usize::MAX,
+            w: 1.0,
+            taper,
+        };
+        end_of(self.tracer.run(ray, mix64(key), true, surfacing), surfacing)
     }
 
     /// [`Self::run_2d`] for the crossing tracer's tests: `Some(Some(exit))`, `Some(None)`
@@ -983,6 +999,29 @@ impl GroovePaths {
             CrossingEnd::Missed => Some(None),
             CrossingEnd::Lost => None,
         }
+    }
+}
+
+/// How a path of [`GroovePaths`] ended, from the tracer's outcome (`placed`: traced at a
+/// place, where [`GrooveExit::from`] says where it left the last wall).
+fn end_of(outcome: Outcome, placed: bool) -> CrossingEnd {
+    let exit = |r: Ray, from| {
+        CrossingEnd::Left(GrooveExit {
+            d: r.d,
+            in_object: r.in_object,
+            w: r.w,
+            from,
+        })
+    };
+    match outcome {
+        // Down into the bulk from a wall below the surface.
+        Outcome::Left(r) if placed && r.in_object && r.d[2] < 0.0 && r.pos[1] < 0.0 => {
+            exit(r, Some(r.pos))
+        }
+        Outcome::Left(r) => exit(r, None),
+        Outcome::Surfaced(r) => exit(r, Some(r.pos)),
+        Outcome::Missed => CrossingEnd::Missed,
+        Outcome::Absorbed | Outcome::Dropped(_) => CrossingEnd::Lost,
     }
 }
 
@@ -1068,7 +1107,8 @@ mod tests {
     /// A path from inside that enters `at` a drawn entry's place is the drawn path until it
     /// surfaces: heading up for the flat surface beside the opening, it stops on the wall it
     /// left, below the surface, and the drawn path goes on from there through the flat
-    /// surface alone: mirrored, or refracted into the air. Elsewhere the two are one path.
+    /// surface alone: mirrored, or refracted into the air. Elsewhere the two are one path,
+    /// and one that leaves down into the glass gives the wall it left (below the surface).
     #[test]
     fn surfacing_paths_stop_on_the_wall_they_leave() {
         let ior = 1.5;
@@ -1080,7 +1120,7 @@ mod tests {
             let profile = Profile::parse(spec).unwrap();
             let paths = GroovePaths::new(&profile, ior);
             let cs = CrossSection::new(&profile);
-            let mut surfaced = 0;
+            let (mut surfaced, mut departed) = (0, 0);
             for k in 0..20_000u64 {
                 let h = |i: u64| unit(mix64(k * 8 + i));
                 let theta = (42.0 + 47.0 * h(0)).to_radians();
@@ -1103,11 +1143,6 @@ mod tests {
                     assert_eq!((a.d, a.in_object), (b.d, b.in_object), "{spec}");
                     continue;
                 };
-                surfaced += 1;
-                assert!(
-                    b.in_object && b.d[2] > 0.0 && z < -SURFACING_DEPTH,
-                    "{spec}: {b:?}"
-                );
                 // On the profile's walls.
                 let gap = profile
                     .points
@@ -1123,6 +1158,14 @@ mod tests {
                     })
                     .fold(f64::INFINITY, f64::min);
                 assert!(gap < 1e-9, "{spec}: ({x}, {z}) is {gap} off the walls");
+                if b.d[2] < 0.0 {
+                    departed += 1;
+                    assert_eq!((a.d, a.in_object), (b.d, b.in_object), "{spec}");
+                    assert!(b.in_object && z < 0.0, "{spec}: {b:?}");
+                    continue;
+                }
+                surfaced += 1;
+                assert!(b.in_object && z < -SURFACING_DEPTH, "{spec}: {b:?}");
                 // It surfaces beside the opening.
                 let xs = x - z * b.d[0] / b.d[2];
                 assert!(xs.abs() > 0.5, "{spec}: surfaces at {xs}");
@@ -1136,6 +1179,7 @@ mod tests {
                 assert!(off.fold(0.0, f64::max) < 1e-9, "{spec}: {a:?} from {b:?}");
             }
             assert!(surfaced > 200, "{spec}: {surfaced} paths surfaced");
+            assert!(departed > 200, "{spec}: {departed} paths left down");
         }
     }
 

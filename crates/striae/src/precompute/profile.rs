@@ -469,14 +469,24 @@ impl Profile {
     /// has met the groove first when this holds (METHOD.md 8.1; the light beside the opening
     /// of [`crate::precompute::groove::GonioSettings::beside`]).
     pub fn ray_meets_ridge(&self, x: f64, dx: f64, dz: f64) -> bool {
-        self.ray_meets_ridge_within(x, dx, dz, f64::INFINITY)
+        self.ray_meets_ridge_between(x, dx, dz, 0.0, f64::INFINITY)
     }
 
-    /// [`Self::ray_meets_ridge`] for a line that begins `max_depth` below the surface: the
-    /// walls must be met shallower than that.
-    pub fn ray_meets_ridge_within(&self, x: f64, dx: f64, dz: f64, max_depth: f64) -> bool {
+    /// [`Self::ray_meets_ridge`] for the stretch of the line between `min_depth` and
+    /// `max_depth` below the surface: light that began `max_depth` deep (met shallower than
+    /// that on its way up), or light that left a wall `min_depth` deep on its way down (met
+    /// deeper than that; a line that is below the opening there, in the groove or under it,
+    /// meets no wall beside it).
+    pub fn ray_meets_ridge_between(
+        &self,
+        x: f64,
+        dx: f64,
+        dz: f64,
+        min_depth: f64,
+        max_depth: f64,
+    ) -> bool {
         let down = dz < 0.0;
-        if !down {
+        if !down || (x + dx * min_depth / -dz).abs() < 0.5 {
             return false;
         }
         let o = [x, 0.0];
@@ -491,7 +501,7 @@ impl Profile {
             let r = sub(w[0], o);
             let t = cross(r, e) / den;
             let u = cross(r, d) / den;
-            t > 1e-12 && (0.0..=1.0).contains(&u) && -t * dz < max_depth
+            t > 1e-12 && (0.0..=1.0).contains(&u) && (min_depth..max_depth).contains(&(-t * dz))
         })
     }
 }
@@ -730,6 +740,37 @@ mod tests {
                 .any(|i| p.ray_meets_ridge(0.5 + 0.004 * (i as f64 + 0.5), a.sin(), -a.cos()));
             assert!(!far, "{deg} degrees: the far side");
         }
+    }
+
+    /// A line down through a V of depth 1/2 crosses its walls where the geometry puts them:
+    /// from `(-3/2, 0)` along `(1, -1/4)` into the left wall at depth 1/3 and out through the
+    /// right one at depth 2/5; only a stretch of the line holding one of them meets it.
+    #[test]
+    fn ridge_met_over_a_stretch_of_the_line() {
+        let p = Profile::parse("v:depth=0.5").unwrap();
+        let (x, dx, dz) = (-1.5, 1.0, -0.25);
+        for (min, max, meets) in [
+            (0.0, f64::INFINITY, true),
+            (0.0, 0.33, false),
+            (0.0, 0.34, true),
+            (0.34, 0.39, false),
+            (0.35, 0.41, true),
+            (0.41, f64::INFINITY, false),
+        ] {
+            assert_eq!(
+                p.ray_meets_ridge_between(x, dx, dz, min, max),
+                meets,
+                "{min}..{max}"
+            );
+        }
+        assert!(
+            !p.ray_meets_ridge_between(x, dx, -dz, 0.0, f64::INFINITY),
+            "going up"
+        );
+        // Below the opening at `min_depth` (past `x = -1/2` from depth 1/4 on): in the groove
+        // or under it, whatever lies deeper.
+        assert!(p.ray_meets_ridge_between(x, dx, dz, 0.24, 0.34));
+        assert!(!p.ray_meets_ridge_between(x, dx, dz, 0.26, f64::INFINITY));
     }
 
     #[test]

@@ -7,7 +7,8 @@ use crate::layers::CoverageCache;
 use crate::math::{Frame, RayDifferential, Rgb, Vec2, Vec3};
 use crate::render::bsdf::{Bsdf, Conductor, ConductorIor, Dielectric, Diffuse};
 use crate::render::bsdf::{ConductorCompensation, DielectricCompensation};
-use crate::render::bsdf::{GrooveWall, LayerAlbedo, Pbr, RoughConductor, RoughDielectric};
+use crate::render::bsdf::{GrooveBelow, GrooveWall, LayerAlbedo, Pbr};
+use crate::render::bsdf::{RoughConductor, RoughDielectric};
 use crate::render::geometry::SurfaceHit;
 use crate::render::scratched::ScratchedMaterial;
 use crate::render::shading::{hit_context, shading_frame, PixelHit, ShadingContext};
@@ -218,6 +219,27 @@ impl Material {
         match self {
             Material::Scratched(m) => m.reads_hit_context(wo, ng),
             _ => false,
+        }
+    }
+
+    /// The groove that light a groove at `hit` sent down into the glass meets next, below the
+    /// surface ([`ScratchedMaterial::groove_below`]; `from` and `wi` in the hit's shading
+    /// `frame`); `None` for every other material.
+    #[inline]
+    pub fn groove_below(
+        &self,
+        hit: &SurfaceHit,
+        frame: Frame,
+        from: Vec3,
+        wi: Vec3,
+        u: f32,
+    ) -> Option<GrooveBelow<'_>> {
+        match self {
+            Material::Scratched(m) => {
+                let ctx = hit_context(hit, None, frame, -frame.to_world(wi), u, None);
+                m.groove_below(&ctx, from, wi, u)
+            }
+            _ => None,
         }
     }
 

@@ -59,7 +59,9 @@ pub use pbr::{LayerAlbedo, Pbr};
 pub use scratched::{
     GroovePlace, LobeShare, ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf,
 };
-pub use scratched_glass::{GlassWalls, ScratchedGlassBsdf, TracedGroove, WallLobeTable};
+pub use scratched_glass::{
+    GlassWalls, GrooveBelow, ScratchedGlassBsdf, TracedGroove, WallLobeTable,
+};
 pub use scratched_metal::ScratchedMetalBsdf;
 pub use wall::GrooveWall;
 
@@ -83,9 +85,11 @@ pub struct BsdfSample {
     /// does not go on from the hit itself: light that left a groove's wall inside the object
     /// and heads up for the surface beside the opening, where the next hit looks the
     /// scratches up again (traced glass walls seen from inside, METHOD.md 8.1); `wi` then
-    /// points up inside the object. On the surface (`z = 0`): the point of the covering
-    /// scratch a footprint's lobe goes on from ([`ScratchLobe::spawn`]). `None` for every other
-    /// sample.
+    /// points up inside the object. Light such a groove sent down into the object (`wi`
+    /// pointing down) gives the wall it left, where the path loop looks for the grooves it
+    /// runs under ([`crate::render::material::Material::groove_below`]), going on from the hit
+    /// past them. On the surface (`z = 0`): the point of the covering scratch a footprint's
+    /// lobe goes on from ([`ScratchLobe::spawn`]). `None` for every other sample.
     pub from: Option<Vec3>,
 }
 

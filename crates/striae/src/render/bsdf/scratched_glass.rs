@@ -57,12 +57,12 @@
 
 use super::dielectric::{mirror_sample, refraction_sample};
 use super::scratched::CoveredLobes;
-use super::{BsdfSample, ScratchLobe};
+use super::{BsdfSample, GroovePlace, ScratchLobe};
 use crate::hash::{mix64, unit_from_u32};
 use crate::math::{Rgb, Vec2, Vec3};
 use crate::optics::fresnel_f32;
-use crate::precompute::crossing::Partner;
-use crate::precompute::groove::GroovePaths;
+use crate::precompute::crossing::{CrossingEnd, Partner};
+use crate::precompute::groove::{GrooveExit, GroovePaths};
 use crate::precompute::profile::Profile;
 use crate::precompute::wall_table::{self, WallTable, WallTableParams};
 use std::f32::consts::{FRAC_PI_2, PI};
@@ -553,29 +553,91 @@ impl TracedGroove {
         let at = place.map(|p| p.at as f64);
         let e = self.paths.trace(d0, u.x as f64, at, key, partner, taper)?;
         let wi = Vec3::new(e.d[0] as f32, e.d[1] as f32, e.d[2] as f32);
-        if let (Some([x, z]), Some(p)) = (e.from, place) {
-            // On from a step up the ray, off the wall: the hit where it surfaces searches for
-            // grooves met beside their openings no deeper than that (`origin_depth`), which
-            // leaves out the wall it left, whatever the rounding of world positions.
-            let step = (0.5 * -z).min(SURFACING_STEP);
-            let (x, z) = (x + step * e.d[0] / e.d[2], z + step);
-            // Still inside the object: a reflection's weight.
-            return Some(SmoothSample {
-                wi,
-                lobe: 0,
-                weight: e.w as f32,
-                pdf: 1.0,
-                from: Some(Vec3::new(x as f32 - p.at, 0.0, z as f32) * p.width),
-            });
-        }
-        let lobe = ((wi.z > 0.0) != (w.z > 0.0)) as usize;
         let side = (w.z < 0.0) as usize;
+        // Transmitted where it ends in the other medium (one that surfaced has not).
+        let lobe = (e.in_object != (side == 1)) as usize;
         Some(SmoothSample {
             wi,
             lobe,
             weight: radiance_factor(self.n, side, lobe) * e.w as f32,
             pdf: 1.0,
-            from: None,
+            from: place.and_then(|p| going_on(&e, p)),
+        })
+    }
+}
+
+/// Where a path traced at `place` ([`GroovePaths::trace`] with `at`) goes on from, where not
+/// from the hit ([`SmoothSample::from`], scratch frame, relative to the point of the surface at
+/// `place`): where it left the groove's wall inside the object, going down, or, going up for
+/// the surface beside the opening, a step up its ray, off the wall: the hit where it surfaces
+/// searches for grooves met beside their openings no deeper than that (`origin_depth`), which
+/// leaves out the wall it left, whatever the rounding of world positions.
+fn going_on(e: &GrooveExit, place: GroovePlace) -> Option<Vec3> {
+    let [x, z] = e.from?;
+    let step = if e.d[2] > 0.0 {
+        (0.5 * -z).min(SURFACING_STEP)
+    } else {
+        0.0
+    };
+    let (x, z) = (x + step * e.d[0] / e.d[2], z + step);
+    Some(Vec3::new(x as f32 - place.at, 0.0, z as f32) * place.width)
+}
+
+/// The groove that light another groove sent down into the glass meets below the surface
+/// (METHOD.md 8.1, "Ours": light between grooves; [`crate::render::scratched::ScratchedMaterial::groove_below`]):
+/// its traced walls, its frame and the place across it where the light's line crosses the
+/// surface (`lobe`), how far below the surface the light began (`depth`, world units) and
+/// where the line crosses the surface (`surface`, shading frame, relative to the hit).
+#[derive(Clone, Copy, Debug)]
+pub struct GrooveBelow<'a> {
+    pub groove: &'a TracedGroove,
+    pub lobe: ScratchLobe,
+    pub depth: f32,
+    pub surface: Vec3,
+}
+
+impl GrooveBelow<'_> {
+    /// One path of the light along `wi` (shading frame, down into the glass) through the
+    /// groove, its bounces drawn from a stream keyed by `key`: where it goes on, as a sample
+    /// whose weight multiplies the one that sent it (a transmission's into the air, the
+    /// path's); the light unchanged where the exact trace finds the line passing the groove;
+    /// `None` where the path is lost. It goes on from where it leaves the groove's wall below
+    /// the surface, as [`TracedGroove`]'s placed samples do ([`BsdfSample::from`]).
+    pub fn sample(&self, wi: Vec3, key: u64) -> Option<BsdfSample> {
+        let place = self.lobe.place?;
+        let frame = self.lobe.unleaned();
+        let d = frame.to_scratch(wi);
+        if !(d.z < 0.0 && place.width > 0.0) {
+            return None;
+        }
+        let g = self.groove;
+        let depth = (self.depth / place.width) as f64;
+        let d = [d.x as f64, d.y as f64, d.z as f64];
+        let start = [place.at as f64 + depth * d[0] / -d[2], -depth];
+        let e = match g.paths.trace_from(start, d, key, g.taper(&self.lobe), true) {
+            CrossingEnd::Left(e) => e,
+            CrossingEnd::Missed => {
+                return Some(BsdfSample {
+                    wi,
+                    weight: Rgb::ONE,
+                    pdf: 1.0,
+                    delta: true,
+                    eta: 1.0,
+                    from: None,
+                })
+            }
+            CrossingEnd::Lost => return None,
+        };
+        let into_air = !e.in_object;
+        let out = Vec3::new(e.d[0] as f32, e.d[1] as f32, e.d[2] as f32);
+        let from = going_on(&e, place).map(|v| frame.from_scratch(v) + self.surface);
+        Some(BsdfSample {
+            wi: frame.wi_from_scratch(out)?,
+            weight: Rgb::splat(radiance_factor(g.n, 1, into_air as usize) * e.w as f32),
+            pdf: 1.0,
+            delta: true,
+            eta: if into_air { 1.0 / g.n } else { 1.0 },
+            from,
         })
     }
 }
@@ -819,7 +881,8 @@ mod tests {
     /// on from a point beside the groove's walls below the surface (the scratch's
     /// frame turned and its width scaled into the shading frame's world units), up through the
     /// glass to the surface beside the opening, with a reflection's weight; some of the light
-    /// does.
+    /// does. Light it sends down into the glass gives the wall it left there, below the
+    /// surface, no deeper than the groove.
     #[test]
     fn surfaced_samples_go_on_from_inside_the_groove_to_beside_it() {
         let profile = Profile::parse("round:depth=0.3,segments=8").unwrap();
@@ -827,7 +890,7 @@ mod tests {
             profile, 1.5, 0.0,
         ))));
         let (beta, width) = (0.7f32, 0.004f32);
-        let mut surfaced = 0;
+        let (mut surfaced, mut departed) = (0, 0);
         for k in 0..4000 {
             let h = |i: u64| crate::hash::unit_f32(mix64(k * 8 + i));
             let at = h(0) - 0.5;
@@ -842,12 +905,15 @@ mod tests {
             let Some(from) = bs.from else {
                 continue;
             };
-            surfaced += 1;
-            assert!(
-                bs.wi.z > 0.0 && bs.eta == 1.0 && bs.weight == Rgb::ONE,
-                "{bs:?}"
-            );
             let s = lobe.to_scratch(from) / width;
+            if bs.wi.z < 0.0 {
+                departed += 1;
+                assert!(bs.eta == 1.0 && bs.weight == Rgb::ONE, "{bs:?}");
+                assert!(s.z < 0.0 && s.z >= -0.3 - 1e-6, "from {s:?}, at {at}");
+                continue;
+            }
+            surfaced += 1;
+            assert!(bs.eta == 1.0 && bs.weight == Rgb::ONE, "{bs:?}");
             // Just off the wall it left (a step up its ray), below the surface, no deeper
             // than the groove.
             assert!(s.z < 0.0 && s.z > -0.3, "from {s:?}, at {at}");
@@ -858,6 +924,7 @@ mod tests {
             );
         }
         assert!(surfaced > 40, "{surfaced} samples surfaced");
+        assert!(departed > 40, "{departed} samples sent down");
     }
 
     /// The guided search ([`WallLobeTable::search`]) finds the entry a binary search of the

@@ -7,11 +7,12 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use super::Worker;
+use crate::hash::{mix64, GOLDEN};
 use crate::math::{Frame, Ray, RayDifferential, Rgb, Vec2, Vec3};
 use crate::render::bsdf::{Bsdf, BsdfSample};
 use crate::render::geometry::{Geometry, SurfaceHit, PACKET};
 use crate::render::lights::Light;
-use crate::render::material::HitView;
+use crate::render::material::{HitView, Material};
 use crate::render::sampler::{PixelSampler, SamplerKind, CAMERA_LANES, LOBE_DIM};
 use crate::render::scene::{Scene, NO_MATERIAL};
 use crate::render::shading::{footprint_dp, spawn_differentials, PixelHit};
@@ -442,6 +443,18 @@ impl Path {
         if !(bs.pdf > 0.0) || bs.weight == Rgb::ZERO {
             return end(shadow);
         }
+        let bs = match bs.from {
+            Some(from) if from.z < 0.0 && bs.wi.z < 0.0 => {
+                let material = &scene.materials[shape.material as usize];
+                let key = mix64((u_lobe.to_bits() as u64) << 32 | u_dir.x.to_bits() as u64)
+                    ^ u_dir.y.to_bits() as u64;
+                match through_grooves_below(material, &hit, frame, bs, key) {
+                    Some(bs) => bs,
+                    None => return end(shadow),
+                }
+            }
+            _ => bs,
+        };
         let wi_world = frame.to_world(bs.wi);
         self.state.scatter(&bs, bsdf.is_delta());
         if DIFFERENTIALS {
@@ -488,6 +501,50 @@ impl Path {
             self.depth < settings.rr_depth || self.state.survives_roulette(&mut self.sampler);
         Landing { goes_on, shadow }
     }
+}
+
+/// The most grooves below the surface that light a groove sent down passes through
+/// ([`through_grooves_below`]); past them it goes on from the hit.
+const MAX_GROOVES_BELOW: u64 = 8;
+
+/// Light a groove at `hit` sent down into the glass from below the surface (`bs.from`, `bs.wi`
+/// going down: traced glass walls seen from inside) through the grooves it meets there before
+/// it leaves their depth (METHOD.md 8.1, "Ours": light between grooves; [`Material::groove_below`]),
+/// each traced from where the light left the last: the sample that sent it, its direction,
+/// weight and relative index those of the light that leaves the last groove met, and where it
+/// goes on from; from the hit where it meets none. `key` keys the grooves' random streams.
+/// `None` where the light is lost in one.
+#[inline(never)]
+fn through_grooves_below(
+    material: &Material,
+    hit: &SurfaceHit,
+    frame: Frame,
+    mut bs: BsdfSample,
+    key: u64,
+) -> Option<BsdfSample> {
+    for k in 0..MAX_GROOVES_BELOW {
+        let Some(from) = bs.from.filter(|f| f.z < 0.0 && bs.wi.z < 0.0) else {
+            return Some(bs);
+        };
+        let key = mix64(key.wrapping_add(k.wrapping_mul(GOLDEN)));
+        let u = crate::hash::unit_f32(key);
+        let Some(below) = material.groove_below(hit, frame, from, bs.wi, u) else {
+            break;
+        };
+        let next = below.sample(bs.wi, mix64(key))?;
+        bs = BsdfSample {
+            wi: next.wi,
+            weight: bs.weight * next.weight,
+            eta: bs.eta * next.eta,
+            from: next.from,
+            ..bs
+        };
+    }
+    // Going on down from below the surface: from the hit, as every other sample into the glass.
+    if bs.wi.z < 0.0 {
+        bs.from = None;
+    }
+    Some(bs)
 }
 
 /// What a path carries from vertex to vertex: its throughput `beta`, the product of the

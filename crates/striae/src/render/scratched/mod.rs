@@ -26,8 +26,9 @@ use crate::math::{Rgb, Vec3};
 use crate::precompute::groove::totally_reflected;
 use crate::render::bsdf::scratched::MAX_SCRATCH_LOBES;
 use crate::render::bsdf::{
-    Bsdf, Conductor, Dielectric, GlassWalls, GroovePlace, LobeShare, ScratchLobe, ScratchLobeTable,
-    ScratchedBase, ScratchedBsdf, ScratchedGlassBsdf, ScratchedMetalBsdf, WallLobeTable,
+    Bsdf, Conductor, Dielectric, GlassWalls, GrooveBelow, GroovePlace, LobeShare, ScratchLobe,
+    ScratchLobeTable, ScratchedBase, ScratchedBsdf, ScratchedGlassBsdf, ScratchedMetalBsdf,
+    WallLobeTable,
 };
 use crate::render::shading::ShadingContext;
 use lean::Along;
@@ -775,7 +776,8 @@ impl ScratchedMaterial {
         if self.layers.is_empty() && self.curves.is_none() {
             return None;
         }
-        let r = RidgeReach::new(self, ctx, walls)?;
+        let wo = ctx.frame.to_local(ctx.wo).as_dvec3();
+        let r = RidgeReach::new(self, ctx, walls, wo, 0.0, ctx.origin_depth as f64)?;
         let uv = ctx.uv.as_dvec2();
         let profile = walls.profile();
         // Under total internal reflection the ray's reach continues past the hit, mirrored.
@@ -787,18 +789,36 @@ impl ScratchedMaterial {
             None => self.layers.capsule_mask(uv, r.reach_uv),
         };
         let placed = self.places_lobes();
-        let layer = |reach: &RidgeReach| {
-            let sc = self.ridge_met(reach, uv, maybe, profile)?;
+        let met = |reach: &RidgeReach| self.groove_met(ctx, reach, uv, maybe, placed, profile);
+        met(&r).or_else(|| reflected.and_then(|m| met(&m)))
+    }
+
+    /// The first groove that the line from texture point `uv` over the reach `r` meets beside
+    /// its opening, the layers' in `maybe` ([`Self::ridge_met`]) before the curves'
+    /// ([`RidgeReach::meets_segment`]): its lobe with coverage 1 (`placed`: at its place where
+    /// the line crosses the surface) and its depth ratio.
+    #[inline(always)]
+    fn groove_met(
+        &self,
+        ctx: &ShadingContext,
+        r: &RidgeReach,
+        uv: glam::DVec2,
+        maybe: u64,
+        placed: bool,
+        profile: &crate::precompute::profile::Profile,
+    ) -> Option<(ScratchLobe, f32)> {
+        let layer = || {
+            let sc = self.ridge_met(r, uv, maybe, profile)?;
             let lobe = scratch_lobe(self, ctx, &sc, 1.0, Along::Hit);
-            let place = placed.then(|| reach.map.scratch_place(&sc, uv)).flatten();
+            let place = placed.then(|| r.map.scratch_place(&sc, uv)).flatten();
             Some((lobe.at_place(place), 1.0))
         };
-        let curve = |reach: &RidgeReach| {
+        let curve = || {
             let mut met = None;
             self.curves
                 .as_ref()?
-                .for_segments_along(uv, uv + reach.reach_uv, |axis| {
-                    let hit = reach.meets_segment(axis, uv, profile);
+                .for_segments_along(uv, uv + r.reach_uv, |axis| {
+                    let hit = r.meets_segment(axis, uv, profile);
                     if hit {
                         met = Some(*axis);
                     }
@@ -806,12 +826,60 @@ impl ScratchedMaterial {
                 });
             met.map(|a| {
                 let d = (a.end - a.start).as_vec2();
-                let place = placed.then(|| reach.map.segment_place(&a, uv)).flatten();
+                let place = placed.then(|| r.map.segment_place(&a, uv)).flatten();
                 (lobe_along(ctx, [d.x, d.y], 1.0).at_place(place), a.depth)
             })
         };
-        let met = |reach: &RidgeReach| layer(reach).or_else(|| curve(reach));
-        met(&r).or_else(|| reflected.and_then(|m| met(&m)))
+        layer().or_else(curve)
+    }
+
+    /// The groove that light a traced groove seen from inside sends down into the glass meets
+    /// next (METHOD.md 8.1, "Ours": light between grooves): it left the wall at `from` below the surface
+    /// (shading frame, relative to the hit `ctx`) along `wi` (shading frame, `wi.z < 0`), and at
+    /// a grazing angle it runs under the surface within the grooves' depth for a while, where
+    /// another groove's walls may lie across its way. The search is the ridge search of a hit
+    /// from inside ([`Self::ridge_lobe`]) over the line's stretch deeper than `from`, from where
+    /// the line crosses the surface; the groove met is traced from `from` on
+    /// ([`GrooveBelow::sample`]). `u` draws a curve's worn table ([`Self::model_at_depth`]).
+    /// `None` where the line meets no groove, or the material's walls are not traced.
+    #[inline]
+    pub fn groove_below(
+        &self,
+        ctx: &ShadingContext,
+        from: Vec3,
+        wi: Vec3,
+        u: f32,
+    ) -> Option<GrooveBelow<'_>> {
+        let ScratchModel::DielectricWalls(walls @ GlassWalls::Traced(_)) = &self.model else {
+            return None;
+        };
+        if !(from.z < 0.0 && wi.z < 0.0) || (self.layers.is_empty() && self.curves.is_none()) {
+            return None;
+        }
+        // Not the wall the light left: only the line's stretch a little deeper than it.
+        let depth = -from.z as f64 * (1.0 + DEPARTURE_MARGIN);
+        let r = RidgeReach::new(self, ctx, walls, wi.as_dvec3(), depth, f64::INFINITY)?;
+        // Where the line crosses the surface, up its ray behind `from`.
+        let surface = from - wi * (from.z / wi.z);
+        let uv = ctx.uv.as_dvec2()
+            + r.map
+                .unmap(glam::DVec2::new(surface.x as f64, surface.y as f64));
+        let maybe = match self.layers.is_empty() {
+            true => 0,
+            false => self.layers.capsule_mask(uv, r.reach_uv),
+        };
+        let (lobe, depth_ratio) = self.groove_met(ctx, &r, uv, maybe, true, walls.profile())?;
+        let ScratchModel::DielectricWalls(GlassWalls::Traced(groove)) =
+            self.model_at_depth(depth_ratio, u)
+        else {
+            return None;
+        };
+        lobe.place.map(|_| GrooveBelow {
+            groove,
+            lobe,
+            depth: -from.z,
+            surface,
+        })
     }
 
     /// The first scratch of the layers in `maybe` whose groove the reach `r` from `uv` meets
@@ -1009,6 +1077,11 @@ struct AxisCrossing {
     dx: f64,
 }
 
+/// The share of its depth below the wall light left that the search for the groove it meets
+/// next leaves out ([`ScratchedMaterial::groove_below`]): the wall it left lies there, its
+/// width at the search's crossing a rounding away from the width it was traced at.
+const DEPARTURE_MARGIN: f64 = 0.01;
+
 /// The most points the search of randomly oriented layers tests along a ray's reach: enough
 /// for a groove of depth 0.3 (in opening widths) up to 84 degrees from the normal.
 const MAX_RIDGE_TESTS: usize = 16;
@@ -1047,6 +1120,12 @@ impl TangentMap {
     #[inline(always)]
     fn map(&self, v: glam::DVec2) -> glam::DVec2 {
         self.au * v.x + self.av * v.y
+    }
+
+    /// The texture vector that [`Self::map`] takes to the tangent-plane vector `v`.
+    #[inline(always)]
+    fn unmap(&self, v: glam::DVec2) -> glam::DVec2 {
+        glam::DVec2::new(v.perp_dot(self.av), self.au.perp_dot(v)) / self.det
     }
 
     /// An axis along texture vector `e`: its unit direction and across axis in the tangent
@@ -1123,28 +1202,38 @@ fn groove_place(offset: f64, half_width: f64) -> Option<GroovePlace> {
     })
 }
 
-/// The ray back from a hit inside the glass, in the face's tangent plane, over the reach where
-/// it passes under the surface within the grooves' depth (no deeper than where the ray began,
-/// [`ShadingContext::origin_depth`]).
+/// A line down from a point of the surface into the glass, in the face's tangent plane, over
+/// the reach where it passes under the surface within the grooves' depth: the ray back from a
+/// hit inside the glass (no deeper than where the ray began,
+/// [`ShadingContext::origin_depth`]), or the light a groove sends down from below the surface
+/// (no shallower than the wall it left, [`ScratchedMaterial::groove_below`]).
 #[derive(Clone, Copy)]
 struct RidgeReach {
-    /// `wo` in the shading frame (`z < 0`).
+    /// The line's direction in the shading frame (`z < 0`).
     wo: glam::DVec3,
     map: TangentMap,
     /// The reach as a texture vector, and how many point tests span it (random layers).
     reach_uv: glam::DVec2,
     tests: usize,
-    /// How far below the surface the ray began (world units).
+    /// The stretch of the line that light runs, as depths below the surface (world units).
+    min_depth: f64,
     max_depth: f64,
 }
 
 impl RidgeReach {
-    /// `None` where no groove can be met beside its opening: light from outside, or steeper
-    /// than the profile's rims let it reach a wall (`GlassWalls::ridge_tan`).
+    /// The line along `wo` (shading frame) over the depths `min_depth..max_depth`; `None`
+    /// where no groove can be met beside its opening: light from outside, or steeper than the
+    /// profile's rims let it reach a wall (`GlassWalls::ridge_tan`).
     #[inline(always)]
-    fn new(m: &ScratchedMaterial, ctx: &ShadingContext, walls: &GlassWalls) -> Option<Self> {
+    fn new(
+        m: &ScratchedMaterial,
+        ctx: &ShadingContext,
+        walls: &GlassWalls,
+        wo: glam::DVec3,
+        min_depth: f64,
+        max_depth: f64,
+    ) -> Option<Self> {
         use glam::DVec2;
-        let wo = ctx.frame.to_local(ctx.wo).as_dvec3();
         let h_len = (wo.x * wo.x + wo.y * wo.y).sqrt();
         let tan = h_len / -wo.z;
         let grazing = wo.z < 0.0 && tan > walls.ridge_tan();
@@ -1167,7 +1256,7 @@ impl RidgeReach {
         let w = w_layers.max(w_curves);
         let reach = walls.profile().depth() * 2.0 * w * sigma_max * tan;
         let v = DVec2::new(wo.x, wo.y) * (reach / h_len);
-        let reach_uv = DVec2::new(v.perp_dot(av), au.perp_dot(v)) / det;
+        let reach_uv = map.unmap(v);
         let narrowest = if w_layers > 0.0 { w_layers } else { w };
         let tests = ((reach / (narrowest * sigma_min)).ceil() as usize).clamp(1, MAX_RIDGE_TESTS);
         Some(RidgeReach {
@@ -1175,7 +1264,8 @@ impl RidgeReach {
             map,
             reach_uv,
             tests,
-            max_depth: ctx.origin_depth as f64,
+            min_depth,
+            max_depth,
         })
     }
 
@@ -1276,8 +1366,10 @@ impl RidgeReach {
         let x = offset / (2.0 * half_width);
         // A groove `depth` times as deep meets the ray `wo.z / depth` steep in the profile's
         // units, and the ray's beginning lies that much shallower in them.
-        let max_depth = self.max_depth / (2.0 * half_width * depth);
-        x.abs() >= 0.5 && profile.ray_meets_ridge_within(x, dx, self.wo.z / depth, max_depth)
+        let units = 2.0 * half_width * depth;
+        let (min_depth, max_depth) = (self.min_depth / units, self.max_depth / units);
+        x.abs() >= 0.5
+            && profile.ray_meets_ridge_between(x, dx, self.wo.z / depth, min_depth, max_depth)
     }
 }
 

@@ -1144,6 +1144,99 @@ fn curves_meet_grazing_light_beside_their_openings() {
     }
 }
 
+/// Light a traced groove sends down into the glass from below the surface meets the next
+/// groove where its line runs through that groove's walls (METHOD.md 8.3, light between
+/// grooves; [`ScratchedMaterial::groove_below`]): a straight V curve of depth 0.3 and light
+/// leaving a point `z` below the surface `x` widths across from its axis, falling toward it a
+/// width across `s` widths deep (less steep than the V's walls): it meets the near wall where
+/// the line is still above the V's point when it reaches the axis, `z + s |x| < 0.3`, and never
+/// heading away; the groove is placed where the line crosses the surface, traced from the
+/// light's depth, and mirrors the light (beyond the critical angle) off that wall, losslessly,
+/// where the line meets it.
+#[test]
+fn light_sent_down_meets_the_groove_below_it() {
+    use crate::curves::{CurveSet, Polyline};
+    use crate::render::bsdf::TracedGroove;
+    use glam::{DVec2, DVec3};
+    let profile = Profile::parse("v:depth=0.3").unwrap();
+    let params = crate::precompute::wall_table::WallTableParams::new(profile, 1.5, 0.0);
+    let walls = GlassWalls::Traced(Arc::new(TracedGroove::new(&params)));
+    let (angle, hw) = (0.4f64, 0.02);
+    let (axis, across) = (DVec2::from_angle(angle), DVec2::from_angle(angle).perp());
+    let line = Polyline::uniform(
+        vec![
+            DVec2::splat(0.5) - 0.45 * axis,
+            DVec2::splat(0.5) + 0.45 * axis,
+        ],
+        hw,
+    );
+    let curves = CurveSet::new(&[line], DVec2::ONE).unwrap();
+    let m = ScratchedMaterial::with_model(
+        ScratchedBase::Glass { eta: 1.5 },
+        Rgb::ONE,
+        ScratchModel::DielectricWalls(walls),
+        LayerSet::none(),
+        LayerMix::Union,
+        CoverageMode::Point,
+    )
+    .with_curves(Some(Arc::new(curves)));
+    let width = 2.0 * hw;
+    let (across3, axis3) = (across.extend(0.0), axis.extend(0.0));
+    let mut rng = Pcg64::seed_from_u64(12);
+    let (mut met, mut passed) = (0, 0);
+    for _ in 0..4000 {
+        // Falling toward the axis (or away from it), `s` deep a width across, `psi` to it.
+        let s = rng.random_range(0.05..0.4f64);
+        let psi = rng.random_range(0.3..FRAC_PI_2);
+        let away = rng.random::<f64>() < 0.2;
+        let h = if away { -1.0 } else { 1.0 };
+        let d =
+            (across3 * (h * psi.sin()) + axis3 * psi.cos()) + DVec3::new(0.0, 0.0, -s * psi.sin());
+        let wi = d.normalize();
+        let (x, z) = (
+            rng.random_range(-1.5..-0.55f64),
+            rng.random_range(0.01..0.25f64),
+        );
+        let uv = DVec2::splat(0.5) + across * (width * x) + axis * rng.random_range(-0.2..0.2);
+        let ctx = flat_ctx(uv.as_vec2(), 0.0, -wi.as_vec3(), 0.5);
+        let from = Vec3::new(0.0, 0.0, -(z * width) as f32);
+        let want = !away && z + s * x.abs() < 0.3;
+        if (z + s * x.abs() - 0.3).abs() < 1e-3 {
+            continue;
+        }
+        let below = m.groove_below(&ctx, from, wi.as_vec3(), 0.5);
+        assert_eq!(below.is_some(), want, "x {x}, z {z}, s {s}, away {away}");
+        let Some(below) = below else {
+            passed += 1;
+            continue;
+        };
+        met += 1;
+        // Placed where the line crosses the surface, from the light's depth.
+        let place = below.lobe.place.unwrap();
+        assert!((place.width - width as f32).abs() < 1e-5, "{place:?}");
+        assert!(
+            (place.at.abs() - (-x + z / s) as f32).abs() < 1e-3,
+            "{place:?}, x {x}"
+        );
+        assert_eq!(below.depth, -from.z);
+        // Mirrored off the near wall, whose normal (into the void, up toward the axis) is
+        // `(0.3, 0.5)` across and up.
+        let out = below.sample(wi.as_vec3(), rng.random()).unwrap();
+        assert_eq!(out.weight, Rgb::ONE);
+        let n = (across3 * 0.3 + DVec3::Z * 0.5).normalize();
+        let want = wi - 2.0 * wi.dot(n) * n;
+        assert!(
+            (out.wi.as_dvec3() - want).length() < 1e-4,
+            "{:?} against {want:?}",
+            out.wi
+        );
+        // On, down from the wall: where the line meets it, below the light's depth.
+        let on = out.from.expect("it leaves the wall below the surface");
+        assert!(out.wi.z < 0.0 && -on.z > -from.z, "{on:?} from {from:?}");
+    }
+    assert!(met > 1000 && passed > 1000, "met {met}, passed {passed}");
+}
+
 /// Hits from inside glass with dielectric walls read `u_layer` but not the footprint
 /// (`reads_footprint_at`, which lets the integrator leave their ray differentials unworked):
 /// their BSDF is the same with no differentials as with any footprint. From outside the
