@@ -813,7 +813,7 @@ fn explicit_path(
 fn traced_exits(d: [f64; 3], taper: f64, rng: &mut impl rand::Rng, paths: usize) -> Exits {
     use striae::precompute::groove::GroovePaths;
     use striae::precompute::profile::Profile;
-    let groove = GroovePaths::new(&Profile::parse("v:depth=0.3").unwrap(), 1.3);
+    let groove = GroovePaths::new(&Profile::parse("v:depth=0.3").unwrap(), 1.5);
     let mut exits = Exits::default();
     for _ in 0..paths {
         if let Some(e) = groove.trace(d, rng.random(), None, rng.random::<u64>(), None, taper) {
