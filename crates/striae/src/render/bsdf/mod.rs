@@ -94,6 +94,13 @@ pub struct BsdfSample {
 }
 
 impl BsdfSample {
+    /// Where light a groove sent down into the object left its wall ([`Self::from`] below the
+    /// surface with `wi` pointing down), if this sample is such light.
+    #[inline]
+    pub fn sent_down(&self) -> Option<Vec3> {
+        self.from.filter(|f| f.z < 0.0 && self.wi.z < 0.0)
+    }
+
     /// A non-delta sample that stays on `wo`'s side: `weight = f |cos theta_i| / pdf`.
     #[inline]
     pub fn reflected(wi: Vec3, f: Rgb, pdf: f32) -> Self {

@@ -443,8 +443,8 @@ impl Path {
         if !(bs.pdf > 0.0) || bs.weight == Rgb::ZERO {
             return end(shadow);
         }
-        let bs = match bs.from {
-            Some(from) if from.z < 0.0 && bs.wi.z < 0.0 => {
+        let bs = match bs.sent_down() {
+            Some(_) => {
                 let material = &scene.materials[shape.material as usize];
                 let key = mix64((u_lobe.to_bits() as u64) << 32 | u_dir.x.to_bits() as u64)
                     ^ u_dir.y.to_bits() as u64;
@@ -453,7 +453,7 @@ impl Path {
                     None => return end(shadow),
                 }
             }
-            _ => bs,
+            None => bs,
         };
         let wi_world = frame.to_world(bs.wi);
         self.state.scatter(&bs, bsdf.is_delta());
@@ -523,7 +523,7 @@ fn through_grooves_below(
     key: u64,
 ) -> Option<BsdfSample> {
     for k in 0..MAX_GROOVES_BELOW {
-        let Some(from) = bs.from.filter(|f| f.z < 0.0 && bs.wi.z < 0.0) else {
+        let Some(from) = bs.sent_down() else {
             return Some(bs);
         };
         let key = mix64(key.wrapping_add(k.wrapping_mul(GOLDEN)));

@@ -864,9 +864,10 @@ impl ScratchedMaterial {
         let uv = ctx.uv.as_dvec2()
             + r.map
                 .unmap(glam::DVec2::new(surface.x as f64, surface.y as f64));
-        let maybe = match self.layers.is_empty() {
-            true => 0,
-            false => self.layers.capsule_mask(uv, r.reach_uv),
+        let maybe = if self.layers.is_empty() {
+            0
+        } else {
+            self.layers.capsule_mask(uv, r.reach_uv)
         };
         let (lobe, depth_ratio) = self.groove_met(ctx, &r, uv, maybe, true, walls.profile())?;
         let ScratchModel::DielectricWalls(GlassWalls::Traced(groove)) =
