@@ -278,10 +278,26 @@ impl Material {
         view: HitView<'_>,
         coverage: &mut CoverageCache,
     ) -> (Frame, Bsdf<'_>) {
+        let mut bsdf = Bsdf::Diffuse(Diffuse::new(Rgb::ZERO));
+        let frame = self.shade_into(hit, view, coverage, &mut bsdf);
+        (frame, bsdf)
+    }
+
+    /// [`Self::shade`] with the BSDF written into `bsdf`, in place: the path loop's form, which
+    /// writes only the variant's own bytes where a returned `(Frame, Bsdf)` is copied whole (the
+    /// size of the largest variant) on its way out.
+    #[inline(always)]
+    pub fn shade_into<'s>(
+        &'s self,
+        hit: &SurfaceHit,
+        view: HitView<'_>,
+        coverage: &mut CoverageCache,
+        bsdf: &mut Bsdf<'s>,
+    ) -> Frame {
         match self {
             Material::Scratched(m) => {
                 let frame = shading_frame(hit, view.wo, m.has_transmission());
-                let bsdf = match view.u_layer {
+                *bsdf = match view.u_layer {
                     Some(u) => m.bsdf(
                         &ShadingContext {
                             origin_depth: view.origin_depth,
@@ -292,15 +308,19 @@ impl Material {
                     // Glass seen from inside: its smooth base, whatever the context.
                     None => m.base_bsdf(),
                 };
-                (frame, bsdf)
+                frame
             }
-            Material::Pbr(m) => m.shade(hit, view.wo),
+            Material::Pbr(m) => {
+                let frame;
+                (frame, *bsdf) = m.shade(hit, view.wo);
+                frame
+            }
             // The other materials' BSDFs do not depend on the frame, so it is worked out after
             // them, from the BSDF: taking `self.has_transmission()` first makes the smooth
             // close-up 3.4 % slower (code layout).
             _ => {
-                let bsdf = self.plain_bsdf(hit.uv);
-                (shading_frame(hit, view.wo, bsdf.has_transmission()), bsdf)
+                *bsdf = self.plain_bsdf(hit.uv);
+                shading_frame(hit, view.wo, bsdf.has_transmission())
             }
         }
     }

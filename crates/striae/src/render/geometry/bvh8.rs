@@ -5,9 +5,10 @@
 //! of 4: glass teapot 2.11 -> 1.96 s, 16 spp, one thread; `BENCHMARKS.md`, "Design findings").
 //! The lane loops of the box test compile to pairs of 128-bit
 //! instructions in every copy of the render loop, to match the two `movmskps` halves of the hit
-//! mask ([`lanes_le`]): a lane loop for the mask built it bit by bit, and 256-bit intrinsics
-//! behind a feature check measured 3-4 % faster per secondary ray, but cannot be chosen per
-//! copy without a run-time check in the portable one.
+//! mask ([`lanes_le`]): a lane loop for the mask built it bit by bit. 256-bit intrinsics measured
+//! 3-4 % faster per secondary ray alone, but inlined into the AVX copies (chosen by a flag a ray)
+//! they take 0.7 % fewer instructions a sample and no time in a render (`BENCHMARKS.md`,
+//! "Measured and rejected").
 //!
 //! * **Collapse**: starting from a binary node's two children, the interior child of largest
 //!   surface area is replaced by its two children until there are [`WIDTH`] (the usual BVH2 to

@@ -9,7 +9,7 @@
 use super::Worker;
 use crate::hash::{mix64, GOLDEN};
 use crate::math::{Frame, Ray, RayDifferential, Rgb, Vec2, Vec3};
-use crate::render::bsdf::{Bsdf, BsdfSample};
+use crate::render::bsdf::{Bsdf, BsdfSample, Diffuse};
 use crate::render::geometry::{Geometry, SurfaceHit, PACKET};
 use crate::render::lights::Light;
 use crate::render::material::{HitView, Material};
@@ -400,7 +400,8 @@ impl Path {
         }
 
         // Shading frame and the material's BSDF.
-        let (frame, bsdf) = shade_hit::<DIFFERENTIALS>(
+        let mut bsdf = Bsdf::Diffuse(Diffuse::new(Rgb::ZERO));
+        let frame = shade_hit::<DIFFERENTIALS>(
             scene,
             &hit,
             Arrival {
@@ -411,6 +412,7 @@ impl Path {
             sampler,
             &mut self.differentials,
             worker,
+            &mut bsdf,
         );
         let wo = frame.to_local(wo_world);
 
@@ -678,7 +680,8 @@ fn shade_hit<'a, const DIFFERENTIALS: bool>(
     sampler: &mut PixelSampler,
     differentials: &mut PathDifferentials,
     worker: &mut Worker,
-) -> (Frame, Bsdf<'a>) {
+    bsdf: &mut Bsdf<'a>,
+) -> Frame {
     let Arrival {
         wo: wo_world,
         origin_depth,
@@ -723,7 +726,7 @@ fn shade_hit<'a, const DIFFERENTIALS: bool>(
         }),
         origin_depth,
     };
-    material.shade(hit, view, &mut worker.coverage)
+    material.shade_into(hit, view, &mut worker.coverage, bsdf)
 }
 
 /// Russian roulette's survival probability for throughput `beta` and the radiance scaling
