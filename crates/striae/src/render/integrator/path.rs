@@ -388,7 +388,9 @@ impl Path {
         {
             self.l += c;
         }
-        let Some(hit) = hit else {
+        // (By reference: a copy of the record, read in wide loads right after its narrower
+        // stores, stalls on store forwarding.)
+        let Some(hit) = hit.as_ref() else {
             return end(None);
         };
         let shape = &shapes[hit.shape as usize];
@@ -403,12 +405,12 @@ impl Path {
         let mut bsdf = Bsdf::Diffuse(Diffuse::new(Rgb::ZERO));
         let frame = shade_hit::<DIFFERENTIALS>(
             scene,
-            &hit,
+            hit,
             Arrival {
                 wo: wo_world,
                 origin_depth: self.origin_depth,
+                depth,
             },
-            depth,
             sampler,
             &mut self.differentials,
             worker,
@@ -420,7 +422,7 @@ impl Path {
         let mut shadow = None;
         if !bsdf.is_delta() && n_lights > 0 {
             let vertex = Vertex {
-                hit: &hit,
+                hit,
                 frame,
                 wo,
                 bsdf: &bsdf,
@@ -450,7 +452,7 @@ impl Path {
                 let material = &scene.materials[shape.material as usize];
                 let key = mix64((u_lobe.to_bits() as u64) << 32 | u_dir.x.to_bits() as u64)
                     ^ u_dir.y.to_bits() as u64;
-                match through_grooves_below(material, &hit, frame, bs, key) {
+                match through_grooves_below(material, hit, frame, bs, key) {
                     Some(bs) => bs,
                     None => return end(shadow),
                 }
@@ -464,7 +466,7 @@ impl Path {
             self.differentials.push(
                 &scene.geometry,
                 DeferredBounce {
-                    hit,
+                    hit: *hit,
                     n: frame.n,
                     d_in: ray.d,
                     wi: wi_world,
@@ -660,23 +662,25 @@ fn emission_weight(specular: bool, prev_pdf: f32, light_pdf: impl FnOnce() -> f3
     }
 }
 
-/// How the ray that made a hit arrived: the direction toward the viewer (world) and how far
-/// below the surface it began ([`crate::render::shading::ShadingContext::origin_depth`]).
+/// How the ray that made a hit arrived: the direction toward the viewer (world), how far
+/// below the surface it began ([`crate::render::shading::ShadingContext::origin_depth`]) and
+/// the path's bounce at the hit.
 #[derive(Clone, Copy)]
 struct Arrival {
     wo: Vec3,
     origin_depth: f32,
+    depth: u32,
 }
 
-/// The shading frame and the BSDF of the material at `hit` (not a pure emitter), for the ray
-/// `arrival` at bounce `depth`, with what the material reads of the hit worked out only where
-/// it reads it: `u_layer`, the footprint, and the chain of delta bounces that led here.
+/// The shading frame at `hit` (not a pure emitter) for the ray `arrival`, with the material's
+/// BSDF written into `bsdf` ([`Material::shade_into`]), and what the material reads of the
+/// hit worked out only where it reads it: `u_layer`, the footprint, and the chain of delta
+/// bounces that led here.
 #[inline(always)]
 fn shade_hit<'a, const DIFFERENTIALS: bool>(
     scene: &'a Scene,
     hit: &SurfaceHit,
     arrival: Arrival,
-    depth: u32,
     sampler: &mut PixelSampler,
     differentials: &mut PathDifferentials,
     worker: &mut Worker,
@@ -685,6 +689,7 @@ fn shade_hit<'a, const DIFFERENTIALS: bool>(
     let Arrival {
         wo: wo_world,
         origin_depth,
+        depth,
     } = arrival;
     let material = &scene.materials[scene.geometry.shapes()[hit.shape as usize].material as usize];
     // `u_layer`: dimension 0 of the bounce's block, drawn only where the material reads it
