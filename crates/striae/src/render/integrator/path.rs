@@ -253,14 +253,15 @@ pub(super) fn camera_packet<const DIFFERENTIALS: bool>(
             (*fx, *fy) = (x as f32 + numbers[0][k], y as f32 + numbers[1][k]);
         }
         let d = scene.camera.pinhole_directions(&film_x, &film_y);
-        for (k, sampler) in samplers.into_iter().take(n).enumerate() {
+        // (By reference: `into_iter` moves the whole array, `CAMERA_LANES` samplers, first.)
+        for (k, sampler) in samplers.iter().take(n).enumerate() {
             let ray = Ray::new(
                 scene.camera.position(),
                 Vec3::new(d[0][k], d[1][k], d[2][k]),
             );
             rays.push(ray);
             samples.push(CameraSample {
-                sampler,
+                sampler: sampler.clone(),
                 ray,
                 rd: RayDifferential::along(&ray),
                 offset: Vec2::ZERO,
