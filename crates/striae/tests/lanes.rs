@@ -127,6 +127,32 @@ fn scratched_glass_seen_from_inside_runs_in_lanes_bit_for_bit() {
 }
 
 #[test]
+fn rough_glass_and_metal_run_in_lanes_bit_for_bit() {
+    // GGX glass and gold (the lane vertex's second loop), each scene with and without the
+    // lanes: the same image bit for bit, and the same rays.
+    let frosted = include_str!("../scenes/glass-teapot.toml")
+        .replace("ior = 1.5", "ior = 1.5\nroughness = 0.25");
+    let brushed = include_str!("../scenes/metal-teapot.toml")
+        .replace("preset = \"gold\"", "preset = \"gold\"\nroughness = 0.2");
+    for text in [frosted, brushed] {
+        assert!(text.contains("roughness"));
+        let scene = |lanes| {
+            let o = Overrides {
+                spp: Some(8),
+                resolution: Some((40, 30)),
+                lanes: Some(lanes),
+                ..Overrides::default()
+            };
+            Scene::parse(&text, Path::new("rough.toml"), Path::new(SCENES), &o).unwrap()
+        };
+        let (a, sa) = render_with_threads(&scene(false), 2);
+        let (b, sb) = render_with_threads(&scene(true), 2);
+        assert!(a.pixels.iter().any(|p| p.max_element() > 0.0));
+        assert!(bits(&a) == bits(&b) && sa.rays == sb.rays);
+    }
+}
+
+#[test]
 fn lane_loop_follows_a_thin_lens_and_sample_ranges_as_the_one_path_loop() {
     // A thin lens's camera rays share no origin (no packets); one sample a pixel leaves lanes
     // idle at a tile's end.

@@ -5,7 +5,7 @@ use crate::math::Vec3;
 
 /// Exact dielectric Fresnel, as `fresnel::dielectric`: returns `(R, cos_theta_t, eta_it)`,
 /// `cos_theta_t` signed opposite to `cos_theta_i` (0 under total internal reflection).
-#[inline]
+#[inline(always)]
 pub fn dielectric(cos_theta_i: f32, eta: f32) -> (f32, f32, f32) {
     let outside = cos_theta_i >= 0.0;
     let eta_it = if outside { eta } else { 1.0 / eta };
@@ -29,7 +29,7 @@ fn sqrt3(v: Vec3) -> Vec3 {
 /// Conductor Fresnel for a complex index `eta + i k` per RGB channel at `cos_theta_i` in
 /// `[0, 1]`, in the real-arithmetic form Mitsuba 3 uses (`fresnel_conductor`, after Moeller,
 /// "Optics", 1988); equal to `fresnel::conductor`.
-#[inline]
+#[inline(always)]
 pub fn conductor(cos_theta_i: f32, eta: Vec3, k: Vec3) -> Vec3 {
     let c2 = (cos_theta_i * cos_theta_i).min(1.0);
     let s2 = 1.0 - c2;

@@ -19,7 +19,7 @@ pub struct ConductorIor {
 
 impl ConductorIor {
     /// Unpolarised reflectance per channel at `cos_theta` in `[0, 1]`.
-    #[inline]
+    #[inline(always)]
     pub fn fresnel(&self, cos_theta: f32) -> Rgb {
         fresnel_f32::conductor(cos_theta, self.eta, self.k)
     }

@@ -1,7 +1,7 @@
 //! The vertex of a plain material in lanes: [`Path::land`]'s operations for up to [`LANES`]
 //! paths at once where their rays met a diffuse surface, a smooth dielectric (scratched glass
-//! seen from inside included: its smooth base) or a smooth conductor ([`Kind`]), in three
-//! stages:
+//! seen from inside included: its smooth base), a smooth conductor, or a rough (GGX) dielectric
+//! or conductor ([`Kind`]), in three stages:
 //!
 //! 1. **Gather**, lane by lane: the hit, the path's throughput, the bounce's random numbers
 //!    (the dimensions `land` reads, drawn in its order), the texture, the light sample and the
@@ -10,7 +10,12 @@
 //! 2. **The vertex** ([`Lanes::run`]), one loop over the lanes whose body is the scalar code's
 //!    own functions (shading frame, next-event estimation's BSDF value and MIS weight, Fresnel,
 //!    the throughput's update, the spawned rays, Russian roulette) with every decision a
-//!    select, so that the render loop's SIMD copies run it 8 or 16 lanes at a time.
+//!    select, so that the render loop's SIMD copies run it 8 or 16 lanes at a time; then, out
+//!    of line and lane by lane, the lanes that hold a GGX BSDF: [`RoughConductor`]'s and
+//!    [`RoughDielectric`]'s own `eval`, `pdf` and `sample` (their branches do not vectorise;
+//!    the instructions a sample are `land`'s within 1 %), whose results replace the first
+//!    loop's there. The Fresnel functions both loops call are inlined always: left to LLVM's
+//!    choice once the GGX code calls them too, they stayed calls and the first loop scalar.
 //! 3. **Scatter**, lane by lane: the path's new ray and state, its deferred shadow test.
 //!
 //! Each lane runs the operations of `land` on the same numbers, so the image is `land`'s bit
@@ -25,9 +30,11 @@ use super::path::{
     Path, ShadowTest,
 };
 use super::Worker;
+use crate::math::Frame;
 use crate::math::{reflect_z, Ray, Rgb, Vec2, Vec3};
 use crate::optics::fresnel_f32;
-use crate::render::bsdf::{Bsdf, ConductorIor};
+use crate::optics::microfacet::Ggx;
+use crate::render::bsdf::{Bsdf, BsdfSample, ConductorIor, RoughConductor, RoughDielectric};
 use crate::render::geometry::{offset_origin_by, SurfaceHit};
 use crate::render::material::Material;
 use crate::render::scene::{Scene, NO_MATERIAL};
@@ -44,10 +51,28 @@ pub(super) enum Kind {
     Glass,
     /// A smooth `Conductor`.
     Mirror,
+    /// A rough (GGX) `Dielectric`, with next-event estimation.
+    RoughGlass,
+    /// A rough (GGX) `Conductor`, with next-event estimation.
+    RoughMetal,
+}
+
+impl Kind {
+    /// A delta BSDF: no next-event estimation, and the bounce is specular.
+    #[inline(always)]
+    fn is_delta(self) -> bool {
+        matches!(self, Kind::Glass | Kind::Mirror)
+    }
+
+    /// Run by the second, GGX loop ([`Lanes::run`]).
+    #[inline(always)]
+    fn is_rough(self) -> bool {
+        matches!(self, Kind::RoughGlass | Kind::RoughMetal)
+    }
 }
 
 /// The lane vertex's BSDF for the vertex of a path at `depth` whose ray met `hit`, arriving
-/// along `d`, if it takes it: a diffuse, smooth dielectric or smooth conductor material (or
+/// along `d`, if it takes it: a diffuse, dielectric or conductor material, smooth or rough (or
 /// scratched glass seen from inside) on a shape that emits nothing, below the depth limit
 /// (what `land` does there and nothing more, in a scene [`applies`] to).
 #[inline(always)]
@@ -58,8 +83,11 @@ pub(super) fn takes(scene: &Scene, hit: &SurfaceHit, depth: u32, d: Vec3) -> Opt
     }
     match &scene.materials[shape.material as usize] {
         Material::Diffuse { .. } => Some(Kind::Diffuse),
-        Material::Dielectric { roughness, .. } if *roughness == 0.0 => Some(Kind::Glass),
-        Material::Conductor { roughness, .. } if *roughness == 0.0 => Some(Kind::Mirror),
+        // (`Material::plain_bsdf`'s choice between the smooth and the GGX BSDF.)
+        Material::Dielectric { roughness, .. } if *roughness > 0.0 => Some(Kind::RoughGlass),
+        Material::Dielectric { .. } => Some(Kind::Glass),
+        Material::Conductor { roughness, .. } if *roughness > 0.0 => Some(Kind::RoughMetal),
+        Material::Conductor { .. } => Some(Kind::Mirror),
         Material::Scratched(m) if m.has_transmission() && !m.reads_hit_context(-d, hit.ng) => {
             Some(Kind::Glass)
         }
@@ -130,6 +158,10 @@ pub(super) struct Lanes {
     u_lobe: [f32; LANES],
     ior_eta: Soa3,
     ior_k: Soa3,
+    // Rough: GGX's alpha, the direction's numbers; which lanes.
+    alpha: [f32; LANES],
+    u_dir: [[f32; LANES]; 2],
+    rough: u32,
 
     // Results: the shadow test (`shadow_radiance` counts where `shadowed`), the bounce (where
     // `scattered`), the state after it, whether the path goes on.
@@ -144,7 +176,20 @@ pub(super) struct Lanes {
     transmitted: [bool; LANES],
     bounce_eta: [f32; LANES],
     prev_pdf: [f32; LANES],
+    beta_after: Soa3,
+    eta_scale_after: [f32; LANES],
     goes_on: [bool; LANES],
+}
+
+/// A lane's BSDF sample as `land` reads it: `BsdfSample`'s direction (shading frame), weight,
+/// density and relative index, and whether the BSDF gave one.
+#[derive(Clone, Copy)]
+struct LaneSample {
+    sampled: bool,
+    wi: Vec3,
+    weight: Rgb,
+    pdf: f32,
+    eta: f32,
 }
 
 impl Lanes {
@@ -176,6 +221,9 @@ impl Lanes {
             u_lobe: f,
             ior_eta: Soa3::splat(Vec3::ONE),
             ior_k: Soa3::splat(Vec3::ONE),
+            alpha: f,
+            u_dir: [[0.0; LANES]; 2],
+            rough: 0,
             shadowed: b,
             shadow_o: v,
             shadow_t_max: f,
@@ -187,6 +235,8 @@ impl Lanes {
             transmitted: b,
             bounce_eta: f,
             prev_pdf: f,
+            beta_after: Soa3::splat(Rgb::ONE),
+            eta_scale_after: f,
             goes_on: b,
         }
     }
@@ -219,33 +269,32 @@ impl Lanes {
         self.roulette[i] = depth + 1 >= scene.settings.rr_depth;
         self.u_roulette[i] = u_roulette;
         self.kind[i] = kind;
+        self.rough |= (kind.is_rough() as u32) << i;
         self.has_light[i] = false;
+        let u_dir = Vec2::new(u_dir_x, u_dir_y);
         match material {
             Material::Diffuse { reflectance } => {
                 self.reflectance.set(i, reflectance.eval(hit.uv));
-                self.cosine_dir
-                    .set(i, square_to_cosine_hemisphere(Vec2::new(u_dir_x, u_dir_y)));
-                // Next-event estimation's light (`direct_light`).
-                if !scene.lights.is_empty() {
-                    let u_light = Vec2::new(u_light_x, u_light_y);
-                    let light = chosen_light(scene, u_choice);
-                    if let Some(ls) = light.sample_li(hit.p, u_light, shapes) {
-                        self.light_wi.set(i, ls.wi);
-                        self.light_dist[i] = ls.dist;
-                        self.light_radiance.set(i, ls.radiance);
-                        self.pdf_light[i] = light_select_pdf(scene) * ls.pdf;
-                        self.light_delta[i] = ls.delta;
-                        self.has_light[i] = true;
-                    }
-                }
+                self.cosine_dir.set(i, square_to_cosine_hemisphere(u_dir));
+                self.light(i, scene, hit, u_choice, Vec2::new(u_light_x, u_light_y));
             }
-            Material::Conductor { ior, .. } => {
+            Material::Conductor { ior, roughness } => {
                 self.ior_eta.set(i, ior.eta);
                 self.ior_k.set(i, ior.k);
+                if kind.is_rough() {
+                    self.alpha[i] = *roughness;
+                    (self.u_dir[0][i], self.u_dir[1][i]) = (u_dir_x, u_dir_y);
+                    self.light(i, scene, hit, u_choice, Vec2::new(u_light_x, u_light_y));
+                }
             }
-            Material::Dielectric { eta, .. } => {
+            Material::Dielectric { eta, roughness } => {
                 self.eta[i] = *eta;
                 self.u_lobe[i] = u_lobe;
+                if kind.is_rough() {
+                    self.alpha[i] = *roughness;
+                    (self.u_dir[0][i], self.u_dir[1][i]) = (u_dir_x, u_dir_y);
+                    self.light(i, scene, hit, u_choice, Vec2::new(u_light_x, u_light_y));
+                }
             }
             Material::Scratched(m) => {
                 let Bsdf::Dielectric(base) = m.base_bsdf() else {
@@ -258,41 +307,74 @@ impl Lanes {
         }
     }
 
+    /// Next-event estimation's light sample for lane `i` (`direct_light`), where it has one.
+    #[inline(always)]
+    fn light(&mut self, i: usize, scene: &Scene, hit: &SurfaceHit, u_choice: f32, u_light: Vec2) {
+        if scene.lights.is_empty() {
+            return;
+        }
+        let light = chosen_light(scene, u_choice);
+        if let Some(ls) = light.sample_li(hit.p, u_light, scene.geometry.shapes()) {
+            self.light_wi.set(i, ls.wi);
+            self.light_dist[i] = ls.dist;
+            self.light_radiance.set(i, ls.radiance);
+            self.pdf_light[i] = light_select_pdf(scene) * ls.pdf;
+            self.light_delta[i] = ls.delta;
+            self.has_light[i] = true;
+        }
+    }
+
     /// Stage 2: every lane's vertex, `land`'s operations with its decisions as selects (a
-    /// lane [`Self::gather`] did not set computes on stale numbers, and is not scattered).
+    /// lane [`Self::gather`] did not set computes on stale numbers, and is not scattered): the
+    /// diffuse and smooth BSDFs in every lane, then the GGX BSDFs in the lanes that hold them.
     #[inline(always)]
     pub fn run(&mut self) {
         for i in 0..LANES {
             self.run_lane(i);
         }
+        if self.rough != 0 {
+            self.run_rough();
+        }
     }
 
-    /// [`Self::run`] for lane `i`: the scalar code's functions, in `land`'s order.
+    /// [`Self::run`]'s second loop: the GGX lanes, one by one, out of the render loop's hot
+    /// code.
+    #[inline(never)]
+    fn run_rough(&mut self) {
+        let mut rough = self.rough;
+        while rough != 0 {
+            let i = rough.trailing_zeros() as usize;
+            rough &= rough - 1;
+            self.run_rough_lane(i);
+        }
+        self.rough = 0;
+    }
+
+    /// The shading frame of lane `i`'s hit and the direction toward the viewer in it.
+    #[inline(always)]
+    fn frame(&self, i: usize, transmits: bool) -> (Frame, Vec3) {
+        let wo_world = self.wo.get(i);
+        let frame = shading_frame_of(
+            self.ng.get(i),
+            self.ns.get(i),
+            self.dpdu.get(i),
+            wo_world,
+            transmits,
+        );
+        (frame, frame.to_local(wo_world))
+    }
+
+    /// [`Self::run`]'s first loop for lane `i`: the scalar code's functions, in `land`'s order.
     #[inline(always)]
     fn run_lane(&mut self, i: usize) {
         let kind = self.kind[i];
-        let (wo_world, p, ng) = (self.wo.get(i), self.p.get(i), self.ng.get(i));
         let transmits = kind == Kind::Glass;
-        let frame = shading_frame_of(ng, self.ns.get(i), self.dpdu.get(i), wo_world, transmits);
-        let wo = frame.to_local(wo_world);
-        let beta = self.beta.get(i);
+        let (frame, wo) = self.frame(i, transmits);
 
         // Next-event estimation (`direct_light` with `Diffuse`'s value and density).
-        let pdf_light = self.pdf_light[i];
-        let light_wi = self.light_wi.get(i);
-        let wi = frame.to_local(light_wi);
+        let wi = frame.to_local(self.light_wi.get(i));
         let f = diffuse_eval(self.reflectance.get(i), wo, wi) * wi.z.abs();
-        let shadow_o = offset_origin_by(p, ng, light_wi, self.rel[i]);
-        self.shadow_t_max[i] = shadow_t_max(self.light_dist[i], shadow_o, p);
-        self.shadow_o.set(i, shadow_o);
-        let w = if self.light_delta[i] {
-            1.0
-        } else {
-            power_heuristic(pdf_light, diffuse_pdf(wo, wi))
-        };
-        self.shadow_radiance
-            .set(i, beta * f * self.light_radiance.get(i) * (w / pdf_light));
-        self.shadowed[i] = self.has_light[i] && f != Rgb::ZERO;
+        let outcome = self.light_outcome(i, f, diffuse_pdf(wo, wi));
 
         // The BSDF's sample: `Diffuse::sample`, `Dielectric::sample` or `Conductor::sample`.
         let cosine_dir = self.cosine_dir.get(i);
@@ -305,7 +387,7 @@ impl Lanes {
         }
         .fresnel(wo.z);
         // (Selects, not a `match` on the kind: a `switch` keeps the loop from vectorising.)
-        let (bs_wi, weight, pdf, bs_eta) = if kind == Kind::Diffuse {
+        let (wi, weight, pdf, eta) = if kind == Kind::Diffuse {
             (
                 cosine_dir,
                 self.reflectance.get(i),
@@ -325,27 +407,157 @@ impl Lanes {
             )
         };
         // `Diffuse::sample` and `Conductor::sample` give none below the surface (or at a zero
-        // density); `land` ends the path at a sample of no density or weight.
+        // density).
         let sampled = transmits || !(wo.z <= 0.0);
-        self.scattered[i] = sampled && pdf > 0.0 && weight != Rgb::ZERO;
-        let wi_world = frame.to_world(bs_wi);
-        self.wi_world.set(i, wi_world);
-        self.n.set(i, frame.n);
-        self.transmitted[i] = bs_wi.z * wo.z < 0.0;
-        self.bounce_eta[i] = bs_eta;
-        self.prev_pdf[i] = pdf;
-        // `PathState::scatter`.
-        let beta = beta * weight;
-        let eta_scale = self.eta_scale[i] * (bs_eta * bs_eta);
-        self.eta_scale[i] = eta_scale;
-        self.origin
-            .set(i, offset_origin_by(p, ng, wi_world, self.rel[i]));
-        // `PathState::survives_roulette`.
+        let sample = LaneSample {
+            sampled,
+            wi,
+            weight,
+            pdf,
+            eta,
+        };
+        let bounce = self.bounce_outcome(i, frame, wo, sample);
+        self.store(i, outcome, bounce);
+    }
+
+    /// [`Self::run`]'s second loop for lane `i`, kept only where the lane holds a GGX BSDF:
+    /// [`RoughDielectric`]'s or [`RoughConductor`]'s `eval`, `pdf` and `sample`, as `land`
+    /// calls them through `Bsdf`.
+    #[inline(always)]
+    fn run_rough_lane(&mut self, i: usize) {
+        let kind = self.kind[i];
+        let transmits = kind == Kind::RoughGlass;
+        let (frame, wo) = self.frame(i, transmits);
+        let distribution = Ggx::isotropic(self.alpha[i]);
+        let glass = RoughDielectric {
+            eta: self.eta[i],
+            distribution,
+        };
+        let metal = RoughConductor {
+            ior: ConductorIor {
+                eta: self.ior_eta.get(i),
+                k: self.ior_k.get(i),
+            },
+            distribution,
+        };
+
+        // Next-event estimation, where the lane has a light sample; the density where the
+        // value is not zero and the light not a delta (lane by lane: the GGX functions'
+        // branches do not vectorise, and these calls are most of their cost).
+        let wi = frame.to_local(self.light_wi.get(i));
+        let mut f = Rgb::ZERO;
+        if self.has_light[i] {
+            f = if transmits {
+                glass.eval(wo, wi)
+            } else {
+                metal.eval(wo, wi)
+            } * wi.z.abs();
+        }
+        let mut pdf = 0.0;
+        if f != Rgb::ZERO && !self.light_delta[i] {
+            pdf = if transmits {
+                glass.pdf(wo, wi)
+            } else {
+                metal.pdf(wo, wi)
+            };
+        }
+        let outcome = self.light_outcome(i, f, pdf);
+
+        // The BSDF's sample.
+        let u = Vec2::new(self.u_dir[0][i], self.u_dir[1][i]);
+        let bs = if transmits {
+            glass.sample(wo, self.u_lobe[i], u)
+        } else {
+            metal.sample(wo, u)
+        };
+        let sample = match bs {
+            Some(BsdfSample {
+                wi,
+                weight,
+                pdf,
+                eta,
+                ..
+            }) => LaneSample {
+                sampled: true,
+                wi,
+                weight,
+                pdf,
+                eta,
+            },
+            None => LaneSample {
+                sampled: false,
+                wi: Vec3::Z,
+                weight: Rgb::ZERO,
+                pdf: 0.0,
+                eta: 1.0,
+            },
+        };
+        let bounce = self.bounce_outcome(i, frame, wo, sample);
+        self.store(i, outcome, bounce);
+    }
+
+    /// Next-event estimation's shadow test for lane `i` (`direct_light`), from the BSDF's
+    /// value times the cosine `f` and its density `pdf_bsdf` toward the light sample.
+    #[inline(always)]
+    fn light_outcome(&self, i: usize, f: Rgb, pdf_bsdf: f32) -> LightOutcome {
+        let (p, light_wi) = (self.p.get(i), self.light_wi.get(i));
+        let pdf_light = self.pdf_light[i];
+        let shadow_o = offset_origin_by(p, self.ng.get(i), light_wi, self.rel[i]);
+        let w = if self.light_delta[i] {
+            1.0
+        } else {
+            power_heuristic(pdf_light, pdf_bsdf)
+        };
+        LightOutcome {
+            shadowed: self.has_light[i] && f != Rgb::ZERO,
+            o: shadow_o,
+            t_max: shadow_t_max(self.light_dist[i], shadow_o, p),
+            radiance: self.beta.get(i) * f * self.light_radiance.get(i) * (w / pdf_light),
+        }
+    }
+
+    /// The bounce of lane `i` from its BSDF's sample `s` (in the shading frame `frame`, `wo`
+    /// toward the viewer), as `land` makes it: the path ends at a sample of no density or
+    /// weight; `PathState::scatter`, the spawned ray, `PathState::survives_roulette`.
+    #[inline(always)]
+    fn bounce_outcome(&self, i: usize, frame: Frame, wo: Vec3, s: LaneSample) -> BounceOutcome {
+        let scattered = s.sampled && s.pdf > 0.0 && s.weight != Rgb::ZERO;
+        let wi_world = frame.to_world(s.wi);
+        let beta = self.beta.get(i) * s.weight;
+        let eta_scale = self.eta_scale[i] * (s.eta * s.eta);
         let q = survival_probability(beta, eta_scale);
         let survives = self.u_roulette[i] < q;
-        self.goes_on[i] = self.scattered[i] && (!self.roulette[i] || survives);
-        self.beta
-            .set(i, if self.roulette[i] { beta / q } else { beta });
+        BounceOutcome {
+            scattered,
+            n: frame.n,
+            wi_world,
+            origin: offset_origin_by(self.p.get(i), self.ng.get(i), wi_world, self.rel[i]),
+            transmitted: s.wi.z * wo.z < 0.0,
+            eta: s.eta,
+            pdf: s.pdf,
+            beta: if self.roulette[i] { beta / q } else { beta },
+            eta_scale,
+            goes_on: scattered && (!self.roulette[i] || survives),
+        }
+    }
+
+    /// Lane `i`'s results.
+    #[inline(always)]
+    fn store(&mut self, i: usize, light: LightOutcome, bounce: BounceOutcome) {
+        self.shadowed[i] = light.shadowed;
+        self.shadow_o.set(i, light.o);
+        self.shadow_t_max[i] = light.t_max;
+        self.shadow_radiance.set(i, light.radiance);
+        self.scattered[i] = bounce.scattered;
+        self.n.set(i, bounce.n);
+        self.wi_world.set(i, bounce.wi_world);
+        self.origin.set(i, bounce.origin);
+        self.transmitted[i] = bounce.transmitted;
+        self.bounce_eta[i] = bounce.eta;
+        self.prev_pdf[i] = bounce.pdf;
+        self.beta_after.set(i, bounce.beta);
+        self.eta_scale_after[i] = bounce.eta_scale;
+        self.goes_on[i] = bounce.goes_on;
     }
 
     /// Stage 3 for lane `i`: its results into `path` (the next ray and the state after the
@@ -376,9 +588,9 @@ impl Lanes {
         if !self.scattered[i] {
             return false;
         }
-        let delta = self.kind[i] != Kind::Diffuse;
-        path.state.beta = self.beta.get(i);
-        path.state.eta_scale = self.eta_scale[i];
+        let delta = self.kind[i].is_delta();
+        path.state.beta = self.beta_after.get(i);
+        path.state.eta_scale = self.eta_scale_after[i];
         path.state.specular = delta;
         path.state.prev_pdf = self.prev_pdf[i];
         if DIFFERENTIALS {
@@ -407,6 +619,28 @@ impl Lanes {
     }
 }
 
+/// Next-event estimation's results for a lane (`Lanes::light_outcome`).
+struct LightOutcome {
+    shadowed: bool,
+    o: Vec3,
+    t_max: f32,
+    radiance: Rgb,
+}
+
+/// A lane's bounce (`Lanes::bounce_outcome`): the new ray, the state after it.
+struct BounceOutcome {
+    scattered: bool,
+    n: Vec3,
+    wi_world: Vec3,
+    origin: Vec3,
+    transmitted: bool,
+    eta: f32,
+    pdf: f32,
+    beta: Rgb,
+    eta_scale: f32,
+    goes_on: bool,
+}
+
 /// `Diffuse::eval` for the reflectance `reflectance`.
 #[inline(always)]
 fn diffuse_eval(reflectance: Rgb, wo: Vec3, wi: Vec3) -> Rgb {
@@ -426,8 +660,8 @@ mod tests {
     use crate::render::integrator::path::camera_sample;
     use crate::render::scene::Overrides;
 
-    /// Diffuse (textured and plain), glass (a smooth mesh and a sphere) and gold under every kind of
-    /// light the lanes sample: a rectangle and a sphere that emit, a point light (delta) and a
+    /// Diffuse (textured and plain), glass (a smooth mesh and a sphere), gold, rough glass and
+    /// rough copper under every kind of light the lanes sample: a rectangle and a sphere that emit, a point light (delta) and a
     /// constant sky (left to BSDF sampling).
     const SCENE: &str = r#"
 [render]
@@ -462,6 +696,16 @@ reflectance = [0.9, 0.85, 0.8]
 type = "conductor"
 preset = "gold"
 
+[materials.frosted]
+type = "dielectric"
+ior = 1.5
+roughness = 0.3
+
+[materials.brushed]
+type = "conductor"
+preset = "copper"
+roughness = 0.15
+
 [[shapes]]
 type = "teapot"
 material = "glass"
@@ -485,6 +729,18 @@ type = "sphere"
 center = [-1.1, 0.45, 1.5]
 radius = 0.45
 material = "gold"
+
+[[shapes]]
+type = "sphere"
+center = [0.9, 0.35, 1.4]
+radius = 0.35
+material = "frosted"
+
+[[shapes]]
+type = "sphere"
+center = [-0.2, 0.25, 2.0]
+radius = 0.25
+material = "brushed"
 
 [[shapes]]
 type = "rectangle"
@@ -558,6 +814,7 @@ radiance = [0.2, 0.25, 0.3]
         for sampler in ["sobol", "independent"] {
             let scene = scene(sampler);
             let (mut taken, mut glass, mut mirror, mut shadowed, mut ended) = (0, 0, 0, 0, 0);
+            let (mut rough_glass, mut rough_metal) = (0, 0);
             let mut lanes = Lanes::new();
             let mut lane = 0;
             for y in 0..16 {
@@ -589,6 +846,8 @@ radiance = [0.2, 0.25, 0.3]
                                 taken += 1;
                                 glass += (kind == Kind::Glass) as u32;
                                 mirror += (kind == Kind::Mirror) as u32;
+                                rough_glass += (kind == Kind::RoughGlass) as u32;
+                                rough_metal += (kind == Kind::RoughMetal) as u32;
                                 lane = (lane + 1) % LANES;
                                 (goes_on, shadow)
                             } else {
@@ -609,10 +868,14 @@ radiance = [0.2, 0.25, 0.3]
                 }
             }
             // Every kind of vertex, light samples, and paths ended by roulette or absorption.
-            let diffuse = taken - glass - mirror;
+            let diffuse = taken - glass - mirror - rough_glass - rough_metal;
             assert!(
                 diffuse > 200 && glass > 200 && mirror > 50,
                 "{diffuse} {glass} {mirror}"
+            );
+            assert!(
+                rough_glass > 100 && rough_metal > 40,
+                "{rough_glass} {rough_metal}"
             );
             assert!(shadowed > 200 && ended > 50, "{shadowed} {ended}");
         }
