@@ -34,7 +34,8 @@
 //!   another, a path from its camera ray to its end) and the lane loop (`render.lanes`,
 //!   `lanes`: [`LANES`] paths of a tile in flight, each stage run for all of them), which runs
 //!   the vertices of diffuse, smooth dielectric and smooth conductor surfaces in SIMD lanes
-//!   (`lane_vertex`, `land`'s operations as selects, bit for bit). They give the same image bit
+//!   (`lane_vertex`, `land`'s operations as selects, bit for bit), and those of rough (GGX)
+//!   ones in the same stages, lane by lane. They give the same image bit
 //!   for bit wherever no material reads a pixel's footprint (`tests/lanes.rs`).
 
 mod lane_vertex;
