@@ -101,6 +101,26 @@ fn lane_loop_renders_every_shipped_scene_as_the_one_path_loop() {
     );
 }
 
+/// The scene `text` at 40 x 24, 8 spp, in the lane loop or the one-path loop.
+fn parse_small(text: &str, lanes: bool) -> Scene {
+    let o = Overrides {
+        spp: Some(8),
+        resolution: Some((40, 24)),
+        lanes: Some(lanes),
+        ..Overrides::default()
+    };
+    Scene::parse(text, Path::new("small.toml"), Path::new(SCENES), &o).unwrap()
+}
+
+/// `one` (the one-path loop) and its lane-loop twin `lanes` render the same image bit for bit
+/// with the same rays, and it is not black.
+fn assert_lanes_bit_for_bit(one: &Scene, lanes: &Scene) {
+    let (a, sa) = render_with_threads(one, 2);
+    let (b, sb) = render_with_threads(lanes, 2);
+    assert!(a.pixels.iter().any(|p| p.max_element() > 0.0));
+    assert!(bits(&a) == bits(&b) && sa.rays == sb.rays);
+}
+
 #[test]
 fn scratched_glass_seen_from_inside_runs_in_lanes_bit_for_bit() {
     // With point coverage no material reads the footprint, so the loops must agree bit for
@@ -109,46 +129,22 @@ fn scratched_glass_seen_from_inside_runs_in_lanes_bit_for_bit() {
         "layer_mix = \"max\"",
         "layer_mix = \"max\"\ncoverage = \"point\"",
     );
-    let scene = |lanes| {
-        let o = Overrides {
-            spp: Some(8),
-            resolution: Some((40, 24)),
-            lanes: Some(lanes),
-            ..Overrides::default()
-        };
-        Scene::parse(&text, Path::new("point.toml"), Path::new(SCENES), &o).unwrap()
-    };
-    let one = scene(false);
+    let one = parse_small(&text, false);
     assert!(!one.materials.iter().any(Material::reads_footprint));
-    let (a, sa) = render_with_threads(&one, 2);
-    let (b, sb) = render_with_threads(&scene(true), 2);
-    assert!(a.pixels.iter().any(|p| p.max_element() > 0.0));
-    assert!(bits(&a) == bits(&b) && sa.rays == sb.rays);
+    assert_lanes_bit_for_bit(&one, &parse_small(&text, true));
 }
 
 #[test]
 fn rough_glass_and_metal_run_in_lanes_bit_for_bit() {
     // GGX glass and gold (the lane vertex's second loop), each scene with and without the
-    // lanes: the same image bit for bit, and the same rays.
+    // lanes.
     let frosted = include_str!("../scenes/glass-teapot.toml")
         .replace("ior = 1.5", "ior = 1.5\nroughness = 0.25");
     let brushed = include_str!("../scenes/metal-teapot.toml")
         .replace("preset = \"gold\"", "preset = \"gold\"\nroughness = 0.2");
     for text in [frosted, brushed] {
         assert!(text.contains("roughness"));
-        let scene = |lanes| {
-            let o = Overrides {
-                spp: Some(8),
-                resolution: Some((40, 30)),
-                lanes: Some(lanes),
-                ..Overrides::default()
-            };
-            Scene::parse(&text, Path::new("rough.toml"), Path::new(SCENES), &o).unwrap()
-        };
-        let (a, sa) = render_with_threads(&scene(false), 2);
-        let (b, sb) = render_with_threads(&scene(true), 2);
-        assert!(a.pixels.iter().any(|p| p.max_element() > 0.0));
-        assert!(bits(&a) == bits(&b) && sa.rays == sb.rays);
+        assert_lanes_bit_for_bit(&parse_small(&text, false), &parse_small(&text, true));
     }
 }
 
