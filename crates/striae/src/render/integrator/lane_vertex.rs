@@ -30,8 +30,7 @@ use super::path::{
     Path, ShadowTest,
 };
 use super::Worker;
-use crate::math::Frame;
-use crate::math::{reflect_z, Ray, Rgb, Vec2, Vec3};
+use crate::math::{reflect_z, Frame, Ray, Rgb, Vec2, Vec3};
 use crate::optics::fresnel_f32;
 use crate::optics::microfacet::Ggx;
 use crate::render::bsdf::{Bsdf, BsdfSample, ConductorIor, RoughConductor, RoughDielectric};
@@ -271,30 +270,25 @@ impl Lanes {
         self.kind[i] = kind;
         self.rough |= (kind.is_rough() as u32) << i;
         self.has_light[i] = false;
-        let u_dir = Vec2::new(u_dir_x, u_dir_y);
+        if !kind.is_delta() {
+            self.light(i, scene, hit, u_choice, Vec2::new(u_light_x, u_light_y));
+        }
+        (self.u_dir[0][i], self.u_dir[1][i]) = (u_dir_x, u_dir_y);
         match material {
             Material::Diffuse { reflectance } => {
                 self.reflectance.set(i, reflectance.eval(hit.uv));
-                self.cosine_dir.set(i, square_to_cosine_hemisphere(u_dir));
-                self.light(i, scene, hit, u_choice, Vec2::new(u_light_x, u_light_y));
+                self.cosine_dir
+                    .set(i, square_to_cosine_hemisphere(Vec2::new(u_dir_x, u_dir_y)));
             }
             Material::Conductor { ior, roughness } => {
                 self.ior_eta.set(i, ior.eta);
                 self.ior_k.set(i, ior.k);
-                if kind.is_rough() {
-                    self.alpha[i] = *roughness;
-                    (self.u_dir[0][i], self.u_dir[1][i]) = (u_dir_x, u_dir_y);
-                    self.light(i, scene, hit, u_choice, Vec2::new(u_light_x, u_light_y));
-                }
+                self.alpha[i] = *roughness;
             }
             Material::Dielectric { eta, roughness } => {
                 self.eta[i] = *eta;
                 self.u_lobe[i] = u_lobe;
-                if kind.is_rough() {
-                    self.alpha[i] = *roughness;
-                    (self.u_dir[0][i], self.u_dir[1][i]) = (u_dir_x, u_dir_y);
-                    self.light(i, scene, hit, u_choice, Vec2::new(u_light_x, u_light_y));
-                }
+                self.alpha[i] = *roughness;
             }
             Material::Scratched(m) => {
                 let Bsdf::Dielectric(base) = m.base_bsdf() else {
