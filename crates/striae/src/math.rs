@@ -104,7 +104,7 @@ pub fn reflect_z(w: Vec3) -> Vec3 {
 }
 
 /// Reflect `w` about the unit normal `n` (both pointing away from the surface).
-#[inline]
+#[inline(always)]
 pub fn reflect(w: Vec3, n: Vec3) -> Vec3 {
     2.0 * w.dot(n) * n - w
 }

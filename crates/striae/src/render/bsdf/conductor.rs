@@ -8,7 +8,7 @@
 use super::BsdfSample;
 use crate::math::{reflect, reflect_z, Rgb, Vec2, Vec3};
 use crate::optics::fresnel_f32;
-use crate::optics::microfacet::Ggx;
+use crate::optics::microfacet::{visible_azimuth, Ggx};
 
 /// The complex index of refraction of a conductor, per RGB channel.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -137,31 +137,31 @@ impl RoughConductor {
     }
 
     /// `F(wo.m) D(m) G(wo, wi, m) / (4 cos_o cos_i)`, `m` the half vector (Walter eq. 20).
-    #[inline]
+    /// (Inlined always, as [`Self::pdf`] and [`Self::sample_at`]: the lane vertex's SIMD loop
+    /// runs them, and a call keeps it scalar.)
+    #[inline(always)]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
-        if wo.z <= 0.0 || wi.z <= 0.0 {
-            return Rgb::ZERO;
-        }
         let m = (wo + wi).normalize();
         let dg = self.distribution.d(m) * self.distribution.g(wo, wi, m);
-        if dg <= 0.0 {
-            return Rgb::ZERO;
+        let v = self.ior.fresnel(wo.dot(m)) * (dg / (4.0 * wo.z * wi.z));
+        if wo.z <= 0.0 || wi.z <= 0.0 || dg <= 0.0 {
+            Rgb::ZERO
+        } else {
+            v
         }
-        self.ior.fresnel(wo.dot(m)) * (dg / (4.0 * wo.z * wi.z))
     }
 
     /// `D_wo(m) / (4 wo.m)` (visible-normal density times the reflection Jacobian, eq. 14).
-    #[inline]
+    #[inline(always)]
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        if wo.z <= 0.0 || wi.z <= 0.0 {
-            return 0.0;
-        }
         let m = (wo + wi).normalize();
         let wo_m = wo.dot(m);
-        if wo_m <= 0.0 {
-            return 0.0;
+        let pdf = self.distribution.pdf_visible(wo, m) / (4.0 * wo_m);
+        if wo.z <= 0.0 || wi.z <= 0.0 || wo_m <= 0.0 {
+            0.0
+        } else {
+            pdf
         }
-        self.distribution.pdf_visible(wo, m) / (4.0 * wo_m)
     }
 
     /// `(eval, pdf)` sharing the half vector, `D` and `G1(wo)`.
@@ -188,21 +188,19 @@ impl RoughConductor {
     /// Reflect `wo` about a visible normal; weight `F(wo.m) G1(wi, m)`.
     #[inline]
     pub fn sample(&self, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
-        if wo.z <= 0.0 {
-            return None;
-        }
-        let m = self.distribution.sample_visible(wo, u);
+        self.sample_at(wo, u.x, visible_azimuth(u.y))
+    }
+
+    /// [`Self::sample`] with the visible normal's azimuth given ([`Ggx::sample_visible_at`]).
+    #[inline(always)]
+    pub fn sample_at(&self, wo: Vec3, u_x: f32, azimuth: (f32, f32)) -> Option<BsdfSample> {
+        let m = self.distribution.sample_visible_at(wo, u_x, azimuth);
         let wi = reflect(wo, m);
-        if wi.z <= 0.0 {
-            return None;
-        }
         let wo_m = wo.dot(m);
         let pdf = self.distribution.pdf_visible(wo, m) / (4.0 * wo_m);
         let g1 = self.distribution.g1(wi, m);
-        if !(pdf > 0.0) || g1 <= 0.0 {
-            return None;
-        }
-        Some(BsdfSample {
+        let valid = !(wo.z <= 0.0) & !(wi.z <= 0.0) & (pdf > 0.0) & !(g1 <= 0.0);
+        valid.then_some(BsdfSample {
             wi,
             weight: self.ior.fresnel(wo_m) * g1,
             pdf,

@@ -9,12 +9,12 @@
 use super::BsdfSample;
 use crate::math::{reflect, reflect_z, Rgb, Vec2, Vec3};
 use crate::optics::fresnel_f32;
-use crate::optics::microfacet::Ggx;
+use crate::optics::microfacet::{visible_azimuth, Ggx};
 
 /// Refract `wo` through the (micro)normal `m` given the signed cosine of the transmitted
 /// direction `cos_t` (sign opposite to `wo . m`) and `eta_ti = n(wo side) / n(wi side)`
 /// (Mitsuba 3's `refract`). Both directions point away from the surface.
-#[inline]
+#[inline(always)]
 pub(super) fn refract(wo: Vec3, m: Vec3, cos_t: f32, eta_ti: f32) -> Vec3 {
     m * (wo.dot(m) * eta_ti + cos_t) - wo * eta_ti
 }
@@ -83,11 +83,8 @@ pub struct RoughDielectric {
 /// The generalised half vector of `(wo, wi)` (Walter eq. 16), in the upper hemisphere, and
 /// `eta_p = n(wi side) / n(wo side)` (1 for reflection). `None` for degenerate pairs and for
 /// pairs whose half vector is back-facing to either direction (no microfacet connects them).
-#[inline]
+#[inline(always)]
 pub(super) fn half_vector(eta: f32, wo: Vec3, wi: Vec3) -> Option<(Vec3, f32, bool)> {
-    if wo.z == 0.0 || wi.z == 0.0 {
-        return None;
-    }
     let reflect = wo.z * wi.z > 0.0;
     let eta_p = if reflect {
         1.0
@@ -98,17 +95,22 @@ pub(super) fn half_vector(eta: f32, wo: Vec3, wi: Vec3) -> Option<(Vec3, f32, bo
     };
     let m = wo + wi * eta_p;
     let len2 = m.length_squared();
-    if !(len2 > 1e-14) {
-        return None;
-    }
-    let mut m = m / len2.sqrt();
-    if m.z < 0.0 {
-        m = -m;
-    }
-    if m.dot(wi) * wi.z <= 0.0 || m.dot(wo) * wo.z <= 0.0 {
-        return None;
-    }
-    Some((m, eta_p, reflect))
+    let m = m / len2.sqrt();
+    let m = if m.z < 0.0 { -m } else { m };
+    let connects = (wo.z != 0.0)
+        & (wi.z != 0.0)
+        & (len2 > 1e-14)
+        & !(m.dot(wi) * wi.z <= 0.0)
+        & !(m.dot(wo) * wo.z <= 0.0);
+    connects.then_some((m, eta_p, reflect))
+}
+
+/// [`half_vector`]'s pair, and whether it connects the directions: the lane vertex's SIMD
+/// loop computes with the placeholder where it does not, and selects its result away.
+#[inline(always)]
+fn half_vector_or_placeholder(eta: f32, wo: Vec3, wi: Vec3) -> ((Vec3, f32, bool), bool) {
+    let h = half_vector(eta, wo, wi);
+    (h.unwrap_or((Vec3::Z, 1.0, true)), h.is_some())
 }
 
 impl RoughDielectric {
@@ -120,39 +122,42 @@ impl RoughDielectric {
     }
 
     /// Walter eq. 20 (reflection) and eq. 21 (transmission, divided by `eta_p^2` for radiance).
-    #[inline]
+    /// (Inlined always, as [`Self::pdf`] and [`Self::sample_at`]: the lane vertex's SIMD loop
+    /// runs them, and a call keeps it scalar.)
+    #[inline(always)]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
-        let Some((m, eta_p, reflect)) = half_vector(self.eta, wo, wi) else {
-            return Rgb::ZERO;
-        };
+        let ((m, eta_p, reflect), connects) = half_vector_or_placeholder(self.eta, wo, wi);
         let (wo_m, wi_m) = (wo.dot(m), wi.dot(m));
         let f = fresnel_f32::dielectric(wo_m, self.eta).0;
         let dg = self.distribution.d(m) * self.distribution.g(wo, wi, m);
-        let v = if reflect {
-            dg * f / (4.0 * (wo.z * wi.z).abs())
+        let reflected = dg * f / (4.0 * (wo.z * wi.z).abs());
+        let denom = (wi_m + wo_m / eta_p).powi(2);
+        let transmitted =
+            dg * (1.0 - f) * (wi_m * wo_m).abs() / ((wi.z * wo.z).abs() * denom) / (eta_p * eta_p);
+        let v = if reflect { reflected } else { transmitted };
+        if connects {
+            Rgb::splat(v)
         } else {
-            let denom = (wi_m + wo_m / eta_p).powi(2);
-            dg * (1.0 - f) * (wi_m * wo_m).abs() / ((wi.z * wo.z).abs() * denom) / (eta_p * eta_p)
-        };
-        Rgb::splat(v)
+            Rgb::ZERO
+        }
     }
 
     /// Visible-normal density times the Jacobian of the reflection (Walter eq. 14) or
     /// refraction (eq. 17) map, times the probability of choosing that lobe (`F` or `1 - F`).
-    #[inline]
+    #[inline(always)]
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        let Some((m, eta_p, reflect)) = half_vector(self.eta, wo, wi) else {
-            return 0.0;
-        };
+        let ((m, eta_p, reflect), connects) = half_vector_or_placeholder(self.eta, wo, wi);
         let (wo_m, wi_m) = (wo.dot(m), wi.dot(m));
         let f = fresnel_f32::dielectric(wo_m, self.eta).0;
         let v = wo * wo.z.signum();
         let pdf_m = self.distribution.pdf_visible(v, m);
-        if reflect {
-            f * pdf_m / (4.0 * wo_m.abs())
-        } else {
-            let denom = (wi_m + wo_m / eta_p).powi(2);
-            (1.0 - f) * pdf_m * wi_m.abs() / denom
+        let reflected = f * pdf_m / (4.0 * wo_m.abs());
+        let denom = (wi_m + wo_m / eta_p).powi(2);
+        let transmitted = (1.0 - f) * pdf_m * wi_m.abs() / denom;
+        match (connects, reflect) {
+            (false, _) => 0.0,
+            (true, true) => reflected,
+            (true, false) => transmitted,
         }
     }
 
@@ -186,56 +191,57 @@ impl RoughDielectric {
     /// refract through it. Weight `G1(wi)` (separable Smith), `/ eta_p^2` for refraction.
     #[inline]
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
-        if wo.z == 0.0 {
-            return None;
-        }
+        self.sample_at(wo, u_lobe, u.x, visible_azimuth(u.y))
+    }
+
+    /// [`Self::sample`] with the visible normal's azimuth given ([`Ggx::sample_visible_at`]).
+    #[inline(always)]
+    pub fn sample_at(
+        &self,
+        wo: Vec3,
+        u_lobe: f32,
+        u_x: f32,
+        azimuth: (f32, f32),
+    ) -> Option<BsdfSample> {
         let v = wo * wo.z.signum();
-        let m = self.distribution.sample_visible(v, u);
+        let m = self.distribution.sample_visible_at(v, u_x, azimuth);
         let pdf_m = self.distribution.pdf_visible(v, m);
-        if !(pdf_m > 0.0) {
-            return None;
-        }
         let wo_m = wo.dot(m);
         let (f, cos_t, eta_it) = fresnel_f32::dielectric(wo_m, self.eta);
-        if u_lobe < f || f >= 1.0 {
-            let wi = reflect(wo, m);
-            if wi.z * wo.z <= 0.0 {
-                return None;
-            }
-            let pdf = f * pdf_m / (4.0 * wo_m.abs());
-            let g1 = self.distribution.g1(wi, m);
-            if !(pdf > 0.0) || g1 <= 0.0 {
-                return None;
-            }
-            Some(BsdfSample {
-                wi,
-                weight: Rgb::splat(g1),
-                pdf,
+        // Both lobes, then the chosen one (`F`, or `1 - F`).
+        let wi_r = reflect(wo, m);
+        let pdf_r = f * pdf_m / (4.0 * wo_m.abs());
+        let g1_r = self.distribution.g1(wi_r, m);
+        let reflected = !(wi_r.z * wo.z <= 0.0) & (pdf_r > 0.0) & !(g1_r <= 0.0);
+        let eta_p = eta_it;
+        let wi_t = refract(wo, m, cos_t, 1.0 / eta_p).normalize();
+        let wi_m = wi_t.dot(m);
+        let denom = (wi_m + wo_m / eta_p).powi(2);
+        let pdf_t = (1.0 - f) * pdf_m * wi_m.abs() / denom;
+        let g1_t = self.distribution.g1(wi_t, m);
+        let transmitted =
+            !(wi_t.z * wo.z >= 0.0) & wi_t.is_finite() & (pdf_t > 0.0) & !(g1_t <= 0.0);
+        let reflects = u_lobe < f || f >= 1.0;
+        let sample = if reflects {
+            BsdfSample {
+                wi: wi_r,
+                weight: Rgb::splat(g1_r),
+                pdf: pdf_r,
                 delta: false,
                 eta: 1.0,
                 from: None,
-            })
+            }
         } else {
-            let eta_p = eta_it;
-            let wi = refract(wo, m, cos_t, 1.0 / eta_p).normalize();
-            if wi.z * wo.z >= 0.0 || !wi.is_finite() {
-                return None;
-            }
-            let wi_m = wi.dot(m);
-            let denom = (wi_m + wo_m / eta_p).powi(2);
-            let pdf = (1.0 - f) * pdf_m * wi_m.abs() / denom;
-            let g1 = self.distribution.g1(wi, m);
-            if !(pdf > 0.0) || g1 <= 0.0 {
-                return None;
-            }
-            Some(BsdfSample {
-                wi,
-                weight: Rgb::splat(g1 / (eta_p * eta_p)),
-                pdf,
+            BsdfSample {
+                wi: wi_t,
+                weight: Rgb::splat(g1_t / (eta_p * eta_p)),
+                pdf: pdf_t,
                 delta: false,
                 eta: eta_p,
                 from: None,
-            })
-        }
+            }
+        };
+        let valid = (wo.z != 0.0) & (pdf_m > 0.0) & if reflects { reflected } else { transmitted };
+        valid.then_some(sample)
     }
 }

@@ -4,18 +4,21 @@
 //! or conductor ([`Kind`]), in three stages:
 //!
 //! 1. **Gather**, lane by lane: the hit, the path's throughput, the bounce's random numbers
-//!    (the dimensions `land` reads, drawn in its order), the texture, the light sample and the
-//!    cosine-weighted direction (each a scalar call: `sincosf` and the `Texture` and `Light`
-//!    enums do not vectorise) into structure-of-arrays [`Lanes`].
+//!    (the dimensions `land` reads, drawn in its order), the texture, the light sample, the
+//!    cosine-weighted direction and the GGX visible normal's azimuth (each a scalar call:
+//!    `sincosf`, `cosf`, `sinf` and the `Texture` and `Light` enums do not vectorise) into
+//!    structure-of-arrays [`Lanes`].
 //! 2. **The vertex** ([`Lanes::run`]), one loop over the lanes whose body is the scalar code's
 //!    own functions (shading frame, next-event estimation's BSDF value and MIS weight, Fresnel,
 //!    the throughput's update, the spawned rays, Russian roulette) with every decision a
-//!    select, so that the render loop's SIMD copies run it 8 or 16 lanes at a time; then, out
-//!    of line and lane by lane, the lanes that hold a GGX BSDF: [`RoughConductor`]'s and
-//!    [`RoughDielectric`]'s own `eval`, `pdf` and `sample` (their branches do not vectorise;
-//!    the instructions a sample are `land`'s within 1 %), whose results replace the first
-//!    loop's there. The Fresnel functions both loops call are inlined always: left to LLVM's
-//!    choice once the GGX code calls them too, they stayed calls and the first loop scalar.
+//!    select, so that the render loop's SIMD copies run it 8 or 16 lanes at a time; then, for
+//!    the lanes that hold a GGX BSDF, [`RoughConductor`]'s and [`RoughDielectric`]'s own
+//!    `eval`, `pdf` and `sample`, written without early returns, whose results replace the
+//!    first loop's there: in the AVX-512 copy a loop over all lanes per BSDF, which it
+//!    vectorises; in the others lane by lane, out of line (LLVM's cost model keeps that loop
+//!    scalar for AVX2). The functions these loops call are inlined always: left to LLVM's
+//!    choice (the Fresnel laws, once the GGX code called them too), they stayed calls and the
+//!    loops scalar.
 //! 3. **Scatter**, lane by lane: the path's new ray and state, its deferred shadow test.
 //!
 //! Each lane runs the operations of `land` on the same numbers, so the image is `land`'s bit
@@ -32,7 +35,7 @@ use super::path::{
 use super::Worker;
 use crate::math::{reflect_z, Frame, Ray, Rgb, Vec2, Vec3};
 use crate::optics::fresnel_f32;
-use crate::optics::microfacet::Ggx;
+use crate::optics::microfacet::{visible_azimuth, Ggx};
 use crate::render::bsdf::{Bsdf, BsdfSample, ConductorIor, RoughConductor, RoughDielectric};
 use crate::render::geometry::{offset_origin_by, SurfaceHit};
 use crate::render::material::Material;
@@ -157,10 +160,13 @@ pub(super) struct Lanes {
     u_lobe: [f32; LANES],
     ior_eta: Soa3,
     ior_k: Soa3,
-    // Rough: GGX's alpha, the direction's numbers; which lanes.
+    // Rough: GGX's alpha, the visible normal's numbers (the first, and the azimuth's cosine
+    // and sine); which lanes hold each kind.
     alpha: [f32; LANES],
-    u_dir: [[f32; LANES]; 2],
-    rough: u32,
+    u_dir_x: [f32; LANES],
+    azimuth: [[f32; LANES]; 2],
+    rough_glass: u32,
+    rough_metal: u32,
 
     // Results: the shadow test (`shadow_radiance` counts where `shadowed`), the bounce (where
     // `scattered`), the state after it, whether the path goes on.
@@ -221,8 +227,10 @@ impl Lanes {
             ior_eta: Soa3::splat(Vec3::ONE),
             ior_k: Soa3::splat(Vec3::ONE),
             alpha: f,
-            u_dir: [[0.0; LANES]; 2],
-            rough: 0,
+            u_dir_x: f,
+            azimuth: [[0.0; LANES]; 2],
+            rough_glass: 0,
+            rough_metal: 0,
             shadowed: b,
             shadow_o: v,
             shadow_t_max: f,
@@ -268,12 +276,16 @@ impl Lanes {
         self.roulette[i] = depth + 1 >= scene.settings.rr_depth;
         self.u_roulette[i] = u_roulette;
         self.kind[i] = kind;
-        self.rough |= (kind.is_rough() as u32) << i;
+        self.rough_glass |= ((kind == Kind::RoughGlass) as u32) << i;
+        self.rough_metal |= ((kind == Kind::RoughMetal) as u32) << i;
         self.has_light[i] = false;
         if !kind.is_delta() {
             self.light(i, scene, hit, u_choice, Vec2::new(u_light_x, u_light_y));
         }
-        (self.u_dir[0][i], self.u_dir[1][i]) = (u_dir_x, u_dir_y);
+        if kind.is_rough() {
+            self.u_dir_x[i] = u_dir_x;
+            (self.azimuth[0][i], self.azimuth[1][i]) = visible_azimuth(u_dir_y);
+        }
         match material {
             Material::Diffuse { reflectance } => {
                 self.reflectance.set(i, reflectance.eval(hit.uv));
@@ -320,28 +332,45 @@ impl Lanes {
 
     /// Stage 2: every lane's vertex, `land`'s operations with its decisions as selects (a
     /// lane [`Self::gather`] did not set computes on stale numbers, and is not scattered): the
-    /// diffuse and smooth BSDFs in every lane, then the GGX BSDFs in the lanes that hold them.
+    /// diffuse and smooth BSDFs in every lane, then the GGX BSDFs. With `SIMD_GGX` (the
+    /// render loop's AVX-512 copy), where any lane holds one, each GGX BSDF in every lane, its
+    /// results kept in the lanes that hold it; else only in those lanes, one by one, out of
+    /// the render loop's hot code (LLVM vectorises that loop for AVX-512 only: for AVX2 its
+    /// cost model keeps it scalar).
     #[inline(always)]
-    pub fn run(&mut self) {
+    pub fn run<const SIMD_GGX: bool>(&mut self) {
         for i in 0..LANES {
             self.run_lane(i);
         }
-        if self.rough != 0 {
-            self.run_rough();
+        if SIMD_GGX {
+            if self.rough_glass != 0 {
+                for i in 0..LANES {
+                    self.run_rough_lane::<true>(i);
+                }
+            }
+            if self.rough_metal != 0 {
+                for i in 0..LANES {
+                    self.run_rough_lane::<false>(i);
+                }
+            }
+        } else if self.rough_glass | self.rough_metal != 0 {
+            self.run_rough_by_lane();
         }
+        (self.rough_glass, self.rough_metal) = (0, 0);
     }
 
-    /// [`Self::run`]'s second loop: the GGX lanes, one by one, out of the render loop's hot
-    /// code.
+    /// [`Self::run`]'s GGX vertices without SIMD: each lane that holds one, alone.
     #[inline(never)]
-    fn run_rough(&mut self) {
-        let mut rough = self.rough;
-        while rough != 0 {
-            let i = rough.trailing_zeros() as usize;
-            rough &= rough - 1;
-            self.run_rough_lane(i);
+    fn run_rough_by_lane(&mut self) {
+        let (mut glass, mut metal) = (self.rough_glass, self.rough_metal);
+        while glass != 0 {
+            self.run_rough_lane::<true>(glass.trailing_zeros() as usize);
+            glass &= glass - 1;
         }
-        self.rough = 0;
+        while metal != 0 {
+            self.run_rough_lane::<false>(metal.trailing_zeros() as usize);
+            metal &= metal - 1;
+        }
     }
 
     /// The shading frame of lane `i`'s hit and the direction toward the viewer in it.
@@ -411,17 +440,17 @@ impl Lanes {
             eta,
         };
         let bounce = self.bounce_outcome(i, frame, wo, sample);
-        self.store(i, outcome, bounce);
+        self.store(i, true, outcome, bounce);
     }
 
-    /// [`Self::run`]'s second loop for lane `i`, kept only where the lane holds a GGX BSDF:
-    /// [`RoughDielectric`]'s or [`RoughConductor`]'s `eval`, `pdf` and `sample`, as `land`
-    /// calls them through `Bsdf`.
+    /// [`Self::run`]'s GGX loop for lane `i`, [`RoughDielectric`]'s (`GLASS`) or
+    /// [`RoughConductor`]'s `eval`, `pdf` and `sample` as `land` calls them through `Bsdf`:
+    /// computed in every lane, kept where the lane holds that BSDF. Where `land` skips a call
+    /// (the value without a light sample, the density where the value is zero or the light a
+    /// delta), its result is replaced by what `land` uses instead.
     #[inline(always)]
-    fn run_rough_lane(&mut self, i: usize) {
-        let kind = self.kind[i];
-        let transmits = kind == Kind::RoughGlass;
-        let (frame, wo) = self.frame(i, transmits);
+    fn run_rough_lane<const GLASS: bool>(&mut self, i: usize) {
+        let (frame, wo) = self.frame(i, GLASS);
         let distribution = Ggx::isotropic(self.alpha[i]);
         let glass = RoughDielectric {
             eta: self.eta[i],
@@ -435,34 +464,32 @@ impl Lanes {
             distribution,
         };
 
-        // Next-event estimation, where the lane has a light sample; the density where the
-        // value is not zero and the light not a delta (lane by lane: the GGX functions'
-        // branches do not vectorise, and these calls are most of their cost).
+        // Next-event estimation.
         let wi = frame.to_local(self.light_wi.get(i));
-        let mut f = Rgb::ZERO;
-        if self.has_light[i] {
-            f = if transmits {
-                glass.eval(wo, wi)
-            } else {
-                metal.eval(wo, wi)
-            } * wi.z.abs();
-        }
-        let mut pdf = 0.0;
-        if f != Rgb::ZERO && !self.light_delta[i] {
-            pdf = if transmits {
-                glass.pdf(wo, wi)
-            } else {
-                metal.pdf(wo, wi)
-            };
-        }
+        let f = if GLASS {
+            glass.eval(wo, wi)
+        } else {
+            metal.eval(wo, wi)
+        } * wi.z.abs();
+        let f = if self.has_light[i] { f } else { Rgb::ZERO };
+        let pdf = if GLASS {
+            glass.pdf(wo, wi)
+        } else {
+            metal.pdf(wo, wi)
+        };
+        let pdf = if f != Rgb::ZERO && !self.light_delta[i] {
+            pdf
+        } else {
+            0.0
+        };
         let outcome = self.light_outcome(i, f, pdf);
 
         // The BSDF's sample.
-        let u = Vec2::new(self.u_dir[0][i], self.u_dir[1][i]);
-        let bs = if transmits {
-            glass.sample(wo, self.u_lobe[i], u)
+        let (u_x, azimuth) = (self.u_dir_x[i], (self.azimuth[0][i], self.azimuth[1][i]));
+        let bs = if GLASS {
+            glass.sample_at(wo, self.u_lobe[i], u_x, azimuth)
         } else {
-            metal.sample(wo, u)
+            metal.sample_at(wo, u_x, azimuth)
         };
         let sample = match bs {
             Some(BsdfSample {
@@ -487,7 +514,12 @@ impl Lanes {
             },
         };
         let bounce = self.bounce_outcome(i, frame, wo, sample);
-        self.store(i, outcome, bounce);
+        let kind = if GLASS {
+            Kind::RoughGlass
+        } else {
+            Kind::RoughMetal
+        };
+        self.store(i, self.kind[i] == kind, outcome, bounce);
     }
 
     /// Next-event estimation's shadow test for lane `i` (`direct_light`), from the BSDF's
@@ -535,23 +567,37 @@ impl Lanes {
         }
     }
 
-    /// Lane `i`'s results.
+    /// Lane `i`'s results, where `keep` (a select, not a branch: the loops store in every
+    /// lane).
     #[inline(always)]
-    fn store(&mut self, i: usize, light: LightOutcome, bounce: BounceOutcome) {
-        self.shadowed[i] = light.shadowed;
-        self.shadow_o.set(i, light.o);
-        self.shadow_t_max[i] = light.t_max;
-        self.shadow_radiance.set(i, light.radiance);
-        self.scattered[i] = bounce.scattered;
-        self.n.set(i, bounce.n);
-        self.wi_world.set(i, bounce.wi_world);
-        self.origin.set(i, bounce.origin);
-        self.transmitted[i] = bounce.transmitted;
-        self.bounce_eta[i] = bounce.eta;
-        self.prev_pdf[i] = bounce.pdf;
-        self.beta_after.set(i, bounce.beta);
-        self.eta_scale_after[i] = bounce.eta_scale;
-        self.goes_on[i] = bounce.goes_on;
+    fn store(&mut self, i: usize, keep: bool, light: LightOutcome, bounce: BounceOutcome) {
+        #[inline(always)]
+        fn pick<T>(keep: bool, new: T, old: T) -> T {
+            if keep {
+                new
+            } else {
+                old
+            }
+        }
+        self.shadowed[i] = pick(keep, light.shadowed, self.shadowed[i]);
+        self.shadow_o
+            .set(i, pick(keep, light.o, self.shadow_o.get(i)));
+        self.shadow_t_max[i] = pick(keep, light.t_max, self.shadow_t_max[i]);
+        let radiance = pick(keep, light.radiance, self.shadow_radiance.get(i));
+        self.shadow_radiance.set(i, radiance);
+        self.scattered[i] = pick(keep, bounce.scattered, self.scattered[i]);
+        self.n.set(i, pick(keep, bounce.n, self.n.get(i)));
+        self.wi_world
+            .set(i, pick(keep, bounce.wi_world, self.wi_world.get(i)));
+        self.origin
+            .set(i, pick(keep, bounce.origin, self.origin.get(i)));
+        self.transmitted[i] = pick(keep, bounce.transmitted, self.transmitted[i]);
+        self.bounce_eta[i] = pick(keep, bounce.eta, self.bounce_eta[i]);
+        self.prev_pdf[i] = pick(keep, bounce.pdf, self.prev_pdf[i]);
+        self.beta_after
+            .set(i, pick(keep, bounce.beta, self.beta_after.get(i)));
+        self.eta_scale_after[i] = pick(keep, bounce.eta_scale, self.eta_scale_after[i]);
+        self.goes_on[i] = pick(keep, bounce.goes_on, self.goes_on[i]);
     }
 
     /// Stage 3 for lane `i`: its results into `path` (the next ray and the state after the
@@ -802,10 +848,17 @@ radiance = [0.2, 0.25, 0.3]
 
     /// Each vertex the lanes take, run in lane `i` (every lane in turn, the others holding the
     /// vertices before it), gives `land`'s path, shadow test, ray count and ending bit for bit,
-    /// over whole paths of every pixel: both samplers, with and without differentials.
+    /// over whole paths of every pixel: both samplers, the GGX vertices in SIMD lanes' form
+    /// (every lane computed, the lane's kept) and lane by lane.
     #[test]
     fn lane_vertex_equals_land() {
-        for sampler in ["sobol", "independent"] {
+        let cases = [
+            ("sobol", true),
+            ("sobol", false),
+            ("independent", true),
+            ("independent", false),
+        ];
+        for (sampler, simd_ggx) in cases {
             let scene = scene(sampler);
             let (mut taken, mut glass, mut mirror, mut shadowed, mut ended) = (0, 0, 0, 0, 0);
             let (mut rough_glass, mut rough_metal) = (0, 0);
@@ -827,7 +880,11 @@ radiance = [0.2, 0.25, 0.3]
                             let (goes_on, shadow) = if let Some(kind) = kind {
                                 let hit: SurfaceHit = hit.unwrap();
                                 lanes.gather(lane, &scene, &mut b, &hit, kind);
-                                lanes.run();
+                                if simd_ggx {
+                                    lanes.run::<true>();
+                                } else {
+                                    lanes.run::<false>();
+                                }
                                 let mut shadow = None;
                                 let goes_on = lanes.scatter::<false>(
                                     lane,

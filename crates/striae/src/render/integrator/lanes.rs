@@ -163,9 +163,9 @@ impl Sums {
 }
 
 /// The sums of the samples `first..end` of the tile `[x0, y0, x1, y1)`'s pixels (row by row),
-/// as [`super::render_pixel`] gives them.
+/// as [`super::render_pixel`] gives them; `SIMD_GGX` as [`Lanes::run`] takes it.
 #[inline(always)]
-pub(super) fn render_tile<const DIFFERENTIALS: bool>(
+pub(super) fn render_tile<const DIFFERENTIALS: bool, const SIMD_GGX: bool>(
     scene: &Scene,
     [x0, y0, x1, y1]: [u32; 4],
     (first, end): (u32, u32),
@@ -267,7 +267,7 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool>(
             ended |= (!landing.goes_on as u32) << i;
         }
         if plain != 0 {
-            vertices.run();
+            vertices.run::<SIMD_GGX>();
             for i in lanes_of(plain) {
                 let hit = hits[i].as_ref().expect("a plain vertex has a hit");
                 let path = &mut lanes[i];

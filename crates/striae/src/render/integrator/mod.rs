@@ -35,8 +35,9 @@
 //!   `lanes`: [`LANES`] paths of a tile in flight, each stage run for all of them), which runs
 //!   the vertices of diffuse, smooth dielectric and smooth conductor surfaces in SIMD lanes
 //!   (`lane_vertex`, `land`'s operations as selects, bit for bit), and those of rough (GGX)
-//!   ones in the same stages, lane by lane. They give the same image bit
-//!   for bit wherever no material reads a pixel's footprint (`tests/lanes.rs`).
+//!   ones in the same stages (in SIMD lanes in the AVX-512 copy, lane by lane in the others).
+//!   They give the same image bit for bit wherever no material reads a pixel's footprint
+//!   (`tests/lanes.rs`).
 
 mod lane_vertex;
 mod lanes;
@@ -560,9 +561,9 @@ fn render_tile(
     }
     let _ = copy;
     if pass.differentials {
-        render_tile_body::<true>(scene, rect, pass.samples, worker)
+        render_tile_body::<true, false>(scene, rect, pass.samples, worker)
     } else {
-        render_tile_body::<false>(scene, rect, pass.samples, worker)
+        render_tile_body::<false, false>(scene, rect, pass.samples, worker)
     }
 }
 
@@ -593,9 +594,9 @@ macro_rules! loop_copy_avx512 {
 
 /// `$name`: [`render_tile_body`] compiled by `$copy` ([`loop_copy_avx2!`] or
 /// [`loop_copy_avx512!`]) for the instruction sets of one copy of the render loop
-/// ([`LoopCopy`]).
+/// ([`LoopCopy`]), its GGX vertices in SIMD lanes or not (`$simd_ggx`).
 macro_rules! render_loop_copy {
-    ($copy:ident, $name:ident) => {
+    ($copy:ident, $name:ident, $simd_ggx:literal) => {
         $copy! {
             unsafe fn $name<const DIFFERENTIALS: bool>(
                 scene: &Scene,
@@ -603,26 +604,30 @@ macro_rules! render_loop_copy {
                 samples: (u32, u32),
                 worker: &mut Worker,
             ) -> Vec<Rgb> {
-                render_tile_body::<DIFFERENTIALS>(scene, rect, samples, worker)
+                render_tile_body::<DIFFERENTIALS, $simd_ggx>(scene, rect, samples, worker)
             }
         }
     };
 }
 
-render_loop_copy!(loop_copy_avx2, render_tile_avx2);
-render_loop_copy!(loop_copy_avx512, render_tile_avx512);
+// Only the AVX-512 copy runs the lane loop's GGX vertices in SIMD lanes: for AVX2, LLVM's
+// cost model keeps that loop scalar, and all lanes' GGX then cost more than the lanes that
+// hold one ([`lane_vertex::Lanes::run`]).
+render_loop_copy!(loop_copy_avx2, render_tile_avx2, false);
+render_loop_copy!(loop_copy_avx512, render_tile_avx512, true);
 
 /// The tile's pixels' sums of the samples `samples`, with (`DIFFERENTIALS`,
-/// `pass.differentials`) or without ray differentials.
+/// `pass.differentials`) or without ray differentials; `SIMD_GGX`: the lane loop's GGX
+/// vertices in SIMD lanes ([`lane_vertex::Lanes::run`]).
 #[inline(always)]
-fn render_tile_body<const DIFFERENTIALS: bool>(
+fn render_tile_body<const DIFFERENTIALS: bool, const SIMD_GGX: bool>(
     scene: &Scene,
     rect: [u32; 4],
     samples: (u32, u32),
     worker: &mut Worker,
 ) -> Vec<Rgb> {
     if scene.settings.lanes {
-        return lanes::render_tile::<DIFFERENTIALS>(scene, rect, samples, worker);
+        return lanes::render_tile::<DIFFERENTIALS, SIMD_GGX>(scene, rect, samples, worker);
     }
     let [x0, y0, x1, y1] = rect;
     let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
