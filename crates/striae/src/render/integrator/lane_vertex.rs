@@ -14,9 +14,9 @@
 //!    select, so that the render loop's SIMD copies run it 8 or 16 lanes at a time; then, for
 //!    the lanes that hold a GGX BSDF, [`RoughConductor`]'s and [`RoughDielectric`]'s own
 //!    `eval`, `pdf` and `sample`, written without early returns, whose results replace the
-//!    first loop's there: in the AVX-512 copy a loop over all lanes per BSDF, which it
-//!    vectorises; in the others lane by lane, out of line (LLVM's cost model keeps that loop
-//!    scalar for AVX2). The functions these loops call are inlined always: left to LLVM's
+//!    first loop's there: in the AVX-512 and AVX2 copies a loop over all lanes per BSDF,
+//!    which they vectorise; in the portable copy lane by lane, out of line. The functions
+//!    these loops call are inlined always: left to LLVM's
 //!    choice (the Fresnel laws, once the GGX code called them too), they stayed calls and the
 //!    loops scalar.
 //! 3. **Scatter**, lane by lane: the path's new ray and state, its deferred shadow test.
@@ -169,21 +169,23 @@ pub(super) struct Lanes {
     rough_metal: u32,
 
     // Results: the shadow test (`shadow_radiance` counts where `shadowed`), the bounce (where
-    // `scattered`), the state after it, whether the path goes on.
-    shadowed: [bool; LANES],
+    // `scattered`), the state after it, whether the path goes on. The flags are `u32` (0 or
+    // 1), not `bool`: selecting bytes between kept and new results makes LLVM's cost model keep
+    // the AVX2 copy's GGX loop scalar.
+    shadowed: [u32; LANES],
     shadow_o: Soa3,
     shadow_t_max: [f32; LANES],
     shadow_radiance: Soa3,
-    scattered: [bool; LANES],
+    scattered: [u32; LANES],
     n: Soa3,
     wi_world: Soa3,
     origin: Soa3,
-    transmitted: [bool; LANES],
+    transmitted: [u32; LANES],
     bounce_eta: [f32; LANES],
     prev_pdf: [f32; LANES],
     beta_after: Soa3,
     eta_scale_after: [f32; LANES],
-    goes_on: [bool; LANES],
+    goes_on: [u32; LANES],
 }
 
 /// A lane's BSDF sample as `land` reads it: `BsdfSample`'s direction (shading frame), weight,
@@ -231,20 +233,20 @@ impl Lanes {
             azimuth: [[0.0; LANES]; 2],
             rough_glass: 0,
             rough_metal: 0,
-            shadowed: b,
+            shadowed: [0; LANES],
             shadow_o: v,
             shadow_t_max: f,
             shadow_radiance: Soa3::splat(Rgb::ZERO),
-            scattered: b,
+            scattered: [0; LANES],
             n: v,
             wi_world: v,
             origin: v,
-            transmitted: b,
+            transmitted: [0; LANES],
             bounce_eta: f,
             prev_pdf: f,
             beta_after: Soa3::splat(Rgb::ONE),
             eta_scale_after: f,
-            goes_on: b,
+            goes_on: [0; LANES],
         }
     }
 
@@ -333,10 +335,10 @@ impl Lanes {
     /// Stage 2: every lane's vertex, `land`'s operations with its decisions as selects (a
     /// lane [`Self::gather`] did not set computes on stale numbers, and is not scattered): the
     /// diffuse and smooth BSDFs in every lane, then the GGX BSDFs. With `SIMD_GGX` (the
-    /// render loop's AVX-512 copy), where any lane holds one, each GGX BSDF in every lane, its
-    /// results kept in the lanes that hold it; else only in those lanes, one by one, out of
-    /// the render loop's hot code (LLVM vectorises that loop for AVX-512 only: for AVX2 its
-    /// cost model keeps it scalar).
+    /// render loop's AVX-512 and AVX2 copies), where any lane holds one, each GGX BSDF in
+    /// every lane, its results kept in the lanes that hold it; else (the portable copy, where
+    /// all lanes' GGX cost more than the lanes that hold one) only in those lanes, one by one,
+    /// out of the render loop's hot code.
     #[inline(always)]
     pub fn run<const SIMD_GGX: bool>(&mut self) {
         for i in 0..LANES {
@@ -579,25 +581,25 @@ impl Lanes {
                 old
             }
         }
-        self.shadowed[i] = pick(keep, light.shadowed, self.shadowed[i]);
+        self.shadowed[i] = pick(keep, light.shadowed as u32, self.shadowed[i]);
         self.shadow_o
             .set(i, pick(keep, light.o, self.shadow_o.get(i)));
         self.shadow_t_max[i] = pick(keep, light.t_max, self.shadow_t_max[i]);
         let radiance = pick(keep, light.radiance, self.shadow_radiance.get(i));
         self.shadow_radiance.set(i, radiance);
-        self.scattered[i] = pick(keep, bounce.scattered, self.scattered[i]);
+        self.scattered[i] = pick(keep, bounce.scattered as u32, self.scattered[i]);
         self.n.set(i, pick(keep, bounce.n, self.n.get(i)));
         self.wi_world
             .set(i, pick(keep, bounce.wi_world, self.wi_world.get(i)));
         self.origin
             .set(i, pick(keep, bounce.origin, self.origin.get(i)));
-        self.transmitted[i] = pick(keep, bounce.transmitted, self.transmitted[i]);
+        self.transmitted[i] = pick(keep, bounce.transmitted as u32, self.transmitted[i]);
         self.bounce_eta[i] = pick(keep, bounce.eta, self.bounce_eta[i]);
         self.prev_pdf[i] = pick(keep, bounce.pdf, self.prev_pdf[i]);
         self.beta_after
             .set(i, pick(keep, bounce.beta, self.beta_after.get(i)));
         self.eta_scale_after[i] = pick(keep, bounce.eta_scale, self.eta_scale_after[i]);
-        self.goes_on[i] = pick(keep, bounce.goes_on, self.goes_on[i]);
+        self.goes_on[i] = pick(keep, bounce.goes_on as u32, self.goes_on[i]);
     }
 
     /// Stage 3 for lane `i`: its results into `path` (the next ray and the state after the
@@ -614,7 +616,7 @@ impl Lanes {
         shadow: &mut Option<ShadowTest>,
     ) -> bool {
         worker.rays += 1;
-        if self.shadowed[i] {
+        if self.shadowed[i] != 0 {
             worker.rays += 1;
             *shadow = Some(ShadowTest {
                 ray: Ray {
@@ -625,7 +627,7 @@ impl Lanes {
                 radiance: self.shadow_radiance.get(i),
             });
         }
-        if !self.scattered[i] {
+        if self.scattered[i] == 0 {
             return false;
         }
         let delta = self.kind[i].is_delta();
@@ -634,7 +636,7 @@ impl Lanes {
         path.state.specular = delta;
         path.state.prev_pdf = self.prev_pdf[i];
         if DIFFERENTIALS {
-            let transmitted = self.transmitted[i];
+            let transmitted = self.transmitted[i] != 0;
             path.push_bounce(
                 &scene.geometry,
                 DeferredBounce {
@@ -655,7 +657,7 @@ impl Lanes {
         path.origin_depth = f32::INFINITY;
         path.ray = Ray::new(self.origin.get(i), self.wi_world.get(i));
         path.depth += 1;
-        self.goes_on[i]
+        self.goes_on[i] != 0
     }
 }
 
