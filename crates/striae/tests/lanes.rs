@@ -136,14 +136,17 @@ fn scratched_glass_seen_from_inside_runs_in_lanes_bit_for_bit() {
 
 #[test]
 fn rough_glass_and_metal_run_in_lanes_bit_for_bit() {
-    // GGX glass and gold (the lane vertex's GGX loops), each scene with and without the
-    // lanes, and the lanes in every compiled copy (the AVX copies run the GGX vertices in
+    // GGX glass and gold, plain and compensated (the lane vertex's GGX loops), each scene with
+    // and without the lanes, and the lanes in every compiled copy (the AVX copies run the GGX vertices in
     // SIMD lanes, the portable one lane by lane).
     let frosted = include_str!("../scenes/glass-teapot.toml")
         .replace("ior = 1.5", "ior = 1.5\nroughness = 0.25");
     let brushed = include_str!("../scenes/metal-teapot.toml")
         .replace("preset = \"gold\"", "preset = \"gold\"\nroughness = 0.2");
-    for text in [frosted, brushed] {
+    // And compensated (`multiscatter = true`): the same BSDFs with their albedo tables.
+    let compensated = |text: &str| text.replace("roughness", "multiscatter = true\nroughness");
+    let (milky, worn) = (compensated(&frosted), compensated(&brushed));
+    for text in [frosted, brushed, milky, worn] {
         assert!(text.contains("roughness"));
         let lanes = parse_small(&text, true);
         assert_lanes_bit_for_bit(&parse_small(&text, false), &lanes);

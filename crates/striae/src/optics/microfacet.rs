@@ -6,7 +6,6 @@
 //! as Mitsuba 3's `MicrofacetDistribution::G` uses it; the renderer is validated against
 //! Mitsuba 3, so we match its choice (pbrt-v4 uses the height-correlated form instead, which
 //! is slightly brighter at grazing angles).
-
 //!
 //! Its functions compute every branch and select (no early returns), inlined always: the lane
 //! vertex runs them in SIMD lanes, where a call or a branch LLVM's cost model will not

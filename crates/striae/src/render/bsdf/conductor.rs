@@ -165,24 +165,24 @@ impl RoughConductor {
     }
 
     /// `(eval, pdf)` sharing the half vector, `D` and `G1(wo)`.
-    #[inline]
+    #[inline(always)]
     pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
-        if wo.z <= 0.0 || wi.z <= 0.0 {
-            return (Rgb::ZERO, 0.0);
-        }
         let m = (wo + wi).normalize();
         let wo_m = wo.dot(m);
-        if wo_m <= 0.0 {
-            return (Rgb::ZERO, 0.0);
-        }
         let d = self.distribution.d(m);
         let g1_o = self.distribution.g1(wo, m);
         let g = g1_o * self.distribution.g1(wi, m);
         let pdf = g1_o * wo_m * d / wo.z / (4.0 * wo_m);
-        if d * g <= 0.0 {
-            return (Rgb::ZERO, pdf);
-        }
-        (self.ior.fresnel(wo_m) * (d * g / (4.0 * wo.z * wi.z)), pdf)
+        let f = self.ior.fresnel(wo_m) * (d * g / (4.0 * wo.z * wi.z));
+        let connects = !(wo.z <= 0.0) & !(wi.z <= 0.0) & !(wo_m <= 0.0);
+        (
+            if connects & !(d * g <= 0.0) {
+                f
+            } else {
+                Rgb::ZERO
+            },
+            if connects { pdf } else { 0.0 },
+        )
     }
 
     /// Reflect `wo` about a visible normal; weight `F(wo.m) G1(wi, m)`.

@@ -102,7 +102,7 @@ impl BsdfSample {
     }
 
     /// A non-delta sample that stays on `wo`'s side: `weight = f |cos theta_i| / pdf`.
-    #[inline]
+    #[inline(always)]
     pub fn reflected(wi: Vec3, f: Rgb, pdf: f32) -> Self {
         BsdfSample {
             wi,

@@ -53,10 +53,14 @@
 //! quadrature), so a white conductor's compensation is lossless for the table it uses. Cost at
 //! load, per material: `64 * 128 * 64` = 524k sampler calls for the conductor, four times that
 //! for the dielectric (two sides, two lobes), about 0.03 s and 0.3 s at opt-level 3.
+//!
+//! The BSDFs' `eval`, `pdf` and `sample` compute every branch and select, inlined always: the
+//! lane vertex runs them in SIMD lanes, the table lookups as gathers.
 
 use super::{BsdfSample, RoughConductor, RoughDielectric};
 use crate::math::{Rgb, Vec2, Vec3, INV_PI};
 use crate::optics::fresnel_f32;
+use crate::optics::microfacet::{visible_azimuth, Ggx};
 use crate::render::bsdf::ConductorIor;
 use crate::sampling::square_to_cosine_hemisphere;
 
@@ -148,7 +152,7 @@ impl AlbedoTable {
     }
 
     /// `E(mu)` for `mu` in `[0, 1]`.
-    #[inline]
+    #[inline(always)]
     pub fn eval(&self, mu: f32) -> f32 {
         let x = (mu * MU_NODES as f32 - 0.5).clamp(0.0, (MU_NODES - 1) as f32);
         let i = (x as usize).min(MU_NODES - 2);
@@ -160,6 +164,12 @@ impl AlbedoTable {
     pub fn average(&self) -> f32 {
         self.average
     }
+
+    /// All zeros: the lane vertex's placeholder in lanes that hold no compensated BSDF.
+    const ZERO: AlbedoTable = AlbedoTable {
+        e: [0.0; MU_NODES],
+        average: 0.0,
+    };
 }
 
 /// `2 int_0^1 F(mu) mu dmu` per channel, the hemispherical average of a conductor's Fresnel
@@ -189,6 +199,23 @@ pub struct ConductorCompensation {
 }
 
 impl ConductorCompensation {
+    /// A white, smooth-limit placeholder of no compensation (the lane vertex's, in lanes that
+    /// hold none).
+    pub(crate) const PLACEHOLDER: ConductorCompensation = ConductorCompensation {
+        ss: RoughConductor {
+            ior: ConductorIor {
+                eta: Rgb::ZERO,
+                k: Rgb::ONE,
+            },
+            distribution: Ggx {
+                alpha_x: 1.0,
+                alpha_y: 1.0,
+            },
+        },
+        albedo: AlbedoTable::ZERO,
+        ms_scale: Rgb::ZERO,
+    };
+
     pub fn new(ior: ConductorIor, alpha: f32) -> Self {
         let ss = RoughConductor::new(ior.eta, ior.k, alpha);
         let white = RoughConductor::new(Rgb::ZERO, Rgb::ONE, alpha);
@@ -226,7 +253,7 @@ pub struct CompensatedConductor<'a> {
 
 impl CompensatedConductor<'_> {
     /// The multiple-scattering lobe `f_ms(wo, wi)` (both directions above the surface).
-    #[inline]
+    #[inline(always)]
     fn f_ms(&self, wo: Vec3, wi: Vec3) -> Rgb {
         let e = &self.comp.albedo;
         self.comp.ms_scale * ((1.0 - e.eval(wo.z)) * (1.0 - e.eval(wi.z)))
@@ -234,7 +261,7 @@ impl CompensatedConductor<'_> {
 
     /// The probability of sampling the cosine lobe for `f_ms`: `1 - E(mu_o)`, its share of the
     /// energy with `F = 1`.
-    #[inline]
+    #[inline(always)]
     fn p_ms(&self, wo: Vec3) -> f32 {
         if self.comp.ms_scale == Rgb::ZERO {
             0.0
@@ -243,22 +270,26 @@ impl CompensatedConductor<'_> {
         }
     }
 
-    #[inline]
+    #[inline(always)]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
+        let f = self.comp.ss.eval(wo, wi) + self.f_ms(wo, wi);
         if wo.z <= 0.0 || wi.z <= 0.0 {
-            return Rgb::ZERO;
+            Rgb::ZERO
+        } else {
+            f
         }
-        self.comp.ss.eval(wo, wi) + self.f_ms(wo, wi)
     }
 
     /// The mixture's density: `(1 - p) pdf_ss + p cos theta_i / pi`, `p` = [`Self::p_ms`].
-    #[inline]
+    #[inline(always)]
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        if wo.z <= 0.0 || wi.z <= 0.0 {
-            return 0.0;
-        }
         let p = self.p_ms(wo);
-        (1.0 - p) * self.comp.ss.pdf(wo, wi) + p * wi.z * INV_PI
+        let pdf = (1.0 - p) * self.comp.ss.pdf(wo, wi) + p * wi.z * INV_PI;
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            0.0
+        } else {
+            pdf
+        }
     }
 
     #[inline]
@@ -276,27 +307,43 @@ impl CompensatedConductor<'_> {
     /// mixture's pdf.
     #[inline]
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
-        if wo.z <= 0.0 {
-            return None;
-        }
+        self.sample_at(
+            wo,
+            u_lobe,
+            square_to_cosine_hemisphere(u),
+            u.x,
+            visible_azimuth(u.y),
+        )
+    }
+
+    /// [`Self::sample`] with the cosine lobe's direction `cosine_dir` and the visible normal's
+    /// azimuth given ([`Ggx::sample_visible_at`]): both lobes computed, the chosen one kept.
+    ///
+    /// [`Ggx::sample_visible_at`]: crate::optics::microfacet::Ggx::sample_visible_at
+    #[inline(always)]
+    pub fn sample_at(
+        &self,
+        wo: Vec3,
+        u_lobe: f32,
+        cosine_dir: Vec3,
+        u_x: f32,
+        azimuth: (f32, f32),
+    ) -> Option<BsdfSample> {
         let p = self.p_ms(wo);
-        let (wi, f_ss, pdf_ss) = if u_lobe < p {
-            let wi = square_to_cosine_hemisphere(u);
-            if wi.z <= 0.0 {
-                return None;
-            }
-            let (f, pdf) = self.comp.ss.eval_pdf(wo, wi);
-            (wi, f, pdf)
-        } else {
-            let s = self.comp.ss.sample(wo, u)?;
-            // The sample's weight is `f_ss cos / pdf_ss`.
-            (s.wi, s.weight * (s.pdf / s.wi.z), s.pdf)
+        let (f_cosine, pdf_cosine) = self.comp.ss.eval_pdf(wo, cosine_dir);
+        // The sample's weight is `f_ss cos / pdf_ss`.
+        let (wi_ss, f_ss, pdf_ss, sampled_ss) = match self.comp.ss.sample_at(wo, u_x, azimuth) {
+            Some(s) => (s.wi, s.weight * (s.pdf / s.wi.z), s.pdf, true),
+            None => (Vec3::Z, Rgb::ZERO, 0.0, false),
         };
-        let pdf = (1.0 - p) * pdf_ss + p * wi.z * INV_PI;
-        if !(pdf > 0.0) {
-            return None;
-        }
-        Some(BsdfSample::reflected(wi, f_ss + self.f_ms(wo, wi), pdf))
+        let (wi, f, pdf_lobe, sampled) = if u_lobe < p {
+            (cosine_dir, f_cosine, pdf_cosine, !(cosine_dir.z <= 0.0))
+        } else {
+            (wi_ss, f_ss, pdf_ss, sampled_ss)
+        };
+        let pdf = (1.0 - p) * pdf_lobe + p * wi.z * INV_PI;
+        let valid = !(wo.z <= 0.0) & sampled & (pdf > 0.0);
+        valid.then_some(BsdfSample::reflected(wi, f + self.f_ms(wo, wi), pdf))
     }
 }
 
@@ -313,6 +360,19 @@ pub struct DielectricCompensation {
 }
 
 impl DielectricCompensation {
+    /// A placeholder (the lane vertex's, in lanes that hold no compensated BSDF).
+    pub(crate) const PLACEHOLDER: DielectricCompensation = DielectricCompensation {
+        ss: RoughDielectric {
+            eta: 1.5,
+            distribution: Ggx {
+                alpha_x: 1.0,
+                alpha_y: 1.0,
+            },
+        },
+        outside: AlbedoTable::ZERO,
+        inside: AlbedoTable::ZERO,
+    };
+
     pub fn new(eta: f32, alpha: f32) -> Self {
         let ss = RoughDielectric::new(eta, alpha);
         let side = |sign: f32| {
@@ -335,7 +395,7 @@ impl DielectricCompensation {
     }
 
     /// `1 / E(|wo.z|)` on `wo`'s side.
-    #[inline]
+    #[inline(always)]
     pub fn scale(&self, wo: Vec3) -> f32 {
         let table = if wo.z > 0.0 {
             &self.outside
@@ -358,13 +418,13 @@ pub struct CompensatedDielectric<'a> {
 }
 
 impl CompensatedDielectric<'_> {
-    #[inline]
+    #[inline(always)]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
         self.comp.ss.eval(wo, wi) * self.comp.scale(wo)
     }
 
     /// The single-scattering sampler's density (the compensation changes only the weight).
-    #[inline]
+    #[inline(always)]
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         self.comp.ss.pdf(wo, wi)
     }
@@ -377,9 +437,27 @@ impl CompensatedDielectric<'_> {
 
     #[inline]
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
-        let mut s = self.comp.ss.sample(wo, u_lobe, u)?;
-        s.weight *= self.comp.scale(wo);
-        Some(s)
+        self.sample_at(wo, u_lobe, u.x, visible_azimuth(u.y))
+    }
+
+    /// [`Self::sample`] with the visible normal's azimuth given
+    /// ([`RoughDielectric::sample_at`]).
+    #[inline(always)]
+    pub fn sample_at(
+        &self,
+        wo: Vec3,
+        u_lobe: f32,
+        u_x: f32,
+        azimuth: (f32, f32),
+    ) -> Option<BsdfSample> {
+        let scale = self.comp.scale(wo);
+        self.comp
+            .ss
+            .sample_at(wo, u_lobe, u_x, azimuth)
+            .map(|s| BsdfSample {
+                weight: s.weight * scale,
+                ..s
+            })
     }
 }
 

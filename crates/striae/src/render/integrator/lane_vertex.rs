@@ -36,7 +36,10 @@ use super::Worker;
 use crate::math::{reflect_z, Frame, Ray, Rgb, Vec2, Vec3};
 use crate::optics::fresnel_f32;
 use crate::optics::microfacet::{visible_azimuth, Ggx};
-use crate::render::bsdf::{Bsdf, BsdfSample, ConductorIor, RoughConductor, RoughDielectric};
+use crate::render::bsdf::{
+    Bsdf, BsdfSample, ConductorCompensation, ConductorIor, DielectricCompensation, RoughConductor,
+    RoughDielectric,
+};
 use crate::render::geometry::{offset_origin_by, SurfaceHit};
 use crate::render::material::Material;
 use crate::render::scene::{Scene, NO_MATERIAL};
@@ -57,6 +60,10 @@ pub(super) enum Kind {
     RoughGlass,
     /// A rough (GGX) `Conductor`, with next-event estimation.
     RoughMetal,
+    /// A `CompensatedDielectric` (`multiscatter = true`), with next-event estimation.
+    CompensatedGlass,
+    /// A `CompensatedConductor` (`multiscatter = true`), with next-event estimation.
+    CompensatedMetal,
 }
 
 impl Kind {
@@ -66,11 +73,28 @@ impl Kind {
         matches!(self, Kind::Glass | Kind::Mirror)
     }
 
-    /// Run by the second, GGX loop ([`Lanes::run`]).
+    /// Run by a GGX loop ([`Lanes::run`]).
     #[inline(always)]
     fn is_rough(self) -> bool {
-        matches!(self, Kind::RoughGlass | Kind::RoughMetal)
+        !matches!(self, Kind::Diffuse | Kind::Glass | Kind::Mirror)
     }
+
+    /// The GGX kind: a dielectric (`glass`) or a conductor, compensated or not.
+    #[inline(always)]
+    const fn ggx(glass: bool, compensated: bool) -> Kind {
+        match (glass, compensated) {
+            (true, false) => Kind::RoughGlass,
+            (false, false) => Kind::RoughMetal,
+            (true, true) => Kind::CompensatedGlass,
+            (false, true) => Kind::CompensatedMetal,
+        }
+    }
+}
+
+/// The index of the GGX kind `Kind::ggx(glass, compensated)` in [`Lanes`]' masks.
+#[inline(always)]
+const fn ggx_slot(glass: bool, compensated: bool) -> usize {
+    glass as usize + 2 * compensated as usize
 }
 
 /// The lane vertex's BSDF for the vertex of a path at `depth` whose ray met `hit`, arriving
@@ -90,6 +114,8 @@ pub(super) fn takes(scene: &Scene, hit: &SurfaceHit, depth: u32, d: Vec3) -> Opt
         Material::Dielectric { .. } => Some(Kind::Glass),
         Material::Conductor { roughness, .. } if *roughness > 0.0 => Some(Kind::RoughMetal),
         Material::Conductor { .. } => Some(Kind::Mirror),
+        Material::CompensatedDielectric(_) => Some(Kind::CompensatedGlass),
+        Material::CompensatedConductor(_) => Some(Kind::CompensatedMetal),
         Material::Scratched(m) if m.has_transmission() && !m.reads_hit_context(-d, hit.ng) => {
             Some(Kind::Glass)
         }
@@ -128,9 +154,10 @@ pub(super) fn applies(scene: &Scene) -> bool {
     !scene.has_absorption()
 }
 
-/// A lane's inputs and results, each field an array over the lanes.
+/// A lane's inputs and results, each field an array over the lanes; `'s` the scene's
+/// materials.
 #[derive(Clone, Copy)]
-pub(super) struct Lanes {
+pub(super) struct Lanes<'s> {
     // The hit and the path that reached it.
     kind: [Kind; LANES],
     wo: Soa3,
@@ -165,8 +192,11 @@ pub(super) struct Lanes {
     alpha: [f32; LANES],
     u_dir_x: [f32; LANES],
     azimuth: [[f32; LANES]; 2],
-    rough_glass: u32,
-    rough_metal: u32,
+    // Compensated: the material's tables (a placeholder in lanes that hold none).
+    glass_compensation: [&'s DielectricCompensation; LANES],
+    metal_compensation: [&'s ConductorCompensation; LANES],
+    /// The lanes that hold each GGX kind, as bits, at [`ggx_slot`].
+    ggx: [u32; 4],
 
     // Results: the shadow test (`shadow_radiance` counts where `shadowed`), the bounce (where
     // `scattered`), the state after it, whether the path goes on. The flags are `u32` (0 or
@@ -199,7 +229,7 @@ struct LaneSample {
     eta: f32,
 }
 
-impl Lanes {
+impl<'s> Lanes<'s> {
     pub fn new() -> Self {
         let v = Soa3::splat(Vec3::Z);
         let f = [1.0; LANES];
@@ -231,8 +261,9 @@ impl Lanes {
             alpha: f,
             u_dir_x: f,
             azimuth: [[0.0; LANES]; 2],
-            rough_glass: 0,
-            rough_metal: 0,
+            glass_compensation: [&DielectricCompensation::PLACEHOLDER; LANES],
+            metal_compensation: [&ConductorCompensation::PLACEHOLDER; LANES],
+            ggx: [0; 4],
             shadowed: [0; LANES],
             shadow_o: v,
             shadow_t_max: f,
@@ -257,7 +288,7 @@ impl Lanes {
     pub fn gather(
         &mut self,
         i: usize,
-        scene: &Scene,
+        scene: &'s Scene,
         path: &mut Path,
         hit: &SurfaceHit,
         kind: Kind,
@@ -278,8 +309,10 @@ impl Lanes {
         self.roulette[i] = depth + 1 >= scene.settings.rr_depth;
         self.u_roulette[i] = u_roulette;
         self.kind[i] = kind;
-        self.rough_glass |= ((kind == Kind::RoughGlass) as u32) << i;
-        self.rough_metal |= ((kind == Kind::RoughMetal) as u32) << i;
+        for (glass, compensated) in [(true, false), (false, false), (true, true), (false, true)] {
+            let holds = kind == Kind::ggx(glass, compensated);
+            self.ggx[ggx_slot(glass, compensated)] |= (holds as u32) << i;
+        }
         self.has_light[i] = false;
         if !kind.is_delta() {
             self.light(i, scene, hit, u_choice, Vec2::new(u_light_x, u_light_y));
@@ -288,11 +321,14 @@ impl Lanes {
             self.u_dir_x[i] = u_dir_x;
             (self.azimuth[0][i], self.azimuth[1][i]) = visible_azimuth(u_dir_y);
         }
+        if matches!(kind, Kind::Diffuse | Kind::CompensatedMetal) {
+            self.cosine_dir
+                .set(i, square_to_cosine_hemisphere(Vec2::new(u_dir_x, u_dir_y)));
+        }
+        self.u_lobe[i] = u_lobe;
         match material {
             Material::Diffuse { reflectance } => {
                 self.reflectance.set(i, reflectance.eval(hit.uv));
-                self.cosine_dir
-                    .set(i, square_to_cosine_hemisphere(Vec2::new(u_dir_x, u_dir_y)));
             }
             Material::Conductor { ior, roughness } => {
                 self.ior_eta.set(i, ior.eta);
@@ -301,15 +337,15 @@ impl Lanes {
             }
             Material::Dielectric { eta, roughness } => {
                 self.eta[i] = *eta;
-                self.u_lobe[i] = u_lobe;
                 self.alpha[i] = *roughness;
             }
+            Material::CompensatedDielectric(c) => self.glass_compensation[i] = c,
+            Material::CompensatedConductor(c) => self.metal_compensation[i] = c,
             Material::Scratched(m) => {
                 let Bsdf::Dielectric(base) = m.base_bsdf() else {
                     unreachable!("scratched glass has a smooth dielectric base")
                 };
                 self.eta[i] = base.eta;
-                self.u_lobe[i] = u_lobe;
             }
             _ => unreachable!("`takes` took the material"),
         }
@@ -345,34 +381,40 @@ impl Lanes {
             self.run_lane(i);
         }
         if SIMD_GGX {
-            if self.rough_glass != 0 {
-                for i in 0..LANES {
-                    self.run_rough_lane::<true>(i);
-                }
-            }
-            if self.rough_metal != 0 {
-                for i in 0..LANES {
-                    self.run_rough_lane::<false>(i);
-                }
-            }
-        } else if self.rough_glass | self.rough_metal != 0 {
-            self.run_rough_by_lane();
+            self.run_ggx_in_lanes::<true, false>();
+            self.run_ggx_in_lanes::<false, false>();
+            self.run_ggx_in_lanes::<true, true>();
+            self.run_ggx_in_lanes::<false, true>();
+        } else if self.ggx != [0; 4] {
+            self.run_ggx_by_lane();
         }
-        (self.rough_glass, self.rough_metal) = (0, 0);
+        self.ggx = [0; 4];
+    }
+
+    /// [`Self::run`]'s GGX loop for one kind, in every lane, where any lane holds it.
+    #[inline(always)]
+    fn run_ggx_in_lanes<const GLASS: bool, const COMPENSATED: bool>(&mut self) {
+        if self.ggx[ggx_slot(GLASS, COMPENSATED)] != 0 {
+            for i in 0..LANES {
+                self.run_ggx_lane::<GLASS, COMPENSATED>(i);
+            }
+        }
     }
 
     /// [`Self::run`]'s GGX vertices without SIMD: each lane that holds one, alone.
     #[inline(never)]
-    fn run_rough_by_lane(&mut self) {
-        let (mut glass, mut metal) = (self.rough_glass, self.rough_metal);
-        while glass != 0 {
-            self.run_rough_lane::<true>(glass.trailing_zeros() as usize);
-            glass &= glass - 1;
+    fn run_ggx_by_lane(&mut self) {
+        fn each<const GLASS: bool, const COMPENSATED: bool>(lanes: &mut Lanes) {
+            let mut mask = lanes.ggx[ggx_slot(GLASS, COMPENSATED)];
+            while mask != 0 {
+                lanes.run_ggx_lane::<GLASS, COMPENSATED>(mask.trailing_zeros() as usize);
+                mask &= mask - 1;
+            }
         }
-        while metal != 0 {
-            self.run_rough_lane::<false>(metal.trailing_zeros() as usize);
-            metal &= metal - 1;
-        }
+        each::<true, false>(self);
+        each::<false, false>(self);
+        each::<true, true>(self);
+        each::<false, true>(self);
     }
 
     /// The shading frame of lane `i`'s hit and the direction toward the viewer in it.
@@ -445,13 +487,18 @@ impl Lanes {
         self.store(i, true, outcome, bounce);
     }
 
-    /// [`Self::run`]'s GGX loop for lane `i`, [`RoughDielectric`]'s (`GLASS`) or
-    /// [`RoughConductor`]'s `eval`, `pdf` and `sample` as `land` calls them through `Bsdf`:
-    /// computed in every lane, kept where the lane holds that BSDF. Where `land` skips a call
-    /// (the value without a light sample, the density where the value is zero or the light a
-    /// delta), its result is replaced by what `land` uses instead.
+    /// [`Self::run`]'s GGX loop for lane `i`: the `eval`, `pdf` and `sample` of
+    /// [`RoughDielectric`] (`GLASS`) or [`RoughConductor`], or with `COMPENSATED` of
+    /// [`CompensatedDielectric`] or [`CompensatedConductor`] (their tables' lookups
+    /// gathers), as
+    /// `land` calls them through `Bsdf`: computed in every lane, kept where the lane holds that
+    /// BSDF. Where `land` skips a call (the value without a light sample, the density where the
+    /// value is zero or the light a delta), its result is replaced by what `land` uses instead.
+    ///
+    /// [`CompensatedDielectric`]: crate::render::bsdf::CompensatedDielectric
+    /// [`CompensatedConductor`]: crate::render::bsdf::CompensatedConductor
     #[inline(always)]
-    fn run_rough_lane<const GLASS: bool>(&mut self, i: usize) {
+    fn run_ggx_lane<const GLASS: bool, const COMPENSATED: bool>(&mut self, i: usize) {
         let (frame, wo) = self.frame(i, GLASS);
         let distribution = Ggx::isotropic(self.alpha[i]);
         let glass = RoughDielectric {
@@ -465,20 +512,31 @@ impl Lanes {
             },
             distribution,
         };
+        let compensated_glass = self.glass_compensation[i].bsdf();
+        let compensated_metal = self.metal_compensation[i].bsdf();
+        let (u_lobe, u_x) = (self.u_lobe[i], self.u_dir_x[i]);
+        let azimuth = (self.azimuth[0][i], self.azimuth[1][i]);
+        let wi = frame.to_local(self.light_wi.get(i));
+        // (`if`s on the constants: compiled away.)
+        let (f, pdf, bs) = if GLASS && COMPENSATED {
+            let b = compensated_glass;
+            let bs = b.sample_at(wo, u_lobe, u_x, azimuth);
+            (b.eval(wo, wi), b.pdf(wo, wi), bs)
+        } else if COMPENSATED {
+            let b = compensated_metal;
+            let bs = b.sample_at(wo, u_lobe, self.cosine_dir.get(i), u_x, azimuth);
+            (b.eval(wo, wi), b.pdf(wo, wi), bs)
+        } else if GLASS {
+            let bs = glass.sample_at(wo, u_lobe, u_x, azimuth);
+            (glass.eval(wo, wi), glass.pdf(wo, wi), bs)
+        } else {
+            let bs = metal.sample_at(wo, u_x, azimuth);
+            (metal.eval(wo, wi), metal.pdf(wo, wi), bs)
+        };
 
         // Next-event estimation.
-        let wi = frame.to_local(self.light_wi.get(i));
-        let f = if GLASS {
-            glass.eval(wo, wi)
-        } else {
-            metal.eval(wo, wi)
-        } * wi.z.abs();
+        let f = f * wi.z.abs();
         let f = if self.has_light[i] { f } else { Rgb::ZERO };
-        let pdf = if GLASS {
-            glass.pdf(wo, wi)
-        } else {
-            metal.pdf(wo, wi)
-        };
         let pdf = if f != Rgb::ZERO && !self.light_delta[i] {
             pdf
         } else {
@@ -487,12 +545,6 @@ impl Lanes {
         let outcome = self.light_outcome(i, f, pdf);
 
         // The BSDF's sample.
-        let (u_x, azimuth) = (self.u_dir_x[i], (self.azimuth[0][i], self.azimuth[1][i]));
-        let bs = if GLASS {
-            glass.sample_at(wo, self.u_lobe[i], u_x, azimuth)
-        } else {
-            metal.sample_at(wo, u_x, azimuth)
-        };
         let sample = match bs {
             Some(BsdfSample {
                 wi,
@@ -516,12 +568,8 @@ impl Lanes {
             },
         };
         let bounce = self.bounce_outcome(i, frame, wo, sample);
-        let kind = if GLASS {
-            Kind::RoughGlass
-        } else {
-            Kind::RoughMetal
-        };
-        self.store(i, self.kind[i] == kind, outcome, bounce);
+        let keep = self.kind[i] == Kind::ggx(GLASS, COMPENSATED);
+        self.store(i, keep, outcome, bounce);
     }
 
     /// Next-event estimation's shadow test for lane `i` (`direct_light`), from the BSDF's
@@ -703,7 +751,8 @@ mod tests {
     use crate::render::scene::Overrides;
 
     /// Diffuse (textured and plain), glass (a smooth mesh and a sphere), gold, rough glass and
-    /// rough copper under every kind of light the lanes sample: a rectangle and a sphere that emit, a point light (delta) and a
+    /// rough copper, plain and compensated (`multiscatter = true`), under every kind of light
+    /// the lanes sample: a rectangle and a sphere that emit, a point light (delta) and a
     /// constant sky (left to BSDF sampling).
     const SCENE: &str = r#"
 [render]
@@ -748,6 +797,18 @@ type = "conductor"
 preset = "copper"
 roughness = 0.15
 
+[materials.milky]
+type = "dielectric"
+ior = 1.4
+roughness = 0.6
+multiscatter = true
+
+[materials.worn]
+type = "conductor"
+preset = "gold"
+roughness = 0.5
+multiscatter = true
+
 [[shapes]]
 type = "teapot"
 material = "glass"
@@ -783,6 +844,18 @@ type = "sphere"
 center = [-0.2, 0.25, 2.0]
 radius = 0.25
 material = "brushed"
+
+[[shapes]]
+type = "sphere"
+center = [0.5, 0.3, 2.4]
+radius = 0.3
+material = "milky"
+
+[[shapes]]
+type = "sphere"
+center = [-0.8, 0.3, 2.5]
+radius = 0.3
+material = "worn"
 
 [[shapes]]
 type = "rectangle"
@@ -864,6 +937,7 @@ radiance = [0.2, 0.25, 0.3]
             let scene = scene(sampler);
             let (mut taken, mut glass, mut mirror, mut shadowed, mut ended) = (0, 0, 0, 0, 0);
             let (mut rough_glass, mut rough_metal) = (0, 0);
+            let (mut compensated_glass, mut compensated_metal) = (0, 0);
             let mut lanes = Lanes::new();
             let mut lane = 0;
             for y in 0..16 {
@@ -901,6 +975,8 @@ radiance = [0.2, 0.25, 0.3]
                                 mirror += (kind == Kind::Mirror) as u32;
                                 rough_glass += (kind == Kind::RoughGlass) as u32;
                                 rough_metal += (kind == Kind::RoughMetal) as u32;
+                                compensated_glass += (kind == Kind::CompensatedGlass) as u32;
+                                compensated_metal += (kind == Kind::CompensatedMetal) as u32;
                                 lane = (lane + 1) % LANES;
                                 (goes_on, shadow)
                             } else {
@@ -921,7 +997,8 @@ radiance = [0.2, 0.25, 0.3]
                 }
             }
             // Every kind of vertex, light samples, and paths ended by roulette or absorption.
-            let diffuse = taken - glass - mirror - rough_glass - rough_metal;
+            let rough = rough_glass + rough_metal + compensated_glass + compensated_metal;
+            let diffuse = taken - glass - mirror - rough;
             assert!(
                 diffuse > 200 && glass > 200 && mirror > 50,
                 "{diffuse} {glass} {mirror}"
@@ -929,6 +1006,10 @@ radiance = [0.2, 0.25, 0.3]
             assert!(
                 rough_glass > 100 && rough_metal > 40,
                 "{rough_glass} {rough_metal}"
+            );
+            assert!(
+                compensated_glass > 40 && compensated_metal > 40,
+                "{compensated_glass} {compensated_metal}"
             );
             assert!(shadowed > 200 && ended > 50, "{shadowed} {ended}");
         }
