@@ -53,7 +53,8 @@ pub use conductor::{Conductor, ConductorIor, RoughConductor, CONDUCTOR_PRESETS};
 pub use dielectric::{Dielectric, RoughDielectric};
 pub use diffuse::Diffuse;
 pub use multiscatter::{
-    CompensatedConductor, CompensatedDielectric, ConductorCompensation, DielectricCompensation,
+    AlbedoTable, CompensatedConductor, CompensatedDielectric, ConductorCompensation,
+    DielectricCompensation,
 };
 pub use pbr::{LayerAlbedo, Pbr};
 pub use scratched::{

@@ -60,7 +60,7 @@
 use super::{BsdfSample, RoughConductor, RoughDielectric};
 use crate::math::{Rgb, Vec2, Vec3, INV_PI};
 use crate::optics::fresnel_f32;
-use crate::optics::microfacet::{visible_azimuth, Ggx};
+use crate::optics::microfacet::visible_azimuth;
 use crate::render::bsdf::ConductorIor;
 use crate::sampling::square_to_cosine_hemisphere;
 
@@ -119,7 +119,7 @@ impl SquareGrid {
 
 /// A single-scattering directional albedo `E(mu)`, `mu = |cos theta_o|`, at [`MU_NODES`] cosines
 /// `(i + 1/2) / MU_NODES`, linearly interpolated.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AlbedoTable {
     e: [f32; MU_NODES],
     /// `2 int_0^1 E(mu) mu dmu` of the interpolant.
@@ -166,7 +166,7 @@ impl AlbedoTable {
     }
 
     /// All zeros: the lane vertex's placeholder in lanes that hold no compensated BSDF.
-    const ZERO: AlbedoTable = AlbedoTable {
+    pub(crate) const ZERO: AlbedoTable = AlbedoTable {
         e: [0.0; MU_NODES],
         average: 0.0,
     };
@@ -199,23 +199,6 @@ pub struct ConductorCompensation {
 }
 
 impl ConductorCompensation {
-    /// A white, smooth-limit placeholder of no compensation (the lane vertex's, in lanes that
-    /// hold none).
-    pub(crate) const PLACEHOLDER: ConductorCompensation = ConductorCompensation {
-        ss: RoughConductor {
-            ior: ConductorIor {
-                eta: Rgb::ZERO,
-                k: Rgb::ONE,
-            },
-            distribution: Ggx {
-                alpha_x: 1.0,
-                alpha_y: 1.0,
-            },
-        },
-        albedo: AlbedoTable::ZERO,
-        ms_scale: Rgb::ZERO,
-    };
-
     pub fn new(ior: ConductorIor, alpha: f32) -> Self {
         let ss = RoughConductor::new(ior.eta, ior.k, alpha);
         let white = RoughConductor::new(Rgb::ZERO, Rgb::ONE, alpha);
@@ -238,41 +221,48 @@ impl ConductorCompensation {
         }
     }
 
-    /// The BSDF (the compensation borrowed).
+    /// The BSDF (the table borrowed).
     #[inline]
     pub fn bsdf(&self) -> CompensatedConductor<'_> {
-        CompensatedConductor { comp: self }
+        CompensatedConductor {
+            ss: self.ss,
+            albedo: &self.albedo,
+            ms_scale: self.ms_scale,
+        }
     }
 }
 
-/// A rough GGX conductor plus the Kulla-Conty multiple-scattering lobe (module docs).
+/// A rough GGX conductor plus the Kulla-Conty multiple-scattering lobe (module docs): the
+/// parts of a [`ConductorCompensation`] (the lane vertex builds it from its lanes' copies).
 #[derive(Clone, Copy, Debug)]
 pub struct CompensatedConductor<'a> {
-    pub comp: &'a ConductorCompensation,
+    pub ss: RoughConductor,
+    pub albedo: &'a AlbedoTable,
+    pub ms_scale: Rgb,
 }
 
 impl CompensatedConductor<'_> {
     /// The multiple-scattering lobe `f_ms(wo, wi)` (both directions above the surface).
     #[inline(always)]
     fn f_ms(&self, wo: Vec3, wi: Vec3) -> Rgb {
-        let e = &self.comp.albedo;
-        self.comp.ms_scale * ((1.0 - e.eval(wo.z)) * (1.0 - e.eval(wi.z)))
+        let e = self.albedo;
+        self.ms_scale * ((1.0 - e.eval(wo.z)) * (1.0 - e.eval(wi.z)))
     }
 
     /// The probability of sampling the cosine lobe for `f_ms`: `1 - E(mu_o)`, its share of the
     /// energy with `F = 1`.
     #[inline(always)]
     fn p_ms(&self, wo: Vec3) -> f32 {
-        if self.comp.ms_scale == Rgb::ZERO {
+        if self.ms_scale == Rgb::ZERO {
             0.0
         } else {
-            1.0 - self.comp.albedo.eval(wo.z)
+            1.0 - self.albedo.eval(wo.z)
         }
     }
 
     #[inline(always)]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
-        let f = self.comp.ss.eval(wo, wi) + self.f_ms(wo, wi);
+        let f = self.ss.eval(wo, wi) + self.f_ms(wo, wi);
         if wo.z <= 0.0 || wi.z <= 0.0 {
             Rgb::ZERO
         } else {
@@ -284,7 +274,7 @@ impl CompensatedConductor<'_> {
     #[inline(always)]
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         let p = self.p_ms(wo);
-        let pdf = (1.0 - p) * self.comp.ss.pdf(wo, wi) + p * wi.z * INV_PI;
+        let pdf = (1.0 - p) * self.ss.pdf(wo, wi) + p * wi.z * INV_PI;
         if wo.z <= 0.0 || wi.z <= 0.0 {
             0.0
         } else {
@@ -297,7 +287,7 @@ impl CompensatedConductor<'_> {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return (Rgb::ZERO, 0.0);
         }
-        let (f, pdf) = self.comp.ss.eval_pdf(wo, wi);
+        let (f, pdf) = self.ss.eval_pdf(wo, wi);
         let p = self.p_ms(wo);
         (f + self.f_ms(wo, wi), (1.0 - p) * pdf + p * wi.z * INV_PI)
     }
@@ -330,9 +320,9 @@ impl CompensatedConductor<'_> {
         azimuth: (f32, f32),
     ) -> Option<BsdfSample> {
         let p = self.p_ms(wo);
-        let (f_cosine, pdf_cosine) = self.comp.ss.eval_pdf(wo, cosine_dir);
+        let (f_cosine, pdf_cosine) = self.ss.eval_pdf(wo, cosine_dir);
         // The sample's weight is `f_ss cos / pdf_ss`.
-        let (wi_ss, f_ss, pdf_ss, sampled_ss) = match self.comp.ss.sample_at(wo, u_x, azimuth) {
+        let (wi_ss, f_ss, pdf_ss, sampled_ss) = match self.ss.sample_at(wo, u_x, azimuth) {
             Some(s) => (s.wi, s.weight * (s.pdf / s.wi.z), s.pdf, true),
             None => (Vec3::Z, Rgb::ZERO, 0.0, false),
         };
@@ -360,19 +350,6 @@ pub struct DielectricCompensation {
 }
 
 impl DielectricCompensation {
-    /// A placeholder (the lane vertex's, in lanes that hold no compensated BSDF).
-    pub(crate) const PLACEHOLDER: DielectricCompensation = DielectricCompensation {
-        ss: RoughDielectric {
-            eta: 1.5,
-            distribution: Ggx {
-                alpha_x: 1.0,
-                alpha_y: 1.0,
-            },
-        },
-        outside: AlbedoTable::ZERO,
-        inside: AlbedoTable::ZERO,
-    };
-
     pub fn new(eta: f32, alpha: f32) -> Self {
         let ss = RoughDielectric::new(eta, alpha);
         let side = |sign: f32| {
@@ -388,19 +365,34 @@ impl DielectricCompensation {
         }
     }
 
-    /// The BSDF (the compensation borrowed).
+    /// The BSDF (the tables borrowed).
     #[inline]
     pub fn bsdf(&self) -> CompensatedDielectric<'_> {
-        CompensatedDielectric { comp: self }
+        CompensatedDielectric {
+            ss: self.ss,
+            outside: &self.outside,
+            inside: &self.inside,
+        }
     }
+}
 
+/// A rough GGX dielectric whose lobes are scaled by `1 / E(mu_o)` (module docs): the parts of a
+/// [`DielectricCompensation`] (the lane vertex builds it from its lanes' copies).
+#[derive(Clone, Copy, Debug)]
+pub struct CompensatedDielectric<'a> {
+    pub ss: RoughDielectric,
+    pub outside: &'a AlbedoTable,
+    pub inside: &'a AlbedoTable,
+}
+
+impl CompensatedDielectric<'_> {
     /// `1 / E(|wo.z|)` on `wo`'s side.
     #[inline(always)]
     pub fn scale(&self, wo: Vec3) -> f32 {
         let table = if wo.z > 0.0 {
-            &self.outside
+            self.outside
         } else {
-            &self.inside
+            self.inside
         };
         let e = table.eval(wo.z.abs());
         if e > 0.0 {
@@ -409,30 +401,22 @@ impl DielectricCompensation {
             0.0
         }
     }
-}
 
-/// A rough GGX dielectric whose lobes are scaled by `1 / E(mu_o)` (module docs).
-#[derive(Clone, Copy, Debug)]
-pub struct CompensatedDielectric<'a> {
-    pub comp: &'a DielectricCompensation,
-}
-
-impl CompensatedDielectric<'_> {
     #[inline(always)]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
-        self.comp.ss.eval(wo, wi) * self.comp.scale(wo)
+        self.ss.eval(wo, wi) * self.scale(wo)
     }
 
     /// The single-scattering sampler's density (the compensation changes only the weight).
     #[inline(always)]
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        self.comp.ss.pdf(wo, wi)
+        self.ss.pdf(wo, wi)
     }
 
     #[inline]
     pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
-        let (f, pdf) = self.comp.ss.eval_pdf(wo, wi);
-        (f * self.comp.scale(wo), pdf)
+        let (f, pdf) = self.ss.eval_pdf(wo, wi);
+        (f * self.scale(wo), pdf)
     }
 
     #[inline]
@@ -450,9 +434,8 @@ impl CompensatedDielectric<'_> {
         u_x: f32,
         azimuth: (f32, f32),
     ) -> Option<BsdfSample> {
-        let scale = self.comp.scale(wo);
-        self.comp
-            .ss
+        let scale = self.scale(wo);
+        self.ss
             .sample_at(wo, u_lobe, u_x, azimuth)
             .map(|s| BsdfSample {
                 weight: s.weight * scale,

@@ -1,24 +1,24 @@
 //! The vertex of a plain material in lanes: [`Path::land`]'s operations for up to [`LANES`]
 //! paths at once where their rays met a diffuse surface, a smooth dielectric (scratched glass
 //! seen from inside included: its smooth base), a smooth conductor, or a rough (GGX) dielectric
-//! or conductor ([`Kind`]), in three stages:
+//! or conductor, with or without multiple-scattering compensation ([`Kind`]), in three stages:
 //!
 //! 1. **Gather**, lane by lane: the hit, the path's throughput, the bounce's random numbers
 //!    (the dimensions `land` reads, drawn in its order), the texture, the light sample, the
 //!    cosine-weighted direction and the GGX visible normal's azimuth (each a scalar call:
 //!    `sincosf`, `cosf`, `sinf` and the `Texture` and `Light` enums do not vectorise) into
-//!    structure-of-arrays [`Lanes`].
+//!    structure-of-arrays [`Lanes`], a compensated BSDF's albedo tables into [`LaneTables`].
 //! 2. **The vertex** ([`Lanes::run`]), one loop over the lanes whose body is the scalar code's
 //!    own functions (shading frame, next-event estimation's BSDF value and MIS weight, Fresnel,
 //!    the throughput's update, the spawned rays, Russian roulette) with every decision a
 //!    select, so that the render loop's SIMD copies run it 8 or 16 lanes at a time; then, for
-//!    the lanes that hold a GGX BSDF, [`RoughConductor`]'s and [`RoughDielectric`]'s own
-//!    `eval`, `pdf` and `sample`, written without early returns, whose results replace the
-//!    first loop's there: in the AVX-512 and AVX2 copies a loop over all lanes per BSDF,
-//!    which they vectorise; in the portable copy lane by lane, out of line. The functions
-//!    these loops call are inlined always: left to LLVM's
-//!    choice (the Fresnel laws, once the GGX code called them too), they stayed calls and the
-//!    loops scalar.
+//!    the lanes that hold a GGX BSDF, its own `eval`, `pdf` and `sample` ([`RoughDielectric`],
+//!    [`RoughConductor`], `CompensatedDielectric`, `CompensatedConductor`), written without
+//!    early returns, whose results replace the first loop's there: in the AVX-512 copy a loop
+//!    over all lanes per BSDF, which it vectorises (the tables' lookups as gathers); in the
+//!    others lane by lane, out of line (LLVM's cost model keeps the AVX2 copy's loops
+//!    scalar). The functions these loops call are inlined always: left to LLVM's choice (the
+//!    Fresnel laws, once the GGX code called them too), they stayed calls and the loops scalar.
 //! 3. **Scatter**, lane by lane: the path's new ray and state, its deferred shadow test.
 //!
 //! Each lane runs the operations of `land` on the same numbers, so the image is `land`'s bit
@@ -37,8 +37,8 @@ use crate::math::{reflect_z, Frame, Ray, Rgb, Vec2, Vec3};
 use crate::optics::fresnel_f32;
 use crate::optics::microfacet::{visible_azimuth, Ggx};
 use crate::render::bsdf::{
-    Bsdf, BsdfSample, ConductorCompensation, ConductorIor, DielectricCompensation, RoughConductor,
-    RoughDielectric,
+    AlbedoTable, Bsdf, BsdfSample, CompensatedConductor, CompensatedDielectric, ConductorIor,
+    RoughConductor, RoughDielectric,
 };
 use crate::render::geometry::{offset_origin_by, SurfaceHit};
 use crate::render::material::Material;
@@ -154,10 +154,9 @@ pub(super) fn applies(scene: &Scene) -> bool {
     !scene.has_absorption()
 }
 
-/// A lane's inputs and results, each field an array over the lanes; `'s` the scene's
-/// materials.
+/// A lane's inputs and results, each field an array over the lanes.
 #[derive(Clone, Copy)]
-pub(super) struct Lanes<'s> {
+pub(super) struct Lanes {
     // The hit and the path that reached it.
     kind: [Kind; LANES],
     wo: Soa3,
@@ -192,16 +191,15 @@ pub(super) struct Lanes<'s> {
     alpha: [f32; LANES],
     u_dir_x: [f32; LANES],
     azimuth: [[f32; LANES]; 2],
-    // Compensated: the material's tables (a placeholder in lanes that hold none).
-    glass_compensation: [&'s DielectricCompensation; LANES],
-    metal_compensation: [&'s ConductorCompensation; LANES],
+    // Compensated conductor: the colour term (the tables are in `LaneTables`).
+    ms_scale: Soa3,
     /// The lanes that hold each GGX kind, as bits, at [`ggx_slot`].
     ggx: [u32; 4],
 
     // Results: the shadow test (`shadow_radiance` counts where `shadowed`), the bounce (where
     // `scattered`), the state after it, whether the path goes on. The flags are `u32` (0 or
     // 1), not `bool`: selecting bytes between kept and new results makes LLVM's cost model keep
-    // the AVX2 copy's GGX loop scalar.
+    // the GGX loops scalar.
     shadowed: [u32; LANES],
     shadow_o: Soa3,
     shadow_t_max: [f32; LANES],
@@ -218,6 +216,26 @@ pub(super) struct Lanes<'s> {
     goes_on: [u32; LANES],
 }
 
+/// The albedo tables of each lane's compensated BSDF, copied: the dielectric's for `wo`
+/// outside and inside, the conductor's. Lookups in them are gathers, which the GGX loop's SIMD
+/// copies vectorise where LLVM sees that they read nothing the loop stores: hence copies (not
+/// references to the materials, which it cannot bound), and apart from [`Lanes`] (a distinct
+/// object: no store into `Lanes` reaches them).
+#[derive(Clone, Copy)]
+pub(super) struct LaneTables {
+    glass: [[AlbedoTable; LANES]; 2],
+    metal: [AlbedoTable; LANES],
+}
+
+impl LaneTables {
+    pub fn new() -> Self {
+        LaneTables {
+            glass: [[AlbedoTable::ZERO; LANES]; 2],
+            metal: [AlbedoTable::ZERO; LANES],
+        }
+    }
+}
+
 /// A lane's BSDF sample as `land` reads it: `BsdfSample`'s direction (shading frame), weight,
 /// density and relative index, and whether the BSDF gave one.
 #[derive(Clone, Copy)]
@@ -229,7 +247,7 @@ struct LaneSample {
     eta: f32,
 }
 
-impl<'s> Lanes<'s> {
+impl Lanes {
     pub fn new() -> Self {
         let v = Soa3::splat(Vec3::Z);
         let f = [1.0; LANES];
@@ -261,8 +279,7 @@ impl<'s> Lanes<'s> {
             alpha: f,
             u_dir_x: f,
             azimuth: [[0.0; LANES]; 2],
-            glass_compensation: [&DielectricCompensation::PLACEHOLDER; LANES],
-            metal_compensation: [&ConductorCompensation::PLACEHOLDER; LANES],
+            ms_scale: Soa3::splat(Rgb::ZERO),
             ggx: [0; 4],
             shadowed: [0; LANES],
             shadow_o: v,
@@ -283,15 +300,16 @@ impl<'s> Lanes<'s> {
 
     /// Stage 1 for lane `i`: the vertex of `path` at `hit`, of the kind [`takes`] found, as
     /// `land` begins it: the bounce's numbers drawn from the path's sampler at the dimensions
-    /// `land` reads them from, the lane's inputs set.
+    /// `land` reads them from, the lane's inputs set (a compensated BSDF's tables in `tables`).
     #[inline(always)]
     pub fn gather(
         &mut self,
         i: usize,
-        scene: &'s Scene,
+        scene: &Scene,
         path: &mut Path,
         hit: &SurfaceHit,
         kind: Kind,
+        tables: &mut LaneTables,
     ) {
         let shapes = scene.geometry.shapes();
         let material = &scene.materials[shapes[hit.shape as usize].material as usize];
@@ -339,8 +357,19 @@ impl<'s> Lanes<'s> {
                 self.eta[i] = *eta;
                 self.alpha[i] = *roughness;
             }
-            Material::CompensatedDielectric(c) => self.glass_compensation[i] = c,
-            Material::CompensatedConductor(c) => self.metal_compensation[i] = c,
+            Material::CompensatedDielectric(c) => {
+                self.eta[i] = c.ss.eta;
+                self.alpha[i] = c.ss.distribution.alpha_x;
+                tables.glass[0][i] = c.outside;
+                tables.glass[1][i] = c.inside;
+            }
+            Material::CompensatedConductor(c) => {
+                self.ior_eta.set(i, c.ss.ior.eta);
+                self.ior_k.set(i, c.ss.ior.k);
+                self.alpha[i] = c.ss.distribution.alpha_x;
+                tables.metal[i] = c.albedo;
+                self.ms_scale.set(i, c.ms_scale);
+            }
             Material::Scratched(m) => {
                 let Bsdf::Dielectric(base) = m.base_bsdf() else {
                     unreachable!("scratched glass has a smooth dielectric base")
@@ -371,50 +400,56 @@ impl<'s> Lanes<'s> {
     /// Stage 2: every lane's vertex, `land`'s operations with its decisions as selects (a
     /// lane [`Self::gather`] did not set computes on stale numbers, and is not scattered): the
     /// diffuse and smooth BSDFs in every lane, then the GGX BSDFs. With `SIMD_GGX` (the
-    /// render loop's AVX-512 and AVX2 copies), where any lane holds one, each GGX BSDF in
-    /// every lane, its results kept in the lanes that hold it; else (the portable copy, where
-    /// all lanes' GGX cost more than the lanes that hold one) only in those lanes, one by one,
-    /// out of the render loop's hot code.
+    /// render loop's AVX-512 copy), where any lane holds one, each GGX BSDF in every lane, its
+    /// results kept in the lanes that hold it; else (the AVX2 and portable copies, whose GGX
+    /// loops stay scalar: all lanes' GGX cost more than the lanes that hold one) only in those
+    /// lanes, one by one, out of the render loop's hot code.
     #[inline(always)]
-    pub fn run<const SIMD_GGX: bool>(&mut self) {
+    pub fn run<const SIMD_GGX: bool>(&mut self, tables: &LaneTables) {
         for i in 0..LANES {
             self.run_lane(i);
         }
         if SIMD_GGX {
-            self.run_ggx_in_lanes::<true, false>();
-            self.run_ggx_in_lanes::<false, false>();
-            self.run_ggx_in_lanes::<true, true>();
-            self.run_ggx_in_lanes::<false, true>();
+            self.run_ggx_in_lanes::<true, false>(tables);
+            self.run_ggx_in_lanes::<false, false>(tables);
+            self.run_ggx_in_lanes::<true, true>(tables);
+            self.run_ggx_in_lanes::<false, true>(tables);
         } else if self.ggx != [0; 4] {
-            self.run_ggx_by_lane();
+            self.run_ggx_by_lane(tables);
         }
         self.ggx = [0; 4];
     }
 
     /// [`Self::run`]'s GGX loop for one kind, in every lane, where any lane holds it.
     #[inline(always)]
-    fn run_ggx_in_lanes<const GLASS: bool, const COMPENSATED: bool>(&mut self) {
+    fn run_ggx_in_lanes<const GLASS: bool, const COMPENSATED: bool>(
+        &mut self,
+        tables: &LaneTables,
+    ) {
         if self.ggx[ggx_slot(GLASS, COMPENSATED)] != 0 {
             for i in 0..LANES {
-                self.run_ggx_lane::<GLASS, COMPENSATED>(i);
+                self.run_ggx_lane::<GLASS, COMPENSATED>(i, tables);
             }
         }
     }
 
     /// [`Self::run`]'s GGX vertices without SIMD: each lane that holds one, alone.
     #[inline(never)]
-    fn run_ggx_by_lane(&mut self) {
-        fn each<const GLASS: bool, const COMPENSATED: bool>(lanes: &mut Lanes) {
+    fn run_ggx_by_lane(&mut self, tables: &LaneTables) {
+        fn each<const GLASS: bool, const COMPENSATED: bool>(
+            lanes: &mut Lanes,
+            tables: &LaneTables,
+        ) {
             let mut mask = lanes.ggx[ggx_slot(GLASS, COMPENSATED)];
             while mask != 0 {
-                lanes.run_ggx_lane::<GLASS, COMPENSATED>(mask.trailing_zeros() as usize);
+                lanes.run_ggx_lane::<GLASS, COMPENSATED>(mask.trailing_zeros() as usize, tables);
                 mask &= mask - 1;
             }
         }
-        each::<true, false>(self);
-        each::<false, false>(self);
-        each::<true, true>(self);
-        each::<false, true>(self);
+        each::<true, false>(self, tables);
+        each::<false, false>(self, tables);
+        each::<true, true>(self, tables);
+        each::<false, true>(self, tables);
     }
 
     /// The shading frame of lane `i`'s hit and the direction toward the viewer in it.
@@ -489,16 +524,17 @@ impl<'s> Lanes<'s> {
 
     /// [`Self::run`]'s GGX loop for lane `i`: the `eval`, `pdf` and `sample` of
     /// [`RoughDielectric`] (`GLASS`) or [`RoughConductor`], or with `COMPENSATED` of
-    /// [`CompensatedDielectric`] or [`CompensatedConductor`] (their tables' lookups
-    /// gathers), as
-    /// `land` calls them through `Bsdf`: computed in every lane, kept where the lane holds that
-    /// BSDF. Where `land` skips a call (the value without a light sample, the density where the
+    /// [`CompensatedDielectric`] or [`CompensatedConductor`] (their tables' lookups gathers
+    /// from the lane's copies in `tables`),
+    /// as `land` calls them through `Bsdf`: computed in every lane, kept where the lane holds
+    /// that BSDF. Where `land` skips a call (the value without a light sample, the density where the
     /// value is zero or the light a delta), its result is replaced by what `land` uses instead.
-    ///
-    /// [`CompensatedDielectric`]: crate::render::bsdf::CompensatedDielectric
-    /// [`CompensatedConductor`]: crate::render::bsdf::CompensatedConductor
     #[inline(always)]
-    fn run_ggx_lane<const GLASS: bool, const COMPENSATED: bool>(&mut self, i: usize) {
+    fn run_ggx_lane<const GLASS: bool, const COMPENSATED: bool>(
+        &mut self,
+        i: usize,
+        tables: &LaneTables,
+    ) {
         let (frame, wo) = self.frame(i, GLASS);
         let distribution = Ggx::isotropic(self.alpha[i]);
         let glass = RoughDielectric {
@@ -512,29 +548,34 @@ impl<'s> Lanes<'s> {
             },
             distribution,
         };
-        let compensated_glass = self.glass_compensation[i].bsdf();
-        let compensated_metal = self.metal_compensation[i].bsdf();
-        let (u_lobe, u_x) = (self.u_lobe[i], self.u_dir_x[i]);
-        let azimuth = (self.azimuth[0][i], self.azimuth[1][i]);
-        let wi = frame.to_local(self.light_wi.get(i));
-        // (`if`s on the constants: compiled away.)
-        let (f, pdf, bs) = if GLASS && COMPENSATED {
-            let b = compensated_glass;
-            let bs = b.sample_at(wo, u_lobe, u_x, azimuth);
-            (b.eval(wo, wi), b.pdf(wo, wi), bs)
-        } else if COMPENSATED {
-            let b = compensated_metal;
-            let bs = b.sample_at(wo, u_lobe, self.cosine_dir.get(i), u_x, azimuth);
-            (b.eval(wo, wi), b.pdf(wo, wi), bs)
-        } else if GLASS {
-            let bs = glass.sample_at(wo, u_lobe, u_x, azimuth);
-            (glass.eval(wo, wi), glass.pdf(wo, wi), bs)
-        } else {
-            let bs = metal.sample_at(wo, u_x, azimuth);
-            (metal.eval(wo, wi), metal.pdf(wo, wi), bs)
+        let compensated_glass = CompensatedDielectric {
+            ss: glass,
+            outside: &tables.glass[0][i],
+            inside: &tables.glass[1][i],
+        };
+        let compensated_metal = CompensatedConductor {
+            ss: metal,
+            albedo: &tables.metal[i],
+            ms_scale: self.ms_scale.get(i),
         };
 
-        // Next-event estimation.
+        // Next-event estimation. (`if`s on the constants: compiled away.)
+        let wi = frame.to_local(self.light_wi.get(i));
+        let (f, pdf) = if GLASS && COMPENSATED {
+            (
+                compensated_glass.eval(wo, wi),
+                compensated_glass.pdf(wo, wi),
+            )
+        } else if COMPENSATED {
+            (
+                compensated_metal.eval(wo, wi),
+                compensated_metal.pdf(wo, wi),
+            )
+        } else if GLASS {
+            (glass.eval(wo, wi), glass.pdf(wo, wi))
+        } else {
+            (metal.eval(wo, wi), metal.pdf(wo, wi))
+        };
         let f = f * wi.z.abs();
         let f = if self.has_light[i] { f } else { Rgb::ZERO };
         let pdf = if f != Rgb::ZERO && !self.light_delta[i] {
@@ -545,6 +586,17 @@ impl<'s> Lanes<'s> {
         let outcome = self.light_outcome(i, f, pdf);
 
         // The BSDF's sample.
+        let (u_lobe, u_x) = (self.u_lobe[i], self.u_dir_x[i]);
+        let azimuth = (self.azimuth[0][i], self.azimuth[1][i]);
+        let bs = if GLASS && COMPENSATED {
+            compensated_glass.sample_at(wo, u_lobe, u_x, azimuth)
+        } else if COMPENSATED {
+            compensated_metal.sample_at(wo, u_lobe, self.cosine_dir.get(i), u_x, azimuth)
+        } else if GLASS {
+            glass.sample_at(wo, u_lobe, u_x, azimuth)
+        } else {
+            metal.sample_at(wo, u_x, azimuth)
+        };
         let sample = match bs {
             Some(BsdfSample {
                 wi,
@@ -938,7 +990,7 @@ radiance = [0.2, 0.25, 0.3]
             let (mut taken, mut glass, mut mirror, mut shadowed, mut ended) = (0, 0, 0, 0, 0);
             let (mut rough_glass, mut rough_metal) = (0, 0);
             let (mut compensated_glass, mut compensated_metal) = (0, 0);
-            let mut lanes = Lanes::new();
+            let (mut lanes, mut tables) = (Lanes::new(), LaneTables::new());
             let mut lane = 0;
             for y in 0..16 {
                 for x in 0..24 {
@@ -955,11 +1007,11 @@ radiance = [0.2, 0.25, 0.3]
                             let la = a.land::<false, true>(&scene, hit, &mut wa);
                             let (goes_on, shadow) = if let Some(kind) = kind {
                                 let hit: SurfaceHit = hit.unwrap();
-                                lanes.gather(lane, &scene, &mut b, &hit, kind);
+                                lanes.gather(lane, &scene, &mut b, &hit, kind, &mut tables);
                                 if simd_ggx {
-                                    lanes.run::<true>();
+                                    lanes.run::<true>(&tables);
                                 } else {
-                                    lanes.run::<false>();
+                                    lanes.run::<false>(&tables);
                                 }
                                 let mut shadow = None;
                                 let goes_on = lanes.scatter::<false>(

@@ -14,7 +14,7 @@
 //! not sample order: the lanes then hold one pixel's samples at a time, and the image agrees
 //! with the one-path loop's within noise (`tests/lanes.rs`).
 
-use super::lane_vertex::{self, Lanes};
+use super::lane_vertex::{self, LaneTables, Lanes};
 use super::path::{
     camera_packet, camera_sample, traces_camera_packets, CameraHit, CameraSample, Path, ShadowTest,
 };
@@ -206,7 +206,7 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool, const SIMD_GGX: bool>(
     // Lanes as bits: running a path; whose hit came with the camera ray's packet.
     let (mut running, mut traced) = (0u32, 0u32);
     let plain_lanes = lane_vertex::applies(scene);
-    let mut vertices = Lanes::new();
+    let (mut vertices, mut tables) = (Lanes::new(), LaneTables::new());
     loop {
         // Regeneration: each free lane takes the tile's next sample. With differentials, a
         // pixel's samples share its footprints: the next pixel starts once the lanes are empty.
@@ -254,7 +254,7 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool, const SIMD_GGX: bool>(
             if let Some(hit) = hits[i].as_ref().filter(|_| plain_lanes) {
                 let path = &mut lanes[i];
                 if let Some(kind) = lane_vertex::takes(scene, hit, path.depth, path.ray.d) {
-                    vertices.gather(i, scene, path, hit, kind);
+                    vertices.gather(i, scene, path, hit, kind, &mut tables);
                     plain |= 1 << i;
                     continue;
                 }
@@ -267,7 +267,7 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool, const SIMD_GGX: bool>(
             ended |= (!landing.goes_on as u32) << i;
         }
         if plain != 0 {
-            vertices.run::<SIMD_GGX>();
+            vertices.run::<SIMD_GGX>(&tables);
             for i in lanes_of(plain) {
                 let hit = hits[i].as_ref().expect("a plain vertex has a hit");
                 let path = &mut lanes[i];

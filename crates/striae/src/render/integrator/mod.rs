@@ -35,7 +35,8 @@
 //!   `lanes`: [`LANES`] paths of a tile in flight, each stage run for all of them), which runs
 //!   the vertices of diffuse, smooth dielectric and smooth conductor surfaces in SIMD lanes
 //!   (`lane_vertex`, `land`'s operations as selects, bit for bit), and those of rough (GGX)
-//!   ones in the same stages (in SIMD lanes in the AVX copies, lane by lane in the portable one).
+//!   ones, compensated or not, in the same stages (in SIMD lanes in the AVX-512 copy, lane by
+//!   lane in the others).
 //!   They give the same image bit for bit wherever no material reads a pixel's footprint
 //!   (`tests/lanes.rs`).
 
@@ -610,10 +611,11 @@ macro_rules! render_loop_copy {
     };
 }
 
-// The AVX copies run the lane loop's GGX vertices in SIMD lanes; the portable copy (its
-// `render_tile_body` call in `render_tile`) lane by lane, where all lanes' GGX cost more than
-// the lanes that hold one ([`lane_vertex::Lanes::run`]).
-render_loop_copy!(loop_copy_avx2, render_tile_avx2, true);
+// The AVX-512 copy runs the lane loop's GGX vertices in SIMD lanes; the AVX2 and portable
+// copies (the latter the `render_tile_body` call in `render_tile`) lane by lane: LLVM's cost
+// model keeps their GGX loops scalar, and all lanes' GGX in scalar code cost more than the
+// lanes that hold one ([`lane_vertex::Lanes::run`]).
+render_loop_copy!(loop_copy_avx2, render_tile_avx2, false);
 render_loop_copy!(loop_copy_avx512, render_tile_avx512, true);
 
 /// The tile's pixels' sums of the samples `samples`, with (`DIFFERENTIALS`,

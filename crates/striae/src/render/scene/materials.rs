@@ -782,14 +782,14 @@ mod tests {
                     assert!(matches!(bsdf_at(&rough, uv), Bsdf::RoughDielectric(_)));
                     assert!(matches!(bsdf_at(&rough_off, uv), Bsdf::RoughDielectric(_)));
                     assert!(matches!(bsdf_at(&on, uv), Bsdf::CompensatedDielectric(b)
-                        if b.comp.ss.eta == 1.5 && b.comp.ss.distribution.alpha_x == 0.3));
+                        if b.ss.eta == 1.5 && b.ss.distribution.alpha_x == 0.3));
                     assert!(matches!(bsdf_at(&smooth_on, uv), Bsdf::Dielectric(_)));
                 }
                 _ => {
                     assert!(matches!(bsdf_at(&rough, uv), Bsdf::RoughConductor(_)));
                     assert!(matches!(bsdf_at(&rough_off, uv), Bsdf::RoughConductor(_)));
                     assert!(matches!(bsdf_at(&on, uv), Bsdf::CompensatedConductor(b)
-                        if b.comp.ss.ior == ConductorIor::preset("gold").unwrap()));
+                        if b.ss.ior == ConductorIor::preset("gold").unwrap()));
                     assert!(matches!(bsdf_at(&smooth_on, uv), Bsdf::Conductor(_)));
                 }
             }
