@@ -524,11 +524,11 @@ impl Lanes {
 
     /// [`Self::run`]'s GGX loop for lane `i`: the `eval`, `pdf` and `sample` of
     /// [`RoughDielectric`] (`GLASS`) or [`RoughConductor`], or with `COMPENSATED` of
-    /// [`CompensatedDielectric`] or [`CompensatedConductor`] (their tables' lookups gathers
-    /// from the lane's copies in `tables`),
-    /// as `land` calls them through `Bsdf`: computed in every lane, kept where the lane holds
-    /// that BSDF. Where `land` skips a call (the value without a light sample, the density where the
-    /// value is zero or the light a delta), its result is replaced by what `land` uses instead.
+    /// [`CompensatedDielectric`] or [`CompensatedConductor`] (their tables' lookups gathers from
+    /// the lane's copies in `tables`), as `land` calls them through `Bsdf`: computed in every
+    /// lane, kept where the lane holds that BSDF. Where `land` skips a call (the value without a
+    /// light sample, the density where the value is zero or the light a delta), its result is
+    /// replaced by what `land` uses instead.
     #[inline(always)]
     fn run_ggx_lane<const GLASS: bool, const COMPENSATED: bool>(
         &mut self,
