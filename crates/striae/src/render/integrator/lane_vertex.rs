@@ -14,11 +14,12 @@
 //!    select, so that the render loop's SIMD copies run it 8 or 16 lanes at a time; then, for
 //!    the lanes that hold a GGX BSDF, its own `eval`, `pdf` and `sample` ([`RoughDielectric`],
 //!    [`RoughConductor`], `CompensatedDielectric`, `CompensatedConductor`), written without
-//!    early returns, whose results replace the first loop's there: in the AVX-512 copy a loop
-//!    over all lanes per BSDF, which it vectorises (the tables' lookups as gathers); in the
-//!    others lane by lane, out of line (LLVM's cost model keeps the AVX2 copy's loops
-//!    scalar). The functions these loops call are inlined always: left to LLVM's choice (the
-//!    Fresnel laws, once the GGX code called them too), they stayed calls and the loops scalar.
+//!    early returns, whose results replace the first loop's there: a loop over all lanes per
+//!    BSDF, which the AVX-512 copy vectorises (the tables' lookups as gathers). The other
+//!    copies leave GGX vertices to `land` ([`takes`]): LLVM's cost model keeps their GGX loops
+//!    scalar, and lane by lane they cost 10-17 % over `land` (BENCHMARKS.md). The functions
+//!    these loops call are inlined always: left to LLVM's choice (the Fresnel laws, once the
+//!    GGX code called them too), they stayed calls and the loops scalar.
 //! 3. **Scatter**, lane by lane: the path's new ray and state, its deferred shadow test.
 //!
 //! Each lane runs the operations of `land` on the same numbers, so the image is `land`'s bit
@@ -100,27 +101,35 @@ const fn ggx_slot(glass: bool, compensated: bool) -> usize {
 /// The lane vertex's BSDF for the vertex of a path at `depth` whose ray met `hit`, arriving
 /// along `d`, if it takes it: a diffuse, dielectric or conductor material, smooth or rough (or
 /// scratched glass seen from inside) on a shape that emits nothing, below the depth limit
-/// (what `land` does there and nothing more, in a scene [`applies`] to).
+/// (what `land` does there and nothing more, in a scene [`applies`] to). The GGX kinds only
+/// with `SIMD_GGX` ([`Lanes::run`]): the other copies' cost models keep the GGX loops scalar,
+/// where every lane's GGX costs more than `land` in the lanes that hold one.
 #[inline(always)]
-pub(super) fn takes(scene: &Scene, hit: &SurfaceHit, depth: u32, d: Vec3) -> Option<Kind> {
+pub(super) fn takes<const SIMD_GGX: bool>(
+    scene: &Scene,
+    hit: &SurfaceHit,
+    depth: u32,
+    d: Vec3,
+) -> Option<Kind> {
     let shape = &scene.geometry.shapes()[hit.shape as usize];
     if shape.material == NO_MATERIAL || shape.area_light.is_some() || depth + 2 > max_depth(scene) {
         return None;
     }
-    match &scene.materials[shape.material as usize] {
-        Material::Diffuse { .. } => Some(Kind::Diffuse),
+    let kind = match &scene.materials[shape.material as usize] {
+        Material::Diffuse { .. } => Kind::Diffuse,
         // (`Material::plain_bsdf`'s choice between the smooth and the GGX BSDF.)
-        Material::Dielectric { roughness, .. } if *roughness > 0.0 => Some(Kind::RoughGlass),
-        Material::Dielectric { .. } => Some(Kind::Glass),
-        Material::Conductor { roughness, .. } if *roughness > 0.0 => Some(Kind::RoughMetal),
-        Material::Conductor { .. } => Some(Kind::Mirror),
-        Material::CompensatedDielectric(_) => Some(Kind::CompensatedGlass),
-        Material::CompensatedConductor(_) => Some(Kind::CompensatedMetal),
+        Material::Dielectric { roughness, .. } if *roughness > 0.0 => Kind::RoughGlass,
+        Material::Dielectric { .. } => Kind::Glass,
+        Material::Conductor { roughness, .. } if *roughness > 0.0 => Kind::RoughMetal,
+        Material::Conductor { .. } => Kind::Mirror,
+        Material::CompensatedDielectric(_) => Kind::CompensatedGlass,
+        Material::CompensatedConductor(_) => Kind::CompensatedMetal,
         Material::Scratched(m) if m.has_transmission() && !m.reads_hit_context(-d, hit.ng) => {
-            Some(Kind::Glass)
+            Kind::Glass
         }
-        _ => None,
-    }
+        _ => return None,
+    };
+    (SIMD_GGX || !kind.is_rough()).then_some(kind)
 }
 
 /// Three-component vectors over the lanes, a component an array: loads and stores of one
@@ -399,11 +408,9 @@ impl Lanes {
 
     /// Stage 2: every lane's vertex, `land`'s operations with its decisions as selects (a
     /// lane [`Self::gather`] did not set computes on stale numbers, and is not scattered): the
-    /// diffuse and smooth BSDFs in every lane, then the GGX BSDFs. With `SIMD_GGX` (the
-    /// render loop's AVX-512 copy), where any lane holds one, each GGX BSDF in every lane, its
-    /// results kept in the lanes that hold it; else (the AVX2 and portable copies, whose GGX
-    /// loops stay scalar: all lanes' GGX cost more than the lanes that hold one) only in those
-    /// lanes, one by one, out of the render loop's hot code.
+    /// diffuse and smooth BSDFs in every lane, then, with `SIMD_GGX` (the render loop's AVX-512
+    /// copy, the only one that [`takes`] GGX vertices in), each GGX BSDF that any lane holds,
+    /// in every lane, its results kept in the lanes that hold it.
     #[inline(always)]
     pub fn run<const SIMD_GGX: bool>(&mut self, tables: &LaneTables) {
         for i in 0..LANES {
@@ -414,8 +421,6 @@ impl Lanes {
             self.run_ggx_in_lanes::<false, false>(tables);
             self.run_ggx_in_lanes::<true, true>(tables);
             self.run_ggx_in_lanes::<false, true>(tables);
-        } else if self.ggx != [0; 4] {
-            self.run_ggx_by_lane(tables);
         }
         self.ggx = [0; 4];
     }
@@ -431,25 +436,6 @@ impl Lanes {
                 self.run_ggx_lane::<GLASS, COMPENSATED>(i, tables);
             }
         }
-    }
-
-    /// [`Self::run`]'s GGX vertices without SIMD: each lane that holds one, alone.
-    #[inline(never)]
-    fn run_ggx_by_lane(&mut self, tables: &LaneTables) {
-        fn each<const GLASS: bool, const COMPENSATED: bool>(
-            lanes: &mut Lanes,
-            tables: &LaneTables,
-        ) {
-            let mut mask = lanes.ggx[ggx_slot(GLASS, COMPENSATED)];
-            while mask != 0 {
-                lanes.run_ggx_lane::<GLASS, COMPENSATED>(mask.trailing_zeros() as usize, tables);
-                mask &= mask - 1;
-            }
-        }
-        each::<true, false>(self, tables);
-        each::<false, false>(self, tables);
-        each::<true, true>(self, tables);
-        each::<false, true>(self, tables);
     }
 
     /// The shading frame of lane `i`'s hit and the direction toward the viewer in it.
@@ -975,8 +961,8 @@ radiance = [0.2, 0.25, 0.3]
 
     /// Each vertex the lanes take, run in lane `i` (every lane in turn, the others holding the
     /// vertices before it), gives `land`'s path, shadow test, ray count and ending bit for bit,
-    /// over whole paths of every pixel: both samplers, the GGX vertices in SIMD lanes' form
-    /// (every lane computed, the lane's kept) and lane by lane.
+    /// over whole paths of every pixel: both samplers, with `SIMD_GGX` (the GGX vertices in
+    /// every lane, the lane's kept) and without (the GGX vertices not taken: `land`'s).
     #[test]
     fn lane_vertex_equals_land() {
         let cases = [
@@ -1001,9 +987,13 @@ radiance = [0.2, 0.25, 0.3]
                         let (mut wa, mut wb) = (Worker::default(), Worker::default());
                         loop {
                             let hit = scene.geometry.intersect(&a.ray);
-                            let kind = hit
-                                .as_ref()
-                                .and_then(|h| takes(&scene, h, a.depth, a.ray.d));
+                            let kind = hit.as_ref().and_then(|h| {
+                                if simd_ggx {
+                                    takes::<true>(&scene, h, a.depth, a.ray.d)
+                                } else {
+                                    takes::<false>(&scene, h, a.depth, a.ray.d)
+                                }
+                            });
                             let la = a.land::<false, true>(&scene, hit, &mut wa);
                             let (goes_on, shadow) = if let Some(kind) = kind {
                                 let hit: SurfaceHit = hit.unwrap();
@@ -1055,14 +1045,24 @@ radiance = [0.2, 0.25, 0.3]
                 diffuse > 200 && glass > 200 && mirror > 50,
                 "{diffuse} {glass} {mirror}"
             );
-            assert!(
-                rough_glass > 100 && rough_metal > 40,
-                "{rough_glass} {rough_metal}"
-            );
-            assert!(
-                compensated_glass > 40 && compensated_metal > 40,
-                "{compensated_glass} {compensated_metal}"
-            );
+            let counts = [
+                rough_glass,
+                rough_metal,
+                compensated_glass,
+                compensated_metal,
+            ];
+            if simd_ggx {
+                assert!(
+                    rough_glass > 100 && rough_metal > 40,
+                    "{rough_glass} {rough_metal}"
+                );
+                assert!(
+                    compensated_glass > 40 && compensated_metal > 40,
+                    "{compensated_glass} {compensated_metal}"
+                );
+            } else {
+                assert_eq!(counts, [0; 4], "GGX vertices taken without SIMD_GGX");
+            }
             assert!(shadowed > 200 && ended > 50, "{shadowed} {ended}");
         }
     }

@@ -253,7 +253,9 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool, const SIMD_GGX: bool>(
         for i in lanes_of(running) {
             if let Some(hit) = hits[i].as_ref().filter(|_| plain_lanes) {
                 let path = &mut lanes[i];
-                if let Some(kind) = lane_vertex::takes(scene, hit, path.depth, path.ray.d) {
+                if let Some(kind) =
+                    lane_vertex::takes::<SIMD_GGX>(scene, hit, path.depth, path.ray.d)
+                {
                     vertices.gather(i, scene, path, hit, kind, &mut tables);
                     plain |= 1 << i;
                     continue;

@@ -612,9 +612,8 @@ macro_rules! render_loop_copy {
 }
 
 // The AVX-512 copy runs the lane loop's GGX vertices in SIMD lanes; the AVX2 and portable
-// copies (the latter the `render_tile_body` call in `render_tile`) lane by lane: LLVM's cost
-// model keeps their GGX loops scalar, and all lanes' GGX in scalar code cost more than the
-// lanes that hold one ([`lane_vertex::Lanes::run`]).
+// copies (the latter the `render_tile_body` call in `render_tile`) leave them to `land`:
+// LLVM's cost model keeps their GGX loops scalar ([`lane_vertex::takes`]).
 render_loop_copy!(loop_copy_avx2, render_tile_avx2, false);
 render_loop_copy!(loop_copy_avx512, render_tile_avx512, true);
 
