@@ -137,8 +137,8 @@ fn scratched_glass_seen_from_inside_runs_in_lanes_bit_for_bit() {
 #[test]
 fn rough_glass_and_metal_run_in_lanes_bit_for_bit() {
     // GGX glass and gold, plain and compensated (the lane vertex's GGX loops), each scene with
-    // and without the lanes, and the lanes in every compiled copy (the AVX-512 copy runs the GGX
-    // vertices in SIMD lanes, the others leave them to the one-path vertex).
+    // and without the lanes, and the lanes in every compiled copy (each runs the GGX vertices it
+    // vectorises in SIMD lanes and leaves the others to the one-path vertex).
     let frosted = include_str!("../scenes/glass-teapot.toml")
         .replace("ior = 1.5", "ior = 1.5\nroughness = 0.25");
     let brushed = include_str!("../scenes/metal-teapot.toml")

@@ -15,11 +15,10 @@
 //!    the lanes that hold a GGX BSDF, its own `eval`, `pdf` and `sample` ([`RoughDielectric`],
 //!    [`RoughConductor`], `CompensatedDielectric`, `CompensatedConductor`), written without
 //!    early returns, whose results replace the first loop's there: a loop over all lanes per
-//!    BSDF, which the AVX-512 copy vectorises (the tables' lookups as gathers). The other
-//!    copies leave GGX vertices to `land` ([`takes`]): LLVM's cost model keeps their GGX loops
-//!    scalar, and lane by lane they cost 10-17 % over `land` (BENCHMARKS.md). The functions
-//!    these loops call are inlined always: left to LLVM's choice (the Fresnel laws, once the
-//!    GGX code called them too), they stayed calls and the loops scalar.
+//!    BSDF (the tables' lookups gathers), for the BSDFs the render loop's copy vectorises
+//!    ([`simd_ggx`]); [`takes`] leaves the others to `land`. The functions these loops call
+//!    are inlined always: left to LLVM's choice (the Fresnel laws, once the GGX code called
+//!    them too), they stayed calls and the loops scalar.
 //! 3. **Scatter**, lane by lane: the path's new ray and state, its deferred shadow test.
 //!
 //! Each lane runs the operations of `land` on the same numbers, so the image is `land`'s bit
@@ -80,6 +79,20 @@ impl Kind {
         !matches!(self, Kind::Diffuse | Kind::Glass | Kind::Mirror)
     }
 
+    /// Taken by the lane vertex of a render loop copy that runs the GGX kinds `simd_ggx` in
+    /// SIMD lanes ([`simd_ggx`]).
+    #[inline(always)]
+    fn taken_with(self, simd_ggx: u32) -> bool {
+        let bit = match self {
+            Kind::RoughGlass => simd_ggx::ROUGH_GLASS,
+            Kind::RoughMetal => simd_ggx::ROUGH_METAL,
+            Kind::CompensatedGlass => simd_ggx::COMPENSATED_GLASS,
+            Kind::CompensatedMetal => simd_ggx::COMPENSATED_METAL,
+            Kind::Diffuse | Kind::Glass | Kind::Mirror => return true,
+        };
+        simd_ggx & bit != 0
+    }
+
     /// The GGX kind: a dielectric (`glass`) or a conductor, compensated or not.
     #[inline(always)]
     const fn ggx(glass: bool, compensated: bool) -> Kind {
@@ -92,20 +105,41 @@ impl Kind {
     }
 }
 
-/// The index of the GGX kind `Kind::ggx(glass, compensated)` in [`Lanes`]' masks.
+/// The index of the GGX kind `Kind::ggx(glass, compensated)` in [`Lanes`]' masks and the bit
+/// `1 << ggx_slot(..)` of it in a [`SimdGgx`].
 #[inline(always)]
 const fn ggx_slot(glass: bool, compensated: bool) -> usize {
     glass as usize + 2 * compensated as usize
+}
+
+/// The sets of GGX kinds a copy of the render loop runs in SIMD lanes (its `SIMD_GGX`), as
+/// bits `1 << ggx_slot(..)` (a `u32`: const generic parameters are integers). Each is a loop
+/// over every lane, worth it only where the copy vectorises it; the lane vertex leaves the
+/// kinds not in the set to `land` ([`takes`]). The sets per copy are measured (BENCHMARKS.md
+/// "The lane loop").
+pub(super) mod simd_ggx {
+    use super::ggx_slot;
+    pub const ROUGH_GLASS: u32 = 1 << ggx_slot(true, false);
+    pub const ROUGH_METAL: u32 = 1 << ggx_slot(false, false);
+    pub const COMPENSATED_GLASS: u32 = 1 << ggx_slot(true, true);
+    pub const COMPENSATED_METAL: u32 = 1 << ggx_slot(false, true);
+    /// The portable copy's: its GGX loops stay scalar, and every lane's GGX costs more than
+    /// `land` in the lanes that hold one.
+    pub const NONE: u32 = 0;
+    /// The AVX2 copy's: the compensated conductor's loop (both lobes and the table lookups,
+    /// gathers, in every lane) costs more than `land` there.
+    pub const AVX2: u32 = ROUGH_GLASS | ROUGH_METAL | COMPENSATED_GLASS;
+    /// The AVX-512 copy's.
+    pub const ALL: u32 = ROUGH_GLASS | ROUGH_METAL | COMPENSATED_GLASS | COMPENSATED_METAL;
 }
 
 /// The lane vertex's BSDF for the vertex of a path at `depth` whose ray met `hit`, arriving
 /// along `d`, if it takes it: a diffuse, dielectric or conductor material, smooth or rough (or
 /// scratched glass seen from inside) on a shape that emits nothing, below the depth limit
 /// (what `land` does there and nothing more, in a scene [`applies`] to). The GGX kinds only
-/// with `SIMD_GGX` ([`Lanes::run`]): the other copies' cost models keep the GGX loops scalar,
-/// where every lane's GGX costs more than `land` in the lanes that hold one.
+/// where the render loop's copy runs them in SIMD lanes (`SIMD_GGX`, a [`simd_ggx`] set).
 #[inline(always)]
-pub(super) fn takes<const SIMD_GGX: bool>(
+pub(super) fn takes<const SIMD_GGX: u32>(
     scene: &Scene,
     hit: &SurfaceHit,
     depth: u32,
@@ -129,7 +163,7 @@ pub(super) fn takes<const SIMD_GGX: bool>(
         }
         _ => return None,
     };
-    (SIMD_GGX || !kind.is_rough()).then_some(kind)
+    kind.taken_with(SIMD_GGX).then_some(kind)
 }
 
 /// Three-component vectors over the lanes, a component an array: loads and stores of one
@@ -408,30 +442,30 @@ impl Lanes {
 
     /// Stage 2: every lane's vertex, `land`'s operations with its decisions as selects (a
     /// lane [`Self::gather`] did not set computes on stale numbers, and is not scattered): the
-    /// diffuse and smooth BSDFs in every lane, then, with `SIMD_GGX` (the render loop's AVX-512
-    /// copy, the only one that [`takes`] GGX vertices in), each GGX BSDF that any lane holds,
-    /// in every lane, its results kept in the lanes that hold it.
+    /// diffuse and smooth BSDFs in every lane, then each GGX BSDF of the set `SIMD_GGX` (the
+    /// kinds [`takes`] gave) that any lane holds, in every lane, its results kept in the lanes
+    /// that hold it.
     #[inline(always)]
-    pub fn run<const SIMD_GGX: bool>(&mut self, tables: &LaneTables) {
+    pub fn run<const SIMD_GGX: u32>(&mut self, tables: &LaneTables) {
         for i in 0..LANES {
             self.run_lane(i);
         }
-        if SIMD_GGX {
-            self.run_ggx_in_lanes::<true, false>(tables);
-            self.run_ggx_in_lanes::<false, false>(tables);
-            self.run_ggx_in_lanes::<true, true>(tables);
-            self.run_ggx_in_lanes::<false, true>(tables);
-        }
+        self.run_ggx_in_lanes::<SIMD_GGX, true, false>(tables);
+        self.run_ggx_in_lanes::<SIMD_GGX, false, false>(tables);
+        self.run_ggx_in_lanes::<SIMD_GGX, true, true>(tables);
+        self.run_ggx_in_lanes::<SIMD_GGX, false, true>(tables);
         self.ggx = [0; 4];
     }
 
-    /// [`Self::run`]'s GGX loop for one kind, in every lane, where any lane holds it.
+    /// [`Self::run`]'s GGX loop for one kind, in every lane, where the set `SIMD_GGX` has it
+    /// and any lane holds it.
     #[inline(always)]
-    fn run_ggx_in_lanes<const GLASS: bool, const COMPENSATED: bool>(
+    fn run_ggx_in_lanes<const SIMD_GGX: u32, const GLASS: bool, const COMPENSATED: bool>(
         &mut self,
         tables: &LaneTables,
     ) {
-        if self.ggx[ggx_slot(GLASS, COMPENSATED)] != 0 {
+        let slot = ggx_slot(GLASS, COMPENSATED);
+        if SIMD_GGX & (1 << slot) != 0 && self.ggx[slot] != 0 {
             for i in 0..LANES {
                 self.run_ggx_lane::<GLASS, COMPENSATED>(i, tables);
             }
@@ -961,17 +995,32 @@ radiance = [0.2, 0.25, 0.3]
 
     /// Each vertex the lanes take, run in lane `i` (every lane in turn, the others holding the
     /// vertices before it), gives `land`'s path, shadow test, ray count and ending bit for bit,
-    /// over whole paths of every pixel: both samplers, with `SIMD_GGX` (the GGX vertices in
-    /// every lane, the lane's kept) and without (the GGX vertices not taken: `land`'s).
+    /// over whole paths of every pixel: both samplers, each copy's set of GGX kinds in SIMD
+    /// lanes ([`simd_ggx`]: those kinds in every lane, the lane's kept; the others not taken).
     #[test]
     fn lane_vertex_equals_land() {
-        let cases = [
-            ("sobol", true),
-            ("sobol", false),
-            ("independent", true),
-            ("independent", false),
-        ];
-        for (sampler, simd_ggx) in cases {
+        fn takes_in(set: u32, scene: &Scene, hit: &SurfaceHit, path: &Path) -> Option<Kind> {
+            let (depth, d) = (path.depth, path.ray.d);
+            match set {
+                simd_ggx::ALL => takes::<{ simd_ggx::ALL }>(scene, hit, depth, d),
+                simd_ggx::AVX2 => takes::<{ simd_ggx::AVX2 }>(scene, hit, depth, d),
+                simd_ggx::NONE => takes::<{ simd_ggx::NONE }>(scene, hit, depth, d),
+                _ => unreachable!(),
+            }
+        }
+        fn run_in(set: u32, lanes: &mut Lanes, tables: &LaneTables) {
+            match set {
+                simd_ggx::ALL => lanes.run::<{ simd_ggx::ALL }>(tables),
+                simd_ggx::AVX2 => lanes.run::<{ simd_ggx::AVX2 }>(tables),
+                simd_ggx::NONE => lanes.run::<{ simd_ggx::NONE }>(tables),
+                _ => unreachable!(),
+            }
+        }
+        let sets = [simd_ggx::ALL, simd_ggx::AVX2, simd_ggx::NONE];
+        for (sampler, set) in ["sobol", "independent"]
+            .into_iter()
+            .flat_map(|sampler| sets.map(|set| (sampler, set)))
+        {
             let scene = scene(sampler);
             let (mut taken, mut glass, mut mirror, mut shadowed, mut ended) = (0, 0, 0, 0, 0);
             let (mut rough_glass, mut rough_metal) = (0, 0);
@@ -987,22 +1036,12 @@ radiance = [0.2, 0.25, 0.3]
                         let (mut wa, mut wb) = (Worker::default(), Worker::default());
                         loop {
                             let hit = scene.geometry.intersect(&a.ray);
-                            let kind = hit.as_ref().and_then(|h| {
-                                if simd_ggx {
-                                    takes::<true>(&scene, h, a.depth, a.ray.d)
-                                } else {
-                                    takes::<false>(&scene, h, a.depth, a.ray.d)
-                                }
-                            });
+                            let kind = hit.as_ref().and_then(|h| takes_in(set, &scene, h, &a));
                             let la = a.land::<false, true>(&scene, hit, &mut wa);
                             let (goes_on, shadow) = if let Some(kind) = kind {
                                 let hit: SurfaceHit = hit.unwrap();
                                 lanes.gather(lane, &scene, &mut b, &hit, kind, &mut tables);
-                                if simd_ggx {
-                                    lanes.run::<true>(&tables);
-                                } else {
-                                    lanes.run::<false>(&tables);
-                                }
+                                run_in(set, &mut lanes, &tables);
                                 let mut shadow = None;
                                 let goes_on = lanes.scatter::<false>(
                                     lane,
@@ -1045,23 +1084,19 @@ radiance = [0.2, 0.25, 0.3]
                 diffuse > 200 && glass > 200 && mirror > 50,
                 "{diffuse} {glass} {mirror}"
             );
-            let counts = [
-                rough_glass,
-                rough_metal,
-                compensated_glass,
-                compensated_metal,
-            ];
-            if simd_ggx {
-                assert!(
-                    rough_glass > 100 && rough_metal > 40,
-                    "{rough_glass} {rough_metal}"
-                );
-                assert!(
-                    compensated_glass > 40 && compensated_metal > 40,
-                    "{compensated_glass} {compensated_metal}"
-                );
-            } else {
-                assert_eq!(counts, [0; 4], "GGX vertices taken without SIMD_GGX");
+            // Each GGX kind taken where the set has it (at least this many vertices), never
+            // where it has not.
+            for (count, bit, least) in [
+                (rough_glass, simd_ggx::ROUGH_GLASS, 100),
+                (rough_metal, simd_ggx::ROUGH_METAL, 40),
+                (compensated_glass, simd_ggx::COMPENSATED_GLASS, 40),
+                (compensated_metal, simd_ggx::COMPENSATED_METAL, 40),
+            ] {
+                if set & bit != 0 {
+                    assert!(count > least, "{sampler} {set:b}: {count} of kind {bit:b}");
+                } else {
+                    assert_eq!(count, 0, "{sampler} {set:b}: kind {bit:b} taken");
+                }
             }
             assert!(shadowed > 200 && ended > 50, "{shadowed} {ended}");
         }

@@ -165,7 +165,7 @@ impl Sums {
 /// The sums of the samples `first..end` of the tile `[x0, y0, x1, y1)`'s pixels (row by row),
 /// as [`super::render_pixel`] gives them; `SIMD_GGX` as [`Lanes::run`] takes it.
 #[inline(always)]
-pub(super) fn render_tile<const DIFFERENTIALS: bool, const SIMD_GGX: bool>(
+pub(super) fn render_tile<const DIFFERENTIALS: bool, const SIMD_GGX: u32>(
     scene: &Scene,
     [x0, y0, x1, y1]: [u32; 4],
     (first, end): (u32, u32),
@@ -206,7 +206,10 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool, const SIMD_GGX: bool>(
     // Lanes as bits: running a path; whose hit came with the camera ray's packet.
     let (mut running, mut traced) = (0u32, 0u32);
     let plain_lanes = lane_vertex::applies(scene);
-    let (mut vertices, mut tables) = (Lanes::new(), LaneTables::new());
+    // Two `let`s, not one of a pair: made as a pair, the AVX2 copy's cost model keeps the GGX
+    // loops scalar (`objdump -d` shows no `vsqrtps ymm` of theirs).
+    let mut vertices = Lanes::new();
+    let mut tables = LaneTables::new();
     loop {
         // Regeneration: each free lane takes the tile's next sample. With differentials, a
         // pixel's samples share its footprints: the next pixel starts once the lanes are empty.

@@ -35,14 +35,16 @@
 //!   `lanes`: [`LANES`] paths of a tile in flight, each stage run for all of them), which runs
 //!   the vertices of diffuse, smooth dielectric and smooth conductor surfaces in SIMD lanes
 //!   (`lane_vertex`, `land`'s operations as selects, bit for bit), and those of rough (GGX)
-//!   ones, compensated or not, in the same stages (in SIMD lanes in the AVX-512 copy, lane by
-//!   lane in the others).
+//!   ones, compensated or not, in the same stages where the copy vectorises them (AVX-512:
+//!   all; AVX2: all but the compensated conductor; `lane_vertex::simd_ggx`).
 //!   They give the same image bit for bit wherever no material reads a pixel's footprint
 //!   (`tests/lanes.rs`).
 
 mod lane_vertex;
 mod lanes;
 mod path;
+
+use lane_vertex::simd_ggx;
 
 pub use lanes::LANES;
 
@@ -562,9 +564,9 @@ fn render_tile(
     }
     let _ = copy;
     if pass.differentials {
-        render_tile_body::<true, false>(scene, rect, pass.samples, worker)
+        render_tile_body::<true, { simd_ggx::NONE }>(scene, rect, pass.samples, worker)
     } else {
-        render_tile_body::<false, false>(scene, rect, pass.samples, worker)
+        render_tile_body::<false, { simd_ggx::NONE }>(scene, rect, pass.samples, worker)
     }
 }
 
@@ -595,9 +597,9 @@ macro_rules! loop_copy_avx512 {
 
 /// `$name`: [`render_tile_body`] compiled by `$copy` ([`loop_copy_avx2!`] or
 /// [`loop_copy_avx512!`]) for the instruction sets of one copy of the render loop
-/// ([`LoopCopy`]), its GGX vertices in SIMD lanes or not (`$simd_ggx`).
+/// ([`LoopCopy`]), running the GGX kinds `$simd_ggx` (a [`simd_ggx`] set) in SIMD lanes.
 macro_rules! render_loop_copy {
-    ($copy:ident, $name:ident, $simd_ggx:literal) => {
+    ($copy:ident, $name:ident, $simd_ggx:expr) => {
         $copy! {
             unsafe fn $name<const DIFFERENTIALS: bool>(
                 scene: &Scene,
@@ -605,23 +607,21 @@ macro_rules! render_loop_copy {
                 samples: (u32, u32),
                 worker: &mut Worker,
             ) -> Vec<Rgb> {
-                render_tile_body::<DIFFERENTIALS, $simd_ggx>(scene, rect, samples, worker)
+                render_tile_body::<DIFFERENTIALS, { $simd_ggx }>(scene, rect, samples, worker)
             }
         }
     };
 }
 
-// The AVX-512 copy runs the lane loop's GGX vertices in SIMD lanes; the AVX2 and portable
-// copies (the latter the `render_tile_body` call in `render_tile`) leave them to `land`:
-// LLVM's cost model keeps their GGX loops scalar ([`lane_vertex::takes`]).
-render_loop_copy!(loop_copy_avx2, render_tile_avx2, false);
-render_loop_copy!(loop_copy_avx512, render_tile_avx512, true);
+// (The portable copy is the `render_tile_body` call in `render_tile`, with `simd_ggx::NONE`.)
+render_loop_copy!(loop_copy_avx2, render_tile_avx2, simd_ggx::AVX2);
+render_loop_copy!(loop_copy_avx512, render_tile_avx512, simd_ggx::ALL);
 
 /// The tile's pixels' sums of the samples `samples`, with (`DIFFERENTIALS`,
-/// `pass.differentials`) or without ray differentials; `SIMD_GGX`: the lane loop's GGX
-/// vertices in SIMD lanes ([`lane_vertex::Lanes::run`]).
+/// `pass.differentials`) or without ray differentials; `SIMD_GGX`: the GGX kinds the lane
+/// loop runs in SIMD lanes (a [`simd_ggx`] set).
 #[inline(always)]
-fn render_tile_body<const DIFFERENTIALS: bool, const SIMD_GGX: bool>(
+fn render_tile_body<const DIFFERENTIALS: bool, const SIMD_GGX: u32>(
     scene: &Scene,
     rect: [u32; 4],
     samples: (u32, u32),
