@@ -206,8 +206,8 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool, const SIMD_GGX: u32>(
     // Lanes as bits: running a path; whose hit came with the camera ray's packet.
     let (mut running, mut traced) = (0u32, 0u32);
     let plain_lanes = lane_vertex::applies(scene);
-    // Two `let`s, not one of a pair: made as a pair, the AVX2 copy's cost model keeps the GGX
-    // loops scalar (`objdump -d` shows no `vsqrtps ymm` of theirs).
+    // Two `let`s, not one of a pair: made as a pair, the AVX2 copy's cost model keeps the
+    // dielectrics' GGX loops scalar (`objdump -d` shows no `vsqrtps ymm` of theirs).
     let mut vertices = Lanes::new();
     let mut tables = LaneTables::new();
     loop {
