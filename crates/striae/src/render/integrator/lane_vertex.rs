@@ -73,24 +73,30 @@ impl Kind {
         matches!(self, Kind::Glass | Kind::Mirror)
     }
 
+    /// A GGX kind's [`ggx_slot`]: its index in [`Lanes`]' masks, its bit `1 << slot` in a
+    /// [`simd_ggx`] set; `None` for the others.
+    #[inline(always)]
+    fn slot(self) -> Option<usize> {
+        match self {
+            Kind::RoughGlass => Some(ggx_slot(true, false)),
+            Kind::RoughMetal => Some(ggx_slot(false, false)),
+            Kind::CompensatedGlass => Some(ggx_slot(true, true)),
+            Kind::CompensatedMetal => Some(ggx_slot(false, true)),
+            Kind::Diffuse | Kind::Glass | Kind::Mirror => None,
+        }
+    }
+
     /// Run by a GGX loop ([`Lanes::run`]).
     #[inline(always)]
     fn is_rough(self) -> bool {
-        !matches!(self, Kind::Diffuse | Kind::Glass | Kind::Mirror)
+        self.slot().is_some()
     }
 
     /// Taken by the lane vertex of a render loop copy that runs the GGX kinds `simd_ggx` in
     /// SIMD lanes ([`simd_ggx`]).
     #[inline(always)]
     fn taken_with(self, simd_ggx: u32) -> bool {
-        let bit = match self {
-            Kind::RoughGlass => simd_ggx::ROUGH_GLASS,
-            Kind::RoughMetal => simd_ggx::ROUGH_METAL,
-            Kind::CompensatedGlass => simd_ggx::COMPENSATED_GLASS,
-            Kind::CompensatedMetal => simd_ggx::COMPENSATED_METAL,
-            Kind::Diffuse | Kind::Glass | Kind::Mirror => return true,
-        };
-        simd_ggx & bit != 0
+        self.slot().is_none_or(|slot| simd_ggx & (1 << slot) != 0)
     }
 
     /// The GGX kind: a dielectric (`glass`) or a conductor, compensated or not.
@@ -371,9 +377,8 @@ impl Lanes {
         self.roulette[i] = depth + 1 >= scene.settings.rr_depth;
         self.u_roulette[i] = u_roulette;
         self.kind[i] = kind;
-        for (glass, compensated) in [(true, false), (false, false), (true, true), (false, true)] {
-            let holds = kind == Kind::ggx(glass, compensated);
-            self.ggx[ggx_slot(glass, compensated)] |= (holds as u32) << i;
+        if let Some(slot) = kind.slot() {
+            self.ggx[slot] |= 1 << i;
         }
         self.has_light[i] = false;
         if !kind.is_delta() {
