@@ -15,6 +15,8 @@ use striae::render::scene::{Overrides, Scene};
 
 const SCENES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes");
 
+/// The shipped scene files: the TOML scenes, and the glTF scene Blender's exporter wrote
+/// (its materials glTF's metallic-roughness BSDF).
 fn shipped_scenes() -> Vec<PathBuf> {
     let mut paths: Vec<PathBuf> = std::fs::read_dir(SCENES)
         .unwrap()
@@ -22,6 +24,7 @@ fn shipped_scenes() -> Vec<PathBuf> {
         .filter(|p| p.extension().is_some_and(|e| e == "toml"))
         .collect();
     paths.sort();
+    paths.push(Path::new(SCENES).join("blender/blender-scene.glb"));
     paths
 }
 
@@ -62,7 +65,7 @@ fn mean_difference_in_sigmas(a: &Image, b: &Image) -> f64 {
 
 #[test]
 fn lane_loop_renders_every_shipped_scene_as_the_one_path_loop() {
-    let (mut identical, mut within_noise, mut lit) = (0, 0, 0);
+    let (mut identical, mut within_noise, mut lit, mut pbr) = (0, 0, 0, 0);
     for path in shipped_scenes() {
         // A full tile and a cut one with packets of camera rays (8 spp), and odd sizes below
         // the packet threshold (3 spp), where every path traces its own camera ray.
@@ -72,6 +75,7 @@ fn lane_loop_renders_every_shipped_scene_as_the_one_path_loop() {
             let (b, sb) = render_with_threads(&lanes, 2);
             let name = path.file_name().unwrap().to_string_lossy();
             lit += a.pixels.iter().any(|p| p.max_element() > 0.0) as usize;
+            pbr += one.materials.iter().any(|m| matches!(m, Material::Pbr(_))) as usize;
             if one.materials.iter().any(Material::reads_footprint) {
                 // A pixel's samples share its cached footprints in the order they reach
                 // them: not sample order in the lanes, so the images differ within noise.
@@ -99,6 +103,8 @@ fn lane_loop_renders_every_shipped_scene_as_the_one_path_loop() {
         lit + 2 >= identical + within_noise,
         "{lit} images not black"
     );
+    // glTF's BSDF among them: `pbr.toml` and Blender's scene, at both sizes.
+    assert!(pbr >= 4, "{pbr} renders of glTF materials");
 }
 
 /// The scene `text` at 40 x 24, 8 spp, in the lane loop or the one-path loop.

@@ -132,11 +132,12 @@ pub(super) mod simd_ggx {
     /// The portable copy's: its GGX loops stay scalar, and every lane's GGX costs more than
     /// `land` in the lanes that hold one.
     pub const NONE: u32 = 0;
-    /// The AVX2 copy's: it vectorises the dielectrics' loops; the conductors' stay scalar,
-    /// the plain one's costing less in every lane than `land` (gold teapot 308 against 316
-    /// M), the compensated one's more (433 against 335 M).
+    /// The AVX2 copy's: it vectorises these three loops 8 wide; the compensated conductor's
+    /// its cost model declines ("vectorization is not beneficial"), and that loop, scalar in
+    /// every lane, costs more than `land` in the lanes that hold one (433 against 335 M).
     pub const AVX2: u32 = ROUGH_GLASS | ROUGH_METAL | COMPENSATED_GLASS;
-    /// The AVX-512 copy's.
+    /// The AVX-512 copy's: all four vectorised 16 wide (compensated gold, one thread: 1.23 s
+    /// against 1.33 s with its vertices left to `land`).
     pub const ALL: u32 = ROUGH_GLASS | ROUGH_METAL | COMPENSATED_GLASS | COMPENSATED_METAL;
 }
 
