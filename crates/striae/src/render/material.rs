@@ -130,6 +130,23 @@ impl PbrMaterial {
         (frame, Bsdf::Pbr(bsdf))
     }
 
+    /// Whether the BSDF at `uv` is one the lane vertex runs: opaque (no transmission) and rough
+    /// (not [`Pbr::smooth`]) in the hit's own shading frame (no normal map, no anisotropy).
+    /// Reads the metallic-roughness texture, where there is one.
+    #[inline(always)]
+    pub fn is_plain_rough_at(&self, uv: Vec2) -> bool {
+        if self.normal_map.is_some() || self.anisotropy != 0.0 || self.transmission != 0.0 {
+            return false;
+        }
+        let roughness = match &self.metallic_roughness {
+            Some(t) => self.roughness * t.eval(uv).y,
+            None => self.roughness,
+        };
+        // `bsdf_at`'s alpha, and `Pbr::new`'s test of it (`alpha_t = alpha_b` without
+        // anisotropy).
+        roughness * roughness > 0.0
+    }
+
     /// The BSDF at texture coordinates `uv` (`transmits`: [`Self::has_transmission`]), its
     /// GGX `alpha_x` the anisotropic `alpha_t` (along the anisotropy direction, the frame's `s`
     /// as [`Self::shade`] turns it).

@@ -56,7 +56,7 @@ pub use multiscatter::{
     AlbedoTable, CompensatedConductor, CompensatedDielectric, ConductorCompensation,
     DielectricCompensation,
 };
-pub use pbr::{LayerAlbedo, Pbr};
+pub use pbr::{LayerAlbedo, LayerLookup, LayerRows, Pbr};
 pub use scratched::{
     GroovePlace, LobeShare, ScratchLobe, ScratchLobeTable, ScratchedBase, ScratchedBsdf,
 };

@@ -70,9 +70,10 @@ use crate::sampling::{cosine_hemisphere_pdf, square_to_cosine_hemisphere};
 use std::sync::{Arc, Mutex, Weak};
 
 /// The glTF metallic-roughness BSDF at one point (textures looked up), borrowing its
-/// material's [`LayerAlbedo`].
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Pbr<'a> {
+/// material's [`LayerAlbedo`] (or, in the lane vertex, a copy of the two rows it reads:
+/// [`LayerRows`]).
+#[derive(Debug, PartialEq)]
+pub struct Pbr<'a, L = LayerAlbedo> {
     /// Linear base colour in `[0, 1]`.
     pub base_color: Rgb,
     /// `[0, 1]`.
@@ -89,13 +90,22 @@ pub struct Pbr<'a> {
     /// material, so that the shading frame is chosen before the textures are read.
     pub transmits: bool,
     /// `E(mu, alpha)` of the specular reflection layer at `eta`.
-    pub layer: &'a LayerAlbedo,
+    pub layer: &'a L,
     /// Where `alpha` (`sqrt(alpha_x alpha_y)`, 0 when smooth) falls among the table's
     /// roughness nodes ([`LayerAlbedo::node`]).
-    layer_node: (usize, f32),
+    pub layer_node: (usize, f32),
     /// `1 / (1 - E_avg(alpha))` (0 where `E_avg` rounds to 1).
-    diffuse_norm: f32,
+    pub diffuse_norm: f32,
 }
+
+// (By hand: derived, `Clone` and `Copy` would ask the table to be `Copy` too.)
+impl<L> Clone for Pbr<'_, L> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<L> Copy for Pbr<'_, L> {}
 
 /// How the lobes share the light at one `wo`.
 #[derive(Clone, Copy, Debug)]
@@ -106,13 +116,13 @@ struct AtWo {
     p_diffuse: f32,
 }
 
-#[inline]
+#[inline(always)]
 fn mean(c: Rgb) -> f32 {
     (c.x + c.y + c.z) * (1.0 / 3.0)
 }
 
 /// Schlick's Fresnel with `f0` (glTF's `conductor_fresnel`), at the cosine `c`.
-#[inline]
+#[inline(always)]
 fn schlick(f0: Rgb, c: f32) -> Rgb {
     let x = (1.0 - c.abs()).clamp(0.0, 1.0);
     let x2 = x * x;
@@ -160,9 +170,11 @@ impl<'a> Pbr<'a> {
             diffuse_norm,
         }
     }
+}
 
+impl<L: LayerLookup> Pbr<'_, L> {
     /// `E(mu)`, the directional albedo of the specular reflection layer alone at this `alpha`.
-    #[inline]
+    #[inline(always)]
     pub fn layer_albedo(&self, mu: f32) -> f32 {
         self.layer.eval_at(self.layer_node, mu)
     }
@@ -175,23 +187,11 @@ impl<'a> Pbr<'a> {
     }
 
     /// The lobe weights at `wo`; `None` where the BSDF gives nothing (behind an opaque one).
-    #[inline]
+    #[inline(always)]
     fn at_wo(&self, wo: Vec3) -> Option<AtWo> {
         if wo.z > 0.0 {
-            let (m, t) = (self.metallic, self.transmission);
-            // The specular layer's albedo (`F(wo.z)` when smooth).
-            let e = self.layer_albedo(wo.z);
-            let w_d = (1.0 - m) * (1.0 - t) * (1.0 - e) * mean(self.base_color);
-            let w_m = m * mean(schlick(self.base_color, wo.z)) + (1.0 - m) * (e + t * (1.0 - e));
-            let sum = w_d + w_m;
-            if !(sum > 0.0) {
-                return None;
-            }
-            Some(AtWo {
-                metallic: m,
-                transmission: t,
-                p_diffuse: w_d / sum,
-            })
+            let (a, gives) = self.at_wo_outside(wo);
+            gives.then_some(a)
         } else if wo.z < 0.0 && self.transmits {
             Some(AtWo {
                 metallic: 0.0,
@@ -203,9 +203,27 @@ impl<'a> Pbr<'a> {
         }
     }
 
+    /// [`Self::at_wo`] for `wo` outside (`wo.z > 0`), and whether the BSDF gives anything
+    /// there (the weights' sum positive).
+    #[inline(always)]
+    fn at_wo_outside(&self, wo: Vec3) -> (AtWo, bool) {
+        let (m, t) = (self.metallic, self.transmission);
+        // The specular layer's albedo (`F(wo.z)` when smooth).
+        let e = self.layer_albedo(wo.z);
+        let w_d = (1.0 - m) * (1.0 - t) * (1.0 - e) * mean(self.base_color);
+        let w_m = m * mean(schlick(self.base_color, wo.z)) + (1.0 - m) * (e + t * (1.0 - e));
+        let sum = w_d + w_m;
+        let a = AtWo {
+            metallic: m,
+            transmission: t,
+            p_diffuse: w_d / sum,
+        };
+        (a, sum > 0.0)
+    }
+
     /// Probability of reflecting (not refracting) through a microfacet seen at `wo_m` with
     /// dielectric Fresnel `fd`.
-    #[inline]
+    #[inline(always)]
     fn reflect_prob(&self, a: &AtWo, wo_m: f32, fd: f32) -> f32 {
         if a.metallic == 0.0 && a.transmission == 1.0 {
             return fd;
@@ -221,7 +239,7 @@ impl<'a> Pbr<'a> {
 
     /// The diffuse lobe, `(1 - m)(1 - t) base / pi (1 - E(mu_o)) (1 - E(mu_i)) / (1 - E_avg)`,
     /// both outside.
-    #[inline]
+    #[inline(always)]
     fn diffuse(&self, a: &AtWo, wo: Vec3, wi: Vec3) -> Rgb {
         let k = (1.0 - a.metallic) * (1.0 - a.transmission);
         if !(k > 0.0 && wo.z > 0.0 && wi.z > 0.0) {
@@ -233,7 +251,7 @@ impl<'a> Pbr<'a> {
     }
 
     /// `(eval, pdf)` with the lobe weights `a` at `wo`.
-    #[inline]
+    #[inline(always)]
     fn eval_pdf_at(&self, a: &AtWo, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
         let mut f = self.diffuse(a, wo, wi);
         let mut pdf = if a.p_diffuse > 0.0 && wi.z > 0.0 {
@@ -294,7 +312,7 @@ impl<'a> Pbr<'a> {
     }
 
     /// `(eval, pdf)` in one call.
-    #[inline]
+    #[inline(always)]
     pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
         match self.at_wo(wo) {
             Some(a) => self.eval_pdf_at(&a, wo, wi),
@@ -369,6 +387,110 @@ impl<'a> Pbr<'a> {
             eta,
             from: None,
         })
+    }
+
+    /// [`Self::sample`] of an opaque rough BSDF (no `transmission`, not smooth: those the lane
+    /// vertex runs), with the cosine lobe's direction `cosine_dir` and the visible normal's
+    /// azimuth given ([`Ggx::sample_visible_at`]), written without early returns: both lobes'
+    /// directions made, the chosen one evaluated. Without transmission a microfacet always reflects
+    /// ([`Self::reflect_prob`] is 1), so the choice is the first one, `u_lobe` against the
+    /// diffuse lobe's probability.
+    #[inline(always)]
+    pub fn sample_opaque_at(
+        &self,
+        wo: Vec3,
+        u_lobe: f32,
+        cosine_dir: Vec3,
+        u_x: f32,
+        azimuth: (f32, f32),
+    ) -> Option<BsdfSample> {
+        debug_assert!(self.transmission == 0.0 && !self.smooth && !self.transmits);
+        let (a, gives) = self.at_wo_outside(wo);
+        let m = self
+            .distribution
+            .sample_visible_at(wo * wo.z.signum(), u_x, azimuth);
+        let diffuse = u_lobe < a.p_diffuse;
+        let wi = if diffuse { cosine_dir } else { reflect(wo, m) };
+        let (f, pdf) = self.eval_pdf_at(&a, wo, wi);
+        // `sample`'s tests of each lobe's direction and value.
+        let valid = (pdf > 0.0) & (diffuse | (!(wi.z * wo.z <= 0.0) & (f != Rgb::ZERO)));
+        ((wo.z > 0.0) & gives & valid).then(|| BsdfSample::reflected(wi, f, pdf))
+    }
+}
+
+/// `E(mu)` at a roughness node `(k, t)` ([`LayerAlbedo::node`]): what [`Pbr`] reads of its
+/// layer's table, the table itself or the lane vertex's copy of two rows ([`LayerRows`]).
+pub trait LayerLookup {
+    fn eval_at(&self, node: (usize, f32), mu: f32) -> f32;
+}
+
+/// `E(mu)` along a roughness node's row: linear in `sqrt(mu)` between the cosine nodes,
+/// constant beyond the end ones.
+#[inline(always)]
+fn along_row(r: &[f32; MU_NODES], mu: f32) -> f32 {
+    let x = (mu.max(0.0).sqrt() * MU_NODES as f32 - 0.5).clamp(0.0, (MU_NODES - 1) as f32);
+    let i = (x as usize).min(MU_NODES - 2);
+    let t = x - i as f32;
+    r[i] + t * (r[i + 1] - r[i])
+}
+
+/// `E(mu)` at the roughness node `(k, t)` from the rows of nodes `k` (`lower`; the exact
+/// Fresnel at `k = 0`) and `k + 1` (`upper`).
+#[inline(always)]
+fn between_rows(
+    eta: f32,
+    [lower, upper]: [&[f32; MU_NODES]; 2],
+    (k, t): (usize, f32),
+    mu: f32,
+) -> f32 {
+    let a = if k == 0 {
+        fresnel_f32::dielectric(mu.clamp(0.0, 1.0), eta).0
+    } else {
+        along_row(lower, mu)
+    };
+    if t > 0.0 {
+        a + t * (along_row(upper, mu) - a)
+    } else {
+        a
+    }
+}
+
+impl LayerLookup for LayerAlbedo {
+    #[inline(always)]
+    fn eval_at(&self, (k, t): (usize, f32), mu: f32) -> f32 {
+        between_rows(self.eta, [&self.e[k], &self.e[k + 1]], (k, t), mu)
+    }
+}
+
+/// The rows of a [`LayerAlbedo`] that a BSDF at one roughness reads (its node's and the
+/// next one's), copied: the lane vertex's SIMD loop looks them up as gathers from each lane's
+/// own copy, as it does the compensated BSDFs' tables.
+#[derive(Clone, Copy, Debug)]
+pub struct LayerRows {
+    eta: f32,
+    rows: [[f32; MU_NODES]; 2],
+}
+
+impl LayerRows {
+    pub const ZERO: LayerRows = LayerRows {
+        eta: 1.0,
+        rows: [[0.0; MU_NODES]; 2],
+    };
+
+    /// The rows of `layer` at the roughness node `(k, _)`.
+    #[inline(always)]
+    pub fn of(layer: &LayerAlbedo, (k, _): (usize, f32)) -> Self {
+        LayerRows {
+            eta: layer.eta,
+            rows: [layer.e[k], layer.e[k + 1]],
+        }
+    }
+}
+
+impl LayerLookup for LayerRows {
+    #[inline(always)]
+    fn eval_at(&self, node: (usize, f32), mu: f32) -> f32 {
+        between_rows(self.eta, [&self.rows[0], &self.rows[1]], node, mu)
     }
 }
 
@@ -480,7 +602,7 @@ impl LayerAlbedo {
 
     /// The roughness node below `alpha` and the fraction of the way to the next one.
     #[inline]
-    fn node(alpha: f32) -> (usize, f32) {
+    pub fn node(alpha: f32) -> (usize, f32) {
         let x = (alpha.max(0.0).sqrt() * (ALPHA_NODES - 1) as f32).min((ALPHA_NODES - 1) as f32);
         let k = (x as usize).min(ALPHA_NODES - 2);
         (k, x - k as f32)
@@ -492,22 +614,7 @@ impl LayerAlbedo {
         if k == 0 {
             return fresnel_f32::dielectric(mu.clamp(0.0, 1.0), self.eta).0;
         }
-        let x = (mu.max(0.0).sqrt() * MU_NODES as f32 - 0.5).clamp(0.0, (MU_NODES - 1) as f32);
-        let i = (x as usize).min(MU_NODES - 2);
-        let t = x - i as f32;
-        let r = &self.e[k];
-        r[i] + t * (r[i + 1] - r[i])
-    }
-
-    /// `E(mu)` at the roughness [`Self::node`] `(k, t)`.
-    #[inline]
-    fn eval_at(&self, (k, t): (usize, f32), mu: f32) -> f32 {
-        let a = self.row(k, mu);
-        if t > 0.0 {
-            a + t * (self.row(k + 1, mu) - a)
-        } else {
-            a
-        }
+        along_row(&self.e[k], mu)
     }
 
     /// `E_avg` at the roughness [`Self::node`] `(k, t)`.

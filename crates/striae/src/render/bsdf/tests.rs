@@ -1170,6 +1170,88 @@ mod pbr {
         }
     }
 
+    /// The lane vertex's form of an opaque rough BSDF gives the scalar form's bits: `eval_pdf`
+    /// with the layer table read from a copy of two rows ([`LayerRows`]), and
+    /// `sample_opaque_at` against `sample` (the same numbers as the lane vertex hands them:
+    /// the cosine lobe's direction and the visible normal's azimuth made beforehand).
+    #[test]
+    fn opaque_lane_form_equals_the_scalar_bit_for_bit() {
+        use crate::optics::microfacet::visible_azimuth;
+        use crate::sampling::square_to_cosine_hemisphere;
+        fn bits(s: Option<BsdfSample>) -> Option<[u32; 9]> {
+            s.map(|s| {
+                let [a, b, c] = s.wi.to_array().map(f32::to_bits);
+                let [d, e, f] = s.weight.to_array().map(f32::to_bits);
+                [
+                    a,
+                    b,
+                    c,
+                    d,
+                    e,
+                    f,
+                    s.pdf.to_bits(),
+                    s.delta as u32,
+                    s.eta.to_bits(),
+                ]
+            })
+        }
+        let mut rng = Pcg64::seed_from_u64(77);
+        let (mut sampled, mut diffuse) = (0, 0);
+        for n in 0..50_000 {
+            let base = Rgb::new(rng.random(), rng.random(), rng.random());
+            // Plastic, metal and mixes.
+            let metallic = match n % 3 {
+                0 => 0.0,
+                1 => 1.0,
+                _ => rng.random(),
+            };
+            let alpha_t = rng.random_range(1e-4f32..1.0);
+            let alpha_b = if n % 2 == 0 {
+                alpha_t
+            } else {
+                rng.random_range(1e-4f32..1.0)
+            };
+            let eta = if n % 5 == 0 { 2.4 } else { 1.5 };
+            let b = Pbr::new(base, metallic, 0.0, layer(eta), alpha_t, alpha_b, false);
+            let rows = LayerRows::of(b.layer, b.layer_node);
+            let lane = Pbr {
+                layer: &rows,
+                base_color: b.base_color,
+                metallic: b.metallic,
+                transmission: b.transmission,
+                eta: b.eta,
+                distribution: b.distribution,
+                smooth: b.smooth,
+                transmits: b.transmits,
+                layer_node: b.layer_node,
+                diffuse_norm: b.diffuse_norm,
+            };
+            // Mostly above the surface, some below (where both give nothing).
+            let wo = dir(rng.random_range(0.0..1.7), rng.random_range(0.0..6.3));
+            let wi = dir(rng.random_range(0.0..3.2), rng.random_range(0.0..6.3));
+            let (f, pdf) = b.eval_pdf(wo, wi);
+            let (f_lane, pdf_lane) = lane.eval_pdf(wo, wi);
+            assert_eq!(
+                f.to_array().map(f32::to_bits),
+                f_lane.to_array().map(f32::to_bits)
+            );
+            assert_eq!(pdf.to_bits(), pdf_lane.to_bits(), "{b:?} {wo} {wi}");
+            let (u_lobe, u) = (rng.random(), Vec2::new(rng.random(), rng.random()));
+            let s = b.sample(wo, u_lobe, u);
+            let cosine_dir = square_to_cosine_hemisphere(u);
+            let s_lane = lane.sample_opaque_at(wo, u_lobe, cosine_dir, u.x, visible_azimuth(u.y));
+            assert_eq!(bits(s), bits(s_lane), "{b:?} {wo} {u_lobe} {u}");
+            sampled += s.is_some() as u32;
+            diffuse += s.is_some_and(|s| s.wi == cosine_dir) as u32;
+        }
+        // Both lobes sampled, and some samples refused.
+        assert!(
+            diffuse > 5_000 && sampled - diffuse > 5_000,
+            "{diffuse} {sampled}"
+        );
+        assert!(sampled < 48_000, "{sampled}");
+    }
+
     /// Smooth (`alpha = 0`) with a diffuse lobe: the delta reflection and refraction are
     /// chosen with their discrete probabilities, weight times probability is the lobe's
     /// reflectance, and the diffuse samples follow `pdf` (which integrates to their share).

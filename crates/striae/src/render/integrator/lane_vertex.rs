@@ -1,19 +1,21 @@
 //! The vertex of a plain material in lanes: [`Path::land`]'s operations for up to [`LANES`]
 //! paths at once where their rays met a diffuse surface, a smooth dielectric (scratched glass
-//! seen from inside included: its smooth base), a smooth conductor, or a rough (GGX) dielectric
-//! or conductor, with or without multiple-scattering compensation ([`Kind`]), in three stages:
+//! seen from inside included: its smooth base), a smooth conductor, a rough (GGX) dielectric
+//! or conductor, with or without multiple-scattering compensation, or glTF's metallic-roughness
+//! BSDF where it is opaque and rough in the hit's own frame ([`Kind`]), in three stages:
 //!
 //! 1. **Gather**, lane by lane: the hit, the path's throughput, the bounce's random numbers
 //!    (the dimensions `land` reads, drawn in its order), the texture, the light sample, the
 //!    cosine-weighted direction and the GGX visible normal's azimuth (each a scalar call:
 //!    `sincosf`, `cosf`, `sinf` and the `Texture` and `Light` enums do not vectorise) into
-//!    structure-of-arrays [`Lanes`], a compensated BSDF's albedo tables into [`LaneTables`].
+//!    structure-of-arrays [`Lanes`], a compensated BSDF's albedo tables (glTF's BSDF: the two
+//!    rows of its layer table it reads) into [`LaneTables`].
 //! 2. **The vertex** ([`Lanes::run`]), one loop over the lanes whose body is the scalar code's
 //!    own functions (shading frame, next-event estimation's BSDF value and MIS weight, Fresnel,
 //!    the throughput's update, the spawned rays, Russian roulette) with every decision a
 //!    select, so that the render loop's SIMD copies run it 8 or 16 lanes at a time; then, for
 //!    the lanes that hold a GGX BSDF, its own `eval`, `pdf` and `sample` ([`RoughDielectric`],
-//!    [`RoughConductor`], `CompensatedDielectric`, `CompensatedConductor`), written without
+//!    [`RoughConductor`], `CompensatedDielectric`, `CompensatedConductor`, [`Pbr`]), written without
 //!    early returns, whose results replace the first loop's there: a loop over all lanes per
 //!    BSDF (the tables' lookups gathers), for the BSDFs the render loop's copy vectorises
 //!    ([`simd_ggx`]); [`takes`] leaves the others to `land`. The functions these loops call
@@ -38,7 +40,7 @@ use crate::optics::fresnel_f32;
 use crate::optics::microfacet::{visible_azimuth, Ggx};
 use crate::render::bsdf::{
     AlbedoTable, Bsdf, BsdfSample, CompensatedConductor, CompensatedDielectric, ConductorIor,
-    RoughConductor, RoughDielectric,
+    LayerRows, Pbr, RoughConductor, RoughDielectric,
 };
 use crate::render::geometry::{offset_origin_by, SurfaceHit};
 use crate::render::material::Material;
@@ -64,6 +66,9 @@ pub(super) enum Kind {
     CompensatedGlass,
     /// A `CompensatedConductor` (`multiscatter = true`), with next-event estimation.
     CompensatedMetal,
+    /// glTF's metallic-roughness `Pbr`, opaque and rough in the hit's own frame
+    /// (`PbrMaterial::is_plain_rough_at`), with next-event estimation.
+    Pbr,
 }
 
 impl Kind {
@@ -73,8 +78,8 @@ impl Kind {
         matches!(self, Kind::Glass | Kind::Mirror)
     }
 
-    /// A GGX kind's [`ggx_slot`]: its index in [`Lanes`]' masks, its bit `1 << slot` in a
-    /// [`simd_ggx`] set; `None` for the others.
+    /// A GGX kind's [`ggx_slot`] (the PBR BSDF's [`PBR_SLOT`]): its index in [`Lanes`]'
+    /// masks, its bit `1 << slot` in a [`simd_ggx`] set; `None` for the others.
     #[inline(always)]
     fn slot(self) -> Option<usize> {
         match self {
@@ -82,6 +87,7 @@ impl Kind {
             Kind::RoughMetal => Some(ggx_slot(false, false)),
             Kind::CompensatedGlass => Some(ggx_slot(true, true)),
             Kind::CompensatedMetal => Some(ggx_slot(false, true)),
+            Kind::Pbr => Some(PBR_SLOT),
             Kind::Diffuse | Kind::Glass | Kind::Mirror => None,
         }
     }
@@ -118,27 +124,34 @@ const fn ggx_slot(glass: bool, compensated: bool) -> usize {
     glass as usize + 2 * compensated as usize
 }
 
+/// [`Kind::Pbr`]'s index in [`Lanes`]' masks and its bit's in a [`simd_ggx`] set, after the
+/// four [`ggx_slot`]s.
+const PBR_SLOT: usize = 4;
+
 /// The sets of GGX kinds a copy of the render loop runs in SIMD lanes (its `SIMD_GGX`), as
 /// bits `1 << ggx_slot(..)` (a `u32`: const generic parameters are integers). Each is a loop
 /// over every lane, worth it where the copy vectorises it; the lane vertex leaves the kinds
 /// not in the set to `land` ([`takes`]). The sets per copy are measured (BENCHMARKS.md "The
 /// lane loop"; instructions at 128 x 96, 9 less 1 spp).
 pub(super) mod simd_ggx {
-    use super::ggx_slot;
+    use super::{ggx_slot, PBR_SLOT};
     pub const ROUGH_GLASS: u32 = 1 << ggx_slot(true, false);
     pub const ROUGH_METAL: u32 = 1 << ggx_slot(false, false);
     pub const COMPENSATED_GLASS: u32 = 1 << ggx_slot(true, true);
     pub const COMPENSATED_METAL: u32 = 1 << ggx_slot(false, true);
+    pub const PBR: u32 = 1 << PBR_SLOT;
     /// The portable copy's: its GGX loops stay scalar, and every lane's GGX costs more than
     /// `land` in the lanes that hold one.
     pub const NONE: u32 = 0;
     /// The AVX2 copy's: it vectorises these three loops 8 wide; the compensated conductor's
-    /// its cost model declines ("vectorization is not beneficial"), and that loop, scalar in
-    /// every lane, costs more than `land` in the lanes that hold one (433 against 335 M).
+    /// and glTF's BSDF's it leaves scalar, and those loops, in every lane, cost more than
+    /// `land` in the lanes that hold one (compensated gold 433 against 335 M instructions;
+    /// `pbr.toml` without absorption, one thread: 2.64 against 2.47 s with the AVX-512 copy).
     pub const AVX2: u32 = ROUGH_GLASS | ROUGH_METAL | COMPENSATED_GLASS;
-    /// The AVX-512 copy's: all four vectorised 16 wide (compensated gold, one thread: 1.23 s
-    /// against 1.33 s with its vertices left to `land`).
-    pub const ALL: u32 = ROUGH_GLASS | ROUGH_METAL | COMPENSATED_GLASS | COMPENSATED_METAL;
+    /// The AVX-512 copy's: all five vectorised 16 wide (compensated gold, one thread: 1.23 s
+    /// against 1.33 s with its vertices left to `land`; `pbr.toml` without absorption: 1.31
+    /// against 1.35 s).
+    pub const ALL: u32 = ROUGH_GLASS | ROUGH_METAL | COMPENSATED_GLASS | COMPENSATED_METAL | PBR;
 }
 
 /// The lane vertex's BSDF for the vertex of a path at `depth` whose ray met `hit`, arriving
@@ -166,6 +179,7 @@ pub(super) fn takes<const SIMD_GGX: u32>(
         Material::Conductor { .. } => Kind::Mirror,
         Material::CompensatedDielectric(_) => Kind::CompensatedGlass,
         Material::CompensatedConductor(_) => Kind::CompensatedMetal,
+        Material::Pbr(m) if m.is_plain_rough_at(hit.uv) => Kind::Pbr,
         Material::Scratched(m) if m.has_transmission() && !m.reads_hit_context(-d, hit.ng) => {
             Kind::Glass
         }
@@ -244,8 +258,17 @@ pub(super) struct Lanes {
     azimuth: [[f32; LANES]; 2],
     // Compensated conductor: the colour term (the tables are in `LaneTables`).
     ms_scale: Soa3,
-    /// The lanes that hold each GGX kind, as bits, at [`ggx_slot`].
-    ggx: [u32; 4],
+    // PBR: the base colour is `reflectance`, the index `eta`, GGX's `alpha_x` `alpha`; the
+    // metallic factor, `alpha_y`, the layer table's roughness node (its rows in `LaneTables`),
+    // the diffuse lobe's normalisation.
+    metallic: [f32; LANES],
+    alpha_y: [f32; LANES],
+    layer_node: [u32; LANES],
+    layer_t: [f32; LANES],
+    diffuse_norm: [f32; LANES],
+    /// The lanes that hold each GGX kind, as bits, at [`ggx_slot`] (the PBR BSDF's at
+    /// [`PBR_SLOT`]).
+    ggx: [u32; 5],
 
     // Results: the shadow test (`shadow_radiance` counts where `shadowed`), the bounce (where
     // `scattered`), the state after it, whether the path goes on. The flags are `u32` (0 or
@@ -276,6 +299,8 @@ pub(super) struct Lanes {
 pub(super) struct LaneTables {
     glass: [[AlbedoTable; LANES]; 2],
     metal: [AlbedoTable; LANES],
+    /// The PBR BSDF's layer albedo, the two rows it reads.
+    pbr: [LayerRows; LANES],
 }
 
 impl LaneTables {
@@ -283,6 +308,7 @@ impl LaneTables {
         LaneTables {
             glass: [[AlbedoTable::ZERO; LANES]; 2],
             metal: [AlbedoTable::ZERO; LANES],
+            pbr: [LayerRows::ZERO; LANES],
         }
     }
 }
@@ -331,7 +357,12 @@ impl Lanes {
             u_dir_x: f,
             azimuth: [[0.0; LANES]; 2],
             ms_scale: Soa3::splat(Rgb::ZERO),
-            ggx: [0; 4],
+            metallic: f,
+            alpha_y: f,
+            layer_node: [0; LANES],
+            layer_t: f,
+            diffuse_norm: f,
+            ggx: [0; 5],
             shadowed: [0; LANES],
             shadow_o: v,
             shadow_t_max: f,
@@ -389,7 +420,7 @@ impl Lanes {
             self.u_dir_x[i] = u_dir_x;
             (self.azimuth[0][i], self.azimuth[1][i]) = visible_azimuth(u_dir_y);
         }
-        if matches!(kind, Kind::Diffuse | Kind::CompensatedMetal) {
+        if matches!(kind, Kind::Diffuse | Kind::CompensatedMetal | Kind::Pbr) {
             self.cosine_dir
                 .set(i, square_to_cosine_hemisphere(Vec2::new(u_dir_x, u_dir_y)));
         }
@@ -419,6 +450,19 @@ impl Lanes {
                 self.alpha[i] = c.ss.distribution.alpha_x;
                 tables.metal[i] = c.albedo;
                 self.ms_scale.set(i, c.ms_scale);
+            }
+            Material::Pbr(m) => {
+                // (`shade`'s BSDF: the frame is the hit's own, `takes` saw to it.)
+                let pbr = m.bsdf_at(hit.uv, false);
+                self.reflectance.set(i, pbr.base_color);
+                self.metallic[i] = pbr.metallic;
+                self.eta[i] = pbr.eta;
+                self.alpha[i] = pbr.distribution.alpha_x;
+                self.alpha_y[i] = pbr.distribution.alpha_y;
+                self.layer_node[i] = pbr.layer_node.0 as u32;
+                self.layer_t[i] = pbr.layer_node.1;
+                self.diffuse_norm[i] = pbr.diffuse_norm;
+                tables.pbr[i] = LayerRows::of(pbr.layer, pbr.layer_node);
             }
             Material::Scratched(m) => {
                 let Bsdf::Dielectric(base) = m.base_bsdf() else {
@@ -461,7 +505,12 @@ impl Lanes {
         self.run_ggx_in_lanes::<SIMD_GGX, false, false>(tables);
         self.run_ggx_in_lanes::<SIMD_GGX, true, true>(tables);
         self.run_ggx_in_lanes::<SIMD_GGX, false, true>(tables);
-        self.ggx = [0; 4];
+        if SIMD_GGX & simd_ggx::PBR != 0 && self.ggx[PBR_SLOT] != 0 {
+            for i in 0..LANES {
+                self.run_pbr_lane(i, tables);
+            }
+        }
+        self.ggx = [0; 5];
     }
 
     /// [`Self::run`]'s GGX loop for one kind, in every lane, where the set `SIMD_GGX` has it
@@ -603,14 +652,7 @@ impl Lanes {
         } else {
             (metal.eval(wo, wi), metal.pdf(wo, wi))
         };
-        let f = f * wi.z.abs();
-        let f = if self.has_light[i] { f } else { Rgb::ZERO };
-        let pdf = if f != Rgb::ZERO && !self.light_delta[i] {
-            pdf
-        } else {
-            0.0
-        };
-        let outcome = self.light_outcome(i, f, pdf);
+        let outcome = self.light_outcome_of(i, wi, f, pdf);
 
         // The BSDF's sample.
         let (u_lobe, u_x) = (self.u_lobe[i], self.u_dir_x[i]);
@@ -624,6 +666,69 @@ impl Lanes {
         } else {
             metal.sample_at(wo, u_x, azimuth)
         };
+        let keep = self.kind[i] == Kind::ggx(GLASS, COMPENSATED);
+        self.store_sampled(i, (frame, wo), outcome, bs, keep);
+    }
+
+    /// [`Self::run`]'s PBR loop for lane `i`: [`Pbr`]'s `eval_pdf` and `sample_opaque_at` (its
+    /// layer table's lookups gathers from the lane's rows in `tables`), as `land` calls
+    /// `Pbr`'s through `Bsdf`; kept where the lane holds a PBR BSDF.
+    #[inline(always)]
+    fn run_pbr_lane(&mut self, i: usize, tables: &LaneTables) {
+        let (frame, wo) = self.frame(i, false);
+        let pbr = Pbr {
+            base_color: self.reflectance.get(i),
+            metallic: self.metallic[i],
+            transmission: 0.0,
+            eta: self.eta[i],
+            distribution: Ggx {
+                alpha_x: self.alpha[i],
+                alpha_y: self.alpha_y[i],
+            },
+            smooth: false,
+            transmits: false,
+            layer: &tables.pbr[i],
+            layer_node: (self.layer_node[i] as usize, self.layer_t[i]),
+            diffuse_norm: self.diffuse_norm[i],
+        };
+        let wi = frame.to_local(self.light_wi.get(i));
+        let (f, pdf) = pbr.eval_pdf(wo, wi);
+        let outcome = self.light_outcome_of(i, wi, f, pdf);
+        let azimuth = (self.azimuth[0][i], self.azimuth[1][i]);
+        let (u_lobe, cosine_dir) = (self.u_lobe[i], self.cosine_dir.get(i));
+        let bs = pbr.sample_opaque_at(wo, u_lobe, cosine_dir, self.u_dir_x[i], azimuth);
+        let keep = self.kind[i] == Kind::Pbr;
+        self.store_sampled(i, (frame, wo), outcome, bs, keep);
+    }
+
+    /// Next-event estimation's outcome for lane `i` from its BSDF's value `f` (without the
+    /// cosine) and density `pdf` toward the light sample `wi` (shading frame), as `land` uses
+    /// them: no value without a light sample, no density where the value is zero or the light
+    /// a delta.
+    #[inline(always)]
+    fn light_outcome_of(&self, i: usize, wi: Vec3, f: Rgb, pdf: f32) -> LightOutcome {
+        let f = f * wi.z.abs();
+        let f = if self.has_light[i] { f } else { Rgb::ZERO };
+        let pdf = if f != Rgb::ZERO && !self.light_delta[i] {
+            pdf
+        } else {
+            0.0
+        };
+        self.light_outcome(i, f, pdf)
+    }
+
+    /// Lane `i`'s results, where `keep`, from next-event estimation's `outcome` and the
+    /// BSDF's sample `bs` (`None`: the path ends) in the shading frame `frame` (`wo` toward the
+    /// viewer).
+    #[inline(always)]
+    fn store_sampled(
+        &mut self,
+        i: usize,
+        (frame, wo): (Frame, Vec3),
+        outcome: LightOutcome,
+        bs: Option<BsdfSample>,
+        keep: bool,
+    ) {
         let sample = match bs {
             Some(BsdfSample {
                 wi,
@@ -647,7 +752,6 @@ impl Lanes {
             },
         };
         let bounce = self.bounce_outcome(i, frame, wo, sample);
-        let keep = self.kind[i] == Kind::ggx(GLASS, COMPENSATED);
         self.store(i, keep, outcome, bounce);
     }
 
@@ -830,7 +934,8 @@ mod tests {
     use crate::render::scene::Overrides;
 
     /// Diffuse (textured and plain), glass (a smooth mesh and a sphere), gold, rough glass and
-    /// rough copper, plain and compensated (`multiscatter = true`), under every kind of light
+    /// rough copper, plain and compensated (`multiscatter = true`), glTF's BSDF (`pbr`: plastic,
+    /// metal, a textured mix, and those not taken: smooth, anisotropic), under every kind of light
     /// the lanes sample: a rectangle and a sphere that emit, a point light (delta) and a
     /// constant sky (left to BSDF sampling).
     const SCENE: &str = r#"
@@ -888,6 +993,34 @@ preset = "gold"
 roughness = 0.5
 multiscatter = true
 
+[materials.plastic]
+type = "pbr"
+base_color = [0.7, 0.1, 0.05]
+metallic = 0.0
+roughness = 0.5
+
+[materials.bronze]
+type = "pbr"
+base_color = [0.9, 0.6, 0.3]
+metallic = 1.0
+roughness = 0.3
+
+# Half its cells a rough mix of metal and plastic, half smooth metal (not taken).
+[materials.mixed]
+type = "pbr"
+base_color = { type = "checkerboard", color0 = [0.2, 0.5, 0.8], color1 = [0.9, 0.9, 0.9], scale = 6.0 }
+metallic = 1.0
+roughness = 1.0
+metallic_roughness = { type = "checkerboard", color0 = [0.0, 0.6, 0.3], color1 = [0.0, 0.0, 1.0], scale = 6.0 }
+
+# Anisotropic: not taken.
+[materials.satin]
+type = "pbr"
+base_color = [0.8, 0.8, 0.8]
+metallic = 1.0
+roughness = 0.3
+anisotropy = 0.7
+
 [[shapes]]
 type = "teapot"
 material = "glass"
@@ -935,6 +1068,30 @@ type = "sphere"
 center = [-0.8, 0.3, 2.5]
 radius = 0.3
 material = "worn"
+
+[[shapes]]
+type = "sphere"
+center = [1.5, 0.3, 2.2]
+radius = 0.3
+material = "plastic"
+
+[[shapes]]
+type = "sphere"
+center = [-1.6, 0.35, 0.2]
+radius = 0.35
+material = "bronze"
+
+[[shapes]]
+type = "sphere"
+center = [0.0, 0.9, -0.9]
+radius = 0.45
+material = "mixed"
+
+[[shapes]]
+type = "sphere"
+center = [1.7, 0.3, 0.2]
+radius = 0.3
+material = "satin"
 
 [[shapes]]
 type = "rectangle"
@@ -1031,7 +1188,7 @@ radiance = [0.2, 0.25, 0.3]
             let scene = scene(sampler);
             let (mut taken, mut glass, mut mirror, mut shadowed, mut ended) = (0, 0, 0, 0, 0);
             let (mut rough_glass, mut rough_metal) = (0, 0);
-            let (mut compensated_glass, mut compensated_metal) = (0, 0);
+            let (mut compensated_glass, mut compensated_metal, mut pbr) = (0, 0, 0);
             let (mut lanes, mut tables) = (Lanes::new(), LaneTables::new());
             let mut lane = 0;
             for y in 0..16 {
@@ -1065,6 +1222,7 @@ radiance = [0.2, 0.25, 0.3]
                                 rough_metal += (kind == Kind::RoughMetal) as u32;
                                 compensated_glass += (kind == Kind::CompensatedGlass) as u32;
                                 compensated_metal += (kind == Kind::CompensatedMetal) as u32;
+                                pbr += (kind == Kind::Pbr) as u32;
                                 lane = (lane + 1) % LANES;
                                 (goes_on, shadow)
                             } else {
@@ -1085,7 +1243,7 @@ radiance = [0.2, 0.25, 0.3]
                 }
             }
             // Every kind of vertex, light samples, and paths ended by roulette or absorption.
-            let rough = rough_glass + rough_metal + compensated_glass + compensated_metal;
+            let rough = rough_glass + rough_metal + compensated_glass + compensated_metal + pbr;
             let diffuse = taken - glass - mirror - rough;
             assert!(
                 diffuse > 200 && glass > 200 && mirror > 50,
@@ -1098,6 +1256,7 @@ radiance = [0.2, 0.25, 0.3]
                 (rough_metal, simd_ggx::ROUGH_METAL, 40),
                 (compensated_glass, simd_ggx::COMPENSATED_GLASS, 40),
                 (compensated_metal, simd_ggx::COMPENSATED_METAL, 40),
+                (pbr, simd_ggx::PBR, 50),
             ] {
                 if set & bit != 0 {
                     assert!(count > least, "{sampler} {set:b}: {count} of kind {bit:b}");
