@@ -392,9 +392,9 @@ impl<L: LayerLookup> Pbr<'_, L> {
     /// [`Self::sample`] of an opaque rough BSDF (no `transmission`, not smooth: those the lane
     /// vertex runs), with the cosine lobe's direction `cosine_dir` and the visible normal's
     /// azimuth given ([`Ggx::sample_visible_at`]), written without early returns: both lobes'
-    /// directions made, the chosen one evaluated. Without transmission a microfacet always reflects
-    /// ([`Self::reflect_prob`] is 1), so the choice is the first one, `u_lobe` against the
-    /// diffuse lobe's probability.
+    /// directions made, the chosen one evaluated. Without transmission a microfacet always
+    /// reflects ([`Self::reflect_prob`] is 1), so the choice is the first one, `u_lobe` against
+    /// the diffuse lobe's probability.
     #[inline(always)]
     pub fn sample_opaque_at(
         &self,

@@ -10,17 +10,17 @@
 //!    `sincosf`, `cosf`, `sinf` and the `Texture` and `Light` enums do not vectorise) into
 //!    structure-of-arrays [`Lanes`], a compensated BSDF's albedo tables (glTF's BSDF: the two
 //!    rows of its layer table it reads) into [`LaneTables`].
-//! 2. **The vertex** ([`Lanes::run`]), one loop over the lanes whose body is the scalar code's
-//!    own functions (shading frame, next-event estimation's BSDF value and MIS weight, Fresnel,
-//!    the throughput's update, the spawned rays, Russian roulette) with every decision a
-//!    select, so that the render loop's SIMD copies run it 8 or 16 lanes at a time; then, for
-//!    the lanes that hold a GGX BSDF, its own `eval`, `pdf` and `sample` ([`RoughDielectric`],
-//!    [`RoughConductor`], `CompensatedDielectric`, `CompensatedConductor`, [`Pbr`]), written without
-//!    early returns, whose results replace the first loop's there: a loop over all lanes per
-//!    BSDF (the tables' lookups gathers), for the BSDFs the render loop's copy vectorises
-//!    ([`simd_ggx`]); [`takes`] leaves the others to `land`. The functions these loops call
-//!    are inlined always: left to LLVM's choice (the Fresnel laws, once the GGX code called
-//!    them too), they stayed calls and the loops scalar.
+//! 2. **The vertex** ([`Lanes::run`]), one loop over the lanes whose body is the scalar code's own
+//!    functions (shading frame, next-event estimation's BSDF value and MIS weight, Fresnel, the
+//!    throughput's update, the spawned rays, Russian roulette) with every decision a select, so
+//!    that the render loop's SIMD copies run it 8 or 16 lanes at a time; then, for the lanes that
+//!    hold a GGX BSDF, its own `eval`, `pdf` and `sample` ([`RoughDielectric`], [`RoughConductor`],
+//!    `CompensatedDielectric`, `CompensatedConductor`, [`Pbr`]), written without early returns,
+//!    whose results replace the first loop's there: a loop over all lanes per BSDF (the tables'
+//!    lookups gathers), for the BSDFs the render loop's copy vectorises ([`simd_ggx`]); [`takes`]
+//!    leaves the others to `land`. The functions these loops call are inlined always: left to
+//!    LLVM's choice (the Fresnel laws, once the GGX code called them too), they stayed calls and
+//!    the loops scalar.
 //! 3. **Scatter**, lane by lane: the path's new ray and state, its deferred shadow test.
 //!
 //! Each lane runs the operations of `land` on the same numbers, so the image is `land`'s bit
