@@ -146,7 +146,7 @@ pub(super) mod simd_ggx {
     /// The AVX2 copy's: it vectorises these three loops 8 wide; the compensated conductor's
     /// and glTF's BSDF's it leaves scalar, and those loops, in every lane, cost more than
     /// `land` in the lanes that hold one (compensated gold 433 against 335 M instructions;
-    /// `pbr.toml` without absorption, one thread: 2.64 against 2.47 s with the AVX-512 copy).
+    /// `pbr.toml` without absorption, one thread: 2.04 against 1.28 s left to `land`).
     pub const AVX2: u32 = ROUGH_GLASS | ROUGH_METAL | COMPENSATED_GLASS;
     /// The AVX-512 copy's: all five vectorised 16 wide (compensated gold, one thread: 1.23 s
     /// against 1.33 s with its vertices left to `land`; `pbr.toml` without absorption: 1.31
