@@ -138,13 +138,23 @@ impl PbrMaterial {
         if self.normal_map.is_some() || self.anisotropy != 0.0 || self.transmission != 0.0 {
             return false;
         }
-        let roughness = match &self.metallic_roughness {
-            Some(t) => self.roughness * t.eval(uv).y,
-            None => self.roughness,
-        };
+        let (_, roughness) = self.metallic_roughness_at(uv);
         // `bsdf_at`'s alpha, and `Pbr::new`'s test of it (`alpha_t = alpha_b` without
         // anisotropy).
         roughness * roughness > 0.0
+    }
+
+    /// The metallic factor and perceptual roughness at `uv`: the factors times the
+    /// metallic-roughness texture's blue and green, where there is one.
+    #[inline(always)]
+    fn metallic_roughness_at(&self, uv: Vec2) -> (f32, f32) {
+        let (mut metallic, mut roughness) = (self.metallic, self.roughness);
+        if let Some(t) = &self.metallic_roughness {
+            let c = t.eval(uv);
+            roughness *= c.y;
+            metallic *= c.z;
+        }
+        (metallic, roughness)
     }
 
     /// The BSDF at texture coordinates `uv` (`transmits`: [`Self::has_transmission`]), its
@@ -153,12 +163,7 @@ impl PbrMaterial {
     #[inline]
     pub fn bsdf_at(&self, uv: Vec2, transmits: bool) -> Pbr<'_> {
         let base = self.base_color.eval(uv);
-        let (mut metallic, mut roughness) = (self.metallic, self.roughness);
-        if let Some(t) = &self.metallic_roughness {
-            let c = t.eval(uv);
-            roughness *= c.y;
-            metallic *= c.z;
-        }
+        let (metallic, roughness) = self.metallic_roughness_at(uv);
         let alpha = roughness * roughness;
         let alpha_t = alpha + (1.0 - alpha) * self.anisotropy * self.anisotropy;
         Pbr::new(

@@ -434,8 +434,19 @@ fn along_row(r: &[f32; MU_NODES], mu: f32) -> f32 {
     r[i] + t * (r[i + 1] - r[i])
 }
 
-/// `E(mu)` at the roughness node `(k, t)` from the rows of nodes `k` (`lower`; the exact
-/// Fresnel at `k = 0`) and `k + 1` (`upper`).
+/// `E(mu)` at the roughness node `k` from its row `r`: the exact Fresnel at `k = 0` (smooth),
+/// [`along_row`] above.
+#[inline(always)]
+fn at_node(eta: f32, r: &[f32; MU_NODES], k: usize, mu: f32) -> f32 {
+    if k == 0 {
+        fresnel_f32::dielectric(mu.clamp(0.0, 1.0), eta).0
+    } else {
+        along_row(r, mu)
+    }
+}
+
+/// `E(mu)` at the roughness node `(k, t)` from the rows of nodes `k` (`lower`) and `k + 1`
+/// (`upper`).
 #[inline(always)]
 fn between_rows(
     eta: f32,
@@ -443,11 +454,7 @@ fn between_rows(
     (k, t): (usize, f32),
     mu: f32,
 ) -> f32 {
-    let a = if k == 0 {
-        fresnel_f32::dielectric(mu.clamp(0.0, 1.0), eta).0
-    } else {
-        along_row(lower, mu)
-    };
+    let a = at_node(eta, lower, k, mu);
     if t > 0.0 {
         a + t * (along_row(upper, mu) - a)
     } else {
@@ -611,10 +618,7 @@ impl LayerAlbedo {
     /// `E(mu)` at the roughness node `k`.
     #[inline]
     fn row(&self, k: usize, mu: f32) -> f32 {
-        if k == 0 {
-            return fresnel_f32::dielectric(mu.clamp(0.0, 1.0), self.eta).0;
-        }
-        along_row(&self.e[k], mu)
+        at_node(self.eta, &self.e[k], k, mu)
     }
 
     /// `E_avg` at the roughness [`Self::node`] `(k, t)`.

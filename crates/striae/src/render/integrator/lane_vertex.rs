@@ -268,7 +268,7 @@ pub(super) struct Lanes {
     diffuse_norm: [f32; LANES],
     /// The lanes that hold each GGX kind, as bits, at [`ggx_slot`] (the PBR BSDF's at
     /// [`PBR_SLOT`]).
-    ggx: [u32; 5],
+    ggx: [u32; PBR_SLOT + 1],
 
     // Results: the shadow test (`shadow_radiance` counts where `shadowed`), the bounce (where
     // `scattered`), the state after it, whether the path goes on. The flags are `u32` (0 or
@@ -362,7 +362,7 @@ impl Lanes {
             layer_node: [0; LANES],
             layer_t: f,
             diffuse_norm: f,
-            ggx: [0; 5],
+            ggx: [0; PBR_SLOT + 1],
             shadowed: [0; LANES],
             shadow_o: v,
             shadow_t_max: f,
@@ -510,7 +510,7 @@ impl Lanes {
                 self.run_pbr_lane(i, tables);
             }
         }
-        self.ggx = [0; 5];
+        self.ggx = [0; PBR_SLOT + 1];
     }
 
     /// [`Self::run`]'s GGX loop for one kind, in every lane, where the set `SIMD_GGX` has it
