@@ -157,7 +157,8 @@ pub(super) mod simd_ggx {
 /// The lane vertex's BSDF for the vertex of a path at `depth` whose ray met `hit`, arriving
 /// along `d`, if it takes it: a diffuse, dielectric or conductor material, smooth or rough (or
 /// scratched glass seen from inside) on a shape that emits nothing, below the depth limit
-/// (what `land` does there and nothing more, in a scene [`applies`] to). The GGX kinds only
+/// (what `land` does there after Beer-Lambert absorption, which the lane loop applies to the path
+/// first). The GGX kinds only
 /// where the render loop's copy runs them in SIMD lanes (`SIMD_GGX`, a [`simd_ggx`] set).
 #[inline(always)]
 pub(super) fn takes<const SIMD_GGX: u32>(
@@ -210,13 +211,6 @@ impl Soa3 {
         self.0[1][i] = v.y;
         self.0[2][i] = v.z;
     }
-}
-
-/// Whether a scene's plain vertices may run in lanes at all: `land` attenuates by absorption
-/// before anything else, which the lanes do not.
-#[inline(always)]
-pub(super) fn applies(scene: &Scene) -> bool {
-    !scene.has_absorption()
 }
 
 /// A lane's inputs and results, each field an array over the lanes.
@@ -398,6 +392,10 @@ impl Lanes {
         let depth = path.depth;
         let [u_choice, u_light_x, u_light_y, u_lobe, u_dir_x, u_dir_y, u_roulette] =
             path.bounce_numbers();
+        // `land`'s first step: Beer-Lambert along the segment that met the hit.
+        if scene.has_absorption() {
+            path.state.absorb(scene, &path.ray, hit);
+        }
         self.wo.set(i, -path.ray.d);
         self.p.set(i, hit.p);
         self.ng.set(i, hit.ng);
@@ -1013,6 +1011,16 @@ metallic = 1.0
 roughness = 1.0
 metallic_roughness = { type = "checkerboard", color0 = [0.0, 0.6, 0.3], color1 = [0.0, 0.0, 1.0], scale = 6.0 }
 
+# Opaque, yet absorbing behind its surface: seen from behind (the panel), its vertices are
+# attenuated first.
+[materials.tinted]
+type = "pbr"
+base_color = [0.6, 0.6, 0.6]
+metallic = 0.0
+roughness = 0.4
+attenuation_color = [0.5, 0.7, 0.9]
+attenuation_distance = 0.5
+
 # Anisotropic: not taken.
 [materials.satin]
 type = "pbr"
@@ -1092,6 +1100,11 @@ type = "sphere"
 center = [1.7, 0.3, 0.2]
 radius = 0.3
 material = "satin"
+
+[[shapes]]
+type = "rectangle"
+material = "tinted"
+transform = [{ scale = 0.5 }, { rotate = { axis = [0, 1, 0], angle = 180 } }, { translate = [-1.5, 1.3, -1.5] }]
 
 [[shapes]]
 type = "rectangle"
@@ -1189,6 +1202,7 @@ radiance = [0.2, 0.25, 0.3]
             let (mut taken, mut glass, mut mirror, mut shadowed, mut ended) = (0, 0, 0, 0, 0);
             let (mut rough_glass, mut rough_metal) = (0, 0);
             let (mut compensated_glass, mut compensated_metal, mut pbr) = (0, 0, 0);
+            let mut absorbed = 0;
             let (mut lanes, mut tables) = (Lanes::new(), LaneTables::new());
             let mut lane = 0;
             for y in 0..16 {
@@ -1201,6 +1215,13 @@ radiance = [0.2, 0.25, 0.3]
                         loop {
                             let hit = scene.geometry.intersect(&a.ray);
                             let kind = hit.as_ref().and_then(|h| takes_in(set, &scene, h, &a));
+                            // Behind an absorbing surface: `land` attenuates the path first.
+                            let attenuated = hit.as_ref().is_some_and(|h| {
+                                let m = scene.geometry.shapes()[h.shape as usize].material;
+                                scene.materials.get(m as usize).is_some_and(|m| {
+                                    m.absorption().is_some() && a.ray.d.dot(h.ng) > 0.0
+                                })
+                            });
                             let la = a.land::<false, true>(&scene, hit, &mut wa);
                             let (goes_on, shadow) = if let Some(kind) = kind {
                                 let hit: SurfaceHit = hit.unwrap();
@@ -1223,6 +1244,7 @@ radiance = [0.2, 0.25, 0.3]
                                 compensated_glass += (kind == Kind::CompensatedGlass) as u32;
                                 compensated_metal += (kind == Kind::CompensatedMetal) as u32;
                                 pbr += (kind == Kind::Pbr) as u32;
+                                absorbed += attenuated as u32;
                                 lane = (lane + 1) % LANES;
                                 (goes_on, shadow)
                             } else {
@@ -1265,6 +1287,10 @@ radiance = [0.2, 0.25, 0.3]
                 }
             }
             assert!(shadowed > 200 && ended > 50, "{shadowed} {ended}");
+            // Vertices attenuated before they shade (taken with glTF's BSDF).
+            if set & simd_ggx::PBR != 0 {
+                assert!(absorbed > 20, "{sampler}: {absorbed} vertices attenuated");
+            }
         }
     }
 }

@@ -205,7 +205,6 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool, const SIMD_GGX: u32>(
     let mut shadows: [Option<ShadowTest>; LANES] = [None; LANES];
     // Lanes as bits: running a path; whose hit came with the camera ray's packet.
     let (mut running, mut traced) = (0u32, 0u32);
-    let plain_lanes = lane_vertex::applies(scene);
     // Two `let`s, not one of a pair: made as a pair, the AVX2 copy's cost model keeps the
     // dielectrics' GGX loops scalar (`objdump -d` shows no `vsqrtps ymm` of theirs).
     let mut vertices = Lanes::new();
@@ -254,7 +253,7 @@ pub(super) fn render_tile<const DIFFERENTIALS: bool, const SIMD_GGX: u32>(
         // that ended.
         let (mut shadowed, mut ended, mut plain) = (0u32, 0u32, 0u32);
         for i in lanes_of(running) {
-            if let Some(hit) = hits[i].as_ref().filter(|_| plain_lanes) {
+            if let Some(hit) = hits[i].as_ref() {
                 let path = &mut lanes[i];
                 if let Some(kind) =
                     lane_vertex::takes::<SIMD_GGX>(scene, hit, path.depth, path.ray.d)

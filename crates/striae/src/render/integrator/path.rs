@@ -617,7 +617,7 @@ impl PathState {
     /// not tracked: a segment inside an absorbing object that ends on another object's front
     /// side is not attenuated.
     #[inline(never)]
-    fn absorb(&mut self, scene: &Scene, ray: &Ray, hit: &SurfaceHit) {
+    pub(super) fn absorb(&mut self, scene: &Scene, ray: &Ray, hit: &SurfaceHit) {
         let material = scene.geometry.shapes()[hit.shape as usize].material;
         if material == NO_MATERIAL || !(ray.d.dot(hit.ng) > 0.0) {
             return;
