@@ -130,18 +130,38 @@ impl PbrMaterial {
         (frame, Bsdf::Pbr(bsdf))
     }
 
-    /// Whether the BSDF at `uv` is one the lane vertex runs: opaque (no transmission) and rough
-    /// (not [`Pbr::smooth`]) in the hit's own shading frame (no normal map, no anisotropy).
-    /// Reads the metallic-roughness texture, where there is one.
+    /// Whether the BSDF at `uv` is one the lane vertex runs as glTF's: opaque (no transmission)
+    /// and rough (not [`Pbr::smooth`]) in the hit's own shading frame. Reads the
+    /// metallic-roughness texture, where there is one.
     #[inline(always)]
     pub fn is_plain_rough_at(&self, uv: Vec2) -> bool {
-        if self.normal_map.is_some() || self.anisotropy != 0.0 || self.transmission != 0.0 {
+        if !self.in_own_frame() || self.transmission != 0.0 {
             return false;
         }
         let (_, roughness) = self.metallic_roughness_at(uv);
         // `bsdf_at`'s alpha, and `Pbr::new`'s test of it (`alpha_t = alpha_b` without
         // anisotropy).
         roughness * roughness > 0.0
+    }
+
+    /// Whether the BSDF at `uv` is clear smooth glass in the hit's own shading frame: all
+    /// transmission, no metal, smooth. It is then a delta BSDF whose [`Pbr::sample`] gives
+    /// [`super::bsdf::Dielectric`]'s samples bit for bit, the refraction's weight times the base
+    /// colour, and the lane vertex runs it as such. Reads the metallic-roughness texture, where
+    /// there is one.
+    #[inline(always)]
+    pub fn is_clear_glass_at(&self, uv: Vec2) -> bool {
+        if !self.in_own_frame() || self.transmission != 1.0 || !self.has_transmission() {
+            return false;
+        }
+        let (metallic, roughness) = self.metallic_roughness_at(uv);
+        metallic == 0.0 && roughness * roughness == 0.0
+    }
+
+    /// Whether the shading frame is the hit's own: no normal map, no anisotropy to turn it.
+    #[inline(always)]
+    fn in_own_frame(&self) -> bool {
+        self.normal_map.is_none() && self.anisotropy == 0.0
     }
 
     /// The metallic factor and perceptual roughness at `uv`: the factors times the

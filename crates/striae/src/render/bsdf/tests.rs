@@ -1252,6 +1252,45 @@ mod pbr {
         assert!(sampled < 48_000, "{sampled}");
     }
 
+    /// Clear smooth glass (all transmission, no metal, `alpha = 0`), as the lane vertex takes
+    /// it: a delta BSDF whose samples are [`Dielectric`]'s bit for bit, the refraction's weight
+    /// times the base colour, from outside and from inside.
+    #[test]
+    fn clear_smooth_glass_samples_as_the_tinted_dielectric_bit_for_bit() {
+        let mut rng = Pcg64::seed_from_u64(78);
+        let (mut mirrored, mut refracted) = (0, 0);
+        for n in 0..20_000 {
+            let base = Rgb::new(rng.random(), rng.random(), rng.random());
+            let eta = if n % 3 == 0 { 2.4 } else { 1.5 };
+            let b = Pbr::new(base, 0.0, 1.0, layer(eta), 0.0, 0.0, true);
+            assert!(Bsdf::Pbr(b).is_delta());
+            let wo = dir(rng.random_range(0.0..3.1), rng.random_range(0.0..6.3));
+            let u_lobe = rng.random();
+            let s = b.sample(wo, u_lobe, Vec2::new(rng.random(), rng.random()));
+            let d = Dielectric::new(eta).sample(wo, u_lobe).map(|mut d| {
+                if d.wi.z * wo.z < 0.0 {
+                    d.weight = base * d.weight.x;
+                }
+                d
+            });
+            let bits = |s: Option<BsdfSample>| {
+                s.map(|s| {
+                    let v = [s.wi.to_array(), s.weight.to_array()].concat();
+                    let v: Vec<u32> = v.into_iter().map(f32::to_bits).collect();
+                    (v, s.pdf.to_bits(), s.delta, s.eta.to_bits())
+                })
+            };
+            assert_eq!(bits(s), bits(d), "{eta} {base} {wo} {u_lobe}");
+            let s = s.expect("a smooth interface always samples");
+            mirrored += (s.wi.z * wo.z > 0.0) as u32;
+            refracted += (s.wi.z * wo.z < 0.0) as u32;
+        }
+        assert!(
+            mirrored > 500 && refracted > 10_000,
+            "{mirrored} {refracted}"
+        );
+    }
+
     /// Smooth (`alpha = 0`) with a diffuse lobe: the delta reflection and refraction are
     /// chosen with their discrete probabilities, weight times probability is the lobe's
     /// reflectance, and the diffuse samples follow `pdf` (which integrates to their share).

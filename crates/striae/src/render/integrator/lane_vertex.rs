@@ -181,6 +181,7 @@ pub(super) fn takes<const SIMD_GGX: u32>(
         Material::CompensatedDielectric(_) => Kind::CompensatedGlass,
         Material::CompensatedConductor(_) => Kind::CompensatedMetal,
         Material::Pbr(m) if m.is_plain_rough_at(hit.uv) => Kind::Pbr,
+        Material::Pbr(m) if m.is_clear_glass_at(hit.uv) => Kind::Glass,
         Material::Scratched(m) if m.has_transmission() && !m.reads_hit_context(-d, hit.ng) => {
             Kind::Glass
         }
@@ -435,6 +436,7 @@ impl Lanes {
             Material::Dielectric { eta, roughness } => {
                 self.eta[i] = *eta;
                 self.alpha[i] = *roughness;
+                self.reflectance.set(i, Rgb::ONE);
             }
             Material::CompensatedDielectric(c) => {
                 self.eta[i] = c.ss.eta;
@@ -448,6 +450,12 @@ impl Lanes {
                 self.alpha[i] = c.ss.distribution.alpha_x;
                 tables.metal[i] = c.albedo;
                 self.ms_scale.set(i, c.ms_scale);
+            }
+            Material::Pbr(m) if kind == Kind::Glass => {
+                // Clear smooth glass: the tint of its refraction and its index.
+                let pbr = m.bsdf_at(hit.uv, true);
+                self.reflectance.set(i, pbr.base_color);
+                self.eta[i] = pbr.eta;
             }
             Material::Pbr(m) => {
                 // (`shade`'s BSDF: the frame is the hit's own, `takes` saw to it.)
@@ -467,6 +475,7 @@ impl Lanes {
                     unreachable!("scratched glass has a smooth dielectric base")
                 };
                 self.eta[i] = base.eta;
+                self.reflectance.set(i, Rgb::ONE);
             }
             _ => unreachable!("`takes` took the material"),
         }
@@ -552,7 +561,8 @@ impl Lanes {
         let f = diffuse_eval(self.reflectance.get(i), wo, wi) * wi.z.abs();
         let outcome = self.light_outcome(i, f, diffuse_pdf(wo, wi));
 
-        // The BSDF's sample: `Diffuse::sample`, `Dielectric::sample` or `Conductor::sample`.
+        // The BSDF's sample: `Diffuse::sample`, `Dielectric::sample` (its refraction tinted by
+        // `reflectance`: white, or clear glTF glass's base colour) or `Conductor::sample`.
         let cosine_dir = self.cosine_dir.get(i);
         let (r, cos_t, eta_it) = fresnel_f32::dielectric(wo.z, self.eta[i]);
         let mirror = self.u_lobe[i] < r || r >= 1.0;
@@ -577,7 +587,7 @@ impl Lanes {
         } else {
             (
                 Vec3::new(-eta_ti * wo.x, -eta_ti * wo.y, cos_t),
-                Rgb::splat(eta_ti * eta_ti),
+                self.reflectance.get(i) * (eta_ti * eta_ti),
                 1.0 - r,
                 eta_it,
             )
@@ -1021,6 +1031,15 @@ roughness = 0.4
 attenuation_color = [0.5, 0.7, 0.9]
 attenuation_distance = 0.5
 
+# Clear smooth glass, tinted: taken as a dielectric.
+[materials.bottle]
+type = "pbr"
+base_color = [0.6, 0.9, 0.7]
+metallic = 0.0
+roughness = 0.0
+transmission = 1.0
+ior = 1.45
+
 # Anisotropic: not taken.
 [materials.satin]
 type = "pbr"
@@ -1100,6 +1119,12 @@ type = "sphere"
 center = [1.7, 0.3, 0.2]
 radius = 0.3
 material = "satin"
+
+[[shapes]]
+type = "sphere"
+center = [0.35, 0.9, 1.6]
+radius = 0.28
+material = "bottle"
 
 [[shapes]]
 type = "rectangle"
@@ -1202,7 +1227,7 @@ radiance = [0.2, 0.25, 0.3]
             let (mut taken, mut glass, mut mirror, mut shadowed, mut ended) = (0, 0, 0, 0, 0);
             let (mut rough_glass, mut rough_metal) = (0, 0);
             let (mut compensated_glass, mut compensated_metal, mut pbr) = (0, 0, 0);
-            let mut absorbed = 0;
+            let (mut absorbed, mut clear_pbr) = (0, 0);
             let (mut lanes, mut tables) = (Lanes::new(), LaneTables::new());
             let mut lane = 0;
             for y in 0..16 {
@@ -1245,6 +1270,10 @@ radiance = [0.2, 0.25, 0.3]
                                 compensated_metal += (kind == Kind::CompensatedMetal) as u32;
                                 pbr += (kind == Kind::Pbr) as u32;
                                 absorbed += attenuated as u32;
+                                let m = scene.geometry.shapes()[hit.shape as usize].material;
+                                clear_pbr += (kind == Kind::Glass
+                                    && matches!(scene.materials[m as usize], Material::Pbr(_)))
+                                    as u32;
                                 lane = (lane + 1) % LANES;
                                 (goes_on, shadow)
                             } else {
@@ -1287,10 +1316,15 @@ radiance = [0.2, 0.25, 0.3]
                 }
             }
             assert!(shadowed > 200 && ended > 50, "{shadowed} {ended}");
-            // Vertices attenuated before they shade (taken with glTF's BSDF).
+            // Vertices attenuated before they shade (taken with glTF's BSDF), and clear glTF
+            // glass taken as a dielectric in every set.
             if set & simd_ggx::PBR != 0 {
                 assert!(absorbed > 20, "{sampler}: {absorbed} vertices attenuated");
             }
+            assert!(
+                clear_pbr > 50,
+                "{sampler}: {clear_pbr} clear glTF glass vertices"
+            );
         }
     }
 }
