@@ -1,8 +1,9 @@
 //! The vertex of a plain material in lanes: [`Path::land`]'s operations for up to [`LANES`]
 //! paths at once where their rays met a diffuse surface, a smooth dielectric (scratched glass
-//! seen from inside included: its smooth base), a smooth conductor, a rough (GGX) dielectric
-//! or conductor, with or without multiple-scattering compensation, or glTF's metallic-roughness
-//! BSDF where it is opaque and rough in the hit's own frame ([`Kind`]), in three stages:
+//! seen from inside included: its smooth base; and glTF's clear smooth glass, its refraction
+//! tinted), a smooth conductor, a rough (GGX) dielectric or conductor, with or without
+//! multiple-scattering compensation, or glTF's metallic-roughness BSDF where it is opaque and
+//! rough in the hit's own frame ([`Kind`]), in three stages:
 //!
 //! 1. **Gather**, lane by lane: the hit, the path's throughput, the bounce's random numbers
 //!    (the dimensions `land` reads, drawn in its order), the texture, the light sample, the
@@ -156,10 +157,10 @@ pub(super) mod simd_ggx {
 
 /// The lane vertex's BSDF for the vertex of a path at `depth` whose ray met `hit`, arriving
 /// along `d`, if it takes it: a diffuse, dielectric or conductor material, smooth or rough (or
-/// scratched glass seen from inside) on a shape that emits nothing, below the depth limit
-/// (what `land` does there after Beer-Lambert absorption, which the lane loop applies to the path
-/// first). The GGX kinds only
-/// where the render loop's copy runs them in SIMD lanes (`SIMD_GGX`, a [`simd_ggx`] set).
+/// scratched glass seen from inside, or glTF's BSDF where opaque and rough or clear smooth
+/// glass) on a shape that emits nothing, below the depth limit (what `land` does there after
+/// Beer-Lambert absorption, which `Lanes::gather` applies first). The GGX kinds only where the
+/// render loop's copy runs them in SIMD lanes (`SIMD_GGX`, a [`simd_ggx`] set).
 #[inline(always)]
 pub(super) fn takes<const SIMD_GGX: u32>(
     scene: &Scene,

@@ -33,13 +33,12 @@
 //!   render loops drive: the one-path loop (the reference: each pixel's samples one after
 //!   another, a path from its camera ray to its end) and the lane loop (`render.lanes`,
 //!   `lanes`: [`LANES`] paths of a tile in flight, each stage run for all of them), which runs
-//!   the vertices of diffuse, smooth dielectric and smooth conductor surfaces in SIMD lanes
-//!   (`lane_vertex`, `land`'s operations as selects, bit for bit), and those of rough (GGX)
-//!   ones, compensated or not, and of glTF's BSDF where opaque and rough, in the same stages
-//!   where that is measured to pay in the copy (AVX-512: all; AVX2: rough glass and metal,
-//!   compensated glass; `lane_vertex::simd_ggx`).
-//!   They give the same image bit for bit wherever no material reads a pixel's footprint
-//!   (`tests/lanes.rs`).
+//!   the vertices of diffuse, smooth dielectric (glTF's clear smooth glass included) and smooth
+//!   conductor surfaces in SIMD lanes (`lane_vertex`, `land`'s operations as selects, bit for
+//!   bit), and those of rough (GGX) ones, compensated or not, and of glTF's BSDF where opaque
+//!   and rough, in the same stages where that is measured to pay in the copy (AVX-512: all;
+//!   AVX2: rough glass and metal, compensated glass; `lane_vertex::simd_ggx`). They give the
+//!   same image bit for bit wherever no material reads a pixel's footprint (`tests/lanes.rs`).
 
 mod lane_vertex;
 mod lanes;
