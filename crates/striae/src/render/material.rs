@@ -147,8 +147,8 @@ impl PbrMaterial {
     /// Whether the BSDF at `uv` is clear smooth glass in the hit's own shading frame: all
     /// transmission, no metal, smooth. It is then a delta BSDF whose [`Pbr::sample`] gives
     /// [`super::bsdf::Dielectric`]'s samples bit for bit, the refraction's weight times the base
-    /// colour, and the lane vertex runs it as such. Reads the metallic-roughness texture, where
-    /// there is one.
+    /// colour (but none for `wo` in the surface), and the lane vertex runs it as such. Reads
+    /// the metallic-roughness texture, where there is one.
     #[inline(always)]
     pub fn is_clear_glass_at(&self, uv: Vec2) -> bool {
         if !self.in_own_frame() || self.transmission != 1.0 || !self.has_transmission() {

@@ -1254,7 +1254,7 @@ mod pbr {
 
     /// Clear smooth glass (all transmission, no metal, `alpha = 0`), as the lane vertex takes
     /// it: a delta BSDF whose samples are [`Dielectric`]'s bit for bit, the refraction's weight
-    /// times the base colour, from outside and from inside.
+    /// times the base colour, from outside and from inside (in the surface it gives none).
     #[test]
     fn clear_smooth_glass_samples_as_the_tinted_dielectric_bit_for_bit() {
         let mut rng = Pcg64::seed_from_u64(78);
@@ -1289,6 +1289,12 @@ mod pbr {
             mirrored > 500 && refracted > 10_000,
             "{mirrored} {refracted}"
         );
+        // The one difference, which the lane vertex keeps: `wo` in the surface.
+        let b = Pbr::new(Rgb::ONE, 0.0, 1.0, layer(1.5), 0.0, 0.0, true);
+        for wo in [Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.6, 0.8, -0.0)] {
+            assert!(b.sample(wo, 0.5, Vec2::splat(0.5)).is_none());
+            assert!(Dielectric::new(1.5).sample(wo, 0.5).is_some());
+        }
     }
 
     /// Smooth (`alpha = 0`) with a diffuse lobe: the delta reflection and refraction are

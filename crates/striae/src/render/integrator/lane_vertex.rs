@@ -242,9 +242,13 @@ pub(super) struct Lanes {
     pdf_light: [f32; LANES],
     light_delta: [bool; LANES],
     has_light: [bool; LANES],
-    // Glass: the relative index and the lobe's number; mirror: the complex index.
+    // Glass: the relative index and the lobe's number, the refraction's tint in `reflectance`
+    // (white but for glTF's clear glass), and whether it gives no sample for `wo` in the surface
+    // (1 for glTF's clear glass: `Pbr::sample` gives none there, `Dielectric::sample` a
+    // mirror); mirror: the complex index.
     eta: [f32; LANES],
     u_lobe: [f32; LANES],
+    none_in_surface: [u32; LANES],
     ior_eta: Soa3,
     ior_k: Soa3,
     // Rough: GGX's alpha, the visible normal's numbers (the first, and the azimuth's cosine
@@ -347,6 +351,7 @@ impl Lanes {
             has_light: b,
             eta: f,
             u_lobe: f,
+            none_in_surface: [0; LANES],
             ior_eta: Soa3::splat(Vec3::ONE),
             ior_k: Soa3::splat(Vec3::ONE),
             alpha: f,
@@ -438,6 +443,7 @@ impl Lanes {
                 self.eta[i] = *eta;
                 self.alpha[i] = *roughness;
                 self.reflectance.set(i, Rgb::ONE);
+                self.none_in_surface[i] = 0;
             }
             Material::CompensatedDielectric(c) => {
                 self.eta[i] = c.ss.eta;
@@ -457,6 +463,7 @@ impl Lanes {
                 let pbr = m.bsdf_at(hit.uv, true);
                 self.reflectance.set(i, pbr.base_color);
                 self.eta[i] = pbr.eta;
+                self.none_in_surface[i] = 1;
             }
             Material::Pbr(m) => {
                 // (`shade`'s BSDF: the frame is the hit's own, `takes` saw to it.)
@@ -477,6 +484,7 @@ impl Lanes {
                 };
                 self.eta[i] = base.eta;
                 self.reflectance.set(i, Rgb::ONE);
+                self.none_in_surface[i] = 0;
             }
             _ => unreachable!("`takes` took the material"),
         }
@@ -594,8 +602,10 @@ impl Lanes {
             )
         };
         // `Diffuse::sample` and `Conductor::sample` give none below the surface (or at a zero
-        // density).
-        let sampled = transmits || !(wo.z <= 0.0);
+        // density), glTF's clear glass none in it (`wo.z` zero, or NaN).
+        let in_surface = wo.z == 0.0 || wo.z.is_nan();
+        let sampled =
+            (transmits && !(self.none_in_surface[i] != 0 && in_surface)) || !(wo.z <= 0.0);
         let sample = LaneSample {
             sampled,
             wi,
