@@ -430,6 +430,12 @@ impl Lanes {
                 .set(i, square_to_cosine_hemisphere(Vec2::new(u_dir_x, u_dir_y)));
         }
         self.u_lobe[i] = u_lobe;
+        if kind == Kind::Glass {
+            // A dielectric's refraction untinted, sampled in the surface too (glTF's clear
+            // glass sets both below).
+            self.reflectance.set(i, Rgb::ONE);
+            self.none_in_surface[i] = 0;
+        }
         match material {
             Material::Diffuse { reflectance } => {
                 self.reflectance.set(i, reflectance.eval(hit.uv));
@@ -442,8 +448,6 @@ impl Lanes {
             Material::Dielectric { eta, roughness } => {
                 self.eta[i] = *eta;
                 self.alpha[i] = *roughness;
-                self.reflectance.set(i, Rgb::ONE);
-                self.none_in_surface[i] = 0;
             }
             Material::CompensatedDielectric(c) => {
                 self.eta[i] = c.ss.eta;
@@ -483,8 +487,6 @@ impl Lanes {
                     unreachable!("scratched glass has a smooth dielectric base")
                 };
                 self.eta[i] = base.eta;
-                self.reflectance.set(i, Rgb::ONE);
-                self.none_in_surface[i] = 0;
             }
             _ => unreachable!("`takes` took the material"),
         }
