@@ -142,9 +142,10 @@ fn scratched_glass_seen_from_inside_runs_in_lanes_bit_for_bit() {
 
 #[test]
 fn rough_glass_and_metal_run_in_lanes_bit_for_bit() {
-    // GGX glass and gold, plain and compensated (the lane vertex's GGX loops), each scene with
-    // and without the lanes, and the lanes in every compiled copy (each runs the GGX vertices it
-    // vectorises in SIMD lanes and leaves the others to the one-path vertex).
+    // GGX glass and gold, plain and compensated, and rough glTF glass (the lane vertex's GGX
+    // loops), each scene with and without the lanes, and the lanes in every compiled copy (each
+    // runs the GGX vertices it vectorises in SIMD lanes and leaves the others to the one-path
+    // vertex).
     let frosted = include_str!("../scenes/glass-teapot.toml")
         .replace("ior = 1.5", "ior = 1.5\nroughness = 0.25");
     let brushed = include_str!("../scenes/metal-teapot.toml")
@@ -152,7 +153,14 @@ fn rough_glass_and_metal_run_in_lanes_bit_for_bit() {
     // And compensated (`multiscatter = true`): the same BSDFs with their albedo tables.
     let compensated = |text: &str| text.replace("roughness", "multiscatter = true\nroughness");
     let (milky, worn) = (compensated(&frosted), compensated(&brushed));
-    for text in [frosted, brushed, milky, worn] {
+    // And glTF's BSDF with rough absorbing glass (`pbr.toml`'s, made rough).
+    let smooth_gltf = include_str!("../scenes/pbr.toml");
+    let frosted_gltf = smooth_gltf.replace(
+        "roughness = 0.0\ntransmission = 1.0",
+        "roughness = 0.3\ntransmission = 1.0",
+    );
+    assert_ne!(smooth_gltf, frosted_gltf);
+    for text in [frosted, brushed, milky, worn, frosted_gltf] {
         assert!(text.contains("roughness"));
         let lanes = parse_small(&text, true);
         assert_lanes_bit_for_bit(&parse_small(&text, false), &lanes);

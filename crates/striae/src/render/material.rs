@@ -130,12 +130,12 @@ impl PbrMaterial {
         (frame, Bsdf::Pbr(bsdf))
     }
 
-    /// Whether the BSDF at `uv` is one the lane vertex runs as glTF's: opaque (no transmission)
-    /// and rough (not [`Pbr::smooth`]) in the hit's own shading frame. Reads the
+    /// Whether the BSDF at `uv` is one the lane vertex runs as glTF's: rough (not
+    /// [`Pbr::smooth`]) in the hit's own shading frame, opaque or transmitting. Reads the
     /// metallic-roughness texture, where there is one.
     #[inline(always)]
-    pub fn is_plain_rough_at(&self, uv: Vec2) -> bool {
-        if !self.in_own_frame() || self.transmission != 0.0 {
+    pub fn is_rough_at(&self, uv: Vec2) -> bool {
+        if !self.in_own_frame() {
             return false;
         }
         let (_, roughness) = self.metallic_roughness_at(uv);

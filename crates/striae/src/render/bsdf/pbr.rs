@@ -116,6 +116,15 @@ struct AtWo {
     p_diffuse: f32,
 }
 
+impl AtWo {
+    /// The weights for `wo` inside a transmitting BSDF: the tinted dielectric alone.
+    const INSIDE: AtWo = AtWo {
+        metallic: 0.0,
+        transmission: 1.0,
+        p_diffuse: 0.0,
+    };
+}
+
 #[inline(always)]
 fn mean(c: Rgb) -> f32 {
     (c.x + c.y + c.z) * (1.0 / 3.0)
@@ -193,11 +202,7 @@ impl<L: LayerLookup> Pbr<'_, L> {
             let (a, gives) = self.at_wo_outside(wo);
             gives.then_some(a)
         } else if wo.z < 0.0 && self.transmits {
-            Some(AtWo {
-                metallic: 0.0,
-                transmission: 1.0,
-                p_diffuse: 0.0,
-            })
+            Some(AtWo::INSIDE)
         } else {
             None
         }
@@ -389,14 +394,13 @@ impl<L: LayerLookup> Pbr<'_, L> {
         })
     }
 
-    /// [`Self::sample`] of an opaque rough BSDF (no `transmission`, not smooth: those the lane
-    /// vertex runs), with the cosine lobe's direction `cosine_dir` and the visible normal's
-    /// azimuth given ([`Ggx::sample_visible_at`]), written without early returns: both lobes'
-    /// directions made, the chosen one evaluated. Without transmission a microfacet always
-    /// reflects ([`Self::reflect_prob`] is 1), so the choice is the first one, `u_lobe` against
-    /// the diffuse lobe's probability.
+    /// [`Self::sample`] of a rough BSDF (not smooth: those the lane vertex runs), with the
+    /// cosine lobe's direction `cosine_dir` and the visible normal's azimuth given
+    /// ([`Ggx::sample_visible_at`]), written without early returns: the lobe weights outside
+    /// and inside both made and one kept, the diffuse, reflected and refracted directions all
+    /// made, the chosen one evaluated and tested as `sample` tests it.
     #[inline(always)]
-    pub fn sample_opaque_at(
+    pub fn sample_rough_at(
         &self,
         wo: Vec3,
         u_lobe: f32,
@@ -404,17 +408,45 @@ impl<L: LayerLookup> Pbr<'_, L> {
         u_x: f32,
         azimuth: (f32, f32),
     ) -> Option<BsdfSample> {
-        debug_assert!(self.transmission == 0.0 && !self.smooth && !self.transmits);
-        let (a, gives) = self.at_wo_outside(wo);
+        debug_assert!(!self.smooth);
+        // `at_wo`'s weights: outside, or inside a transmitting BSDF; none elsewhere.
+        let (outside, gives_outside) = self.at_wo_outside(wo);
+        let inside = wo.z < 0.0 && self.transmits;
+        let a = if inside { AtWo::INSIDE } else { outside };
+        let gives = (wo.z > 0.0 && gives_outside) || inside;
+        let diffuse = u_lobe < a.p_diffuse;
+        // `sample`'s reflect / refract choice through the visible normal `m`.
+        let u_choice = ((u_lobe - a.p_diffuse) / (1.0 - a.p_diffuse)).clamp(0.0, 1.0);
         let m = self
             .distribution
             .sample_visible_at(wo * wo.z.signum(), u_x, azimuth);
-        let diffuse = u_lobe < a.p_diffuse;
-        let wi = if diffuse { cosine_dir } else { reflect(wo, m) };
+        let wo_m = wo.dot(m);
+        let (fd, cos_t, eta_it) = fresnel_f32::dielectric(wo_m, self.eta);
+        let rho = self.reflect_prob(&a, wo_m, fd);
+        let reflects = u_choice < rho || rho >= 1.0;
+        let refracted = refract(wo, m, cos_t, 1.0 / eta_it).normalize();
+        let wi = if diffuse {
+            cosine_dir
+        } else if reflects {
+            reflect(wo, m)
+        } else {
+            refracted
+        };
+        let eta = if diffuse || reflects { 1.0 } else { eta_it };
         let (f, pdf) = self.eval_pdf_at(&a, wo, wi);
         // `sample`'s tests of each lobe's direction and value.
-        let valid = (pdf > 0.0) & (diffuse | (!(wi.z * wo.z <= 0.0) & (f != Rgb::ZERO)));
-        ((wo.z > 0.0) & gives & valid).then(|| BsdfSample::reflected(wi, f, pdf))
+        let side = wi.z * wo.z;
+        let direction =
+            diffuse | (reflects & !(side <= 0.0)) | (!reflects & !(side >= 0.0) & wi.is_finite());
+        let valid = (pdf > 0.0) & direction & (diffuse | (f != Rgb::ZERO));
+        (gives & valid).then(|| BsdfSample {
+            wi,
+            weight: f * (wi.z.abs() / pdf),
+            pdf,
+            delta: false,
+            eta,
+            from: None,
+        })
     }
 }
 

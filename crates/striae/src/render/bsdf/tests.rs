@@ -1170,12 +1170,13 @@ mod pbr {
         }
     }
 
-    /// The lane vertex's form of an opaque rough BSDF gives the scalar form's bits: `eval_pdf`
-    /// with the layer table read from a copy of two rows ([`LayerRows`]), and
-    /// `sample_opaque_at` against `sample` (the same numbers as the lane vertex hands them:
-    /// the cosine lobe's direction and the visible normal's azimuth made beforehand).
+    /// The lane vertex's form of a rough BSDF gives the scalar form's bits: `eval_pdf` with
+    /// the layer table read from a copy of two rows ([`LayerRows`]), and `sample_rough_at`
+    /// against `sample` (the same numbers as the lane vertex hands them: the cosine lobe's
+    /// direction and the visible normal's azimuth made beforehand), opaque and transmitting,
+    /// `wo` outside and inside.
     #[test]
-    fn opaque_lane_form_equals_the_scalar_bit_for_bit() {
+    fn rough_lane_form_equals_the_scalar_bit_for_bit() {
         use crate::optics::microfacet::visible_azimuth;
         use crate::sampling::square_to_cosine_hemisphere;
         fn bits(s: Option<BsdfSample>) -> Option<[u32; 9]> {
@@ -1196,15 +1197,22 @@ mod pbr {
             })
         }
         let mut rng = Pcg64::seed_from_u64(77);
-        let (mut sampled, mut diffuse) = (0, 0);
-        for n in 0..50_000 {
+        let (mut sampled, mut diffuse, mut refracted, mut from_inside) = (0, 0, 0, 0);
+        for n in 0..80_000 {
             let base = Rgb::new(rng.random(), rng.random(), rng.random());
-            // Plastic, metal and mixes.
+            // Plastic, metal and mixes; opaque, glass and partly transmitting.
             let metallic = match n % 3 {
                 0 => 0.0,
                 1 => 1.0,
                 _ => rng.random(),
             };
+            let transmission = match n % 4 {
+                0 | 1 => 0.0,
+                2 => 1.0,
+                _ => rng.random(),
+            };
+            // `PbrMaterial::has_transmission`.
+            let transmits = transmission > 0.0 && metallic < 1.0;
             let alpha_t = rng.random_range(1e-4f32..1.0);
             let alpha_b = if n % 2 == 0 {
                 alpha_t
@@ -1212,7 +1220,15 @@ mod pbr {
                 rng.random_range(1e-4f32..1.0)
             };
             let eta = if n % 5 == 0 { 2.4 } else { 1.5 };
-            let b = Pbr::new(base, metallic, 0.0, layer(eta), alpha_t, alpha_b, false);
+            let b = Pbr::new(
+                base,
+                metallic,
+                transmission,
+                layer(eta),
+                alpha_t,
+                alpha_b,
+                transmits,
+            );
             let rows = LayerRows::of(b.layer, b.layer_node);
             let lane = Pbr {
                 layer: &rows,
@@ -1226,8 +1242,8 @@ mod pbr {
                 layer_node: b.layer_node,
                 diffuse_norm: b.diffuse_norm,
             };
-            // Mostly above the surface, some below (where both give nothing).
-            let wo = dir(rng.random_range(0.0..1.7), rng.random_range(0.0..6.3));
+            // Mostly above the surface, some below (where only a transmitting BSDF gives).
+            let wo = dir(rng.random_range(0.0..2.2), rng.random_range(0.0..6.3));
             let wi = dir(rng.random_range(0.0..3.2), rng.random_range(0.0..6.3));
             let (f, pdf) = b.eval_pdf(wo, wi);
             let (f_lane, pdf_lane) = lane.eval_pdf(wo, wi);
@@ -1239,17 +1255,23 @@ mod pbr {
             let (u_lobe, u) = (rng.random(), Vec2::new(rng.random(), rng.random()));
             let s = b.sample(wo, u_lobe, u);
             let cosine_dir = square_to_cosine_hemisphere(u);
-            let s_lane = lane.sample_opaque_at(wo, u_lobe, cosine_dir, u.x, visible_azimuth(u.y));
+            let s_lane = lane.sample_rough_at(wo, u_lobe, cosine_dir, u.x, visible_azimuth(u.y));
             assert_eq!(bits(s), bits(s_lane), "{b:?} {wo} {u_lobe} {u}");
             sampled += s.is_some() as u32;
             diffuse += s.is_some_and(|s| s.wi == cosine_dir) as u32;
+            refracted += s.is_some_and(|s| s.wi.z * wo.z < 0.0) as u32;
+            from_inside += s.is_some_and(|_| wo.z < 0.0) as u32;
         }
-        // Both lobes sampled, and some samples refused.
+        // Every lobe sampled, from both sides, and some samples refused.
         assert!(
-            diffuse > 5_000 && sampled - diffuse > 5_000,
+            diffuse > 5_000 && sampled - diffuse - refracted > 5_000,
             "{diffuse} {sampled}"
         );
-        assert!(sampled < 48_000, "{sampled}");
+        assert!(
+            refracted > 5_000 && from_inside > 2_000,
+            "{refracted} {from_inside}"
+        );
+        assert!(sampled < 76_000, "{sampled}");
     }
 
     /// Clear smooth glass (all transmission, no metal, `alpha = 0`), as the lane vertex takes

@@ -2,8 +2,8 @@
 //! paths at once where their rays met a diffuse surface, a smooth dielectric (scratched glass
 //! seen from inside included: its smooth base; and glTF's clear smooth glass, its refraction
 //! tinted), a smooth conductor, a rough (GGX) dielectric or conductor, with or without
-//! multiple-scattering compensation, or glTF's metallic-roughness BSDF where it is opaque and
-//! rough in the hit's own frame ([`Kind`]), in three stages:
+//! multiple-scattering compensation, or glTF's metallic-roughness BSDF where it is rough in the
+//! hit's own frame, opaque or transmitting ([`Kind`]), in three stages:
 //!
 //! 1. **Gather**, lane by lane: the hit, the path's throughput, the bounce's random numbers
 //!    (the dimensions `land` reads, drawn in its order), the texture, the light sample, the
@@ -67,8 +67,8 @@ pub(super) enum Kind {
     CompensatedGlass,
     /// A `CompensatedConductor` (`multiscatter = true`), with next-event estimation.
     CompensatedMetal,
-    /// glTF's metallic-roughness `Pbr`, opaque and rough in the hit's own frame
-    /// (`PbrMaterial::is_plain_rough_at`), with next-event estimation.
+    /// glTF's metallic-roughness `Pbr`, rough in the hit's own frame, opaque or transmitting
+    /// (`PbrMaterial::is_rough_at`), with next-event estimation.
     Pbr,
 }
 
@@ -157,8 +157,7 @@ pub(super) mod simd_ggx {
 
 /// The lane vertex's BSDF for the vertex of a path at `depth` whose ray met `hit`, arriving
 /// along `d`, if it takes it: a diffuse, dielectric or conductor material, smooth or rough (or
-/// scratched glass seen from inside, or glTF's BSDF where opaque and rough or clear smooth
-/// glass) on a shape that emits nothing, below the depth limit (what `land` does there after
+/// scratched glass seen from inside, or glTF's BSDF where rough or clear smooth glass) on a shape that emits nothing, below the depth limit (what `land` does there after
 /// Beer-Lambert absorption, which `Lanes::gather` applies first). The GGX kinds only where the
 /// render loop's copy runs them in SIMD lanes (`SIMD_GGX`, a [`simd_ggx`] set).
 #[inline(always)]
@@ -181,7 +180,7 @@ pub(super) fn takes<const SIMD_GGX: u32>(
         Material::Conductor { .. } => Kind::Mirror,
         Material::CompensatedDielectric(_) => Kind::CompensatedGlass,
         Material::CompensatedConductor(_) => Kind::CompensatedMetal,
-        Material::Pbr(m) if m.is_plain_rough_at(hit.uv) => Kind::Pbr,
+        Material::Pbr(m) if m.is_rough_at(hit.uv) => Kind::Pbr,
         Material::Pbr(m) if m.is_clear_glass_at(hit.uv) => Kind::Glass,
         Material::Scratched(m) if m.has_transmission() && !m.reads_hit_context(-d, hit.ng) => {
             Kind::Glass
@@ -259,9 +258,12 @@ pub(super) struct Lanes {
     // Compensated conductor: the colour term (the tables are in `LaneTables`).
     ms_scale: Soa3,
     // PBR: the base colour is `reflectance`, the index `eta`, GGX's `alpha_x` `alpha`; the
-    // metallic factor, `alpha_y`, the layer table's roughness node (its rows in `LaneTables`),
-    // the diffuse lobe's normalisation.
+    // metallic factor, the transmission factor and whether the material transmits (1) or not
+    // (0), `alpha_y`, the layer table's roughness node (its rows in `LaneTables`), the diffuse
+    // lobe's normalisation.
     metallic: [f32; LANES],
+    transmission: [f32; LANES],
+    transmits: [u32; LANES],
     alpha_y: [f32; LANES],
     layer_node: [u32; LANES],
     layer_t: [f32; LANES],
@@ -359,6 +361,8 @@ impl Lanes {
             azimuth: [[0.0; LANES]; 2],
             ms_scale: Soa3::splat(Rgb::ZERO),
             metallic: f,
+            transmission: f,
+            transmits: [0; LANES],
             alpha_y: f,
             layer_node: [0; LANES],
             layer_t: f,
@@ -471,9 +475,11 @@ impl Lanes {
             }
             Material::Pbr(m) => {
                 // (`shade`'s BSDF: the frame is the hit's own, `takes` saw to it.)
-                let pbr = m.bsdf_at(hit.uv, false);
+                let pbr = m.bsdf_at(hit.uv, m.has_transmission());
                 self.reflectance.set(i, pbr.base_color);
                 self.metallic[i] = pbr.metallic;
+                self.transmission[i] = pbr.transmission;
+                self.transmits[i] = pbr.transmits as u32;
                 self.eta[i] = pbr.eta;
                 self.alpha[i] = pbr.distribution.alpha_x;
                 self.alpha_y[i] = pbr.distribution.alpha_y;
@@ -691,23 +697,24 @@ impl Lanes {
         self.store_sampled(i, (frame, wo), outcome, bs, keep);
     }
 
-    /// [`Self::run`]'s PBR loop for lane `i`: [`Pbr`]'s `eval_pdf` and `sample_opaque_at` (its
+    /// [`Self::run`]'s PBR loop for lane `i`: [`Pbr`]'s `eval_pdf` and `sample_rough_at` (its
     /// layer table's lookups gathers from the lane's rows in `tables`), as `land` calls
     /// `Pbr`'s through `Bsdf`; kept where the lane holds a PBR BSDF.
     #[inline(always)]
     fn run_pbr_lane(&mut self, i: usize, tables: &LaneTables) {
-        let (frame, wo) = self.frame(i, false);
+        let transmits = self.transmits[i] != 0;
+        let (frame, wo) = self.frame(i, transmits);
         let pbr = Pbr {
             base_color: self.reflectance.get(i),
             metallic: self.metallic[i],
-            transmission: 0.0,
+            transmission: self.transmission[i],
             eta: self.eta[i],
             distribution: Ggx {
                 alpha_x: self.alpha[i],
                 alpha_y: self.alpha_y[i],
             },
             smooth: false,
-            transmits: false,
+            transmits,
             layer: &tables.pbr[i],
             layer_node: (self.layer_node[i] as usize, self.layer_t[i]),
             diffuse_norm: self.diffuse_norm[i],
@@ -717,7 +724,7 @@ impl Lanes {
         let outcome = self.light_outcome_of(i, wi, f, pdf);
         let azimuth = (self.azimuth[0][i], self.azimuth[1][i]);
         let (u_lobe, cosine_dir) = (self.u_lobe[i], self.cosine_dir.get(i));
-        let bs = pbr.sample_opaque_at(wo, u_lobe, cosine_dir, self.u_dir_x[i], azimuth);
+        let bs = pbr.sample_rough_at(wo, u_lobe, cosine_dir, self.u_dir_x[i], azimuth);
         let keep = self.kind[i] == Kind::Pbr;
         self.store_sampled(i, (frame, wo), outcome, bs, keep);
     }
@@ -1053,6 +1060,22 @@ roughness = 0.0
 transmission = 1.0
 ior = 1.45
 
+# Rough glass, and a rough mix of metal, plastic and glass: taken with glTF's BSDF.
+[materials.haze]
+type = "pbr"
+base_color = [0.9, 0.8, 0.7]
+metallic = 0.0
+roughness = 0.35
+transmission = 1.0
+
+[materials.veil]
+type = "pbr"
+base_color = [0.7, 0.8, 0.9]
+metallic = 0.2
+roughness = 0.5
+transmission = 0.6
+ior = 1.7
+
 # Anisotropic: not taken.
 [materials.satin]
 type = "pbr"
@@ -1138,6 +1161,18 @@ type = "sphere"
 center = [0.35, 0.9, 1.6]
 radius = 0.28
 material = "bottle"
+
+[[shapes]]
+type = "sphere"
+center = [-0.45, 0.9, 1.0]
+radius = 0.28
+material = "haze"
+
+[[shapes]]
+type = "sphere"
+center = [1.2, 0.9, 0.9]
+radius = 0.28
+material = "veil"
 
 [[shapes]]
 type = "rectangle"
@@ -1240,7 +1275,7 @@ radiance = [0.2, 0.25, 0.3]
             let (mut taken, mut glass, mut mirror, mut shadowed, mut ended) = (0, 0, 0, 0, 0);
             let (mut rough_glass, mut rough_metal) = (0, 0);
             let (mut compensated_glass, mut compensated_metal, mut pbr) = (0, 0, 0);
-            let (mut absorbed, mut clear_pbr) = (0, 0);
+            let (mut absorbed, mut clear_pbr, mut rough_pbr_glass) = (0, 0, 0);
             let (mut lanes, mut tables) = (Lanes::new(), LaneTables::new());
             let mut lane = 0;
             for y in 0..16 {
@@ -1284,9 +1319,11 @@ radiance = [0.2, 0.25, 0.3]
                                 pbr += (kind == Kind::Pbr) as u32;
                                 absorbed += attenuated as u32;
                                 let m = scene.geometry.shapes()[hit.shape as usize].material;
-                                clear_pbr += (kind == Kind::Glass
-                                    && matches!(scene.materials[m as usize], Material::Pbr(_)))
-                                    as u32;
+                                let material = &scene.materials[m as usize];
+                                let is_pbr = matches!(material, Material::Pbr(_));
+                                clear_pbr += (kind == Kind::Glass && is_pbr) as u32;
+                                rough_pbr_glass +=
+                                    (kind == Kind::Pbr && material.has_transmission()) as u32;
                                 lane = (lane + 1) % LANES;
                                 (goes_on, shadow)
                             } else {
@@ -1329,10 +1366,14 @@ radiance = [0.2, 0.25, 0.3]
                 }
             }
             assert!(shadowed > 200 && ended > 50, "{shadowed} {ended}");
-            // Vertices attenuated before they shade (taken with glTF's BSDF), and clear glTF
-            // glass taken as a dielectric in every set.
+            // Vertices attenuated before they shade and rough transmitting glTF materials
+            // (taken with glTF's BSDF), and clear glTF glass taken as a dielectric in every set.
             if set & simd_ggx::PBR != 0 {
                 assert!(absorbed > 20, "{sampler}: {absorbed} vertices attenuated");
+                assert!(
+                    rough_pbr_glass > 100,
+                    "{sampler}: {rough_pbr_glass} rough transmitting glTF vertices"
+                );
             }
             assert!(
                 clear_pbr > 50,
