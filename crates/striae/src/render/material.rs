@@ -131,11 +131,11 @@ impl PbrMaterial {
     }
 
     /// Whether the BSDF at `uv` is one the lane vertex runs as glTF's: rough (not
-    /// [`Pbr::smooth`]) in the hit's own shading frame, opaque or transmitting. Reads the
+    /// [`Pbr::smooth`]) in an unturned shading frame, opaque or transmitting. Reads the
     /// metallic-roughness texture, where there is one.
     #[inline(always)]
     pub fn is_rough_at(&self, uv: Vec2) -> bool {
-        if !self.in_own_frame() {
+        if !self.in_unturned_frame() {
             return false;
         }
         let (_, roughness) = self.metallic_roughness_at(uv);
@@ -144,24 +144,25 @@ impl PbrMaterial {
         roughness * roughness > 0.0
     }
 
-    /// Whether the BSDF at `uv` is clear smooth glass in the hit's own shading frame: all
+    /// Whether the BSDF at `uv` is clear smooth glass in an unturned shading frame: all
     /// transmission, no metal, smooth. It is then a delta BSDF whose [`Pbr::sample`] gives
     /// [`super::bsdf::Dielectric`]'s samples bit for bit, the refraction's weight times the base
     /// colour (but none for `wo` in the surface), and the lane vertex runs it as such. Reads
     /// the metallic-roughness texture, where there is one.
     #[inline(always)]
     pub fn is_clear_glass_at(&self, uv: Vec2) -> bool {
-        if !self.in_own_frame() || self.transmission != 1.0 || !self.has_transmission() {
+        if !self.in_unturned_frame() || self.transmission != 1.0 || !self.has_transmission() {
             return false;
         }
         let (metallic, roughness) = self.metallic_roughness_at(uv);
         metallic == 0.0 && roughness * roughness == 0.0
     }
 
-    /// Whether the shading frame is the hit's own: no normal map, no anisotropy to turn it.
+    /// Whether the shading frame is [`shading_frame`]'s of the hit, its shading normal the
+    /// normal map's where there is one ([`Self::mapped_normal`]): no anisotropy turns it.
     #[inline(always)]
-    fn in_own_frame(&self) -> bool {
-        self.normal_map.is_none() && self.anisotropy == 0.0
+    fn in_unturned_frame(&self) -> bool {
+        self.anisotropy == 0.0
     }
 
     /// The metallic factor and perceptual roughness at `uv`: the factors times the

@@ -2,8 +2,8 @@
 //! paths at once where their rays met a diffuse surface, a smooth dielectric (scratched glass
 //! seen from inside included: its smooth base; and glTF's clear smooth glass, its refraction
 //! tinted), a smooth conductor, a rough (GGX) dielectric or conductor, with or without
-//! multiple-scattering compensation, or glTF's metallic-roughness BSDF where it is rough in the
-//! hit's own frame, opaque or transmitting ([`Kind`]), in three stages:
+//! multiple-scattering compensation, or glTF's metallic-roughness BSDF where it is rough,
+//! opaque or transmitting, and not anisotropic ([`Kind`]), in three stages:
 //!
 //! 1. **Gather**, lane by lane: the hit, the path's throughput, the bounce's random numbers
 //!    (the dimensions `land` reads, drawn in its order), the texture, the light sample, the
@@ -67,8 +67,9 @@ pub(super) enum Kind {
     CompensatedGlass,
     /// A `CompensatedConductor` (`multiscatter = true`), with next-event estimation.
     CompensatedMetal,
-    /// glTF's metallic-roughness `Pbr`, rough in the hit's own frame, opaque or transmitting
-    /// (`PbrMaterial::is_rough_at`), with next-event estimation.
+    /// glTF's metallic-roughness `Pbr`, rough, opaque or transmitting, in a frame no anisotropy
+    /// turns (`PbrMaterial::is_rough_at`; a normal map's normal taken in gather), with
+    /// next-event estimation.
     Pbr,
 }
 
@@ -467,14 +468,18 @@ impl Lanes {
                 self.ms_scale.set(i, c.ms_scale);
             }
             Material::Pbr(m) if kind == Kind::Glass => {
-                // Clear smooth glass: the tint of its refraction and its index.
+                // Clear smooth glass: the tint of its refraction and its index; the shading
+                // normal the normal map's, as `shade` takes it.
+                self.ns.set(i, m.mapped_normal(hit).unwrap_or(hit.ns));
                 let pbr = m.bsdf_at(hit.uv, true);
                 self.reflectance.set(i, pbr.base_color);
                 self.eta[i] = pbr.eta;
                 self.none_in_surface[i] = 1;
             }
             Material::Pbr(m) => {
-                // (`shade`'s BSDF: the frame is the hit's own, `takes` saw to it.)
+                // `shade`'s BSDF, and its shading normal: the normal map's where there is one
+                // (the frame is not turned: `takes` saw to it).
+                self.ns.set(i, m.mapped_normal(hit).unwrap_or(hit.ns));
                 let pbr = m.bsdf_at(hit.uv, m.has_transmission());
                 self.reflectance.set(i, pbr.base_color);
                 self.metallic[i] = pbr.metallic;
@@ -1051,7 +1056,7 @@ roughness = 0.4
 attenuation_color = [0.5, 0.7, 0.9]
 attenuation_distance = 0.5
 
-# Clear smooth glass, tinted: taken as a dielectric.
+# Clear smooth glass, tinted and normal-mapped: taken as a dielectric.
 [materials.bottle]
 type = "pbr"
 base_color = [0.6, 0.9, 0.7]
@@ -1059,8 +1064,10 @@ metallic = 0.0
 roughness = 0.0
 transmission = 1.0
 ior = 1.45
+normal_map = { type = "checkerboard", color0 = [0.65, 0.45, 0.9], color1 = [0.4, 0.6, 0.95], scale = 5.0 }
 
-# Rough glass, and a rough mix of metal, plastic and glass: taken with glTF's BSDF.
+# Rough glass, and a rough mix of metal, plastic and glass, normal-mapped: taken with glTF's
+# BSDF.
 [materials.haze]
 type = "pbr"
 base_color = [0.9, 0.8, 0.7]
@@ -1075,6 +1082,7 @@ metallic = 0.2
 roughness = 0.5
 transmission = 0.6
 ior = 1.7
+normal_map = { type = "checkerboard", color0 = [0.3, 0.55, 0.9], color1 = [0.6, 0.7, 0.85], scale = 4.0 }
 
 # Anisotropic: not taken.
 [materials.satin]
@@ -1275,7 +1283,7 @@ radiance = [0.2, 0.25, 0.3]
             let (mut taken, mut glass, mut mirror, mut shadowed, mut ended) = (0, 0, 0, 0, 0);
             let (mut rough_glass, mut rough_metal) = (0, 0);
             let (mut compensated_glass, mut compensated_metal, mut pbr) = (0, 0, 0);
-            let (mut absorbed, mut clear_pbr, mut rough_pbr_glass) = (0, 0, 0);
+            let (mut absorbed, mut clear_pbr, mut rough_pbr_glass, mut mapped) = (0, 0, 0, 0);
             let (mut lanes, mut tables) = (Lanes::new(), LaneTables::new());
             let mut lane = 0;
             for y in 0..16 {
@@ -1324,6 +1332,8 @@ radiance = [0.2, 0.25, 0.3]
                                 clear_pbr += (kind == Kind::Glass && is_pbr) as u32;
                                 rough_pbr_glass +=
                                     (kind == Kind::Pbr && material.has_transmission()) as u32;
+                                mapped += matches!(material, Material::Pbr(p) if p.normal_map.is_some())
+                                    as u32;
                                 lane = (lane + 1) % LANES;
                                 (goes_on, shadow)
                             } else {
@@ -1375,6 +1385,11 @@ radiance = [0.2, 0.25, 0.3]
                     "{sampler}: {rough_pbr_glass} rough transmitting glTF vertices"
                 );
             }
+            // Normal-mapped glTF materials (the clear glass in every set).
+            assert!(
+                mapped > 50,
+                "{sampler}: {mapped} normal-mapped glTF vertices"
+            );
             assert!(
                 clear_pbr > 50,
                 "{sampler}: {clear_pbr} clear glTF glass vertices"
