@@ -67,12 +67,26 @@ pub struct PbrMaterial {
 
 /// `-1` or `1`: the sign that turns `t` (a frame's second axis) toward decreasing `v`, the
 /// image's up, which glTF's bitangent and the green of its normal maps point to.
-#[inline]
+#[inline(always)]
 fn toward_image_up(t: Vec3, dpdv: Vec3) -> f32 {
     if t.dot(dpdv) > 0.0 {
         -1.0
     } else {
         1.0
+    }
+}
+
+/// `frame` turned about its normal to the anisotropy direction `(cos, sin)` (its angle from
+/// `s`, toward the bitangent that points toward decreasing `v`, as the normal map's), where
+/// `dpdv` is the hit's `dP/dv` (KHR_materials_anisotropy).
+#[inline(always)]
+pub fn turned_to(frame: Frame, (cos, sin): (f32, f32), dpdv: Vec3) -> Frame {
+    let w = toward_image_up(frame.t, dpdv);
+    let s = (frame.s * cos + frame.t * (w * sin)).normalize_or(frame.s);
+    Frame {
+        s,
+        t: frame.n.cross(s),
+        n: frame.n,
     }
 }
 
@@ -117,52 +131,35 @@ impl PbrMaterial {
         };
         let bsdf = self.bsdf_at(hit.uv, transmits);
         if self.anisotropy > 0.0 {
-            let (cos, sin) = self.anisotropy_direction;
-            // The bitangent toward decreasing v, as the normal map's.
-            let w = toward_image_up(frame.t, hit.dpdv);
-            let s = (frame.s * cos + frame.t * (w * sin)).normalize_or(frame.s);
-            frame = Frame {
-                s,
-                t: frame.n.cross(s),
-                n: frame.n,
-            };
+            frame = turned_to(frame, self.anisotropy_direction, hit.dpdv);
         }
         (frame, Bsdf::Pbr(bsdf))
     }
 
     /// Whether the BSDF at `uv` is one the lane vertex runs as glTF's: rough (not
-    /// [`Pbr::smooth`]) in an unturned shading frame, opaque or transmitting. Reads the
-    /// metallic-roughness texture, where there is one.
+    /// [`Pbr::smooth`]), opaque or transmitting. Reads the metallic-roughness texture, where
+    /// there is one.
     #[inline(always)]
     pub fn is_rough_at(&self, uv: Vec2) -> bool {
-        if !self.in_unturned_frame() {
-            return false;
-        }
         let (_, roughness) = self.metallic_roughness_at(uv);
-        // `bsdf_at`'s alpha, and `Pbr::new`'s test of it (`alpha_t = alpha_b` without
-        // anisotropy).
-        roughness * roughness > 0.0
+        // `bsdf_at`'s alphas, and `Pbr::new`'s test of them.
+        let alpha = roughness * roughness;
+        let alpha_t = alpha + (1.0 - alpha) * self.anisotropy * self.anisotropy;
+        alpha_t > 0.0 || alpha > 0.0
     }
 
-    /// Whether the BSDF at `uv` is clear smooth glass in an unturned shading frame: all
-    /// transmission, no metal, smooth. It is then a delta BSDF whose [`Pbr::sample`] gives
+    /// Whether the BSDF at `uv` is clear smooth glass: all transmission, no metal, smooth (no
+    /// anisotropy either, which makes it rough). It is then a delta BSDF whose [`Pbr::sample`] gives
     /// [`super::bsdf::Dielectric`]'s samples bit for bit, the refraction's weight times the base
     /// colour (but none for `wo` in the surface), and the lane vertex runs it as such. Reads
     /// the metallic-roughness texture, where there is one.
     #[inline(always)]
     pub fn is_clear_glass_at(&self, uv: Vec2) -> bool {
-        if !self.in_unturned_frame() || self.transmission != 1.0 || !self.has_transmission() {
+        if self.anisotropy != 0.0 || self.transmission != 1.0 || !self.has_transmission() {
             return false;
         }
         let (metallic, roughness) = self.metallic_roughness_at(uv);
         metallic == 0.0 && roughness * roughness == 0.0
-    }
-
-    /// Whether the shading frame is [`shading_frame`]'s of the hit, its shading normal the
-    /// normal map's where there is one ([`Self::mapped_normal`]): no anisotropy turns it.
-    #[inline(always)]
-    fn in_unturned_frame(&self) -> bool {
-        self.anisotropy == 0.0
     }
 
     /// The metallic factor and perceptual roughness at `uv`: the factors times the

@@ -2,8 +2,8 @@
 //! paths at once where their rays met a diffuse surface, a smooth dielectric (scratched glass
 //! seen from inside included: its smooth base; and glTF's clear smooth glass, its refraction
 //! tinted), a smooth conductor, a rough (GGX) dielectric or conductor, with or without
-//! multiple-scattering compensation, or glTF's metallic-roughness BSDF where it is rough,
-//! opaque or transmitting, and not anisotropic ([`Kind`]), in three stages:
+//! multiple-scattering compensation, or glTF's metallic-roughness BSDF where it is rough
+//! ([`Kind`]), in three stages:
 //!
 //! 1. **Gather**, lane by lane: the hit, the path's throughput, the bounce's random numbers
 //!    (the dimensions `land` reads, drawn in its order), the texture, the light sample, the
@@ -44,7 +44,7 @@ use crate::render::bsdf::{
     LayerRows, Pbr, RoughConductor, RoughDielectric,
 };
 use crate::render::geometry::{offset_origin_by, SurfaceHit};
-use crate::render::material::Material;
+use crate::render::material::{turned_to, Material};
 use crate::render::scene::{Scene, NO_MATERIAL};
 use crate::render::shading::shading_frame_of;
 use crate::sampling::{cosine_hemisphere_pdf, power_heuristic, square_to_cosine_hemisphere};
@@ -67,9 +67,9 @@ pub(super) enum Kind {
     CompensatedGlass,
     /// A `CompensatedConductor` (`multiscatter = true`), with next-event estimation.
     CompensatedMetal,
-    /// glTF's metallic-roughness `Pbr`, rough, opaque or transmitting, in a frame no anisotropy
-    /// turns (`PbrMaterial::is_rough_at`; a normal map's normal taken in gather), with
-    /// next-event estimation.
+    /// glTF's metallic-roughness `Pbr` where rough (`PbrMaterial::is_rough_at`): opaque or
+    /// transmitting, its shading normal the normal map's (taken in gather), its frame turned
+    /// to the anisotropy direction where there is anisotropy; with next-event estimation.
     Pbr,
 }
 
@@ -158,9 +158,10 @@ pub(super) mod simd_ggx {
 
 /// The lane vertex's BSDF for the vertex of a path at `depth` whose ray met `hit`, arriving
 /// along `d`, if it takes it: a diffuse, dielectric or conductor material, smooth or rough (or
-/// scratched glass seen from inside, or glTF's BSDF where rough or clear smooth glass) on a shape that emits nothing, below the depth limit (what `land` does there after
-/// Beer-Lambert absorption, which `Lanes::gather` applies first). The GGX kinds only where the
-/// render loop's copy runs them in SIMD lanes (`SIMD_GGX`, a [`simd_ggx`] set).
+/// scratched glass seen from inside, or glTF's BSDF where rough or clear smooth glass) on a
+/// shape that emits nothing, below the depth limit (what `land` does there after Beer-Lambert
+/// absorption, which `Lanes::gather` applies first). The GGX kinds only where the render loop's
+/// copy runs them in SIMD lanes (`SIMD_GGX`, a [`simd_ggx`] set).
 #[inline(always)]
 pub(super) fn takes<const SIMD_GGX: u32>(
     scene: &Scene,
@@ -261,10 +262,14 @@ pub(super) struct Lanes {
     // PBR: the base colour is `reflectance`, the index `eta`, GGX's `alpha_x` `alpha`; the
     // metallic factor, the transmission factor and whether the material transmits (1) or not
     // (0), `alpha_y`, the layer table's roughness node (its rows in `LaneTables`), the diffuse
-    // lobe's normalisation.
+    // lobe's normalisation; whether the frame is turned to an anisotropy direction (1), the
+    // direction's cosine and sine, the hit's `dP/dv`.
     metallic: [f32; LANES],
     transmission: [f32; LANES],
     transmits: [u32; LANES],
+    turned: [u32; LANES],
+    turn: [[f32; LANES]; 2],
+    dpdv: Soa3,
     alpha_y: [f32; LANES],
     layer_node: [u32; LANES],
     layer_t: [f32; LANES],
@@ -364,6 +369,9 @@ impl Lanes {
             metallic: f,
             transmission: f,
             transmits: [0; LANES],
+            turned: [0; LANES],
+            turn: [[0.0; LANES]; 2],
+            dpdv: Soa3::splat(Vec3::Y),
             alpha_y: f,
             layer_node: [0; LANES],
             layer_t: f,
@@ -477,9 +485,12 @@ impl Lanes {
                 self.none_in_surface[i] = 1;
             }
             Material::Pbr(m) => {
-                // `shade`'s BSDF, and its shading normal: the normal map's where there is one
-                // (the frame is not turned: `takes` saw to it).
+                // `shade`'s BSDF, its shading normal (the normal map's where there is one) and
+                // the turn of its frame.
                 self.ns.set(i, m.mapped_normal(hit).unwrap_or(hit.ns));
+                self.turned[i] = (m.anisotropy > 0.0) as u32;
+                (self.turn[0][i], self.turn[1][i]) = m.anisotropy_direction;
+                self.dpdv.set(i, hit.dpdv);
                 let pbr = m.bsdf_at(hit.uv, m.has_transmission());
                 self.reflectance.set(i, pbr.base_color);
                 self.metallic[i] = pbr.metallic;
@@ -708,7 +719,12 @@ impl Lanes {
     #[inline(always)]
     fn run_pbr_lane(&mut self, i: usize, tables: &LaneTables) {
         let transmits = self.transmits[i] != 0;
-        let (frame, wo) = self.frame(i, transmits);
+        let (frame, _) = self.frame(i, transmits);
+        // `shade`'s turn to the anisotropy direction.
+        let turn = (self.turn[0][i], self.turn[1][i]);
+        let turned = turned_to(frame, turn, self.dpdv.get(i));
+        let frame = if self.turned[i] != 0 { turned } else { frame };
+        let wo = frame.to_local(self.wo.get(i));
         let pbr = Pbr {
             base_color: self.reflectance.get(i),
             metallic: self.metallic[i],
@@ -1084,7 +1100,7 @@ transmission = 0.6
 ior = 1.7
 normal_map = { type = "checkerboard", color0 = [0.3, 0.55, 0.9], color1 = [0.6, 0.7, 0.85], scale = 4.0 }
 
-# Anisotropic: not taken.
+# Anisotropic: taken with glTF's BSDF in a turned frame.
 [materials.satin]
 type = "pbr"
 base_color = [0.8, 0.8, 0.8]
@@ -1160,8 +1176,8 @@ material = "mixed"
 
 [[shapes]]
 type = "sphere"
-center = [1.7, 0.3, 0.2]
-radius = 0.3
+center = [1.9, 0.45, -0.2]
+radius = 0.45
 material = "satin"
 
 [[shapes]]
@@ -1284,6 +1300,7 @@ radiance = [0.2, 0.25, 0.3]
             let (mut rough_glass, mut rough_metal) = (0, 0);
             let (mut compensated_glass, mut compensated_metal, mut pbr) = (0, 0, 0);
             let (mut absorbed, mut clear_pbr, mut rough_pbr_glass, mut mapped) = (0, 0, 0, 0);
+            let mut anisotropic = 0;
             let (mut lanes, mut tables) = (Lanes::new(), LaneTables::new());
             let mut lane = 0;
             for y in 0..16 {
@@ -1334,6 +1351,8 @@ radiance = [0.2, 0.25, 0.3]
                                     (kind == Kind::Pbr && material.has_transmission()) as u32;
                                 mapped += matches!(material, Material::Pbr(p) if p.normal_map.is_some())
                                     as u32;
+                                anisotropic += matches!(material, Material::Pbr(p) if p.anisotropy > 0.0)
+                                    as u32;
                                 lane = (lane + 1) % LANES;
                                 (goes_on, shadow)
                             } else {
@@ -1383,6 +1402,10 @@ radiance = [0.2, 0.25, 0.3]
                 assert!(
                     rough_pbr_glass > 100,
                     "{sampler}: {rough_pbr_glass} rough transmitting glTF vertices"
+                );
+                assert!(
+                    anisotropic > 30,
+                    "{sampler}: {anisotropic} anisotropic vertices"
                 );
             }
             // Normal-mapped glTF materials (the clear glass in every set).
