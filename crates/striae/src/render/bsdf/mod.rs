@@ -105,12 +105,19 @@ impl BsdfSample {
     /// A non-delta sample that stays on `wo`'s side: `weight = f |cos theta_i| / pdf`.
     #[inline(always)]
     pub fn reflected(wi: Vec3, f: Rgb, pdf: f32) -> Self {
+        Self::scattered(wi, f, pdf, 1.0)
+    }
+
+    /// A non-delta sample of relative index `eta` (1 where it stays on `wo`'s side): `weight =
+    /// f |cos theta_i| / pdf`.
+    #[inline(always)]
+    pub fn scattered(wi: Vec3, f: Rgb, pdf: f32, eta: f32) -> Self {
         BsdfSample {
             wi,
             weight: f * (wi.z.abs() / pdf),
             pdf,
             delta: false,
-            eta: 1.0,
+            eta,
             from: None,
         }
     }

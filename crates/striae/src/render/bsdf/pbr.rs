@@ -384,14 +384,7 @@ impl<L: LayerLookup> Pbr<'_, L> {
         if !(pdf > 0.0) || f == Rgb::ZERO {
             return None;
         }
-        Some(BsdfSample {
-            wi,
-            weight: f * (wi.z.abs() / pdf),
-            pdf,
-            delta: false,
-            eta,
-            from: None,
-        })
+        Some(BsdfSample::scattered(wi, f, pdf, eta))
     }
 
     /// [`Self::sample`] of a rough BSDF (not smooth: those the lane vertex runs), with the
@@ -439,14 +432,7 @@ impl<L: LayerLookup> Pbr<'_, L> {
         let direction =
             diffuse | (reflects & !(side <= 0.0)) | (!reflects & !(side >= 0.0) & wi.is_finite());
         let valid = (pdf > 0.0) & direction & (diffuse | (f != Rgb::ZERO));
-        (gives & valid).then(|| BsdfSample {
-            wi,
-            weight: f * (wi.z.abs() / pdf),
-            pdf,
-            delta: false,
-            eta,
-            from: None,
-        })
+        (gives & valid).then(|| BsdfSample::scattered(wi, f, pdf, eta))
     }
 }
 
