@@ -141,18 +141,16 @@ impl PbrMaterial {
     /// there is one.
     #[inline(always)]
     pub fn is_rough_at(&self, uv: Vec2) -> bool {
-        let (_, roughness) = self.metallic_roughness_at(uv);
-        // `bsdf_at`'s alphas, and `Pbr::new`'s test of them.
-        let alpha = roughness * roughness;
-        let alpha_t = alpha + (1.0 - alpha) * self.anisotropy * self.anisotropy;
-        alpha_t > 0.0 || alpha > 0.0
+        // `Pbr::new`'s test of `bsdf_at`'s alphas.
+        let (_, alpha_t, alpha_b) = self.metallic_alphas_at(uv);
+        alpha_t > 0.0 || alpha_b > 0.0
     }
 
     /// Whether the BSDF at `uv` is clear smooth glass: all transmission, no metal, smooth (no
-    /// anisotropy either, which makes it rough). It is then a delta BSDF whose [`Pbr::sample`] gives
-    /// [`super::bsdf::Dielectric`]'s samples bit for bit, the refraction's weight times the base
-    /// colour (but none for `wo` in the surface), and the lane vertex runs it as such. Reads
-    /// the metallic-roughness texture, where there is one.
+    /// anisotropy either, which makes it rough). It is then a delta BSDF whose [`Pbr::sample`]
+    /// gives [`super::bsdf::Dielectric`]'s samples bit for bit, the refraction's weight times the
+    /// base colour (but none for `wo` in the surface), and the lane vertex runs it as such.
+    /// Reads the metallic-roughness texture, where there is one.
     #[inline(always)]
     pub fn is_clear_glass_at(&self, uv: Vec2) -> bool {
         if self.anisotropy != 0.0 || self.transmission != 1.0 || !self.has_transmission() {
@@ -181,18 +179,26 @@ impl PbrMaterial {
     #[inline]
     pub fn bsdf_at(&self, uv: Vec2, transmits: bool) -> Pbr<'_> {
         let base = self.base_color.eval(uv);
-        let (metallic, roughness) = self.metallic_roughness_at(uv);
-        let alpha = roughness * roughness;
-        let alpha_t = alpha + (1.0 - alpha) * self.anisotropy * self.anisotropy;
+        let (metallic, alpha_t, alpha_b) = self.metallic_alphas_at(uv);
         Pbr::new(
             base,
             metallic,
             self.transmission,
             &self.layer,
             alpha_t,
-            alpha,
+            alpha_b,
             transmits,
         )
+    }
+
+    /// The metallic factor and GGX's `alpha_t`, `alpha_b` at `uv`: `alpha = roughness^2`,
+    /// KHR_materials_anisotropy's `alpha_t = mix(alpha, 1, strength^2)` and `alpha_b = alpha`.
+    #[inline(always)]
+    fn metallic_alphas_at(&self, uv: Vec2) -> (f32, f32, f32) {
+        let (metallic, roughness) = self.metallic_roughness_at(uv);
+        let alpha = roughness * roughness;
+        let alpha_t = alpha + (1.0 - alpha) * self.anisotropy * self.anisotropy;
+        (metallic, alpha_t, alpha)
     }
 }
 

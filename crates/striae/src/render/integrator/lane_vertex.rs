@@ -449,6 +449,10 @@ impl Lanes {
             self.reflectance.set(i, Rgb::ONE);
             self.none_in_surface[i] = 0;
         }
+        if let Material::Pbr(m) = material {
+            // `shade`'s shading normal: the normal map's, where there is one.
+            self.ns.set(i, m.mapped_normal(hit).unwrap_or(hit.ns));
+        }
         match material {
             Material::Diffuse { reflectance } => {
                 self.reflectance.set(i, reflectance.eval(hit.uv));
@@ -476,18 +480,14 @@ impl Lanes {
                 self.ms_scale.set(i, c.ms_scale);
             }
             Material::Pbr(m) if kind == Kind::Glass => {
-                // Clear smooth glass: the tint of its refraction and its index; the shading
-                // normal the normal map's, as `shade` takes it.
-                self.ns.set(i, m.mapped_normal(hit).unwrap_or(hit.ns));
+                // Clear smooth glass: the tint of its refraction and its index.
                 let pbr = m.bsdf_at(hit.uv, true);
                 self.reflectance.set(i, pbr.base_color);
                 self.eta[i] = pbr.eta;
                 self.none_in_surface[i] = 1;
             }
             Material::Pbr(m) => {
-                // `shade`'s BSDF, its shading normal (the normal map's where there is one) and
-                // the turn of its frame.
-                self.ns.set(i, m.mapped_normal(hit).unwrap_or(hit.ns));
+                // `shade`'s BSDF and the turn of its frame.
                 self.turned[i] = (m.anisotropy > 0.0) as u32;
                 (self.turn[0][i], self.turn[1][i]) = m.anisotropy_direction;
                 self.dpdv.set(i, hit.dpdv);
