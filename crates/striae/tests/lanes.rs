@@ -142,8 +142,8 @@ fn scratched_glass_seen_from_inside_runs_in_lanes_bit_for_bit() {
 
 #[test]
 fn rough_glass_and_metal_run_in_lanes_bit_for_bit() {
-    // GGX glass and gold, plain and compensated, and rough glTF glass (the lane vertex's GGX
-    // loops), each scene with and without the lanes, and the lanes in every compiled copy (each
+    // GGX glass and gold, plain and compensated, rough glTF glass, smooth glTF metal and
+    // plastic on a shape that glows (the lane vertex's GGX and glTF loops), each scene with and without the lanes, and the lanes in every compiled copy (each
     // runs the GGX vertices it vectorises in SIMD lanes and leaves the others to the one-path
     // vertex).
     let frosted = include_str!("../scenes/glass-teapot.toml")
@@ -160,7 +160,24 @@ fn rough_glass_and_metal_run_in_lanes_bit_for_bit() {
         "roughness = 0.3\ntransmission = 1.0",
     );
     assert_ne!(smooth_gltf, frosted_gltf);
-    for text in [frosted, brushed, milky, worn, frosted_gltf] {
+    // And smooth glTF metal (a delta BSDF) and plastic (delta lobes beside a diffuse one), the
+    // plastic box glowing.
+    let glowing_gltf = smooth_gltf
+        .replace(
+            "metallic = 1.0\nroughness = 0.35",
+            "metallic = 1.0\nroughness = 0.0",
+        )
+        .replace(
+            "metallic = 0.0\nroughness = 0.3\n",
+            "metallic = 0.0\nroughness = 0.0\n",
+        )
+        .replace(
+            "material = \"plastic\"",
+            "material = \"plastic\"\nemission = [0.4, 0.1, 0.1]",
+        );
+    assert_eq!(glowing_gltf.matches("roughness = 0.0").count(), 3);
+    assert!(glowing_gltf.contains("emission"));
+    for text in [frosted, brushed, milky, worn, frosted_gltf, glowing_gltf] {
         assert!(text.contains("roughness"));
         let lanes = parse_small(&text, true);
         assert_lanes_bit_for_bit(&parse_small(&text, false), &lanes);

@@ -136,16 +136,6 @@ impl PbrMaterial {
         (frame, Bsdf::Pbr(bsdf))
     }
 
-    /// Whether the BSDF at `uv` is one the lane vertex runs as glTF's: rough (not
-    /// [`Pbr::smooth`]), opaque or transmitting. Reads the metallic-roughness texture, where
-    /// there is one.
-    #[inline(always)]
-    pub fn is_rough_at(&self, uv: Vec2) -> bool {
-        // `Pbr::new`'s test of `bsdf_at`'s alphas.
-        let (_, alpha_t, alpha_b) = self.metallic_alphas_at(uv);
-        alpha_t > 0.0 || alpha_b > 0.0
-    }
-
     /// Whether the BSDF at `uv` is clear smooth glass: all transmission, no metal, smooth (no
     /// anisotropy either, which makes it rough). It is then a delta BSDF whose [`Pbr::sample`]
     /// gives [`super::bsdf::Dielectric`]'s samples bit for bit, the refraction's weight times the

@@ -387,13 +387,14 @@ impl<L: LayerLookup> Pbr<'_, L> {
         Some(BsdfSample::scattered(wi, f, pdf, eta))
     }
 
-    /// [`Self::sample`] of a rough BSDF (not smooth: those the lane vertex runs), with the
-    /// cosine lobe's direction `cosine_dir` and the visible normal's azimuth given
+    /// [`Self::sample`] as the lane vertex runs it, smooth or rough, with the cosine lobe's
+    /// direction `cosine_dir` and the visible normal's azimuth given
     /// ([`Ggx::sample_visible_at`]), written without early returns: the lobe weights outside
-    /// and inside both made and one kept, the diffuse, reflected and refracted directions all
-    /// made, the chosen one evaluated and tested as `sample` tests it.
+    /// and inside both made and one kept, the diffuse direction, the rough lobes' reflected
+    /// and refracted ones and the smooth lobes' mirrored and refracted ones all made, the
+    /// chosen one evaluated (a delta lobe weighted) and tested as `sample` tests it.
     #[inline(always)]
-    pub fn sample_rough_at(
+    pub fn sample_at(
         &self,
         wo: Vec3,
         u_lobe: f32,
@@ -401,25 +402,32 @@ impl<L: LayerLookup> Pbr<'_, L> {
         u_x: f32,
         azimuth: (f32, f32),
     ) -> Option<BsdfSample> {
-        debug_assert!(!self.smooth);
         // `at_wo`'s weights: outside, or inside a transmitting BSDF; none elsewhere.
         let (outside, gives_outside) = self.at_wo_outside(wo);
         let inside = wo.z < 0.0 && self.transmits;
         let a = if inside { AtWo::INSIDE } else { outside };
         let gives = (wo.z > 0.0 && gives_outside) || inside;
         let diffuse = u_lobe < a.p_diffuse;
-        // `sample`'s reflect / refract choice through the visible normal `m`.
-        let u_choice = ((u_lobe - a.p_diffuse) / (1.0 - a.p_diffuse)).clamp(0.0, 1.0);
+        // `sample`'s reflect / refract choice, through the visible normal `m` where rough.
+        let p_micro = 1.0 - a.p_diffuse;
+        let u_choice = ((u_lobe - a.p_diffuse) / p_micro).clamp(0.0, 1.0);
         let m = self
             .distribution
             .sample_visible_at(wo * wo.z.signum(), u_x, azimuth);
-        let wo_m = wo.dot(m);
+        let wo_m = if self.smooth { wo.z } else { wo.dot(m) };
         let (fd, cos_t, eta_it) = fresnel_f32::dielectric(wo_m, self.eta);
         let rho = self.reflect_prob(&a, wo_m, fd);
         let reflects = u_choice < rho || rho >= 1.0;
         let refracted = refract(wo, m, cos_t, 1.0 / eta_it).normalize();
+        let delta = self.smooth && !diffuse;
         let wi = if diffuse {
             cosine_dir
+        } else if delta {
+            if reflects {
+                mirror_sample(wo, 1.0).wi
+            } else {
+                refraction_sample(wo, cos_t, eta_it, 1.0).wi
+            }
         } else if reflects {
             reflect(wo, m)
         } else {
@@ -427,12 +435,39 @@ impl<L: LayerLookup> Pbr<'_, L> {
         };
         let eta = if diffuse || reflects { 1.0 } else { eta_it };
         let (f, pdf) = self.eval_pdf_at(&a, wo, wi);
-        // `sample`'s tests of each lobe's direction and value.
+        // The smooth lobes' weights, as `sample` makes them.
+        let delta_pdf = p_micro * if reflects { rho } else { 1.0 - rho };
+        let mirrored = if a.metallic > 0.0 {
+            schlick(self.base_color, wo.z) * a.metallic + Rgb::splat((1.0 - a.metallic) * fd)
+        } else {
+            Rgb::splat(fd)
+        };
+        let k = (1.0 - a.metallic) * a.transmission * (1.0 - fd);
+        let delta_weight = if reflects {
+            mirrored / delta_pdf
+        } else {
+            let eta_ti = 1.0 / eta_it;
+            self.base_color * ((eta_ti * eta_ti) * (k / delta_pdf))
+        };
+        // `sample`'s tests of each lobe's direction and value (none of a smooth lobe).
         let side = wi.z * wo.z;
         let direction =
             diffuse | (reflects & !(side <= 0.0)) | (!reflects & !(side >= 0.0) & wi.is_finite());
-        let valid = (pdf > 0.0) & direction & (diffuse | (f != Rgb::ZERO));
-        (gives & valid).then(|| BsdfSample::scattered(wi, f, pdf, eta))
+        let valid = delta | ((pdf > 0.0) & direction & (diffuse | (f != Rgb::ZERO)));
+        (gives & valid).then(|| {
+            if delta {
+                BsdfSample {
+                    wi,
+                    weight: delta_weight,
+                    pdf: delta_pdf,
+                    delta: true,
+                    eta,
+                    from: None,
+                }
+            } else {
+                BsdfSample::scattered(wi, f, pdf, eta)
+            }
+        })
     }
 }
 

@@ -1170,13 +1170,13 @@ mod pbr {
         }
     }
 
-    /// The lane vertex's form of a rough BSDF gives the scalar form's bits: `eval_pdf` with
-    /// the layer table read from a copy of two rows ([`LayerRows`]), and `sample_rough_at`
-    /// against `sample` (the same numbers as the lane vertex hands them: the cosine lobe's
-    /// direction and the visible normal's azimuth made beforehand), opaque and transmitting,
-    /// `wo` outside and inside.
+    /// The lane vertex's form of the BSDF gives the scalar form's bits: `eval_pdf` with the
+    /// layer table read from a copy of two rows ([`LayerRows`]), and `sample_at` against
+    /// `sample` (the same numbers as the lane vertex hands them: the cosine lobe's direction
+    /// and the visible normal's azimuth made beforehand), rough and smooth, opaque and
+    /// transmitting, `wo` outside and inside.
     #[test]
-    fn rough_lane_form_equals_the_scalar_bit_for_bit() {
+    fn lane_form_equals_the_scalar_bit_for_bit() {
         use crate::optics::microfacet::visible_azimuth;
         use crate::sampling::square_to_cosine_hemisphere;
         fn bits(s: Option<BsdfSample>) -> Option<[u32; 9]> {
@@ -1198,6 +1198,7 @@ mod pbr {
         }
         let mut rng = Pcg64::seed_from_u64(77);
         let (mut sampled, mut diffuse, mut refracted, mut from_inside) = (0, 0, 0, 0);
+        let (mut delta, mut delta_refracted) = (0, 0);
         for n in 0..80_000 {
             let base = Rgb::new(rng.random(), rng.random(), rng.random());
             // Plastic, metal and mixes; opaque, glass and partly transmitting.
@@ -1213,11 +1214,18 @@ mod pbr {
             };
             // `PbrMaterial::has_transmission`.
             let transmits = transmission > 0.0 && metallic < 1.0;
+            // Smooth one time in seven.
+            let smooth = n % 7 == 0;
             let alpha_t = rng.random_range(1e-4f32..1.0);
             let alpha_b = if n % 2 == 0 {
                 alpha_t
             } else {
                 rng.random_range(1e-4f32..1.0)
+            };
+            let (alpha_t, alpha_b) = if smooth {
+                (0.0, 0.0)
+            } else {
+                (alpha_t, alpha_b)
             };
             let eta = if n % 5 == 0 { 2.4 } else { 1.5 };
             let b = Pbr::new(
@@ -1255,9 +1263,12 @@ mod pbr {
             let (u_lobe, u) = (rng.random(), Vec2::new(rng.random(), rng.random()));
             let s = b.sample(wo, u_lobe, u);
             let cosine_dir = square_to_cosine_hemisphere(u);
-            let s_lane = lane.sample_rough_at(wo, u_lobe, cosine_dir, u.x, visible_azimuth(u.y));
+            let s_lane = lane.sample_at(wo, u_lobe, cosine_dir, u.x, visible_azimuth(u.y));
             assert_eq!(bits(s), bits(s_lane), "{b:?} {wo} {u_lobe} {u}");
+            assert_eq!(b.smooth, smooth);
             sampled += s.is_some() as u32;
+            delta += s.is_some_and(|s| s.delta) as u32;
+            delta_refracted += s.is_some_and(|s| s.delta && s.wi.z * wo.z < 0.0) as u32;
             diffuse += s.is_some_and(|s| s.wi == cosine_dir) as u32;
             refracted += s.is_some_and(|s| s.wi.z * wo.z < 0.0) as u32;
             from_inside += s.is_some_and(|_| wo.z < 0.0) as u32;
@@ -1272,6 +1283,11 @@ mod pbr {
             "{refracted} {from_inside}"
         );
         assert!(sampled < 76_000, "{sampled}");
+        // The smooth lobes, mirrored and refracted.
+        assert!(
+            delta - delta_refracted > 2_000 && delta_refracted > 1_000,
+            "{delta} {delta_refracted}"
+        );
     }
 
     /// Clear smooth glass (all transmission, no metal, `alpha = 0`), as the lane vertex takes

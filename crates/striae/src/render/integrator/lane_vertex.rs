@@ -2,10 +2,11 @@
 //! paths at once where their rays met a diffuse surface, a smooth dielectric (scratched glass
 //! seen from inside included: its smooth base; and glTF's clear smooth glass, its refraction
 //! tinted), a smooth conductor, a rough (GGX) dielectric or conductor, with or without
-//! multiple-scattering compensation, or glTF's metallic-roughness BSDF where it is rough
-//! ([`Kind`]), in three stages:
+//! multiple-scattering compensation, or glTF's metallic-roughness BSDF ([`Kind`]), on a shape
+//! that emits or not, in three stages:
 //!
-//! 1. **Gather**, lane by lane: the hit, the path's throughput, the bounce's random numbers
+//! 1. **Gather**, lane by lane: the emission found at the hit (into the path's radiance, as
+//!    `land` counts it), the hit, the path's throughput, the bounce's random numbers
 //!    (the dimensions `land` reads, drawn in its order), the texture, the light sample, the
 //!    cosine-weighted direction and the GGX visible normal's azimuth (each a scalar call:
 //!    `sincosf`, `cosf`, `sinf` and the `Texture` and `Light` enums do not vectorise) into
@@ -67,14 +68,16 @@ pub(super) enum Kind {
     CompensatedGlass,
     /// A `CompensatedConductor` (`multiscatter = true`), with next-event estimation.
     CompensatedMetal,
-    /// glTF's metallic-roughness `Pbr` where rough (`PbrMaterial::is_rough_at`): opaque or
-    /// transmitting, its shading normal the normal map's (taken in gather), its frame turned
-    /// to the anisotropy direction where there is anisotropy; with next-event estimation.
+    /// glTF's metallic-roughness `Pbr` (but clear smooth glass, a `Glass`): rough or smooth,
+    /// opaque or transmitting, its shading normal the normal map's (taken in gather), its
+    /// frame turned to the anisotropy direction where there is anisotropy; with next-event
+    /// estimation where it is not a delta BSDF (`Pbr::is_delta`: smooth, no diffuse lobe).
     Pbr,
 }
 
 impl Kind {
-    /// A delta BSDF: no next-event estimation, and the bounce is specular.
+    /// A delta BSDF: no next-event estimation, and the bounce is specular (a `Pbr` may be
+    /// one too: [`Lanes::gather`] tells).
     #[inline(always)]
     fn is_delta(self) -> bool {
         matches!(self, Kind::Glass | Kind::Mirror)
@@ -158,10 +161,10 @@ pub(super) mod simd_ggx {
 
 /// The lane vertex's BSDF for the vertex of a path at `depth` whose ray met `hit`, arriving
 /// along `d`, if it takes it: a diffuse, dielectric or conductor material, smooth or rough (or
-/// scratched glass seen from inside, or glTF's BSDF where rough or clear smooth glass) on a
-/// shape that emits nothing, below the depth limit (what `land` does there after Beer-Lambert
-/// absorption, which `Lanes::gather` applies first). The GGX kinds only where the render loop's
-/// copy runs them in SIMD lanes (`SIMD_GGX`, a [`simd_ggx`] set).
+/// scratched glass seen from inside, or glTF's BSDF), below the depth limit (what `land` does
+/// there after Beer-Lambert absorption and the emission found, which `Lanes::gather` applies
+/// first). The GGX kinds only where the render loop's copy runs them in SIMD lanes
+/// (`SIMD_GGX`, a [`simd_ggx`] set).
 #[inline(always)]
 pub(super) fn takes<const SIMD_GGX: u32>(
     scene: &Scene,
@@ -170,7 +173,7 @@ pub(super) fn takes<const SIMD_GGX: u32>(
     d: Vec3,
 ) -> Option<Kind> {
     let shape = &scene.geometry.shapes()[hit.shape as usize];
-    if shape.material == NO_MATERIAL || shape.area_light.is_some() || depth + 2 > max_depth(scene) {
+    if shape.material == NO_MATERIAL || depth + 2 > max_depth(scene) {
         return None;
     }
     let kind = match &scene.materials[shape.material as usize] {
@@ -182,8 +185,8 @@ pub(super) fn takes<const SIMD_GGX: u32>(
         Material::Conductor { .. } => Kind::Mirror,
         Material::CompensatedDielectric(_) => Kind::CompensatedGlass,
         Material::CompensatedConductor(_) => Kind::CompensatedMetal,
-        Material::Pbr(m) if m.is_rough_at(hit.uv) => Kind::Pbr,
         Material::Pbr(m) if m.is_clear_glass_at(hit.uv) => Kind::Glass,
+        Material::Pbr(_) => Kind::Pbr,
         Material::Scratched(m) if m.has_transmission() && !m.reads_hit_context(-d, hit.ng) => {
             Kind::Glass
         }
@@ -233,6 +236,8 @@ pub(super) struct Lanes {
     /// Russian roulette after this bounce, with this number.
     roulette: [bool; LANES],
     u_roulette: [f32; LANES],
+    /// A delta BSDF (1; [`Kind::is_delta`], or a `Pbr`'s): no light sample, a specular bounce.
+    delta_bsdf: [u32; LANES],
     // Diffuse: the reflectance, the cosine-weighted direction, the light sample where there is
     // one (`has_light`; `pdf_light` with the light's choice).
     reflectance: Soa3,
@@ -260,13 +265,14 @@ pub(super) struct Lanes {
     // Compensated conductor: the colour term (the tables are in `LaneTables`).
     ms_scale: Soa3,
     // PBR: the base colour is `reflectance`, the index `eta`, GGX's `alpha_x` `alpha`; the
-    // metallic factor, the transmission factor and whether the material transmits (1) or not
-    // (0), `alpha_y`, the layer table's roughness node (its rows in `LaneTables`), the diffuse
+    // metallic factor, the transmission factor, whether the material transmits (1) or not
+    // (0) and whether it is smooth (1), `alpha_y`, the layer table's roughness node (its rows in `LaneTables`), the diffuse
     // lobe's normalisation; whether the frame is turned to an anisotropy direction (1), the
     // direction's cosine and sine, the hit's `dP/dv`.
     metallic: [f32; LANES],
     transmission: [f32; LANES],
     transmits: [u32; LANES],
+    smooth: [u32; LANES],
     turned: [u32; LANES],
     turn: [[f32; LANES]; 2],
     dpdv: Soa3,
@@ -279,7 +285,7 @@ pub(super) struct Lanes {
     ggx: [u32; PBR_SLOT + 1],
 
     // Results: the shadow test (`shadow_radiance` counts where `shadowed`), the bounce (where
-    // `scattered`), the state after it, whether the path goes on. The flags are `u32` (0 or
+    // `scattered`; `delta` where its lobe is a delta), the state after it, whether the path goes on. The flags are `u32` (0 or
     // 1), not `bool`: selecting bytes between kept and new results makes LLVM's cost model keep
     // the GGX loops scalar.
     shadowed: [u32; LANES],
@@ -287,6 +293,7 @@ pub(super) struct Lanes {
     shadow_t_max: [f32; LANES],
     shadow_radiance: Soa3,
     scattered: [u32; LANES],
+    delta: [u32; LANES],
     n: Soa3,
     wi_world: Soa3,
     origin: Soa3,
@@ -322,7 +329,7 @@ impl LaneTables {
 }
 
 /// A lane's BSDF sample as `land` reads it: `BsdfSample`'s direction (shading frame), weight,
-/// density and relative index, and whether the BSDF gave one.
+/// density, relative index and whether its lobe is a delta, and whether the BSDF gave one.
 #[derive(Clone, Copy)]
 struct LaneSample {
     sampled: bool,
@@ -330,6 +337,7 @@ struct LaneSample {
     weight: Rgb,
     pdf: f32,
     eta: f32,
+    delta: bool,
 }
 
 impl Lanes {
@@ -349,6 +357,7 @@ impl Lanes {
             eta_scale: f,
             roulette: b,
             u_roulette: f,
+            delta_bsdf: [0; LANES],
             reflectance: Soa3::splat(Rgb::ONE),
             cosine_dir: v,
             light_wi: v,
@@ -369,6 +378,7 @@ impl Lanes {
             metallic: f,
             transmission: f,
             transmits: [0; LANES],
+            smooth: [0; LANES],
             turned: [0; LANES],
             turn: [[0.0; LANES]; 2],
             dpdv: Soa3::splat(Vec3::Y),
@@ -382,6 +392,7 @@ impl Lanes {
             shadow_t_max: f,
             shadow_radiance: Soa3::splat(Rgb::ZERO),
             scattered: [0; LANES],
+            delta: [0; LANES],
             n: v,
             wi_world: v,
             origin: v,
@@ -395,8 +406,9 @@ impl Lanes {
     }
 
     /// Stage 1 for lane `i`: the vertex of `path` at `hit`, of the kind [`takes`] found, as
-    /// `land` begins it: the bounce's numbers drawn from the path's sampler at the dimensions
-    /// `land` reads them from, the lane's inputs set (a compensated BSDF's tables in `tables`).
+    /// `land` begins it: the emission found at the hit counted, the bounce's numbers drawn
+    /// from the path's sampler at the dimensions `land` reads them from, the lane's inputs set
+    /// (a compensated BSDF's tables in `tables`).
     #[inline(always)]
     pub fn gather(
         &mut self,
@@ -412,9 +424,16 @@ impl Lanes {
         let depth = path.depth;
         let [u_choice, u_light_x, u_light_y, u_lobe, u_dir_x, u_dir_y, u_roulette] =
             path.bounce_numbers();
-        // `land`'s first step: Beer-Lambert along the segment that met the hit.
+        // `land`'s first steps: Beer-Lambert along the segment that met the hit, the emission
+        // found there.
         if scene.has_absorption() {
             path.state.absorb(scene, &path.ray, hit);
+        }
+        let emitted =
+            path.state
+                .found_emission(scene, &path.ray, Some(hit), light_select_pdf(scene));
+        if let Some(c) = emitted {
+            path.l += c;
         }
         self.wo.set(i, -path.ray.d);
         self.p.set(i, hit.p);
@@ -430,10 +449,7 @@ impl Lanes {
         if let Some(slot) = kind.slot() {
             self.ggx[slot] |= 1 << i;
         }
-        self.has_light[i] = false;
-        if !kind.is_delta() {
-            self.light(i, scene, hit, u_choice, Vec2::new(u_light_x, u_light_y));
-        }
+        self.delta_bsdf[i] = kind.is_delta() as u32;
         if kind.is_rough() {
             self.u_dir_x[i] = u_dir_x;
             (self.azimuth[0][i], self.azimuth[1][i]) = visible_azimuth(u_dir_y);
@@ -496,6 +512,8 @@ impl Lanes {
                 self.metallic[i] = pbr.metallic;
                 self.transmission[i] = pbr.transmission;
                 self.transmits[i] = pbr.transmits as u32;
+                self.smooth[i] = pbr.smooth as u32;
+                self.delta_bsdf[i] = pbr.is_delta() as u32;
                 self.eta[i] = pbr.eta;
                 self.alpha[i] = pbr.distribution.alpha_x;
                 self.alpha_y[i] = pbr.distribution.alpha_y;
@@ -511,6 +529,10 @@ impl Lanes {
                 self.eta[i] = base.eta;
             }
             _ => unreachable!("`takes` took the material"),
+        }
+        self.has_light[i] = false;
+        if self.delta_bsdf[i] == 0 {
+            self.light(i, scene, hit, u_choice, Vec2::new(u_light_x, u_light_y));
         }
     }
 
@@ -636,6 +658,7 @@ impl Lanes {
             weight,
             pdf,
             eta,
+            delta: kind.is_delta(),
         };
         let bounce = self.bounce_outcome(i, frame, wo, sample);
         self.store(i, true, outcome, bounce);
@@ -713,7 +736,7 @@ impl Lanes {
         self.store_sampled(i, (frame, wo), outcome, bs, keep);
     }
 
-    /// [`Self::run`]'s PBR loop for lane `i`: [`Pbr`]'s `eval_pdf` and `sample_rough_at` (its
+    /// [`Self::run`]'s PBR loop for lane `i`: [`Pbr`]'s `eval_pdf` and `sample_at` (its
     /// layer table's lookups gathers from the lane's rows in `tables`), as `land` calls
     /// `Pbr`'s through `Bsdf`; kept where the lane holds a PBR BSDF.
     #[inline(always)]
@@ -734,7 +757,7 @@ impl Lanes {
                 alpha_x: self.alpha[i],
                 alpha_y: self.alpha_y[i],
             },
-            smooth: false,
+            smooth: self.smooth[i] != 0,
             transmits,
             layer: &tables.pbr[i],
             layer_node: (self.layer_node[i] as usize, self.layer_t[i]),
@@ -745,7 +768,7 @@ impl Lanes {
         let outcome = self.light_outcome_of(i, wi, f, pdf);
         let azimuth = (self.azimuth[0][i], self.azimuth[1][i]);
         let (u_lobe, cosine_dir) = (self.u_lobe[i], self.cosine_dir.get(i));
-        let bs = pbr.sample_rough_at(wo, u_lobe, cosine_dir, self.u_dir_x[i], azimuth);
+        let bs = pbr.sample_at(wo, u_lobe, cosine_dir, self.u_dir_x[i], azimuth);
         let keep = self.kind[i] == Kind::Pbr;
         self.store_sampled(i, (frame, wo), outcome, bs, keep);
     }
@@ -784,6 +807,7 @@ impl Lanes {
                 weight,
                 pdf,
                 eta,
+                delta,
                 ..
             }) => LaneSample {
                 sampled: true,
@@ -791,6 +815,7 @@ impl Lanes {
                 weight,
                 pdf,
                 eta,
+                delta,
             },
             None => LaneSample {
                 sampled: false,
@@ -798,6 +823,7 @@ impl Lanes {
                 weight: Rgb::ZERO,
                 pdf: 0.0,
                 eta: 1.0,
+                delta: false,
             },
         };
         let bounce = self.bounce_outcome(i, frame, wo, sample);
@@ -837,6 +863,7 @@ impl Lanes {
         let survives = self.u_roulette[i] < q;
         BounceOutcome {
             scattered,
+            delta: s.delta,
             n: frame.n,
             wi_world,
             origin: offset_origin_by(self.p.get(i), self.ng.get(i), wi_world, self.rel[i]),
@@ -868,6 +895,7 @@ impl Lanes {
         let radiance = pick(keep, light.radiance, self.shadow_radiance.get(i));
         self.shadow_radiance.set(i, radiance);
         self.scattered[i] = pick(keep, bounce.scattered as u32, self.scattered[i]);
+        self.delta[i] = pick(keep, bounce.delta as u32, self.delta[i]);
         self.n.set(i, pick(keep, bounce.n, self.n.get(i)));
         self.wi_world
             .set(i, pick(keep, bounce.wi_world, self.wi_world.get(i)));
@@ -910,10 +938,11 @@ impl Lanes {
         if self.scattered[i] == 0 {
             return false;
         }
-        let delta = self.kind[i].is_delta();
+        // (`PathState::scatter`.)
+        let delta = self.delta[i] != 0;
         path.state.beta = self.beta_after.get(i);
         path.state.eta_scale = self.eta_scale_after[i];
-        path.state.specular = delta;
+        path.state.specular = delta || self.delta_bsdf[i] != 0;
         path.state.prev_pdf = self.prev_pdf[i];
         if DIFFERENTIALS {
             let transmitted = self.transmitted[i] != 0;
@@ -952,6 +981,7 @@ struct LightOutcome {
 /// A lane's bounce (`Lanes::bounce_outcome`): the new ray, the state after it.
 struct BounceOutcome {
     scattered: bool,
+    delta: bool,
     n: Vec3,
     wi_world: Vec3,
     origin: Vec3,
@@ -984,9 +1014,9 @@ mod tests {
 
     /// Diffuse (textured and plain), glass (a smooth mesh and a sphere), gold, rough glass and
     /// rough copper, plain and compensated (`multiscatter = true`), glTF's BSDF (`pbr`: plastic,
-    /// metal, a textured mix, and those not taken: smooth, anisotropic), under every kind of light
-    /// the lanes sample: a rectangle and a sphere that emit, a point light (delta) and a
-    /// constant sky (left to BSDF sampling).
+    /// metal, a textured mix, glass, smooth, anisotropic, normal-mapped), a diffuse and a smooth
+    /// glTF sphere that glow, under every kind of light the lanes sample: a rectangle and spheres that emit, a
+    /// point light (delta) and a constant sky (left to BSDF sampling).
     const SCENE: &str = r#"
 [render]
 width = 24
@@ -1054,7 +1084,7 @@ base_color = [0.9, 0.6, 0.3]
 metallic = 1.0
 roughness = 0.3
 
-# Half its cells a rough mix of metal and plastic, half smooth metal (not taken).
+# Half its cells a rough mix of metal and plastic, half smooth metal (a delta BSDF).
 [materials.mixed]
 type = "pbr"
 base_color = { type = "checkerboard", color0 = [0.2, 0.5, 0.8], color1 = [0.9, 0.9, 0.9], scale = 6.0 }
@@ -1100,6 +1130,28 @@ transmission = 0.6
 ior = 1.7
 normal_map = { type = "checkerboard", color0 = [0.3, 0.55, 0.9], color1 = [0.6, 0.7, 0.85], scale = 4.0 }
 
+# Smooth plastic, and a smooth mix of metal, plastic and glass: delta lobes beside a diffuse
+# one; smooth metal: a delta BSDF.
+[materials.lacquer]
+type = "pbr"
+base_color = [0.1, 0.3, 0.7]
+metallic = 0.0
+roughness = 0.0
+
+[materials.pane]
+type = "pbr"
+base_color = [0.8, 0.7, 0.5]
+metallic = 0.3
+roughness = 0.0
+transmission = 0.5
+ior = 1.6
+
+[materials.chrome]
+type = "pbr"
+base_color = [0.9, 0.9, 0.95]
+metallic = 1.0
+roughness = 0.0
+
 # Anisotropic: taken with glTF's BSDF in a turned frame.
 [materials.satin]
 type = "pbr"
@@ -1120,11 +1172,31 @@ center = [0.8, 0.5, 0.3]
 radius = 0.5
 material = "dense"
 
-[[shapes]]
+[[shapes]]                       # white, and it glows
 type = "sphere"
 center = [0.1, 0.3, 1.2]
 radius = 0.3
 material = "white"
+emission = [0.8, 0.7, 0.6]
+
+[[shapes]]
+type = "sphere"
+center = [2.3, 1.3, 0.8]
+radius = 0.45
+material = "lacquer"
+emission = [0.3, 0.4, 0.6]
+
+[[shapes]]
+type = "sphere"
+center = [2.4, 0.4, 1.2]
+radius = 0.35
+material = "chrome"
+
+[[shapes]]
+type = "sphere"
+center = [-2.2, 1.4, 0.4]
+radius = 0.45
+material = "pane"
 
 [[shapes]]
 type = "sphere"
@@ -1300,7 +1372,7 @@ radiance = [0.2, 0.25, 0.3]
             let (mut rough_glass, mut rough_metal) = (0, 0);
             let (mut compensated_glass, mut compensated_metal, mut pbr) = (0, 0, 0);
             let (mut absorbed, mut clear_pbr, mut rough_pbr_glass, mut mapped) = (0, 0, 0, 0);
-            let mut anisotropic = 0;
+            let (mut anisotropic, mut smooth_pbr, mut delta_pbr, mut glowing) = (0, 0, 0, 0);
             let (mut lanes, mut tables) = (Lanes::new(), LaneTables::new());
             let mut lane = 0;
             for y in 0..16 {
@@ -1353,6 +1425,13 @@ radiance = [0.2, 0.25, 0.3]
                                     as u32;
                                 anisotropic += matches!(material, Material::Pbr(p) if p.anisotropy > 0.0)
                                     as u32;
+                                if let (Kind::Pbr, Material::Pbr(p)) = (kind, material) {
+                                    let bsdf = p.bsdf_at(hit.uv, p.has_transmission());
+                                    smooth_pbr += bsdf.smooth as u32;
+                                    delta_pbr += bsdf.is_delta() as u32;
+                                }
+                                let shape = &scene.geometry.shapes()[hit.shape as usize];
+                                glowing += shape.area_light.is_some() as u32;
                                 lane = (lane + 1) % LANES;
                                 (goes_on, shadow)
                             } else {
@@ -1407,7 +1486,14 @@ radiance = [0.2, 0.25, 0.3]
                     anisotropic > 30,
                     "{sampler}: {anisotropic} anisotropic vertices"
                 );
+                // Smooth glTF BSDFs: with a diffuse lobe, and delta ones.
+                assert!(
+                    smooth_pbr - delta_pbr > 100 && delta_pbr > 30,
+                    "{sampler}: {smooth_pbr} smooth glTF vertices, {delta_pbr} delta"
+                );
             }
+            // Vertices on a shape that emits, their emission counted first.
+            assert!(glowing > 30, "{sampler}: {glowing} vertices that glow");
             // Normal-mapped glTF materials (the clear glass in every set).
             assert!(
                 mapped > 50,

@@ -35,8 +35,8 @@
 //!   `lanes`: [`LANES`] paths of a tile in flight, each stage run for all of them), which runs
 //!   the vertices of diffuse, smooth dielectric (glTF's clear smooth glass included) and smooth
 //!   conductor surfaces in SIMD lanes (`lane_vertex`, `land`'s operations as selects, bit for
-//!   bit), and those of rough (GGX) ones, compensated or not, and of glTF's BSDF where rough,
-//!   in the same stages where that is measured to pay in the copy (AVX-512: all; AVX2: rough
+//!   bit), and those of rough (GGX) ones, compensated or not, and of glTF's other BSDFs, in
+//!   the same stages where that is measured to pay in the copy (AVX-512: all; AVX2: rough
 //!   glass and metal, compensated glass; `lane_vertex::simd_ggx`). They give the same image
 //!   bit for bit wherever no material reads a pixel's footprint (`tests/lanes.rs`).
 

@@ -585,7 +585,7 @@ impl PathState {
     /// light sampling: the environment's where it escapes (`hit` is `None`), an area light's
     /// where it hits one.
     #[inline(always)]
-    fn found_emission(
+    pub(super) fn found_emission(
         &self,
         scene: &Scene,
         ray: &Ray,
