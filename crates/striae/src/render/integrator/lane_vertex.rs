@@ -266,9 +266,9 @@ pub(super) struct Lanes {
     ms_scale: Soa3,
     // PBR: the base colour is `reflectance`, the index `eta`, GGX's `alpha_x` `alpha`; the
     // metallic factor, the transmission factor, whether the material transmits (1) or not
-    // (0) and whether it is smooth (1), `alpha_y`, the layer table's roughness node (its rows in `LaneTables`), the diffuse
-    // lobe's normalisation; whether the frame is turned to an anisotropy direction (1), the
-    // direction's cosine and sine, the hit's `dP/dv`.
+    // (0) and whether it is smooth (1), `alpha_y`, the layer table's roughness node (its rows
+    // in `LaneTables`), the diffuse lobe's normalisation; whether the frame is turned to an
+    // anisotropy direction (1), the direction's cosine and sine, the hit's `dP/dv`.
     metallic: [f32; LANES],
     transmission: [f32; LANES],
     transmits: [u32; LANES],
@@ -285,9 +285,9 @@ pub(super) struct Lanes {
     ggx: [u32; PBR_SLOT + 1],
 
     // Results: the shadow test (`shadow_radiance` counts where `shadowed`), the bounce (where
-    // `scattered`; `delta` where its lobe is a delta), the state after it, whether the path goes on. The flags are `u32` (0 or
-    // 1), not `bool`: selecting bytes between kept and new results makes LLVM's cost model keep
-    // the GGX loops scalar.
+    // `scattered`; `delta` where its lobe is a delta), the state after it, whether the path
+    // goes on. The flags are `u32` (0 or 1), not `bool`: selecting bytes between kept and new
+    // results makes LLVM's cost model keep the GGX loops scalar.
     shadowed: [u32; LANES],
     shadow_o: Soa3,
     shadow_t_max: [f32; LANES],
