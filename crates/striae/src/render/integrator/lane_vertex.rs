@@ -1015,8 +1015,8 @@ mod tests {
     /// Diffuse (textured and plain), glass (a smooth mesh and a sphere), gold, rough glass and
     /// rough copper, plain and compensated (`multiscatter = true`), glTF's BSDF (`pbr`: plastic,
     /// metal, a textured mix, glass, smooth, anisotropic, normal-mapped), a diffuse and a smooth
-    /// glTF sphere that glow, under every kind of light the lanes sample: a rectangle and spheres that emit, a
-    /// point light (delta) and a constant sky (left to BSDF sampling).
+    /// glTF sphere that glow, under every kind of light the lanes sample: a rectangle and
+    /// spheres that emit, a point light (delta) and a constant sky (left to BSDF sampling).
     const SCENE: &str = r#"
 [render]
 width = 24
