@@ -143,9 +143,9 @@ fn scratched_glass_seen_from_inside_runs_in_lanes_bit_for_bit() {
 #[test]
 fn rough_glass_and_metal_run_in_lanes_bit_for_bit() {
     // GGX glass and gold, plain and compensated, rough glTF glass, smooth glTF metal and
-    // plastic on a shape that glows (the lane vertex's GGX and glTF loops), each scene with and without the lanes, and the lanes in every compiled copy (each
-    // runs the GGX vertices it vectorises in SIMD lanes and leaves the others to the one-path
-    // vertex).
+    // plastic on a shape that glows (the lane vertex's GGX and glTF loops), each scene with
+    // and without the lanes, and the lanes in every compiled copy (each runs the GGX vertices
+    // it vectorises in SIMD lanes and leaves the others to the one-path vertex).
     let frosted = include_str!("../scenes/glass-teapot.toml")
         .replace("ior = 1.5", "ior = 1.5\nroughness = 0.25");
     let brushed = include_str!("../scenes/metal-teapot.toml")

@@ -344,23 +344,8 @@ impl<L: LayerLookup> Pbr<'_, L> {
         if self.smooth {
             let (fd, cos_t, eta_it) = fresnel_f32::dielectric(wo.z, self.eta);
             let rho = self.reflect_prob(&a, wo.z, fd);
-            if u_lobe < rho || rho >= 1.0 {
-                let pdf = p_micro * rho;
-                let spec = if a.metallic > 0.0 {
-                    schlick(self.base_color, wo.z) * a.metallic
-                        + Rgb::splat((1.0 - a.metallic) * fd)
-                } else {
-                    Rgb::splat(fd)
-                };
-                let mut s = mirror_sample(wo, pdf);
-                s.weight = spec / pdf;
-                return Some(s);
-            }
-            let pdf = p_micro * (1.0 - rho);
-            let k = (1.0 - a.metallic) * a.transmission * (1.0 - fd);
-            let mut s = refraction_sample(wo, cos_t, eta_it, pdf);
-            s.weight = self.base_color * (s.weight.x * (k / pdf));
-            return Some(s);
+            let reflects = u_lobe < rho || rho >= 1.0;
+            return Some(self.smooth_lobe(&a, wo, p_micro, rho, reflects, (fd, cos_t, eta_it)));
         }
         let v = wo * wo.z.signum();
         let m = self.distribution.sample_visible(v, u);
@@ -385,6 +370,38 @@ impl<L: LayerLookup> Pbr<'_, L> {
             return None;
         }
         Some(BsdfSample::scattered(wi, f, pdf, eta))
+    }
+
+    /// The sample of a smooth BSDF's mirror (`reflects`) or refraction at `wo`, chosen among
+    /// the specular lobes (probability `p_micro`) with the reflection's probability `rho`, from
+    /// the smooth Fresnel terms `(fd, cos_t, eta_it)` of [`fresnel_f32::dielectric`].
+    #[inline(always)]
+    fn smooth_lobe(
+        &self,
+        a: &AtWo,
+        wo: Vec3,
+        p_micro: f32,
+        rho: f32,
+        reflects: bool,
+        (fd, cos_t, eta_it): (f32, f32, f32),
+    ) -> BsdfSample {
+        if reflects {
+            let pdf = p_micro * rho;
+            let spec = if a.metallic > 0.0 {
+                schlick(self.base_color, wo.z) * a.metallic + Rgb::splat((1.0 - a.metallic) * fd)
+            } else {
+                Rgb::splat(fd)
+            };
+            let mut s = mirror_sample(wo, pdf);
+            s.weight = spec / pdf;
+            s
+        } else {
+            let pdf = p_micro * (1.0 - rho);
+            let k = (1.0 - a.metallic) * a.transmission * (1.0 - fd);
+            let mut s = refraction_sample(wo, cos_t, eta_it, pdf);
+            s.weight = self.base_color * (s.weight.x * (k / pdf));
+            s
+        }
     }
 
     /// [`Self::sample`] as the lane vertex runs it, smooth or rough, with the cosine lobe's
@@ -420,14 +437,11 @@ impl<L: LayerLookup> Pbr<'_, L> {
         let reflects = u_choice < rho || rho >= 1.0;
         let refracted = refract(wo, m, cos_t, 1.0 / eta_it).normalize();
         let delta = self.smooth && !diffuse;
+        let specular = self.smooth_lobe(&a, wo, p_micro, rho, reflects, (fd, cos_t, eta_it));
         let wi = if diffuse {
             cosine_dir
         } else if delta {
-            if reflects {
-                mirror_sample(wo, 1.0).wi
-            } else {
-                refraction_sample(wo, cos_t, eta_it, 1.0).wi
-            }
+            specular.wi
         } else if reflects {
             reflect(wo, m)
         } else {
@@ -435,20 +449,6 @@ impl<L: LayerLookup> Pbr<'_, L> {
         };
         let eta = if diffuse || reflects { 1.0 } else { eta_it };
         let (f, pdf) = self.eval_pdf_at(&a, wo, wi);
-        // The smooth lobes' weights, as `sample` makes them.
-        let delta_pdf = p_micro * if reflects { rho } else { 1.0 - rho };
-        let mirrored = if a.metallic > 0.0 {
-            schlick(self.base_color, wo.z) * a.metallic + Rgb::splat((1.0 - a.metallic) * fd)
-        } else {
-            Rgb::splat(fd)
-        };
-        let k = (1.0 - a.metallic) * a.transmission * (1.0 - fd);
-        let delta_weight = if reflects {
-            mirrored / delta_pdf
-        } else {
-            let eta_ti = 1.0 / eta_it;
-            self.base_color * ((eta_ti * eta_ti) * (k / delta_pdf))
-        };
         // `sample`'s tests of each lobe's direction and value (none of a smooth lobe).
         let side = wi.z * wo.z;
         let direction =
@@ -456,14 +456,7 @@ impl<L: LayerLookup> Pbr<'_, L> {
         let valid = delta | ((pdf > 0.0) & direction & (diffuse | (f != Rgb::ZERO)));
         (gives & valid).then(|| {
             if delta {
-                BsdfSample {
-                    wi,
-                    weight: delta_weight,
-                    pdf: delta_pdf,
-                    delta: true,
-                    eta,
-                    from: None,
-                }
+                specular
             } else {
                 BsdfSample::scattered(wi, f, pdf, eta)
             }
